@@ -1,0 +1,37 @@
+//! `control`: the one home of every equation that runs on the B-G431B-ESC1 board.
+//!
+//! `no_std`, no allocation. Equations are generic over [`num_traits::Float`] so that the host
+//! (f64 identification and emulation) and the firmware (f32) run the very same code.
+//!
+//! | module | what it is |
+//! |---|---|
+//! | [`motor`] | DC-equivalent motor constants (R, L, K_t, K_b, J) |
+//! | [`effects`] | the physical effects of the contract's list, as equations |
+//! | [`hall`] | Hall-state decoding, sectors, faults, angle |
+//! | [`velocity`] | velocity estimators: moving average (the paper's) and Hall-edge timing |
+//! | [`lugre`] | LuGre friction observer with an exact (exponential) update |
+//! | [`sindy`] | SINDYc friction model evaluator (sparse named terms) |
+//! | [`pi`] | PI speed controller with anti-windup |
+//! | [`compensation`] | friction compensation current and voltage |
+//! | [`step`] | the 12 ms control step the firmware calls |
+//! | [`blob`] | the coefficient blob (postcard + magic + version + CRC32) |
+//! | [`frame`] | the serial frame codec (COBS + postcard + CRC) |
+//! | [`slots`] | two-slot flash storage of coefficients, power-cut safe |
+#![no_std]
+#![forbid(unsafe_code)]
+
+pub mod blob;
+pub mod compensation;
+pub mod effects;
+pub mod frame;
+pub mod hall;
+pub mod lugre;
+pub mod motor;
+pub mod pi;
+pub mod sindy;
+pub mod slots;
+pub mod step;
+pub mod velocity;
+
+/// Control period of the paper and of the firmware: 12 ms.
+pub const CONTROL_PERIOD_S: f32 = 0.012;

@@ -1,0 +1,10 @@
+//! `motorid emulate` (not yet written).
+use anyhow::{bail, Result};
+
+/// Not yet written.
+#[derive(clap::Args, Debug)]
+pub struct Args {}
+
+pub fn run(_args: Args) -> Result<()> {
+    bail!("'motorid emulate' is not implemented yet")
+}

@@ -1,0 +1,10 @@
+//! `motorid flash` (not yet written).
+use anyhow::{bail, Result};
+
+/// Not yet written.
+#[derive(clap::Args, Debug)]
+pub struct Args {}
+
+pub fn run(_args: Args) -> Result<()> {
+    bail!("'motorid flash' is not implemented yet")
+}

@@ -1,0 +1,10 @@
+//! `motorid inspect` (not yet written).
+use anyhow::{bail, Result};
+
+/// Not yet written.
+#[derive(clap::Args, Debug)]
+pub struct Args {}
+
+pub fn run(_args: Args) -> Result<()> {
+    bail!("'motorid inspect' is not implemented yet")
+}

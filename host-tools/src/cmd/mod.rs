@@ -1,0 +1,15 @@
+//! One file per `motorid` subcommand. Each has `Args` (its `--help`) and `run`.
+pub mod board;
+pub mod compare;
+pub mod demo;
+pub mod diagnose;
+pub mod emulate;
+pub mod export;
+pub mod fit;
+pub mod flash;
+pub mod inspect;
+pub mod paper_table;
+pub mod real_data;
+pub mod record;
+pub mod simulate;
+pub mod upload;

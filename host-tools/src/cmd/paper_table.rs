@@ -1,0 +1,10 @@
+//! `motorid paper-table` (not yet written).
+use anyhow::{bail, Result};
+
+/// Not yet written.
+#[derive(clap::Args, Debug)]
+pub struct Args {}
+
+pub fn run(_args: Args) -> Result<()> {
+    bail!("'motorid paper-table' is not implemented yet")
+}

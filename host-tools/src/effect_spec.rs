@@ -1,0 +1,403 @@
+//! Effect specs as the user types them: `NAME` or `NAME:key=value,...`
+//! (`--effect` of `simulate`, `--add` of `fit`, the `spec` that `diagnose` prints).
+//!
+//! The equations behind each name are in `control::effects`; this file holds the keys, their
+//! units and the defaults used when a key is left out.
+use anyhow::{anyhow, bail, Result};
+use control::effects::{Effect, EffectKind};
+use std::collections::BTreeMap;
+use std::fmt;
+
+/// One key of an effect: name, unit, default value (for the emulator), meaning.
+pub struct Key {
+    pub name: &'static str,
+    pub unit: &'static str,
+    pub default: f64,
+    pub meaning: &'static str,
+}
+
+/// The keys of an effect, in the order the spec prints them. Defaults are sized for the
+/// reference paper's motor (Coulomb friction 0.08 N·m, K_t = 0.071 N·m/A): clearly visible
+/// in the data, but smaller than the friction the base model already has.
+pub fn keys(kind: EffectKind) -> &'static [Key] {
+    const fn k(name: &'static str, unit: &'static str, default: f64, meaning: &'static str) -> Key {
+        Key {
+            name,
+            unit,
+            default,
+            meaning,
+        }
+    }
+    match kind {
+        EffectKind::Coulomb => {
+            const K: &[Key] = &[k("fc", "N·m", 0.05, "Coulomb friction torque")];
+            K
+        }
+        EffectKind::Viscous => {
+            const K: &[Key] = &[k("b", "N·m·s/rad", 0.001, "viscous friction coefficient")];
+            K
+        }
+        EffectKind::Stribeck => {
+            const K: &[Key] = &[
+                k("fs", "N·m", 0.04, "breakaway torque above Coulomb"),
+                k("vs", "rad/s", 5.0, "Stribeck velocity"),
+            ];
+            K
+        }
+        EffectKind::Presliding => {
+            const K: &[Key] = &[
+                k("sigma0", "N·m/rad", 300.0, "bristle stiffness"),
+                k("sigma1", "N·m·s/rad", 0.5, "bristle damping"),
+            ];
+            K
+        }
+        EffectKind::Cogging => {
+            const K: &[Key] = &[
+                k(
+                    "harmonic",
+                    "1/rev",
+                    7.0,
+                    "periods per revolution (2 or more)",
+                ),
+                k("amp", "N·m", 0.03, "torque amplitude"),
+                k("phase", "rad", 0.0, "phase"),
+            ];
+            K
+        }
+        EffectKind::PositionLoad => {
+            const K: &[Key] = &[
+                k(
+                    "amp",
+                    "N·m",
+                    0.05,
+                    "torque amplitude (one period per revolution)",
+                ),
+                k("phase", "rad", 0.0, "phase"),
+            ];
+            K
+        }
+        EffectKind::Offset => {
+            const K: &[Key] = &[k("t0", "N·m", 0.03, "constant load torque")];
+            K
+        }
+        EffectKind::Asymmetry => {
+            const K: &[Key] = &[
+                k(
+                    "dv",
+                    "N·m·s/rad",
+                    0.0008,
+                    "viscous friction difference (b ± dv by direction)",
+                ),
+                k(
+                    "dc",
+                    "N·m",
+                    0.0,
+                    "Coulomb friction difference (fc ± dc by direction)",
+                ),
+            ];
+            K
+        }
+        EffectKind::Deadtime => {
+            const K: &[Key] = &[k(
+                "vd",
+                "V",
+                0.3,
+                "inverter voltage loss, sign of the current",
+            )];
+            K
+        }
+        EffectKind::CurrentOffset => {
+            const K: &[Key] = &[k("i0", "A", 0.2, "current-sensor offset")];
+            K
+        }
+        EffectKind::Thermal => {
+            const K: &[Key] = &[
+                k(
+                    "k",
+                    "1/A²",
+                    0.002,
+                    "relative resistance rise per A² of steady current",
+                ),
+                k("tau", "s", 20.0, "thermal time constant"),
+            ];
+            K
+        }
+        EffectKind::LoadFriction => {
+            const K: &[Key] = &[k("mu", "1", 0.05, "friction per N·m of transmitted torque")];
+            K
+        }
+    }
+}
+
+/// A parsed spec: the effect and the values the user gave (others take defaults).
+#[derive(Debug, Clone, PartialEq)]
+pub struct EffectSpec {
+    pub kind: EffectKind,
+    pub values: BTreeMap<String, f64>,
+}
+
+impl EffectSpec {
+    /// A spec with no values (a bare NAME).
+    pub fn bare(kind: EffectKind) -> EffectSpec {
+        EffectSpec {
+            kind,
+            values: BTreeMap::new(),
+        }
+    }
+
+    /// Parse `NAME` or `NAME:key=value,...`.
+    pub fn parse(spec: &str) -> Result<EffectSpec> {
+        let spec = spec.trim();
+        let (name, rest) = spec.split_once(':').unwrap_or((spec, ""));
+        let kind = EffectKind::from_name(name.trim()).ok_or_else(|| {
+            anyhow!(
+                "unknown effect '{}'; known effects: {}",
+                name.trim(),
+                EffectKind::ALL
+                    .iter()
+                    .map(|k| k.name())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )
+        })?;
+        let known = keys(kind);
+        let mut values = BTreeMap::new();
+        for part in rest.split(',').map(str::trim).filter(|p| !p.is_empty()) {
+            let (k, v) = part
+                .split_once('=')
+                .ok_or_else(|| anyhow!("effect '{}': '{part}' is not key=value", kind.name()))?;
+            let k = k.trim();
+            if !known.iter().any(|key| key.name == k) {
+                bail!(
+                    "effect '{}': unknown key '{k}'; its keys are: {}",
+                    kind.name(),
+                    known
+                        .iter()
+                        .map(|key| key.name)
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                );
+            }
+            let v: f64 = v
+                .trim()
+                .parse()
+                .ok()
+                .filter(|v: &f64| v.is_finite())
+                .ok_or_else(|| {
+                    anyhow!(
+                        "effect '{}': key '{k}': '{}' is not a number",
+                        kind.name(),
+                        v.trim()
+                    )
+                })?;
+            values.insert(k.to_string(), v);
+        }
+        if kind == EffectKind::Cogging {
+            if let Some(h) = values.get("harmonic") {
+                if *h < 2.0 || h.fract() != 0.0 || *h > 1000.0 {
+                    bail!("effect 'cogging': harmonic must be a whole number of 2 or more (got {h}); one period per revolution is 'position_load'");
+                }
+            }
+        }
+        Ok(EffectSpec { kind, values })
+    }
+
+    /// The value of a key: the user's, or the default.
+    pub fn get(&self, key: &str) -> f64 {
+        self.values.get(key).copied().unwrap_or_else(|| {
+            keys(self.kind)
+                .iter()
+                .find(|k| k.name == key)
+                .map(|k| k.default)
+                .unwrap_or(0.0)
+        })
+    }
+
+    /// The effect with these values (defaults where not given).
+    pub fn to_effect(&self) -> Effect<f64> {
+        let g = |k: &str| self.get(k);
+        match self.kind {
+            EffectKind::Coulomb => Effect::Coulomb { fc: g("fc") },
+            EffectKind::Viscous => Effect::Viscous { b: g("b") },
+            EffectKind::Stribeck => Effect::Stribeck {
+                fs: g("fs"),
+                vs: g("vs"),
+            },
+            EffectKind::Presliding => Effect::Presliding {
+                sigma0: g("sigma0"),
+                sigma1: g("sigma1"),
+            },
+            EffectKind::Cogging => Effect::Cogging {
+                harmonic: g("harmonic").round().clamp(2.0, 1000.0) as u16,
+                amp: g("amp"),
+                phase: g("phase"),
+            },
+            EffectKind::PositionLoad => Effect::PositionLoad {
+                amp: g("amp"),
+                phase: g("phase"),
+            },
+            EffectKind::Offset => Effect::Offset { t0: g("t0") },
+            EffectKind::Asymmetry => Effect::Asymmetry {
+                dv: g("dv"),
+                dc: g("dc"),
+            },
+            EffectKind::Deadtime => Effect::Deadtime { vd: g("vd") },
+            EffectKind::CurrentOffset => Effect::CurrentOffset { i0: g("i0") },
+            EffectKind::Thermal => Effect::Thermal {
+                k: g("k"),
+                tau: g("tau"),
+            },
+            EffectKind::LoadFriction => Effect::LoadFriction { mu: g("mu") },
+        }
+    }
+
+    /// The spec of an effect with all its values.
+    pub fn from_effect(e: &Effect<f64>) -> EffectSpec {
+        let mut values = BTreeMap::new();
+        let mut put = |k: &str, v: f64| {
+            values.insert(k.to_string(), v);
+        };
+        match *e {
+            Effect::Coulomb { fc } => put("fc", fc),
+            Effect::Viscous { b } => put("b", b),
+            Effect::Stribeck { fs, vs } => {
+                put("fs", fs);
+                put("vs", vs)
+            }
+            Effect::Presliding { sigma0, sigma1 } => {
+                put("sigma0", sigma0);
+                put("sigma1", sigma1)
+            }
+            Effect::Cogging {
+                harmonic,
+                amp,
+                phase,
+            } => {
+                put("harmonic", harmonic as f64);
+                put("amp", amp);
+                put("phase", phase)
+            }
+            Effect::PositionLoad { amp, phase } => {
+                put("amp", amp);
+                put("phase", phase)
+            }
+            Effect::Offset { t0 } => put("t0", t0),
+            Effect::Asymmetry { dv, dc } => {
+                put("dv", dv);
+                put("dc", dc)
+            }
+            Effect::Deadtime { vd } => put("vd", vd),
+            Effect::CurrentOffset { i0 } => put("i0", i0),
+            Effect::Thermal { k, tau } => {
+                put("k", k);
+                put("tau", tau)
+            }
+            Effect::LoadFriction { mu } => put("mu", mu),
+        }
+        EffectSpec {
+            kind: e.kind(),
+            values,
+        }
+    }
+
+    /// `--help` text listing every effect and its keys.
+    pub fn help_text() -> String {
+        let mut s = String::from("Effects (NAME or NAME:key=value,...):\n");
+        for kind in EffectKind::ALL {
+            let ks: Vec<String> = keys(kind)
+                .iter()
+                .map(|k| format!("{}={} [{}] {}", k.name, k.default, k.unit, k.meaning))
+                .collect();
+            s.push_str(&format!("  {:<15} {}\n", kind.name(), ks.join("; ")));
+        }
+        s
+    }
+}
+
+impl fmt::Display for EffectSpec {
+    /// `NAME:key=value,...` in the keys' documented order, values with 4 significant digits.
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}", self.kind.name())?;
+        let mut first = true;
+        for key in keys(self.kind) {
+            if let Some(v) = self.values.get(key.name) {
+                write!(
+                    f,
+                    "{}{}={}",
+                    if first { ":" } else { "," },
+                    key.name,
+                    short(*v)
+                )?;
+                first = false;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// A number with 4 significant digits, without trailing zeros.
+fn short(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() {
+        return format!("{v}");
+    }
+    if v.fract() == 0.0 && v.abs() < 1e6 {
+        return format!("{v}");
+    }
+    let s = format!("{:.3e}", v);
+    let parsed: f64 = s.parse().unwrap_or(v);
+    format!("{parsed}")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parse_and_print_round_trip() {
+        let s = EffectSpec::parse("cogging:harmonic=7,amp=0.0312345").unwrap();
+        assert_eq!(s.to_string(), "cogging:harmonic=7,amp=0.03123");
+        assert_eq!(
+            EffectSpec::parse(&s.to_string()).unwrap().get("harmonic"),
+            7.0
+        );
+        assert_eq!(EffectSpec::parse("offset").unwrap().to_string(), "offset");
+        let e = EffectSpec::parse("position_load:amp=0.1")
+            .unwrap()
+            .to_effect();
+        assert_eq!(
+            e,
+            Effect::PositionLoad {
+                amp: 0.1,
+                phase: 0.0
+            }
+        );
+        assert_eq!(EffectSpec::from_effect(&e).to_effect(), e);
+    }
+
+    #[test]
+    fn bad_specs_say_what_is_wrong() {
+        assert!(EffectSpec::parse("gravity")
+            .unwrap_err()
+            .to_string()
+            .contains("known effects"));
+        assert!(EffectSpec::parse("cogging:h=3")
+            .unwrap_err()
+            .to_string()
+            .contains("unknown key 'h'"));
+        assert!(EffectSpec::parse("cogging:harmonic=1").is_err());
+        assert!(EffectSpec::parse("offset:t0=abc")
+            .unwrap_err()
+            .to_string()
+            .contains("not a number"));
+        assert!(EffectSpec::parse("offset:t0=NaN").is_err());
+    }
+
+    #[test]
+    fn every_effect_has_keys_and_defaults() {
+        for kind in EffectKind::ALL {
+            let e = EffectSpec::bare(kind).to_effect();
+            assert_eq!(e.kind(), kind);
+            assert!(!keys(kind).is_empty());
+        }
+    }
+}

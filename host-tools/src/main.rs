@@ -1,0 +1,95 @@
+//! `motorid`: identify a friction-aware motor model from logs, show where it fails, name the
+//! missing physical effect, and take the coefficients to the board.
+use clap::{Parser, Subcommand};
+use motorid::cmd;
+use std::process::ExitCode;
+
+#[derive(Parser, Debug)]
+#[command(
+    name = "motorid",
+    version,
+    about = "Identify, diagnose and deploy friction models of BLDC motors",
+    long_about = "Identify, diagnose and deploy friction models of BLDC motors.\n\n\
+        Typical loop: `simulate` (or record) a log, `fit` a model, `compare` it with the data, \
+        `diagnose` what physical effect is missing, `fit --add` it, then `export` the \
+        coefficients and `flash` or `upload` them to the board. `demo` runs the whole loop \
+        on the built-in emulator."
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Simulate the emulated motor under one of the paper's excitations and write a log.
+    Simulate(cmd::simulate::Args),
+    /// Fit a linear, LuGre or SINDYc model to one or more logs.
+    Fit(cmd::fit::Args),
+    /// Run a model in free run on a log and score it (fit percentage).
+    Compare(cmd::compare::Args),
+    /// Find the physical effects the model is missing.
+    Diagnose(cmd::diagnose::Args),
+    /// The whole loop on the emulator: simulate, fit, diagnose, add, refit.
+    Demo(cmd::demo::Args),
+    /// Write the coefficient blob the firmware loads.
+    Export(cmd::export::Args),
+    /// Validate and decode a coefficient blob.
+    Inspect(cmd::inspect::Args),
+    /// Write a coefficient blob into the board's flash with a debug probe.
+    Flash(cmd::flash::Args),
+    /// Send a coefficient blob to the board over its serial port.
+    Upload(cmd::upload::Args),
+    /// Run an experiment on the board and save the log.
+    Record(cmd::record::Args),
+    /// Run the emulated board (control step + motor) behind a pseudo-terminal.
+    Board(cmd::board::Args),
+    /// Closed-loop speed control with friction compensation on the emulated motor.
+    Emulate(cmd::emulate::Args),
+    /// Regenerate the reference paper's fit table on emulated data.
+    PaperTable(cmd::paper_table::Args),
+    /// Fit and diagnose the measured data sets in ../shared/data (EMPS, screw drives, DC motors).
+    RealData(cmd::real_data::Args),
+}
+
+fn main() -> ExitCode {
+    // A panic is a bug, but the user still gets one `error:` line, not a backtrace.
+    std::panic::set_hook(Box::new(|info| {
+        let msg = info
+            .payload()
+            .downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| info.payload().downcast_ref::<String>().cloned())
+            .unwrap_or_default();
+        let at = info
+            .location()
+            .map(|l| format!(" at {}:{}", l.file(), l.line()))
+            .unwrap_or_default();
+        eprintln!("error: internal error{at}: {msg} (please report this)");
+    }));
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Simulate(a) => cmd::simulate::run(a),
+        Command::Fit(a) => cmd::fit::run(a),
+        Command::Compare(a) => cmd::compare::run(a),
+        Command::Diagnose(a) => cmd::diagnose::run(a),
+        Command::Demo(a) => cmd::demo::run(a),
+        Command::Export(a) => cmd::export::run(a),
+        Command::Inspect(a) => cmd::inspect::run(a),
+        Command::Flash(a) => cmd::flash::run(a),
+        Command::Upload(a) => cmd::upload::run(a),
+        Command::Record(a) => cmd::record::run(a),
+        Command::Board(a) => cmd::board::run(a),
+        Command::Emulate(a) => cmd::emulate::run(a),
+        Command::PaperTable(a) => cmd::paper_table::run(a),
+        Command::RealData(a) => cmd::real_data::run(a),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            let msg = format!("{e:#}").replace('\n', " ");
+            eprintln!("error: {msg}");
+            ExitCode::FAILURE
+        }
+    }
+}
