@@ -1,1 +1,612 @@
-//! (to be written)
+//! The coefficient blob: what `motorid export` writes and the firmware loads.
+//!
+//! Layout (all integers little-endian):
+//!
+//! | offset | size | field |
+//! |---|---|---|
+//! | 0 | 4 | magic `b"MIDC"` |
+//! | 4 | 2 | format version ([`VERSION`]) |
+//! | 6 | 2 | payload length `n` |
+//! | 8 | n | postcard encoding of [`Coefficients`] |
+//! | 8+n | 4 | CRC-32 (ISO-HDLC, the zip/Ethernet CRC) of bytes `0..8+n` |
+//!
+//! The whole blob is at most [`MAX_BLOB_LEN`] bytes so that it fits one 2 KiB flash page of
+//! the STM32G431 together with the slot header of [`crate::slots`]. Every variable-length
+//! part of [`Coefficients`] is a fixed-capacity `heapless` container, so decoding needs no
+//! allocator and a blob with too many entries is an error, not an overflow.
+//!
+//! [`decode`] checks magic, version, length, CRC, the postcard payload, and then the values
+//! themselves ([`Coefficients::validate`]): finite numbers, a Hall table that is a
+//! permutation, a model kind whose parameters are present. The firmware treats any error as
+//! "no compensation" and logs a warning.
+use heapless::Vec;
+use serde::{Deserialize, Serialize};
+
+use crate::effects::Effect;
+use crate::hall::{HallTable, INVALID};
+use crate::lugre::LugreParams;
+use crate::motor::MotorParams;
+use crate::pi::PiParams;
+use crate::sindy::SindyModel;
+use crate::step::{ObserverConfig, StepConfig};
+use crate::velocity::EstimatorConfig;
+
+/// First four bytes of every blob.
+pub const MAGIC: [u8; 4] = *b"MIDC";
+/// Blob format version; bump on any change of [`Coefficients`].
+pub const VERSION: u16 = 1;
+/// Header size: magic, version, payload length.
+pub const HEADER_LEN: usize = 8;
+/// Trailer size: CRC-32.
+pub const CRC_LEN: usize = 4;
+/// Largest blob, header and CRC included (1 KiB: half a G431 flash page).
+pub const MAX_BLOB_LEN: usize = 1024;
+/// Largest postcard payload.
+pub const MAX_PAYLOAD_LEN: usize = MAX_BLOB_LEN - HEADER_LEN - CRC_LEN;
+/// Most added effects a blob carries.
+pub const MAX_EFFECTS: usize = 8;
+/// Marker in a Hall table for a state that must never occur (000 and 111 on 120° sensors).
+pub const HALL_INVALID: u8 = 0xFF;
+
+/// CRC used by the blob, the slot header and the serial frames: CRC-32/ISO-HDLC.
+pub const CRC32: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
+
+/// Which friction model the coefficients describe.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum ModelKind {
+    /// No model: the firmware runs the plain PI loop without compensation.
+    None,
+    /// Linear motor model (no friction state); compensation from the added effects only.
+    Linear,
+    /// LuGre friction observer (the paper's section on the LuGre model).
+    Lugre,
+    /// SINDYc sparse model (the paper's eqs. 43-47).
+    Sindyc,
+}
+
+/// Which velocity estimator the firmware runs.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub enum Estimator {
+    /// Moving average of the Hall-quantised angle difference over `window` samples of 12 ms
+    /// (the paper uses 10).
+    MovingAverage { window: u8 },
+    /// Hall-edge timing: one Hall step divided by the time between the last two edges,
+    /// forced to zero when no edge came for `timeout_s`.
+    EdgeTiming { timeout_s: f32 },
+}
+
+/// PI speed-loop gains and the compensation gain.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct PiGains {
+    /// Proportional gain [V/(rad/s)].
+    pub kp: f32,
+    /// Integral gain [V/rad].
+    pub ki: f32,
+    /// Voltage limit of the loop output (anti-windup clamp) [V].
+    pub u_max: f32,
+    /// Weight of the friction compensation voltage V_c added to the PI output (0 = off,
+    /// 1 = full compensation as in the paper's eq. 40).
+    pub comp_gain: f32,
+}
+
+/// Safety limits the firmware enforces (bridge off and fault when exceeded).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Limits {
+    /// Phase current limit [A].
+    pub i_max: f32,
+    /// Lowest allowed bus voltage [V].
+    pub vbus_min: f32,
+    /// Highest allowed bus voltage [V].
+    pub vbus_max: f32,
+}
+
+/// Everything the firmware needs to run the identified model: the blob's payload.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Coefficients {
+    /// Friction model kind.
+    pub model: ModelKind,
+    /// Motor constants (R, L, K_t, K_b, J).
+    pub motor: MotorParams<f32>,
+    /// LuGre parameters (required when `model` is [`ModelKind::Lugre`]).
+    pub lugre: Option<LugreParams<f32>>,
+    /// SINDYc model (required when `model` is [`ModelKind::Sindyc`]).
+    pub sindy: Option<SindyModel<f32>>,
+    /// Physical effects added to the model (`fit --add`), compensated on top of it.
+    pub effects: Vec<Effect<f32>, MAX_EFFECTS>,
+    /// Motor pole pairs: one electrical revolution (six Hall steps) is 1/pole_pairs turn.
+    pub pole_pairs: u8,
+    /// Hall state (bits H3 H2 H1, 0..7) to commutation sector (0..5, electrical angle
+    /// sector·60°); [`HALL_INVALID`] marks the two impossible states.
+    pub hall_table: [u8; 8],
+    /// Velocity estimator.
+    pub estimator: Estimator,
+    /// Speed-loop gains.
+    pub pi: PiGains,
+    /// Safety limits.
+    pub limits: Limits,
+}
+
+/// Default Hall table for 120°-spaced sensors, sequence 1-3-2-6-4-5 for positive rotation
+/// (the order of ST's six-step examples; a motor wired otherwise needs its own table,
+/// which `motorid export` writes).
+pub const DEFAULT_HALL_TABLE: [u8; 8] = [HALL_INVALID, 0, 2, 1, 4, 5, 3, HALL_INVALID];
+
+impl Default for Coefficients {
+    /// No friction model, the paper's motor, and conservative loop settings.
+    fn default() -> Self {
+        Coefficients {
+            model: ModelKind::None,
+            motor: MotorParams::paper(),
+            lugre: None,
+            sindy: None,
+            effects: Vec::new(),
+            // The paper's Hall resolution 0.095 rad = 2π/66 = one of 6·11 steps: 11 pole pairs.
+            pole_pairs: 11,
+            hall_table: DEFAULT_HALL_TABLE,
+            // The paper's estimator: moving average over 10 samples.
+            estimator: Estimator::MovingAverage { window: 10 },
+            pi: PiGains {
+                // Assumed starting gains, small enough to be safe on the paper's motor
+                // (R ≈ 0.22 Ω); tune per motor and export with the model.
+                kp: 0.05,
+                ki: 0.5,
+                u_max: 12.0,
+                comp_gain: 1.0,
+            },
+            limits: Limits {
+                // B-G431B-ESC1: UM2516 rates the board for 40 A peak and 6-28 V (6S LiPo);
+                // we stop well inside those.
+                i_max: 30.0,
+                vbus_min: 6.0,
+                vbus_max: 28.0,
+            },
+        }
+    }
+}
+
+/// Why a blob was rejected.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BlobError {
+    /// The output buffer cannot hold the blob.
+    BufferTooSmall,
+    /// Fewer bytes than the header announces (or than a header).
+    Truncated,
+    /// The first four bytes are not `MIDC`.
+    BadMagic,
+    /// A format version this code does not read.
+    UnsupportedVersion(u16),
+    /// Payload length beyond [`MAX_PAYLOAD_LEN`] or trailing bytes after the CRC.
+    BadLength,
+    /// CRC mismatch: the blob is corrupted.
+    BadCrc,
+    /// The payload is not a postcard encoding of [`Coefficients`] (or exceeds a capacity).
+    Payload,
+    /// The values are not usable; the text says which.
+    Invalid(&'static str),
+}
+
+impl core::fmt::Display for BlobError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            BlobError::BufferTooSmall => write!(f, "buffer too small for the coefficient blob"),
+            BlobError::Truncated => write!(f, "coefficient blob is truncated"),
+            BlobError::BadMagic => write!(f, "not a coefficient blob (magic is not MIDC)"),
+            BlobError::UnsupportedVersion(v) => {
+                write!(
+                    f,
+                    "coefficient blob version {v} is not supported (expected {VERSION})"
+                )
+            }
+            BlobError::BadLength => write!(f, "coefficient blob has a bad length field"),
+            BlobError::BadCrc => write!(f, "coefficient blob CRC mismatch (corrupted)"),
+            BlobError::Payload => write!(f, "coefficient blob payload does not decode"),
+            BlobError::Invalid(why) => write!(f, "coefficient blob values are invalid: {why}"),
+        }
+    }
+}
+
+impl core::error::Error for BlobError {}
+
+fn finite(xs: &[f32]) -> bool {
+    xs.iter().all(|x| x.is_finite())
+}
+
+fn effect_finite(e: &Effect<f32>) -> bool {
+    match *e {
+        Effect::Coulomb { fc } => finite(&[fc]),
+        Effect::Viscous { b } => finite(&[b]),
+        Effect::Stribeck { fs, vs } => finite(&[fs, vs]) && vs != 0.0,
+        Effect::Presliding { sigma0, sigma1 } => finite(&[sigma0, sigma1]),
+        Effect::Cogging { amp, phase, .. } => finite(&[amp, phase]),
+        Effect::PositionLoad { amp, phase } => finite(&[amp, phase]),
+        Effect::Offset { t0 } => finite(&[t0]),
+        Effect::Asymmetry { dv, dc } => finite(&[dv, dc]),
+        Effect::Deadtime { vd } => finite(&[vd]),
+        Effect::CurrentOffset { i0 } => finite(&[i0]),
+        Effect::Thermal { k, tau } => finite(&[k, tau]) && tau > 0.0,
+        Effect::LoadFriction { mu } => finite(&[mu]),
+    }
+}
+
+impl Coefficients {
+    /// Checks the values: finite numbers, positive motor constants, a Hall table that maps
+    /// the six valid states one-to-one onto sectors 0..5, parameters present for the model.
+    pub fn validate(&self) -> Result<(), BlobError> {
+        let m = &self.motor;
+        if !finite(&[m.r, m.l, m.kt, m.kb, m.j]) || m.r <= 0.0 || m.l <= 0.0 || m.kt <= 0.0 {
+            return Err(BlobError::Invalid(
+                "motor constants must be finite and positive",
+            ));
+        }
+        if m.j <= 0.0 || m.kb <= 0.0 {
+            return Err(BlobError::Invalid(
+                "motor constants must be finite and positive",
+            ));
+        }
+        if self.pole_pairs == 0 {
+            return Err(BlobError::Invalid("pole_pairs must be at least 1"));
+        }
+        let mut seen = [false; 6];
+        let mut valid_states = 0;
+        for &s in &self.hall_table {
+            if s == HALL_INVALID {
+                continue;
+            }
+            if s > 5 || seen[s as usize] {
+                return Err(BlobError::Invalid(
+                    "hall table must map six states onto sectors 0..5",
+                ));
+            }
+            seen[s as usize] = true;
+            valid_states += 1;
+        }
+        if valid_states != 6 {
+            return Err(BlobError::Invalid(
+                "hall table must map six states onto sectors 0..5",
+            ));
+        }
+        match self.estimator {
+            Estimator::MovingAverage { window } if window == 0 || window > 64 => {
+                return Err(BlobError::Invalid("moving-average window must be 1..=64"));
+            }
+            Estimator::EdgeTiming { timeout_s } if !(timeout_s > 0.0 && timeout_s.is_finite()) => {
+                return Err(BlobError::Invalid("edge-timing timeout must be positive"));
+            }
+            _ => {}
+        }
+        let p = &self.pi;
+        if !finite(&[p.kp, p.ki, p.u_max, p.comp_gain]) || p.u_max <= 0.0 {
+            return Err(BlobError::Invalid(
+                "PI gains must be finite and u_max positive",
+            ));
+        }
+        let l = &self.limits;
+        if !finite(&[l.i_max, l.vbus_min, l.vbus_max]) || l.i_max <= 0.0 || l.vbus_min >= l.vbus_max
+        {
+            return Err(BlobError::Invalid(
+                "limits must be finite with vbus_min < vbus_max",
+            ));
+        }
+        if !self.effects.iter().all(effect_finite) {
+            return Err(BlobError::Invalid("effect parameters must be finite"));
+        }
+        if let Some(lg) = &self.lugre {
+            if !lg.is_valid() {
+                return Err(BlobError::Invalid("LuGre parameters are not valid"));
+            }
+        }
+        if let Some(s) = &self.sindy {
+            let eqs = [&s.accel, &s.zdot, &s.idot];
+            let coefs_finite = eqs
+                .iter()
+                .all(|e| e.terms.iter().all(|(_, c)| c.is_finite()));
+            // z_max may be non-finite on purpose (the model's default bound), see SindyModel.
+            if !finite(&[s.a, s.vs, s.j]) || !coefs_finite {
+                return Err(BlobError::Invalid("SINDYc coefficients must be finite"));
+            }
+        }
+        match self.model {
+            ModelKind::Lugre if self.lugre.is_none() => {
+                Err(BlobError::Invalid("model lugre without LuGre parameters"))
+            }
+            ModelKind::Sindyc if self.sindy.is_none() => {
+                Err(BlobError::Invalid("model sindyc without SINDYc terms"))
+            }
+            _ => Ok(()),
+        }
+    }
+}
+
+impl Coefficients {
+    /// Tick rate [Hz] of the firmware's Hall capture timer (TIM4 at 1 MHz), used by the
+    /// edge-timing estimator.
+    pub const CAPTURE_TICK_HZ: f32 = 1.0e6;
+
+    /// The control step's configuration for these coefficients at nominal bus voltage
+    /// `v_bus` [V]: what the firmware (and the board emulator) runs.
+    pub fn step_config(&self, v_bus: f32) -> StepConfig<f32> {
+        let mut cfg = StepConfig::<f32>::paper();
+        cfg.motor = self.motor;
+        cfg.pole_pairs = u16::from(self.pole_pairs.max(1));
+        let mut sector = [INVALID; 8];
+        for (s, &b) in sector.iter_mut().zip(&self.hall_table) {
+            *s = if b == HALL_INVALID { INVALID } else { b as i8 };
+        }
+        cfg.hall_table = HallTable { sector };
+        cfg.estimator = match self.estimator {
+            Estimator::MovingAverage { window } => EstimatorConfig::MovingAverage { window },
+            Estimator::EdgeTiming { timeout_s } => EstimatorConfig::EdgeTiming {
+                tick_hz: Self::CAPTURE_TICK_HZ,
+                timeout_s,
+            },
+        };
+        cfg.observer = match (self.model, &self.lugre, &self.sindy) {
+            (ModelKind::Lugre, Some(p), _) => ObserverConfig::Lugre(*p),
+            (ModelKind::Sindyc, _, Some(m)) => ObserverConfig::Sindy(m.clone()),
+            _ => ObserverConfig::None,
+        };
+        cfg.effects = self.effects.iter().copied().collect();
+        cfg.pi = PiParams::new(self.pi.kp, self.pi.ki, self.pi.u_max.min(v_bus));
+        cfg.v_bus = v_bus;
+        cfg.compensate = self.pi.comp_gain > 0.0 && self.model != ModelKind::None;
+        cfg
+    }
+}
+
+/// Encodes `c` into `buf` and returns the blob (a prefix of `buf`).
+///
+/// Fails with [`BlobError::BufferTooSmall`] when `buf` (or [`MAX_BLOB_LEN`]) is too small,
+/// and with [`BlobError::Invalid`] when the values would not pass [`decode`].
+pub fn encode<'a>(c: &Coefficients, buf: &'a mut [u8]) -> Result<&'a [u8], BlobError> {
+    c.validate()?;
+    let cap = buf.len().min(MAX_BLOB_LEN);
+    if cap < HEADER_LEN + CRC_LEN {
+        return Err(BlobError::BufferTooSmall);
+    }
+    let n = postcard::to_slice(c, &mut buf[HEADER_LEN..cap - CRC_LEN])
+        .map_err(|_| BlobError::BufferTooSmall)?
+        .len();
+    buf[0..4].copy_from_slice(&MAGIC);
+    buf[4..6].copy_from_slice(&VERSION.to_le_bytes());
+    buf[6..8].copy_from_slice(&(n as u16).to_le_bytes());
+    let end = HEADER_LEN + n;
+    let crc = CRC32.checksum(&buf[..end]);
+    buf[end..end + CRC_LEN].copy_from_slice(&crc.to_le_bytes());
+    Ok(&buf[..end + CRC_LEN])
+}
+
+/// Total length of the blob that starts `bytes`, read from its header (no CRC check).
+/// Used by the flash slots to know how much to read. `None` without a plausible header.
+pub fn blob_len(bytes: &[u8]) -> Option<usize> {
+    if bytes.len() < HEADER_LEN || bytes[0..4] != MAGIC {
+        return None;
+    }
+    let n = u16::from_le_bytes([bytes[6], bytes[7]]) as usize;
+    (n <= MAX_PAYLOAD_LEN).then_some(HEADER_LEN + n + CRC_LEN)
+}
+
+/// Checks the framing (magic, version, length, CRC) of a blob and returns its payload.
+pub fn check(bytes: &[u8]) -> Result<&[u8], BlobError> {
+    if bytes.len() < HEADER_LEN {
+        return Err(BlobError::Truncated);
+    }
+    if bytes[0..4] != MAGIC {
+        return Err(BlobError::BadMagic);
+    }
+    let version = u16::from_le_bytes([bytes[4], bytes[5]]);
+    if version != VERSION {
+        return Err(BlobError::UnsupportedVersion(version));
+    }
+    let n = u16::from_le_bytes([bytes[6], bytes[7]]) as usize;
+    if n > MAX_PAYLOAD_LEN {
+        return Err(BlobError::BadLength);
+    }
+    let end = HEADER_LEN + n;
+    if bytes.len() < end + CRC_LEN {
+        return Err(BlobError::Truncated);
+    }
+    if bytes.len() > end + CRC_LEN {
+        return Err(BlobError::BadLength);
+    }
+    let stored = u32::from_le_bytes([bytes[end], bytes[end + 1], bytes[end + 2], bytes[end + 3]]);
+    if CRC32.checksum(&bytes[..end]) != stored {
+        return Err(BlobError::BadCrc);
+    }
+    Ok(&bytes[HEADER_LEN..end])
+}
+
+/// Decodes and validates a blob. Never panics, whatever the bytes.
+pub fn decode(bytes: &[u8]) -> Result<Coefficients, BlobError> {
+    let payload = check(bytes)?;
+    let (c, rest): (Coefficients, &[u8]) =
+        postcard::take_from_bytes(payload).map_err(|_| BlobError::Payload)?;
+    if !rest.is_empty() {
+        return Err(BlobError::Payload);
+    }
+    c.validate()?;
+    Ok(c)
+}
+
+#[cfg(test)]
+mod tests {
+    extern crate std;
+    use super::*;
+    use crate::sindy::{SparseEq, Term, MAX_TERMS};
+    use proptest::prelude::*;
+
+    /// A blob with every optional part filled, at the largest size the format allows.
+    fn full() -> Coefficients {
+        let mut c = Coefficients {
+            model: ModelKind::Sindyc,
+            lugre: Some(LugreParams::paper()),
+            ..Coefficients::default()
+        };
+        // Worst case for size: every equation full, with the widest term encoding.
+        let mut eq = SparseEq::new();
+        for k in 0..MAX_TERMS {
+            eq.push(Term::SinTheta(1000 + k as u16), -1.5e3 + k as f32)
+                .unwrap();
+        }
+        let mut m = SindyModel::empty(20.0, 3.676, 3.0e-4);
+        m.accel = eq.clone();
+        m.zdot = eq.clone();
+        m.idot = eq;
+        c.sindy = Some(m);
+        let effects = [
+            Effect::Coulomb { fc: 0.08 },
+            Effect::Viscous { b: 0.0016 },
+            Effect::Stribeck {
+                fs: 0.0175,
+                vs: 3.676,
+            },
+            Effect::Presliding {
+                sigma0: 317.2,
+                sigma1: 22.2,
+            },
+            Effect::Cogging {
+                harmonic: 12,
+                amp: 0.01,
+                phase: 0.3,
+            },
+            Effect::Deadtime { vd: 0.4 },
+            Effect::Thermal { k: 0.01, tau: 60.0 },
+            Effect::LoadFriction { mu: 0.02 },
+        ];
+        for e in effects {
+            c.effects.push(e).unwrap();
+        }
+        c.estimator = Estimator::EdgeTiming { timeout_s: 0.2 };
+        c
+    }
+
+    #[test]
+    fn round_trip_default_and_full() {
+        let mut buf = [0u8; MAX_BLOB_LEN];
+        for c in [Coefficients::default(), full()] {
+            let blob = encode(&c, &mut buf).unwrap();
+            assert_eq!(&blob[0..4], b"MIDC");
+            assert_eq!(blob_len(blob), Some(blob.len()));
+            assert_eq!(decode(blob).unwrap(), c);
+        }
+    }
+
+    #[test]
+    fn largest_blob_fits_half_a_flash_page() {
+        let mut buf = [0u8; 4096];
+        let n = encode(&full(), &mut buf).unwrap().len();
+        assert!(n <= MAX_BLOB_LEN, "{n} bytes");
+        // Room left for the slot header inside one 2 KiB page.
+        assert!(n + 16 <= 2048);
+    }
+
+    #[test]
+    fn step_config_carries_the_model() {
+        let c = full();
+        let cfg = c.step_config(24.0);
+        assert!(matches!(cfg.observer, ObserverConfig::Sindy(_)));
+        assert_eq!(cfg.pole_pairs, 11);
+        assert_eq!(cfg.effects.len(), MAX_EFFECTS);
+        assert_eq!(cfg.hall_table, HallTable::DEFAULT_120);
+        let none = Coefficients::default().step_config(12.0);
+        assert!(matches!(none.observer, ObserverConfig::None));
+        assert!(!none.compensate);
+        assert_eq!(none.pi.out_max, 12.0);
+    }
+
+    #[test]
+    fn small_buffer_is_an_error() {
+        let mut buf = [0u8; 40];
+        assert_eq!(encode(&full(), &mut buf), Err(BlobError::BufferTooSmall));
+    }
+
+    #[test]
+    fn truncation_is_detected_at_every_length() {
+        let mut buf = [0u8; MAX_BLOB_LEN];
+        let blob = encode(&full(), &mut buf).unwrap();
+        for n in 0..blob.len() {
+            assert!(
+                decode(&blob[..n]).is_err(),
+                "accepted a blob cut to {n} bytes"
+            );
+        }
+    }
+
+    #[test]
+    fn every_single_bit_flip_is_detected() {
+        let mut buf = [0u8; MAX_BLOB_LEN];
+        let blob = encode(&Coefficients::default(), &mut buf).unwrap().to_vec();
+        for byte in 0..blob.len() {
+            for bit in 0..8 {
+                let mut b = blob.clone();
+                b[byte] ^= 1 << bit;
+                assert!(
+                    decode(&b).is_err(),
+                    "flip of byte {byte} bit {bit} accepted"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn invalid_values_are_rejected_even_with_a_good_crc() {
+        let mut buf = [0u8; MAX_BLOB_LEN];
+        let cases: [fn(&mut Coefficients); 5] = [
+            |c| c.hall_table = [HALL_INVALID, 0, 0, 1, 4, 5, 3, HALL_INVALID],
+            |c| c.pole_pairs = 0,
+            |c| c.motor.r = f32::NAN,
+            |c| c.model = ModelKind::Lugre,
+            |c| c.limits.vbus_min = 50.0,
+        ];
+        for (k, spoil) in cases.iter().enumerate() {
+            let mut c = Coefficients::default();
+            spoil(&mut c);
+            assert!(
+                matches!(c.validate(), Err(BlobError::Invalid(_))),
+                "case {k}"
+            );
+            // Build the blob by hand (encode refuses invalid values) and check decode refuses.
+            let n = postcard::to_slice(&c, &mut buf[HEADER_LEN..])
+                .unwrap()
+                .len();
+            buf[0..4].copy_from_slice(&MAGIC);
+            buf[4..6].copy_from_slice(&VERSION.to_le_bytes());
+            buf[6..8].copy_from_slice(&(n as u16).to_le_bytes());
+            let crc = CRC32.checksum(&buf[..HEADER_LEN + n]);
+            buf[HEADER_LEN + n..HEADER_LEN + n + 4].copy_from_slice(&crc.to_le_bytes());
+            let r = decode(&buf[..HEADER_LEN + n + 4]);
+            assert!(matches!(r, Err(BlobError::Invalid(_))), "case {k}: {r:?}");
+        }
+    }
+
+    #[test]
+    fn other_version_is_refused() {
+        let mut buf = [0u8; MAX_BLOB_LEN];
+        let blob = encode(&Coefficients::default(), &mut buf).unwrap().to_vec();
+        let mut b = blob.clone();
+        b[4] = 2;
+        assert_eq!(decode(&b), Err(BlobError::UnsupportedVersion(2)));
+    }
+
+    proptest! {
+        #[test]
+        fn garbage_never_panics(bytes in proptest::collection::vec(any::<u8>(), 0..1100)) {
+            let _ = decode(&bytes);
+        }
+
+        #[test]
+        fn garbage_behind_a_valid_header_never_panics(
+            payload in proptest::collection::vec(any::<u8>(), 0..400)
+        ) {
+            // Correct magic, version, length and CRC around random payload bytes: exercises
+            // the postcard decoder and the validation on arbitrary input.
+            let mut b = std::vec::Vec::new();
+            b.extend_from_slice(&MAGIC);
+            b.extend_from_slice(&VERSION.to_le_bytes());
+            b.extend_from_slice(&(payload.len() as u16).to_le_bytes());
+            b.extend_from_slice(&payload);
+            let crc = CRC32.checksum(&b);
+            b.extend_from_slice(&crc.to_le_bytes());
+            let _ = decode(&b);
+        }
+    }
+}

@@ -1,1 +1,734 @@
-//! (to be written)
+//! The 12 ms control step the firmware (and the emulator) calls.
+//!
+//! One [`ControlStep::step`] does, in order:
+//! 1. Hall decoding of the edges captured since the last step (each edge through the
+//!    [`HallDecoder`], its direction and timestamp to the velocity estimator), then of the
+//!    present Hall state; faults are flagged.
+//! 2. Angle θ = steps·2π/(6·pole_pairs); velocity ω from the chosen estimator. Position
+//!    terms (cogging, position load, the SINDYc model's x) see θ within one revolution.
+//! 3. Current: the measured current corrected by `current_offset` effects.
+//! 4. Friction F_f: the observer (none / LuGre / SINDYc) plus the torque of every torque
+//!    effect of the configuration.
+//! 5. Compensation `V_c = L·dI_c/dt + R·I_c`, `I_c = F_f/K_t` (R scaled by the heat state of
+//!    a `thermal` effect), plus the voltage lost to `deadtime`.
+//! 6. `V = PI(ω_ref − ω) + V_c + V_deadtime`, saturated at ±V_bus (the PI's anti-windup sees
+//!    the saturation of the total), or the open-loop override in experiment mode.
+//!
+//! No allocation; per step the transcendental calls are those of the observer and the
+//! effects (LuGre: 2 exp; the paper's SINDYc model: a few tanh), the rest is arithmetic.
+use num_traits::Float;
+use serde::{Deserialize, Serialize};
+
+use crate::compensation::{CompParams, Compensator};
+use crate::effects::{self, Effect, EffectInputs};
+use crate::hall::{self, HallDecoder, HallFault, HallTable};
+use crate::lugre::{LugreObserver, LugreParams};
+use crate::motor::MotorParams;
+use crate::pi::{saturate, Pi, PiParams};
+use crate::sindy::{SindyModel, SindyObserver};
+use crate::velocity::{Estimator, EstimatorConfig, VelocityEstimator};
+
+/// Hall edges one step can take: 32 edges per 12 ms is 2667 steps/s, 280 rad/s with 11 pole
+/// pairs (the paper's motor reaches ≈ 170 rad/s at 12 V).
+pub const MAX_EDGES: usize = 32;
+/// Effects a configuration can carry.
+pub const MAX_EFFECTS: usize = 8;
+/// The velocity estimator's angle reference moves after this many Hall steps (4096 steps are
+/// 390 rad with 11 pole pairs, where an f32 keeps 3e-5 rad resolution).
+const REBASE_STEPS: u32 = 4096;
+
+/// One Hall edge: the capture timer count and the Hall state after the edge.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct HallEdge {
+    pub ticks: u32,
+    pub state: u8,
+}
+
+/// Which friction observer runs.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum ObserverConfig<F> {
+    /// No observer: friction from the effect terms only.
+    None,
+    Lugre(LugreParams<F>),
+    Sindy(SindyModel<F>),
+}
+
+/// Everything the step needs, serialisable (the coefficient blob carries it or converts into
+/// it).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StepConfig<F> {
+    pub motor: MotorParams<F>,
+    pub pole_pairs: u16,
+    pub hall_table: HallTable,
+    pub estimator: EstimatorConfig<F>,
+    pub observer: ObserverConfig<F>,
+    /// Effects added on top of the observer (do not repeat what the observer models, e.g.
+    /// Coulomb friction with a LuGre observer).
+    pub effects: heapless::Vec<Effect<F>, MAX_EFFECTS>,
+    /// Speed PI gains, anti-windup; its limits are replaced by ±V_bus every step.
+    pub pi: PiParams<F>,
+    /// Nominal bus voltage [V], used when the measured one is missing or invalid.
+    pub v_bus: F,
+    /// Time constant [s] of the filtered derivative of I_c.
+    pub tau_d: F,
+    /// Control period [s].
+    pub dt: F,
+    /// Add the friction compensation voltage (false: friction is estimated and reported but
+    /// not compensated, the paper's uncompensated baseline).
+    pub compensate: bool,
+}
+
+impl<F: Float> StepConfig<F> {
+    /// The paper's setup: its motor, 11 pole pairs, 120° Hall sensors, moving average of 10
+    /// samples, LuGre observer with its identified parameters, 24 V bus, 12 ms.
+    /// Not from the paper (it gives no values): PI kp = 0.05 V/(rad/s), ki = 0.8 V/rad —
+    /// a closed loop of ≈ 0.3 s, slow against the 60 ms delay of the moving average — and
+    /// τ_d = 24 ms (two periods) for the derivative filter.
+    pub fn paper() -> Self {
+        let c = |x: f64| F::from(x).unwrap();
+        StepConfig {
+            motor: MotorParams::paper(),
+            pole_pairs: hall::PAPER_POLE_PAIRS,
+            hall_table: HallTable::DEFAULT_120,
+            estimator: EstimatorConfig::paper(),
+            observer: ObserverConfig::Lugre(LugreParams::paper()),
+            effects: heapless::Vec::new(),
+            pi: PiParams::new(c(0.05), c(0.8), c(24.0)),
+            v_bus: c(24.0),
+            tau_d: c(0.024),
+            dt: F::from(crate::CONTROL_PERIOD_S).unwrap(),
+            compensate: true,
+        }
+    }
+}
+
+/// Inputs of one step.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct StepInputs<F> {
+    /// Present Hall state (bit 0 = A, bit 1 = B, bit 2 = C).
+    pub hall: u8,
+    /// Hall edges captured since the previous step, oldest first.
+    pub edges: heapless::Vec<HallEdge, MAX_EDGES>,
+    /// More edges came than `edges` holds (the count is then wrong): flagged as a fault.
+    pub edges_overflow: bool,
+    /// Capture-timer count at this sample (same timer as the edges).
+    pub now_ticks: u32,
+    /// Measured winding current [A].
+    pub i_meas: F,
+    /// Measured bus voltage [V] (non-finite or ≤ 0: the configured nominal value).
+    pub v_bus: F,
+    /// Speed reference [rad/s].
+    pub omega_ref: F,
+    /// Experiment mode: apply this voltage open loop (saturated at ±V_bus) instead of the PI.
+    pub v_override: Option<F>,
+}
+
+/// Fault and status flags of one step (bit set).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct Faults(pub u16);
+
+impl Faults {
+    /// A Hall state 000/111 (or unmapped) was seen.
+    pub const HALL_INVALID: u16 = 1 << 0;
+    /// A jump to a non-adjacent sector was seen.
+    pub const HALL_JUMP: u16 = 1 << 1;
+    /// More Hall edges than [`MAX_EDGES`] in one step.
+    pub const EDGE_OVERFLOW: u16 = 1 << 2;
+    /// A non-finite input (current, reference, override) was replaced by 0.
+    pub const NONFINITE_INPUT: u16 = 1 << 3;
+    /// The measured bus voltage was invalid; the nominal one was used.
+    pub const BUS_INVALID: u16 = 1 << 4;
+    /// The voltage command is saturated at ±V_bus.
+    pub const SATURATED: u16 = 1 << 5;
+    /// The friction estimate was not finite; it was replaced by 0 and the observer reset.
+    pub const OBSERVER_RESET: u16 = 1 << 6;
+
+    pub fn contains(self, flag: u16) -> bool {
+        self.0 & flag != 0
+    }
+    fn set(&mut self, flag: u16) {
+        self.0 |= flag;
+    }
+}
+
+/// Outputs of one step.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct StepOutputs<F> {
+    /// Voltage command [V].
+    pub v_cmd: F,
+    /// Decoded angle [rad] (steps·step angle; loses resolution in f32 after very long runs:
+    /// `steps` is exact).
+    pub theta: F,
+    /// Hall steps counted since start (signed, exact).
+    pub steps: i32,
+    /// Estimated velocity [rad/s].
+    pub omega: F,
+    /// Estimated friction torque F_f [N·m] (observer + torque effects).
+    pub friction: F,
+    /// Compensation voltage V_c [V] (0 when compensation is off).
+    pub v_comp: F,
+    /// Observer state z (0 without observer).
+    pub z: F,
+    pub faults: Faults,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+enum Observer<F> {
+    None,
+    Lugre(LugreObserver<F>),
+    Sindy(SindyObserver<F>),
+}
+
+/// The control step with its state.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ControlStep<F> {
+    motor: MotorParams<F>,
+    dt: F,
+    v_bus_nominal: F,
+    compensate: bool,
+    decoder: HallDecoder,
+    estimator: Estimator<F>,
+    observer: Observer<F>,
+    effects: heapless::Vec<Effect<F>, MAX_EFFECTS>,
+    /// Heat states of the `thermal` effects (one per effect slot).
+    heat: [F; MAX_EFFECTS],
+    pi: Pi<F>,
+    comp: Compensator<F>,
+    /// Voltage commanded at the previous step (the SINDYc model's u).
+    u_prev: F,
+    /// Step count the estimator's angle is relative to.
+    steps_ref: i32,
+    step_angle: F,
+}
+
+impl<F: Float> ControlStep<F> {
+    pub fn new(cfg: &StepConfig<F>) -> Self {
+        let step = hall::step_angle::<F>(cfg.pole_pairs);
+        let observer = match &cfg.observer {
+            ObserverConfig::None => Observer::None,
+            ObserverConfig::Lugre(p) => Observer::Lugre(LugreObserver::new(*p)),
+            ObserverConfig::Sindy(m) => Observer::Sindy(SindyObserver::new(m.clone())),
+        };
+        let dt = if cfg.dt.is_finite() && cfg.dt > F::zero() {
+            cfg.dt
+        } else {
+            F::from(crate::CONTROL_PERIOD_S).unwrap()
+        };
+        ControlStep {
+            motor: cfg.motor,
+            dt,
+            v_bus_nominal: cfg.v_bus.abs(),
+            compensate: cfg.compensate,
+            decoder: HallDecoder::new(cfg.hall_table, cfg.pole_pairs),
+            estimator: Estimator::from_config(&cfg.estimator, step, dt),
+            observer,
+            effects: cfg.effects.clone(),
+            heat: [F::zero(); MAX_EFFECTS],
+            pi: Pi::new(cfg.pi),
+            comp: Compensator::new(CompParams {
+                kt: cfg.motor.kt,
+                r: cfg.motor.r,
+                l: cfg.motor.l,
+                tau_d: cfg.tau_d,
+            }),
+            u_prev: F::zero(),
+            steps_ref: 0,
+            step_angle: step,
+        }
+    }
+
+    /// Back to rest: position count, estimator, observer, PI, compensation, heat.
+    pub fn reset(&mut self) {
+        self.decoder.reset();
+        self.estimator.reset();
+        match &mut self.observer {
+            Observer::None => {}
+            Observer::Lugre(o) => o.reset(),
+            Observer::Sindy(o) => o.reset(),
+        }
+        self.heat = [F::zero(); MAX_EFFECTS];
+        self.pi.reset();
+        self.comp.reset();
+        self.u_prev = F::zero();
+        self.steps_ref = 0;
+    }
+
+    /// The Hall decoder (angle, step count, fault count).
+    pub fn decoder(&self) -> &HallDecoder {
+        &self.decoder
+    }
+
+    /// The speed PI (integral, saturation).
+    pub fn pi(&self) -> &Pi<F> {
+        &self.pi
+    }
+
+    fn hall_fault(faults: &mut Faults, f: Option<HallFault>) {
+        match f {
+            Some(HallFault::InvalidState) => faults.set(Faults::HALL_INVALID),
+            Some(HallFault::ImpossibleJump) => faults.set(Faults::HALL_JUMP),
+            None => {}
+        }
+    }
+
+    /// One control step.
+    pub fn step(&mut self, inp: &StepInputs<F>) -> StepOutputs<F> {
+        let mut faults = Faults::default();
+        let dt = self.dt;
+        let finite_or_zero = |x: F, faults: &mut Faults| {
+            if x.is_finite() {
+                x
+            } else {
+                faults.set(Faults::NONFINITE_INPUT);
+                F::zero()
+            }
+        };
+
+        // 1-2. Hall edges, present state, angle, velocity.
+        if inp.edges_overflow {
+            faults.set(Faults::EDGE_OVERFLOW);
+        }
+        for e in &inp.edges {
+            let u = self.decoder.update(e.state);
+            Self::hall_fault(&mut faults, u.fault);
+            if u.dir != 0 {
+                self.estimator.on_edge(e.ticks, u.dir);
+            }
+        }
+        let u = self.decoder.update(inp.hall);
+        Self::hall_fault(&mut faults, u.fault);
+        if u.dir != 0 {
+            // A change without a captured edge: time it at the sample.
+            self.estimator.on_edge(inp.now_ticks, u.dir);
+        }
+        let steps = self.decoder.steps();
+        let theta: F = self.decoder.angle();
+        // The estimator sees the angle relative to a reference re-based every REBASE_STEPS
+        // steps, so that f32 angle differences stay exact over long runs.
+        let rel = steps.wrapping_sub(self.steps_ref);
+        if rel.unsigned_abs() >= REBASE_STEPS {
+            self.steps_ref = steps;
+            self.estimator
+                .rebase(F::from(rel).unwrap() * self.step_angle);
+        }
+        let theta_rel = F::from(steps.wrapping_sub(self.steps_ref)).unwrap() * self.step_angle;
+        let omega = self.estimator.update(theta_rel, inp.now_ticks);
+        // Position-dependent terms see the angle within one revolution (exact in f32).
+        let theta_rev: F = self.decoder.angle_in_rev();
+
+        // 3. Current corrected for the sensor offset (measured = I + i0).
+        let i_meas = finite_or_zero(inp.i_meas, &mut faults);
+        let current = i_meas - effects::total_sensor_offset(&self.effects);
+        let omega_ref = finite_or_zero(inp.omega_ref, &mut faults);
+        let v_bus = if inp.v_bus.is_finite() && inp.v_bus > F::zero() {
+            inp.v_bus
+        } else {
+            faults.set(Faults::BUS_INVALID);
+            self.v_bus_nominal
+        };
+
+        // 4. Friction: observer + torque effects.
+        let (f_obs, z) = match &mut self.observer {
+            Observer::None => (F::zero(), F::zero()),
+            Observer::Lugre(o) => (o.step(omega, dt), o.z),
+            Observer::Sindy(o) => (o.step(theta_rev, omega, current, self.u_prev, dt), o.z),
+        };
+        let ex = EffectInputs {
+            theta: theta_rev,
+            omega,
+            current,
+            kt: self.motor.kt,
+        };
+        let mut friction = f_obs + effects::total_torque(&self.effects, &ex);
+        if !friction.is_finite() {
+            faults.set(Faults::OBSERVER_RESET);
+            friction = F::zero();
+            match &mut self.observer {
+                Observer::None => {}
+                Observer::Lugre(o) => o.reset(),
+                Observer::Sindy(o) => o.reset(),
+            }
+        }
+
+        // 5. Compensation voltage (R follows the heat state of a thermal effect).
+        let mut heat = F::zero();
+        for (h, e) in self.heat.iter_mut().zip(self.effects.iter()) {
+            if let Effect::Thermal { .. } = e {
+                *h = e.heat_step(*h, current, dt);
+                if !h.is_finite() {
+                    *h = F::zero();
+                }
+                heat = heat + *h;
+            }
+        }
+        self.comp.params.r = self.motor.r * (F::one() + heat);
+        let v_comp = if self.compensate {
+            self.comp.step(friction, dt, v_bus).v_c
+        } else {
+            F::zero()
+        };
+        let v_dead = effects::total_voltage_loss(&self.effects, current);
+        let ff = v_comp
+            + if v_dead.is_finite() {
+                v_dead
+            } else {
+                F::zero()
+            };
+
+        // 6. PI with feed-forward, or the open-loop override.
+        self.pi.set_limits(-v_bus, v_bus);
+        let err = omega_ref - omega;
+        let v_cmd = match inp.v_override {
+            Some(v) => {
+                let v = saturate(finite_or_zero(v, &mut faults), -v_bus, v_bus);
+                // Bumpless return to closed loop: the integral takes what the PI would need.
+                let p = self.pi.params;
+                self.pi.integral = saturate(v - p.kp * err - ff, -v_bus, v_bus);
+                v
+            }
+            None => self.pi.step_ff(err, ff, dt),
+        };
+        let v_cmd = if v_cmd.is_finite() {
+            v_cmd
+        } else {
+            // Only a non-finite gain in the configuration gets here.
+            faults.set(Faults::NONFINITE_INPUT);
+            self.pi.reset();
+            F::zero()
+        };
+        if v_cmd.abs() >= v_bus {
+            faults.set(Faults::SATURATED);
+        }
+        self.u_prev = v_cmd;
+        StepOutputs {
+            v_cmd,
+            theta,
+            steps,
+            omega,
+            friction,
+            v_comp,
+            z,
+            faults,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::hall::hall_state_for_angle;
+    use crate::lugre;
+    use crate::sindy::{SparseEq, Term};
+    use proptest::prelude::*;
+
+    /// A DC motor with LuGre friction, integrated finely (exact LuGre update, 0.1 ms steps),
+    /// producing Hall states and edges for the control step.
+    struct Motor {
+        m: MotorParams<f64>,
+        lg: LugreParams<f64>,
+        theta: f64,
+        omega: f64,
+        i: f64,
+        z: f64,
+        t_ticks: u64,
+    }
+
+    const HZ: f64 = 1.0e6;
+
+    impl Motor {
+        fn new() -> Self {
+            Motor {
+                m: MotorParams::paper(),
+                lg: LugreParams::paper(),
+                theta: 0.01,
+                omega: 0.0,
+                i: 0.0,
+                z: 0.0,
+                t_ticks: 0,
+            }
+        }
+        /// Apply `v` for 12 ms; returns the step inputs of the next sample.
+        fn run(&mut self, v: f64, omega_ref: f64, table: &HallTable) -> StepInputs<f64> {
+            let h = 1e-4;
+            let mut inp = StepInputs {
+                v_bus: 24.0,
+                omega_ref,
+                ..Default::default()
+            };
+            let mut state = hall_state_for_angle(self.theta, 11, table);
+            for _ in 0..120 {
+                // Current: exact first-order update with ω held.
+                let a = (-self.m.r * h / self.m.l).exp();
+                let i_ss = (v - self.m.kb * self.omega) / self.m.r;
+                self.i = i_ss + (self.i - i_ss) * a;
+                let (zn, zd) = lugre::z_step(&self.lg, self.z, self.omega, h);
+                self.z = zn;
+                let ff = self.lg.friction_at(self.omega, zn, zd);
+                self.omega += h * (self.m.kt * self.i - ff) / self.m.j;
+                self.theta += h * self.omega;
+                self.t_ticks += (h * HZ) as u64;
+                let s = hall_state_for_angle(self.theta, 11, table);
+                if s != state {
+                    state = s;
+                    let _ = inp.edges.push(HallEdge {
+                        ticks: self.t_ticks as u32,
+                        state: s,
+                    });
+                }
+            }
+            inp.hall = state;
+            inp.now_ticks = self.t_ticks as u32;
+            inp.i_meas = self.i;
+            inp
+        }
+    }
+
+    fn closed_loop(cfg: &StepConfig<f64>, omega_ref: f64, steps: usize) -> (f64, f64, Faults) {
+        let mut ctl = ControlStep::new(cfg);
+        let mut motor = Motor::new();
+        let mut v = 0.0;
+        let mut faults = Faults::default();
+        let mut err_sum = 0.0;
+        for k in 0..steps {
+            let inp = motor.run(v, omega_ref, &cfg.hall_table);
+            let out = ctl.step(&inp);
+            v = out.v_cmd;
+            faults.0 |= out.faults.0;
+            if k >= steps - 100 {
+                err_sum += (motor.omega - omega_ref).abs();
+            }
+        }
+        (motor.omega, err_sum / 100.0, faults)
+    }
+
+    #[test]
+    fn closed_loop_tracks_speed_with_both_estimators() {
+        let mut cfg = StepConfig::<f64>::paper();
+        for est in [
+            EstimatorConfig::paper(),
+            EstimatorConfig::EdgeTiming {
+                tick_hz: HZ,
+                timeout_s: 0.1,
+            },
+        ] {
+            cfg.estimator = est;
+            let (w, mean_err, faults) = closed_loop(&cfg, 40.0, 600);
+            assert!(
+                mean_err < 0.02 * 40.0,
+                "{est:?}: ω = {w}, mean |err| {mean_err}"
+            );
+            assert!(!faults.contains(Faults::HALL_INVALID | Faults::HALL_JUMP));
+        }
+    }
+
+    #[test]
+    fn compensation_reports_friction_and_voltage() {
+        let cfg = StepConfig::<f64>::paper();
+        let mut ctl = ControlStep::new(&cfg);
+        let mut motor = Motor::new();
+        let mut v = 0.0;
+        let mut out = StepOutputs::default();
+        for _ in 0..600 {
+            let inp = motor.run(v, 40.0, &cfg.hall_table);
+            out = ctl.step(&inp);
+            v = out.v_cmd;
+        }
+        // In steady motion the observer's friction is the steady LuGre friction at ω̂ and
+        // V_c = R·F_f/K_t (dI_c/dt ≈ 0).
+        let p = LugreParams::<f64>::paper();
+        let want = p.steady_friction(out.omega);
+        assert!(
+            (out.friction - want).abs() < 0.01 * want,
+            "{} vs {want}",
+            out.friction
+        );
+        let m = MotorParams::<f64>::paper();
+        assert!((out.v_comp - m.r * out.friction / m.kt).abs() < 0.05);
+        // With compensation off, v_comp is 0 but friction is still reported.
+        let mut off = cfg.clone();
+        off.compensate = false;
+        let mut ctl = ControlStep::new(&off);
+        let o = ctl.step(&motor.run(v, 40.0, &off.hall_table));
+        assert_eq!(o.v_comp, 0.0);
+    }
+
+    #[test]
+    fn override_and_faults() {
+        let cfg = StepConfig::<f64>::paper();
+        let mut ctl = ControlStep::new(&cfg);
+        let inp = StepInputs {
+            hall: 7,
+            v_bus: 12.0,
+            v_override: Some(30.0),
+            i_meas: f64::NAN,
+            ..Default::default()
+        };
+        let out = ctl.step(&inp);
+        assert_eq!(out.v_cmd, 12.0);
+        assert!(out.faults.contains(Faults::HALL_INVALID));
+        assert!(out.faults.contains(Faults::SATURATED));
+        assert!(out.faults.contains(Faults::NONFINITE_INPUT));
+        let mut inp = StepInputs {
+            hall: 1,
+            v_bus: -1.0,
+            ..Default::default()
+        };
+        ctl.step(&inp);
+        inp.hall = 6;
+        let out = ctl.step(&inp);
+        assert!(out.faults.contains(Faults::HALL_JUMP));
+        assert!(out.faults.contains(Faults::BUS_INVALID));
+    }
+
+    #[test]
+    fn effects_enter_friction_voltage_and_current() {
+        let mut cfg = StepConfig::<f64>::paper();
+        cfg.observer = ObserverConfig::None;
+        cfg.effects
+            .extend_from_slice(&[
+                Effect::Offset { t0: 0.05 },
+                Effect::CurrentOffset { i0: 0.5 },
+                Effect::Deadtime { vd: 0.4 },
+            ])
+            .unwrap();
+        cfg.pi = PiParams::new(0.0, 0.0, 24.0);
+        cfg.tau_d = 0.0;
+        let mut ctl = ControlStep::new(&cfg);
+        let inp = StepInputs {
+            hall: 1,
+            v_bus: 24.0,
+            i_meas: 2.5, // true current 2.0 A
+            ..Default::default()
+        };
+        let out = ctl.step(&inp);
+        assert!((out.friction - 0.05).abs() < 1e-12);
+        let m = MotorParams::<f64>::paper();
+        let v_c = m.r * 0.05 / m.kt;
+        assert!((out.v_comp - v_c).abs() < 1e-12);
+        // Dead time follows sgn(I) of the corrected current (+2 A): +0.4 V.
+        assert!((out.v_cmd - (v_c + 0.4)).abs() < 1e-9);
+        let inp = StepInputs {
+            i_meas: 0.5 - 2.0, // true current −2 A
+            ..inp
+        };
+        let out = ctl.step(&inp);
+        assert!((out.v_cmd - (v_c - 0.4)).abs() < 1e-9);
+    }
+
+    #[test]
+    fn f32_velocity_stays_exact_after_long_runs() {
+        // 30 edges per 12 ms for 150 000 steps: 4.5 million Hall steps, θ ≈ 4.3e5 rad, where
+        // an f32 angle alone resolves only 0.03 rad (0.25 rad/s over the 0.12 s window).
+        let mut cfg = StepConfig::<f32>::paper();
+        cfg.observer = ObserverConfig::None;
+        let mut ctl = ControlStep::new(&cfg);
+        let table = HallTable::DEFAULT_120;
+        let mut sector = 0u8;
+        let mut out = StepOutputs::default();
+        for _ in 0..150_000 {
+            let mut inp = StepInputs::<f32> {
+                v_bus: 24.0,
+                ..Default::default()
+            };
+            for _ in 0..30 {
+                sector = (sector + 1) % 6;
+                inp.edges
+                    .push(HallEdge {
+                        ticks: 0,
+                        state: table.state_of(sector).unwrap(),
+                    })
+                    .unwrap();
+            }
+            inp.hall = table.state_of(sector).unwrap();
+            out = ctl.step(&inp);
+        }
+        assert_eq!(out.steps, 4_500_000);
+        let want = 30.0 * hall::step_angle::<f64>(11) / 0.012;
+        let rel = (out.omega as f64 - want).abs() / want;
+        assert!(rel < 2e-6, "ω = {} vs {want}: {rel:e}", out.omega);
+    }
+
+    fn paper_like_sindy() -> SindyModel<f64> {
+        let mut m = SindyModel::empty(20.0, 3.0, 3e-4);
+        m.z_max = 2.0;
+        m.accel = SparseEq::from_slice(&[
+            (Term::Xdot, -5.0),
+            (Term::Z, -100.0),
+            (Term::I, 237.0),
+            (Term::TanhXdot, -250.0),
+            (Term::AbsXdotXdot, -0.01),
+            (Term::AbsZZ, 3.0),
+            (Term::ZU, 0.5),
+        ])
+        .unwrap();
+        m.zdot = SparseEq::from_slice(&[
+            (Term::Xdot, 1.0),
+            (Term::Z, -30.0),
+            (Term::TanhXdot, 0.2),
+            (Term::TanhZ, -5.0),
+            (Term::AbsXdotXdot, 1e-3),
+            (Term::AbsZZ2, -10.0),
+        ])
+        .unwrap();
+        m
+    }
+
+    fn xorshift(s: &mut u64) -> u64 {
+        *s ^= *s << 13;
+        *s ^= *s >> 7;
+        *s ^= *s << 17;
+        *s
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(24))]
+        #[test]
+        fn ten_thousand_random_steps_stay_finite(seed in 1u64..u64::MAX, which in 0usize..6, scale in 0.0f64..1e4) {
+            let mut cfg = StepConfig::<f64>::paper();
+            cfg.observer = match which % 3 {
+                0 => ObserverConfig::None,
+                1 => ObserverConfig::Lugre(LugreParams::paper()),
+                _ => ObserverConfig::Sindy(paper_like_sindy()),
+            };
+            if which >= 3 {
+                cfg.estimator = EstimatorConfig::EdgeTiming { tick_hz: 1.7e8, timeout_s: 0.05 };
+                cfg.effects.extend_from_slice(&[
+                    Effect::Coulomb { fc: 0.02 },
+                    Effect::Cogging { harmonic: 22, amp: 0.01, phase: 0.3 },
+                    Effect::Thermal { k: 0.01, tau: 30.0 },
+                    Effect::Deadtime { vd: 0.3 },
+                    Effect::LoadFriction { mu: 0.05 },
+                ]).unwrap();
+            }
+            let mut ctl = ControlStep::new(&cfg);
+            let mut s = seed;
+            let r = |s: &mut u64| (xorshift(s) as f64 / u64::MAX as f64) * 2.0 - 1.0;
+            let mut ticks = 0u32;
+            for _ in 0..10_000 {
+                let mut inp = StepInputs::<f64> {
+                    hall: (xorshift(&mut s) % 8) as u8,
+                    i_meas: r(&mut s) * scale,
+                    v_bus: r(&mut s) * 30.0,
+                    omega_ref: r(&mut s) * scale,
+                    ..Default::default()
+                };
+                let n_edges = xorshift(&mut s) % 6;
+                for _ in 0..n_edges {
+                    ticks = ticks.wrapping_add((xorshift(&mut s) % 400_000) as u32);
+                    let _ = inp.edges.push(HallEdge { ticks, state: (xorshift(&mut s) % 8) as u8 });
+                }
+                ticks = ticks.wrapping_add((xorshift(&mut s) % 3_000_000) as u32);
+                inp.now_ticks = ticks;
+                if xorshift(&mut s).is_multiple_of(10) {
+                    inp.v_override = Some(r(&mut s) * 50.0);
+                }
+                let out = ctl.step(&inp);
+                for v in [out.v_cmd, out.theta, out.omega, out.friction, out.v_comp, out.z] {
+                    prop_assert!(v.is_finite());
+                }
+                let bus = if inp.v_bus > 0.0 { inp.v_bus } else { cfg.v_bus };
+                prop_assert!(out.v_cmd.abs() <= bus);
+            }
+        }
+    }
+}

@@ -6,7 +6,19 @@
 //! | [`atomic`] | atomic output files (write to a temporary file, then rename) |
 //! | [`cmd`] | one file per `motorid` subcommand: its `--help` text and its `run` |
 //! | [`effect_spec`] | effect specs `NAME:key=value,...` with keys, units, defaults |
+//! | [`ident`] | identification: fit linear/LuGre/SINDYc models, free-run simulation, fit % |
+//! | [`model`] | MODEL.toml: an identified model with units, std errors, provenance |
+//! | [`diagnose`] | the model-error workbench: missing effects (F-test), error by region |
+//! | [`report`] | self-contained HTML reports with inline SVG plots (compare, diagnose, demo) |
+//! | [`emulator`] | the built-in motor emulator: the paper's motor, effects, sensors, signals |
 pub mod atomic;
+pub mod board;
 pub mod cmd;
+pub mod diagnose;
 pub mod effect_spec;
+pub mod emulator;
+pub mod ident;
 pub mod log;
+pub mod model;
+pub mod real_data;
+pub mod report;

@@ -1,10 +1,54 @@
-//! `motorid export` (not yet written).
-use anyhow::{bail, Result};
+//! `motorid export`: MODEL.toml → the coefficient blob the firmware loads.
+use crate::board::coeffs::{self, LoopSettings};
+use crate::model::Model;
+use anyhow::{Context, Result};
+use std::path::PathBuf;
 
-/// Not yet written.
+/// Write the coefficient blob (magic, version, postcard payload, CRC-32) for a model.
+///
+/// The blob carries the model (kind, motor constants, LuGre or SINDYc coefficients, added
+/// effects), the Hall and velocity-estimator setup, and the speed-loop gains, so that the
+/// board (or `motorid board`) runs the model's friction compensation. Check it with
+/// `motorid inspect`, put it on the board with `motorid flash` or `motorid upload`.
 #[derive(clap::Args, Debug)]
-pub struct Args {}
+pub struct Args {
+    /// The identified model (written by `motorid fit`).
+    pub model: PathBuf,
+    /// Output file for the blob (written atomically).
+    #[arg(short, long, value_name = "COEFFS.bin")]
+    pub output: PathBuf,
+    /// Speed-loop proportional gain [V per rad/s]. Default: 0.05, see control::step.
+    #[arg(long, default_value_t = LoopSettings::default().kp)]
+    pub kp: f32,
+    /// Speed-loop integral gain [V per rad]. Default: 0.8, see control::step.
+    #[arg(long, default_value_t = LoopSettings::default().ki)]
+    pub ki: f32,
+    /// Voltage limit of the speed loop [V].
+    #[arg(long, default_value_t = LoopSettings::default().u_max)]
+    pub u_max: f32,
+    /// Weight of the friction compensation voltage: 1 = full (the paper's eq. 40), 0 = off.
+    #[arg(long, default_value_t = LoopSettings::default().comp_gain)]
+    pub comp_gain: f32,
+}
 
-pub fn run(_args: Args) -> Result<()> {
-    bail!("'motorid export' is not implemented yet")
+pub fn run(args: Args) -> Result<()> {
+    let model = Model::load(&args.model)?;
+    let settings = LoopSettings {
+        kp: args.kp,
+        ki: args.ki,
+        u_max: args.u_max,
+        comp_gain: args.comp_gain,
+    };
+    let co = coeffs::coefficients(&model, settings)
+        .with_context(|| format!("{}", args.model.display()))?;
+    let bytes = coeffs::encode(&co).with_context(|| format!("{}", args.model.display()))?;
+    crate::atomic::write(&args.output, &bytes)?;
+    eprintln!(
+        "wrote {} ({} bytes: {} model, {} effects)",
+        args.output.display(),
+        bytes.len(),
+        model.kind.name(),
+        co.effects.len()
+    );
+    Ok(())
 }

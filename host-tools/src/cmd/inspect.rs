@@ -1,10 +1,117 @@
-//! `motorid inspect` (not yet written).
-use anyhow::{bail, Result};
+//! `motorid inspect`: validate and decode a coefficient blob.
+use crate::board::coeffs;
+use crate::effect_spec::EffectSpec;
+use anyhow::Result;
+use control::blob::{self, Coefficients};
+use serde_json::json;
+use std::path::PathBuf;
 
-/// Not yet written.
+/// Validate a coefficient blob (magic, version, length, CRC-32, values) and show what it
+/// holds: model kind, effects, every coefficient. A corrupted or truncated blob is an error.
 #[derive(clap::Args, Debug)]
-pub struct Args {}
+pub struct Args {
+    /// The blob (written by `motorid export`).
+    pub blob: PathBuf,
+    /// Print one JSON object: {"file", "bytes", "version", "crc32", "model", "effects":
+    /// [{"name", "spec"}], "coefficients": {...}}.
+    #[arg(long)]
+    pub json: bool,
+}
 
-pub fn run(_args: Args) -> Result<()> {
-    bail!("'motorid inspect' is not implemented yet")
+/// Model kind as the contract names it.
+pub fn kind_name(k: blob::ModelKind) -> &'static str {
+    match k {
+        blob::ModelKind::None => "none",
+        blob::ModelKind::Linear => "linear",
+        blob::ModelKind::Lugre => "lugre",
+        blob::ModelKind::Sindyc => "sindyc",
+    }
+}
+
+/// An f32 as the f64 of its shortest decimal form (0.01f32 → 0.01, not 0.009999999776).
+pub fn f32_shortest(x: f32) -> f64 {
+    x.to_string().parse().unwrap_or(f64::from(x))
+}
+
+/// The blob's effects as `diagnose`-style specs.
+pub fn effect_specs(co: &Coefficients) -> Vec<EffectSpec> {
+    co.effects
+        .iter()
+        .map(|e| EffectSpec::from_effect(&coeffs::map_effect(e, f32_shortest)))
+        .collect()
+}
+
+/// The JSON object `inspect --json` prints.
+pub fn to_json(file: &str, bytes: &[u8], co: &Coefficients) -> Result<serde_json::Value> {
+    let crc = u32::from_le_bytes(bytes[bytes.len() - 4..].try_into()?);
+    let effects: Vec<_> = effect_specs(co)
+        .iter()
+        .map(|s| json!({"name": s.kind.name(), "spec": s.to_string()}))
+        .collect();
+    Ok(json!({
+        "file": file,
+        "bytes": bytes.len(),
+        "version": blob::VERSION,
+        "crc32": format!("{crc:08x}"),
+        "model": kind_name(co.model),
+        "effects": effects,
+        // Through text so that each f32 keeps its shortest decimal form.
+        "coefficients": serde_json::from_str::<serde_json::Value>(&serde_json::to_string(co)?)?,
+    }))
+}
+
+pub fn run(args: Args) -> Result<()> {
+    let (bytes, co) = coeffs::decode_file(&args.blob)?;
+    let file = args.blob.display().to_string();
+    if args.json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&to_json(&file, &bytes, &co)?)?
+        );
+        return Ok(());
+    }
+    let m = &co.motor;
+    println!(
+        "{file}: valid coefficient blob, format version {}, {} bytes",
+        blob::VERSION,
+        bytes.len()
+    );
+    println!("model:      {}", kind_name(co.model));
+    println!(
+        "motor:      R = {} Ω, L = {} H, Kt = {} N·m/A, Kb = {} V·s/rad, J = {} kg·m²",
+        m.r, m.l, m.kt, m.kb, m.j
+    );
+    if let Some(l) = &co.lugre {
+        println!(
+            "lugre:      α0 = {} N·m, α1 = {} N·m, α2 = {} N·m·s/rad, v0 = {} rad/s, σ0 = {} N·m/rad, σ1 = {} N·m·s/rad",
+            l.alpha0, l.alpha1, l.alpha2, l.v0, l.sigma0, l.sigma1
+        );
+    }
+    if let Some(s) = &co.sindy {
+        println!(
+            "sindyc:     a = {}, vs = {} rad/s, J = {} kg·m², terms: {} (dω/dt), {} (dz/dt), {} (dI/dt)",
+            s.a,
+            s.vs,
+            s.j,
+            s.accel.terms.len(),
+            s.zdot.terms.len(),
+            s.idot.terms.len()
+        );
+    }
+    let specs = effect_specs(&co);
+    if specs.is_empty() {
+        println!("effects:    none");
+    }
+    for s in specs {
+        println!("effect:     {s}");
+    }
+    println!(
+        "hall:       {} pole pairs, table {:?}; velocity estimator {:?}",
+        co.pole_pairs, co.hall_table, co.estimator
+    );
+    println!(
+        "loop:       kp = {} V/(rad/s), ki = {} V/rad, u_max = {} V, compensation gain {}",
+        co.pi.kp, co.pi.ki, co.pi.u_max, co.pi.comp_gain
+    );
+    Ok(())
 }

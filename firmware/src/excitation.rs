@@ -1,0 +1,112 @@
+//! Open-loop excitations of experiment mode, computed on the board at each 12 ms sample.
+//!
+//! The reference paper gives its signals only by amplitude and frequency range; these follow
+//! the same table as the host emulator (`host-tools/src/emulator/signals.rs`): `a` multisine
+//! 0.1-1 Hz up to 12 V, `b` up to 6 V 0.05-1 Hz, `c` up to 0.5 V 0.25-1 Hz, `d` steps
+//! between −10 and 10 V held 1-3 s, plus constant and ramp. The shapes are deterministic but
+//! not sample-identical to the host's (which uses a seeded `StdRng`): the log records the
+//! voltage actually applied, which is what identification uses.
+//!
+//! Multisines use Schroeder phases (low crest factor) and are scaled by the sum of their
+//! amplitudes, so the peak never exceeds the stated amplitude; a slow envelope varies the
+//! amplitude, and the first second fades in from rest.
+use core::f32::consts::PI;
+
+use control::frame::Excitation;
+
+struct Multisine {
+    f_lo: f32,
+    f_hi: f32,
+    n: u32,
+    peak: f32,
+    env_period: f32,
+    env_min: f32,
+}
+
+fn multisine(m: &Multisine, t: f32) -> f32 {
+    let mut s = 0.0;
+    for k in 0..m.n {
+        // Log-spaced frequencies over [f_lo, f_hi].
+        let r = k as f32 / (m.n - 1) as f32;
+        let f = m.f_lo * libm::powf(m.f_hi / m.f_lo, r);
+        let phase = -PI * (k * (k + 1)) as f32 / m.n as f32;
+        s += libm::sinf(2.0 * PI * f * t + phase);
+    }
+    let env = m.env_min + (1.0 - m.env_min) * 0.5 * (1.0 - libm::cosf(2.0 * PI * t / m.env_period));
+    let fade = (t / 1.0).clamp(0.0, 1.0);
+    m.peak * env * fade * s / m.n as f32
+}
+
+/// Deterministic pseudo-random number in [0, 1) from an integer (a 32-bit hash).
+fn hash01(mut x: u32) -> f32 {
+    x ^= x >> 16;
+    x = x.wrapping_mul(0x7feb_352d);
+    x ^= x >> 15;
+    x = x.wrapping_mul(0x846c_a68b);
+    x ^= x >> 16;
+    (x >> 8) as f32 / (1u32 << 24) as f32
+}
+
+/// Steps between −10 and 10 V held 1-3 s, at rest for the first second.
+fn steps(t: f32) -> f32 {
+    if t < 1.0 {
+        return 0.0;
+    }
+    let mut start = 1.0;
+    let mut k = 0u32;
+    loop {
+        let hold = 1.0 + 2.0 * hash01(2 * k + 1);
+        if t < start + hold || k > 10_000 {
+            let level = 10.0 * hash01(2 * k + 2);
+            return if hash01(2 * k + 3 + 0x9e37) < 0.5 {
+                level
+            } else {
+                -level
+            };
+        }
+        start += hold;
+        k += 1;
+    }
+}
+
+/// Voltage of `signal` at time `t` [s] since the start.
+pub fn voltage(signal: Excitation, t: f32) -> f32 {
+    match signal {
+        Excitation::A => multisine(
+            &Multisine {
+                f_lo: 0.1,
+                f_hi: 1.0,
+                n: 12,
+                peak: 12.0,
+                env_period: 30.0,
+                env_min: 0.1,
+            },
+            t,
+        ),
+        Excitation::B => multisine(
+            &Multisine {
+                f_lo: 0.05,
+                f_hi: 1.0,
+                n: 10,
+                peak: 6.0,
+                env_period: 60.0,
+                env_min: 0.2,
+            },
+            t,
+        ),
+        Excitation::C => multisine(
+            &Multisine {
+                f_lo: 0.25,
+                f_hi: 1.0,
+                n: 8,
+                peak: 0.5,
+                env_period: 20.0,
+                env_min: 0.3,
+            },
+            t,
+        ),
+        Excitation::D => steps(t),
+        Excitation::Steady { volts } => volts,
+        Excitation::Ramp { volts_per_s } => volts_per_s * t,
+    }
+}

@@ -1,0 +1,220 @@
+//! From an identified model (MODEL.toml) to the coefficient blob's [`Coefficients`], and from
+//! blob bytes. The control step's configuration comes from `Coefficients::step_config`, the
+//! same call the firmware makes after loading a blob.
+use crate::model::{Model, ModelKind};
+use anyhow::{anyhow, bail, Result};
+use control::blob::{self, Coefficients, Estimator, PiGains};
+use control::effects::Effect;
+use control::lugre::LugreParams;
+use control::motor::MotorParams;
+use control::sindy::{SindyModel, SparseEq};
+
+/// Loop settings `motorid export` writes next to the model (the blob carries them so that the
+/// board and its emulator run the same loop).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LoopSettings {
+    /// PI proportional gain [V/(rad/s)].
+    pub kp: f32,
+    /// PI integral gain [V/rad].
+    pub ki: f32,
+    /// PI output limit [V].
+    pub u_max: f32,
+    /// Weight of the compensation voltage (1 = the paper's eq. 40, 0 = off).
+    pub comp_gain: f32,
+}
+
+impl Default for LoopSettings {
+    /// The gains of `control::step::StepConfig::paper()` (kp = 0.05 V/(rad/s), ki = 0.8 V/rad,
+    /// see there why), 24 V limit (the paper's motor is a 24 V motor), full compensation.
+    fn default() -> Self {
+        LoopSettings {
+            kp: 0.05,
+            ki: 0.8,
+            u_max: 24.0,
+            comp_gain: 1.0,
+        }
+    }
+}
+
+/// The same effect with every number mapped by `c` (e.g. `|x| x as f32`).
+pub fn map_effect<A: Copy, B>(e: &Effect<A>, c: impl Fn(A) -> B) -> Effect<B> {
+    match *e {
+        Effect::Coulomb { fc } => Effect::Coulomb { fc: c(fc) },
+        Effect::Viscous { b } => Effect::Viscous { b: c(b) },
+        Effect::Stribeck { fs, vs } => Effect::Stribeck {
+            fs: c(fs),
+            vs: c(vs),
+        },
+        Effect::Presliding { sigma0, sigma1 } => Effect::Presliding {
+            sigma0: c(sigma0),
+            sigma1: c(sigma1),
+        },
+        Effect::Cogging {
+            harmonic,
+            amp,
+            phase,
+        } => Effect::Cogging {
+            harmonic,
+            amp: c(amp),
+            phase: c(phase),
+        },
+        Effect::PositionLoad { amp, phase } => Effect::PositionLoad {
+            amp: c(amp),
+            phase: c(phase),
+        },
+        Effect::Offset { t0 } => Effect::Offset { t0: c(t0) },
+        Effect::Asymmetry { dv, dc } => Effect::Asymmetry {
+            dv: c(dv),
+            dc: c(dc),
+        },
+        Effect::Deadtime { vd } => Effect::Deadtime { vd: c(vd) },
+        Effect::CurrentOffset { i0 } => Effect::CurrentOffset { i0: c(i0) },
+        Effect::Thermal { k, tau } => Effect::Thermal {
+            k: c(k),
+            tau: c(tau),
+        },
+        Effect::LoadFriction { mu } => Effect::LoadFriction { mu: c(mu) },
+    }
+}
+
+fn eq_f32(e: &SparseEq<f64>) -> SparseEq<f32> {
+    let terms: Vec<_> = e.terms.iter().map(|&(t, k)| (t, k as f32)).collect();
+    SparseEq::from_slice(&terms).unwrap_or_else(SparseEq::new)
+}
+
+/// The SINDYc model in single precision (the board's).
+pub fn sindy_f32(m: &SindyModel<f64>) -> SindyModel<f32> {
+    let c = |x: f64| x as f32;
+    SindyModel {
+        a: c(m.a),
+        vs: c(m.vs),
+        j: c(m.j),
+        z_max: c(m.z_max),
+        accel: eq_f32(&m.accel),
+        zdot: eq_f32(&m.zdot),
+        idot: eq_f32(&m.idot),
+    }
+}
+
+/// The model's SINDYc equations as the control core reads them.
+pub fn sindy_model(model: &Model) -> Result<SindyModel<f64>> {
+    let table = model
+        .sindy
+        .clone()
+        .ok_or_else(|| anyhow!("field 'sindy': a model of kind 'sindyc' needs a [sindy] table"))?;
+    table.try_into::<SindyModel<f64>>().map_err(|e| {
+        anyhow!(
+            "field 'sindy': cannot read the SINDYc equations: {}",
+            e.message().trim()
+        )
+    })
+}
+
+/// Pole pairs of the model's motor: given, or from the Hall resolution 2π/(6·p), or the
+/// paper's 11 (its 0.095 rad resolution).
+pub fn pole_pairs(model: &Model) -> u8 {
+    if let Some(p) = model.sensor.pole_pairs {
+        return p.clamp(1, 255) as u8;
+    }
+    let res = model.sensor.hall_resolution_rad;
+    if res > 0.0 && res.is_finite() {
+        let p = (std::f64::consts::TAU / (6.0 * res)).round();
+        if (1.0..=255.0).contains(&p) {
+            return p as u8;
+        }
+    }
+    control::hall::PAPER_POLE_PAIRS as u8
+}
+
+/// Model → blob payload. Errors name the MODEL.toml field at fault.
+pub fn coefficients(model: &Model, loop_settings: LoopSettings) -> Result<Coefficients> {
+    if model.plant != crate::log::Plant::Voltage {
+        bail!(
+            "field 'plant': only voltage-driven models can go to the board (this one is '{}')",
+            "torque"
+        );
+    }
+    let m = &model.motor;
+    let mut co = Coefficients {
+        model: match model.kind {
+            ModelKind::Linear => blob::ModelKind::Linear,
+            ModelKind::Lugre => blob::ModelKind::Lugre,
+            ModelKind::Sindyc => blob::ModelKind::Sindyc,
+        },
+        motor: MotorParams {
+            r: m.r as f32,
+            l: m.l as f32,
+            kt: m.kt as f32,
+            kb: m.kb as f32,
+            j: m.j as f32,
+        },
+        pole_pairs: pole_pairs(model),
+        estimator: Estimator::MovingAverage {
+            window: model.sensor.velocity_window.clamp(1, 64) as u8,
+        },
+        pi: PiGains {
+            kp: loop_settings.kp,
+            ki: loop_settings.ki,
+            u_max: loop_settings.u_max,
+            comp_gain: loop_settings.comp_gain,
+        },
+        ..Coefficients::default()
+    };
+    if let Some(l) = &model.lugre {
+        co.lugre = Some(LugreParams {
+            alpha0: l.alpha0 as f32,
+            alpha1: l.alpha1 as f32,
+            alpha2: l.alpha2 as f32,
+            v0: l.v0 as f32,
+            sigma0: l.sigma0 as f32,
+            sigma1: l.sigma1 as f32,
+        });
+    }
+    if model.kind == ModelKind::Sindyc {
+        co.sindy = Some(sindy_f32(&sindy_model(model)?));
+    }
+    // The linear model's viscous friction is compensated like any other effect.
+    if model.kind == ModelKind::Linear && model.viscous != 0.0 {
+        co.effects
+            .push(Effect::Viscous {
+                b: model.viscous as f32,
+            })
+            .map_err(|_| anyhow!("field 'effects': too many effects"))?;
+    }
+    for e in &model.effects {
+        co.effects.push(map_effect(e, |x| x as f32)).map_err(|_| {
+            anyhow!(
+                "field 'effects': the board holds at most {} effects",
+                blob::MAX_EFFECTS
+            )
+        })?;
+    }
+    co.validate().map_err(|e| anyhow!("{e}"))?;
+    Ok(co)
+}
+
+/// Encode a blob (bytes ready for a file, the flash slot or an upload).
+pub fn encode(co: &Coefficients) -> Result<Vec<u8>> {
+    let mut buf = [0u8; blob::MAX_BLOB_LEN];
+    let bytes = blob::encode(co, &mut buf).map_err(|e| anyhow!("{e}"))?;
+    Ok(bytes.to_vec())
+}
+
+/// Decode a blob read from `path`; the error names the file and says what is wrong.
+pub fn decode_file(path: &std::path::Path) -> Result<(Vec<u8>, Coefficients)> {
+    let p = path.display();
+    let bytes = std::fs::read(path).map_err(|e| anyhow!("{p}: cannot read: {e}"))?;
+    match blob::decode(&bytes) {
+        Ok(co) => Ok((bytes, co)),
+        Err(e) => {
+            let detail = match (e, blob::blob_len(&bytes)) {
+                (blob::BlobError::Truncated, Some(n)) => {
+                    format!(" ({} bytes, the header announces {n})", bytes.len())
+                }
+                (blob::BlobError::Truncated, None) => format!(" ({} bytes)", bytes.len()),
+                _ => String::new(),
+            };
+            bail!("{p}: {e}{detail}")
+        }
+    }
+}

@@ -1,0 +1,127 @@
+//! The emulated board: the firmware's control step ([`control::step::ControlStep`], in f32
+//! as on the STM32G431) driving the emulated motor ([`crate::emulator::Plant`]) through the
+//! board's sensors, one 12 ms period at a time.
+//!
+//! Per period, as the firmware's control task does: read the Hall state, the Hall edges
+//! captured since the last period (with their capture-timer counts) and the current; run
+//! the step; hold its voltage for the period. Edge times are the ends of 1 ms slices of the
+//! period ([`EDGE_SLICES`]), on a 1 MHz capture timer.
+use crate::emulator::{EmulatorConfig, Plant};
+use anyhow::Result;
+use control::step::{ControlStep, HallEdge, StepConfig, StepInputs, StepOutputs, MAX_EDGES};
+
+/// Capture-timer frequency [Hz] (the firmware's embassy tick rate, tick-hz-1_000_000).
+pub const TICK_HZ: f64 = 1.0e6;
+/// Slices per period for timing Hall edges (1 ms resolution at 12 ms).
+pub const EDGE_SLICES: usize = 12;
+
+/// What one period did.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RigSample {
+    /// Time at the start of the period [s].
+    pub t: f64,
+    /// Speed reference [rad/s].
+    pub omega_ref: f64,
+    /// The step's outputs (voltage command, decoded angle, velocity estimate, friction...).
+    pub out: StepOutputs<f32>,
+    /// Measured current the step saw [A].
+    pub i_meas: f64,
+    /// True velocity at the start of the period [rad/s].
+    pub omega_true: f64,
+    /// True angle at the start of the period [rad].
+    pub theta_true: f64,
+}
+
+/// Plant + control step + timer.
+pub struct Rig {
+    plant: Plant,
+    ctl: ControlStep<f32>,
+    dt: f64,
+    ticks: u32,
+    t: f64,
+    /// Hall edges captured during the running period, for the next step (more than
+    /// [`MAX_EDGES`] is reported as an overflow, as the firmware's capture buffer does).
+    pending: Vec<HallEdge>,
+    /// Every step's inputs, when recording (for the QEMU parity trace).
+    pub recorded: Option<Vec<StepInputs<f32>>>,
+}
+
+impl Rig {
+    /// A motor at rest and a control step configured by `cfg`.
+    pub fn new(plant: EmulatorConfig, cfg: &StepConfig<f32>) -> Result<Rig> {
+        let mut plant = Plant::new(plant)?;
+        plant.take_hall_edges(); // start recording edges
+        Ok(Rig {
+            plant,
+            ctl: ControlStep::new(cfg),
+            dt: f64::from(cfg.dt),
+            ticks: 0,
+            t: 0.0,
+            pending: Vec::with_capacity(MAX_EDGES),
+            recorded: None,
+        })
+    }
+
+    /// Replace the control step's configuration (a new blob was committed): the step restarts
+    /// from rest, the motor keeps turning.
+    pub fn reconfigure(&mut self, cfg: &StepConfig<f32>) {
+        self.ctl = ControlStep::new(cfg);
+        self.dt = f64::from(cfg.dt);
+    }
+
+    /// Time [s].
+    pub fn time(&self) -> f64 {
+        self.t
+    }
+
+    /// The emulated motor.
+    pub fn plant(&self) -> &Plant {
+        &self.plant
+    }
+
+    /// One control period: closed loop on `omega_ref`, or open loop with `v_override`.
+    pub fn step(&mut self, omega_ref: f64, v_override: Option<f64>) -> RigSample {
+        let truth = self.plant.truth();
+        let i_meas = self.plant.measured_current();
+        let mut inp = StepInputs {
+            hall: self.plant.hall_state(),
+            now_ticks: self.ticks,
+            i_meas: i_meas as f32,
+            v_bus: f32::NAN, // no bus measurement: the configured nominal voltage
+            omega_ref: omega_ref as f32,
+            v_override: v_override.map(|v| v as f32),
+            ..StepInputs::default()
+        };
+        for e in self.pending.drain(..) {
+            if inp.edges.push(e).is_err() {
+                inp.edges_overflow = true;
+            }
+        }
+        let out = self.ctl.step(&inp);
+        if let Some(rec) = self.recorded.as_mut() {
+            rec.push(inp);
+        }
+        // Hold the command for the period; time the Hall edges per slice.
+        let h = self.dt / EDGE_SLICES as f64;
+        for k in 1..=EDGE_SLICES {
+            self.plant.apply(f64::from(out.v_cmd), h);
+            let at = self
+                .ticks
+                .wrapping_add((k as f64 * h * TICK_HZ).round() as u32);
+            for state in self.plant.take_hall_edges() {
+                self.pending.push(HallEdge { ticks: at, state });
+            }
+        }
+        self.ticks = self.ticks.wrapping_add((self.dt * TICK_HZ).round() as u32);
+        let sample = RigSample {
+            t: self.t,
+            omega_ref,
+            out,
+            i_meas,
+            omega_true: truth.omega,
+            theta_true: truth.theta,
+        };
+        self.t += self.dt;
+        sample
+    }
+}

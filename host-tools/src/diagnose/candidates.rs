@@ -1,0 +1,452 @@
+//! The candidate regressors of every physical effect: what each effect of the contract's
+//! list adds to the mechanical (torque) or electrical (voltage) equation, sample by sample,
+//! and how the fitted coefficients turn back into the effect's parameters (its spec).
+//!
+//! Equations, with the sign conventions of `control::effects` (load torques oppose motion,
+//! voltage losses are subtracted from the command):
+//! - mechanical: `K_t·I_meas = J·θ̈ + Σ torque_j + K_t·i0` (torque plant: `u` instead of `K_t·I`)
+//! - electrical: `V = R·I_meas + L·İ + K_b·ω + vd·sgn(I) + R·k·h·I − R·i0`
+//!
+//! Parameters that enter nonlinearly (Stribeck velocity, cogging harmonic, thermal time
+//! constant, bristle stiffness) are searched over a grid; the others are the linear
+//! coefficients.
+use super::harmonics;
+use crate::effect_spec::EffectSpec;
+use crate::log::{MotorLog, Plant};
+use control::effects::{smooth_sign, Effect, EffectKind, CURRENT_EPS, VELOCITY_EPS};
+use control::lugre::{LugreObserver, LugreParams};
+use std::collections::BTreeMap;
+
+/// Which equation an effect shows in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Equation {
+    /// Torque balance of the rotor.
+    Mechanical,
+    /// Voltage balance of the winding.
+    Electrical,
+}
+
+impl Equation {
+    /// Name for people.
+    pub fn label(self) -> &'static str {
+        match self {
+            Equation::Mechanical => "torque equation",
+            Equation::Electrical => "voltage equation",
+        }
+    }
+}
+
+/// Sample-level signals derived from a log.
+#[derive(Debug, Clone)]
+pub struct Signals {
+    /// Sample period [s].
+    pub dt: f64,
+    pub t: Vec<f64>,
+    /// Input: voltage [V] (voltage plant) or torque command (torque plant).
+    pub u: Vec<f64>,
+    /// Measured current [A] (voltage plant).
+    pub i: Option<Vec<f64>>,
+    /// Angle as measured [rad].
+    pub theta: Vec<f64>,
+    /// Angle smoothed over a few samples (less quantisation error while moving) [rad].
+    pub theta_s: Vec<f64>,
+    /// Velocity: smoothed derivative of the angle [rad/s].
+    pub omega: Vec<f64>,
+    /// Motor torque: `K_t·I` (voltage plant) or `u` (torque plant).
+    pub drive: Vec<f64>,
+    pub plant: Plant,
+    /// Torque constant used to express currents as torques (1 for a torque plant).
+    pub kt: f64,
+    /// Angle quantisation step [rad], when the log says it.
+    pub hall_resolution: Option<f64>,
+}
+
+/// Half-width (samples) of the velocity estimate: ±4 × 12 ms. The slope over 9 samples of a
+/// Hall angle (0.095 rad steps) resolves about 0.8 rad/s and lags nothing (centred).
+pub const VELOCITY_HALF: usize = 4;
+
+impl Signals {
+    /// Derive the signals from a log. `kt` is the model's torque constant.
+    pub fn from_log(log: &MotorLog, plant: Plant, kt: f64) -> Signals {
+        let dt = log.sample_period();
+        let omega = super::weakform::smoothed_derivative(&log.theta, dt, VELOCITY_HALF);
+        let theta_s = super::weakform::moving_average(&log.theta, 2);
+        // The input is held over [t_k, t_k+1) (zero-order hold) while angle and current are
+        // sampled at t_k: on the sample grid the input is the mean of the two intervals that
+        // meet at t_k. The winding settles within L/R ≈ 1.4 ms, so the current over an
+        // interval is the one sampled at its end, and likewise averaged onto the grid.
+        let u = zoh_to_grid(&log.u);
+        let i = match (plant, &log.i) {
+            (Plant::Voltage, Some(i)) => {
+                let mode = std::env::var("ALIGN").unwrap_or_default();
+                if mode == "raw" { Some(i.clone()) } else if mode == "zoh" { Some(zoh_to_grid(i)) } else {
+                let mut next: Vec<f64> = i[1.min(i.len())..].to_vec();
+                next.extend(i.last());
+                Some(zoh_to_grid(&next)) }
+            }
+            _ => None,
+        };
+        let (drive, kt) = match &i {
+            Some(i) => (i.iter().map(|v| kt * v).collect(), kt),
+            None => (u.clone(), 1.0),
+        };
+        Signals {
+            dt,
+            t: log.t.clone(),
+            u,
+            i,
+            theta: log.theta.clone(),
+            theta_s,
+            omega,
+            drive,
+            plant,
+            kt,
+            hall_resolution: log.meta_f64("hall_resolution_rad"),
+        }
+    }
+
+    /// Number of samples.
+    pub fn len(&self) -> usize {
+        self.t.len()
+    }
+
+    /// True when there are no samples.
+    pub fn is_empty(&self) -> bool {
+        self.t.is_empty()
+    }
+
+    fn sgn_omega(&self) -> Vec<f64> {
+        self.omega
+            .iter()
+            .map(|w| smooth_sign(*w, VELOCITY_EPS))
+            .collect()
+    }
+
+    /// Sample-level angle harmonic pair for `h` periods per revolution, attenuated where the
+    /// torque averages out over a sample (see [`harmonics::sample_average_gain`]).
+    pub fn angle_pair(&self, h: u32) -> [Vec<f64>; 2] {
+        let hf = h as f64;
+        let g: Vec<f64> = self
+            .omega
+            .iter()
+            .map(|w| harmonics::sample_average_gain(hf, *w, self.dt).max(0.0))
+            .collect();
+        [
+            self.theta_s
+                .iter()
+                .zip(&g)
+                .map(|(t, g)| g * (hf * t).sin())
+                .collect(),
+            self.theta_s
+                .iter()
+                .zip(&g)
+                .map(|(t, g)| g * (hf * t).cos())
+                .collect(),
+        ]
+    }
+
+    /// Heat state `h_τ` for unit gain (`dh/dt = (I² − h)/τ`, exact per sample), times I.
+    pub fn thermal_column(&self, tau: f64) -> Vec<f64> {
+        let Some(i) = &self.i else {
+            return vec![0.0; self.len()];
+        };
+        let e = Effect::Thermal { k: 1.0, tau };
+        let mut h = 0.0;
+        i.iter()
+            .map(|c| {
+                let out = c * h;
+                h = e.heat_step(h, *c, self.dt);
+                out
+            })
+            .collect()
+    }
+
+    /// LuGre dynamic friction minus its static part along the measured velocity, with the
+    /// given parameters (what the bristle state adds to a static friction curve).
+    pub fn presliding_column(&self, p: &LugreParams<f64>) -> Vec<f64> {
+        let mut obs = LugreObserver::new(*p);
+        self.omega
+            .iter()
+            .map(|w| {
+                let f = obs.step(*w, self.dt);
+                f - p.steady_friction(*w)
+            })
+            .collect()
+    }
+}
+
+/// Map a signal held over sample intervals onto the sample grid: `(x[k−1] + x[k])/2`.
+pub fn zoh_to_grid(x: &[f64]) -> Vec<f64> {
+    (0..x.len())
+        .map(|k| if k == 0 { x[0] } else { 0.5 * (x[k - 1] + x[k]) })
+        .collect()
+}
+
+/// Velocity below which the rotor counts as stuck [rad/s]: less than about one Hall step
+/// (0.095 rad) across the ±4-sample velocity window. While stuck, static friction takes
+/// whatever value balances the drive, so the torque equation there has its own unknown.
+pub const STICK_SPEED: f64 = 1.0;
+
+impl Signals {
+    /// `1` where the rotor is stuck (|ω| < [`STICK_SPEED`]), else `0`.
+    pub fn stuck(&self) -> Vec<bool> {
+        self.omega.iter().map(|w| w.abs() < STICK_SPEED).collect()
+    }
+
+    /// Static friction while stuck: it balances the drive, `drive·1[stuck]`.
+    pub fn stick_column(&self) -> Vec<f64> {
+        self.drive
+            .iter()
+            .zip(self.stuck())
+            .map(|(d, s)| if s { *d } else { 0.0 })
+            .collect()
+    }
+
+    /// Breakaway lag: friction above the static curve right after the rotor starts moving,
+    /// decaying with time constant `tau` (LuGre: σ1/σ0): `sgn(ω)·exp(−t_moving/τ)`.
+    pub fn breakaway_column(&self, tau: f64) -> Vec<f64> {
+        let stuck = self.stuck();
+        let mut since = f64::INFINITY;
+        let mut last_sign = 0.0;
+        self.omega
+            .iter()
+            .zip(stuck)
+            .map(|(w, st)| {
+                if st || w.signum() != last_sign {
+                    since = 0.0;
+                } else {
+                    since += self.dt;
+                }
+                if !st {
+                    last_sign = w.signum();
+                }
+                if st {
+                    0.0
+                } else {
+                    w.signum() * (-since / tau).exp()
+                }
+            })
+            .collect()
+    }
+}
+
+/// Value of a grid parameter in a variant (`harmonic=7`, `vs=3`, `tau=20`).
+pub type Fixed = Vec<(&'static str, f64)>;
+
+/// One way to add an effect: its sample-level columns in one equation, with the values of its
+/// nonlinear parameters fixed.
+#[derive(Debug, Clone)]
+pub struct Variant {
+    pub kind: EffectKind,
+    pub equation: Equation,
+    pub fixed: Fixed,
+    pub columns: Vec<Vec<f64>>,
+}
+
+/// Grid of Stribeck velocities [rad/s]: around the paper's v0 = 3.7 rad/s, from the
+/// velocity resolution (≈1 rad/s) up to where Stribeck merges with viscous friction.
+pub const STRIBECK_GRID: [f64; 6] = [1.0, 2.0, 3.5, 5.0, 8.0, 12.0];
+/// Grid of thermal time constants [s]: small motors heat in 5 s (winding) to minutes (case).
+pub const THERMAL_GRID: [f64; 6] = [5.0, 10.0, 20.0, 40.0, 80.0, 160.0];
+/// Grid of breakaway time constants σ1/σ0 [s]: the paper's 22.2/317 = 70 ms, and a factor
+/// of about 2.5 either way.
+pub const BREAKAWAY_GRID: [f64; 3] = [0.03, 0.07, 0.18];
+
+/// Every variant of an effect on these signals (empty when the effect cannot show in them,
+/// e.g. electrical effects on a torque plant). `coulomb_guess` is the Coulomb friction used to
+/// shape the presliding regressor.
+pub fn variants(kind: EffectKind, s: &Signals, coulomb_guess: f64) -> Vec<Variant> {
+    let n = s.len();
+    let one = |equation, fixed: Fixed, columns: Vec<Vec<f64>>| Variant {
+        kind,
+        equation,
+        fixed,
+        columns,
+    };
+    let mech = Equation::Mechanical;
+    let elec = Equation::Electrical;
+    let sgn = s.sgn_omega();
+    let voltage = s.plant == Plant::Voltage && s.i.is_some();
+    match kind {
+        EffectKind::Coulomb => vec![one(mech, vec![], vec![sgn, s.stick_column()])],
+        EffectKind::Viscous => vec![one(mech, vec![], vec![s.omega.clone()])],
+        EffectKind::Stribeck => STRIBECK_GRID
+            .iter()
+            .map(|&vs| {
+                let col = s
+                    .omega
+                    .iter()
+                    .zip(&sgn)
+                    .map(|(w, g)| (-(w / vs) * (w / vs)).exp() * g)
+                    .collect();
+                one(mech, vec![("vs", vs)], vec![col])
+            })
+            .collect(),
+        EffectKind::Presliding => {
+            let _ = coulomb_guess;
+            let sigma0 = EffectSpec::bare(EffectKind::Presliding).get("sigma0");
+            BREAKAWAY_GRID
+                .iter()
+                .map(|&tau| {
+                    one(
+                        mech,
+                        vec![("sigma0", sigma0), ("sigma1", tau * sigma0)],
+                        vec![s.breakaway_column(tau)],
+                    )
+                })
+                .collect()
+        }
+        EffectKind::Cogging => {
+            let hmax = harmonics::resolvable(s.hall_resolution);
+            (2..=hmax)
+                .map(|h| {
+                    let [a, b] = s.angle_pair(h);
+                    one(mech, vec![("harmonic", h as f64)], vec![a, b])
+                })
+                .collect()
+        }
+        EffectKind::PositionLoad => {
+            let [a, b] = s.angle_pair(1);
+            vec![one(mech, vec![], vec![a, b])]
+        }
+        EffectKind::Offset => vec![one(mech, vec![], vec![vec![1.0; n]])],
+        EffectKind::Asymmetry => {
+            vec![one(
+                mech,
+                vec![],
+                vec![s.omega.iter().map(|w| w.abs()).collect()],
+            )]
+        }
+        EffectKind::LoadFriction => vec![one(
+            mech,
+            vec![],
+            vec![s.drive.iter().zip(&sgn).map(|(d, g)| d.abs() * g).collect()],
+        )],
+        EffectKind::Deadtime if voltage => {
+            let i = s.i.as_ref().unwrap();
+            vec![one(
+                elec,
+                vec![],
+                vec![i.iter().map(|c| smooth_sign(*c, CURRENT_EPS)).collect()],
+            )]
+        }
+        EffectKind::CurrentOffset if voltage => vec![one(elec, vec![], vec![vec![1.0; n]])],
+        EffectKind::Thermal if voltage => {
+            let duration = s.t.last().copied().unwrap_or(0.0) - s.t.first().copied().unwrap_or(0.0);
+            THERMAL_GRID
+                .iter()
+                .filter(|&&tau| tau <= 2.0 * duration.max(5.0))
+                .map(|&tau| one(elec, vec![("tau", tau)], vec![s.thermal_column(tau)]))
+                .collect()
+        }
+        EffectKind::Deadtime | EffectKind::CurrentOffset | EffectKind::Thermal => vec![],
+    }
+}
+
+/// Columns that stand for an effect the model already has (its nonlinear parameters taken
+/// from the model), in its equation; empty for effects with no column.
+pub fn present_columns(e: &Effect<f64>, s: &Signals) -> Vec<(Equation, Vec<f64>)> {
+    let n = s.len();
+    let mech = Equation::Mechanical;
+    let elec = Equation::Electrical;
+    let voltage = s.plant == Plant::Voltage && s.i.is_some();
+    match *e {
+        Effect::Coulomb { .. } => vec![(mech, s.sgn_omega()), (mech, s.stick_column())],
+        Effect::Viscous { .. } => vec![(mech, s.omega.clone())],
+        Effect::Stribeck { vs, .. } => {
+            let vs = if vs > 0.0 { vs } else { 3.5 };
+            let sgn = s.sgn_omega();
+            vec![(
+                mech,
+                s.omega
+                    .iter()
+                    .zip(&sgn)
+                    .map(|(w, g)| (-(w / vs) * (w / vs)).exp() * g)
+                    .collect(),
+            )]
+        }
+        Effect::Presliding { sigma0, sigma1 } => {
+            let tau = if sigma0 > 0.0 && sigma1 > 0.0 {
+                sigma1 / sigma0
+            } else {
+                0.07
+            };
+            vec![(mech, s.breakaway_column(tau))]
+        }
+        Effect::Cogging { harmonic, .. } => {
+            let [a, b] = s.angle_pair(harmonic as u32);
+            vec![(mech, a), (mech, b)]
+        }
+        Effect::PositionLoad { .. } => {
+            let [a, b] = s.angle_pair(1);
+            vec![(mech, a), (mech, b)]
+        }
+        Effect::Offset { .. } => vec![(mech, vec![1.0; n])],
+        Effect::Asymmetry { .. } => vec![(mech, s.omega.iter().map(|w| w.abs()).collect())],
+        Effect::LoadFriction { .. } => {
+            let sgn = s.sgn_omega();
+            vec![(
+                mech,
+                s.drive.iter().zip(&sgn).map(|(d, g)| d.abs() * g).collect(),
+            )]
+        }
+        Effect::Deadtime { .. } if voltage => {
+            let i = s.i.as_ref().unwrap();
+            vec![(
+                elec,
+                i.iter().map(|c| smooth_sign(*c, CURRENT_EPS)).collect(),
+            )]
+        }
+        Effect::CurrentOffset { .. } if voltage => {
+            vec![(elec, vec![1.0; n]), (mech, vec![1.0; n])]
+        }
+        Effect::Thermal { tau, .. } if voltage => vec![(elec, s.thermal_column(tau.max(0.1)))],
+        _ => vec![],
+    }
+}
+
+/// Parameters of the physical unit system the spec needs (fitted in the base equations).
+#[derive(Debug, Clone, Copy)]
+pub struct Units {
+    /// Winding resistance R [Ω] (from the voltage equation's fit).
+    pub r: f64,
+    /// Torque constant K_t [N·m/A].
+    pub kt: f64,
+}
+
+/// The spec of an effect from a variant's fitted coefficients.
+pub fn spec_of(v: &Variant, beta: &[f64], units: Units) -> EffectSpec {
+    let mut values = BTreeMap::new();
+    let mut put = |k: &str, x: f64| {
+        values.insert(k.to_string(), x);
+    };
+    for (k, x) in &v.fixed {
+        put(k, *x);
+    }
+    let b0 = beta.first().copied().unwrap_or(0.0);
+    match v.kind {
+        EffectKind::Coulomb => put("fc", b0),
+        EffectKind::Viscous => put("b", b0),
+        EffectKind::Stribeck => put("fs", b0),
+        EffectKind::Presliding => {}
+        EffectKind::Cogging | EffectKind::PositionLoad => {
+            let (amp, phase) = harmonics::amp_phase(b0, beta.get(1).copied().unwrap_or(0.0));
+            put("amp", amp);
+            put("phase", phase);
+        }
+        EffectKind::Offset => put("t0", b0),
+        EffectKind::Asymmetry => {
+            put("dv", b0);
+            put("dc", 0.0)
+        }
+        EffectKind::LoadFriction => put("mu", b0),
+        EffectKind::Deadtime => put("vd", b0),
+        EffectKind::CurrentOffset => put("i0", -b0 / units.r),
+        EffectKind::Thermal => put("k", b0 / units.r),
+    }
+    EffectSpec {
+        kind: v.kind,
+        values,
+    }
+}

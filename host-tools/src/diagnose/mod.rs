@@ -1,0 +1,491 @@
+//! The model-error workbench: which physical effect a model is missing, and where it fails.
+//!
+//! How `diagnose` decides (documented for `motorid diagnose --help` too):
+//! 1. The log is turned into two *equation residuals* in weak form ([`weakform`]): the
+//!    mechanical torque balance and, for a voltage plant, the electrical voltage balance.
+//!    The model's own structure (inertia, R, L, K_b and the effects it has) is refitted by
+//!    least squares in each equation, so a biased parameter cannot pass for a missing effect.
+//! 2. Every effect of the contract's list that the model lacks brings its regressors
+//!    ([`candidates`]), over a grid for its nonlinear parameters (cogging harmonic, Stribeck
+//!    velocity, thermal time constant, bristle stiffness).
+//! 3. Forward selection: the candidate that explains most of the residual is tested with a
+//!    nested-model F-test; the residual's autocorrelation shrinks the sample count to an
+//!    effective one ([`stats::effective_n`]) so that coloured noise is not taken for evidence.
+//!    It is kept when it is **significant** (p below [`FAMILY_ALPHA`] divided by the number of
+//!    candidate variants tested, Bonferroni, and a lower BIC) **and relevant** (it explains at
+//!    least [`MIN_EXPLAINED`] of the residual sum of squares); it then joins the base and the
+//!    next one is tested, until none passes.
+//! 4. Each finding's coefficients become a spec (`cogging:harmonic=7,amp=0.03,phase=0.2`) that
+//!    `fit --add` accepts; its score is the fraction of the base residual it explains.
+pub mod candidates;
+pub mod harmonics;
+pub mod regions;
+pub mod stats;
+pub mod weakform;
+
+use crate::effect_spec::EffectSpec;
+use crate::log::{MotorLog, Plant};
+use candidates::{Equation, Signals, Units, Variant};
+use control::effects::{Effect, EffectKind};
+use control::motor::MotorParams;
+use serde::Serialize;
+use stats::Gram;
+
+/// Family-wise false-alarm probability of one `diagnose` run: the chance that a correct model
+/// gets any finding at all is at most 0.1 % (Bonferroni over every variant tested).
+pub const FAMILY_ALPHA: f64 = 1e-3;
+/// Smallest fraction of an equation's residual sum of squares an effect must explain to be
+/// reported: 2 %. Below that, adding the effect would not change a fit noticeably, however
+/// significant.
+pub const MIN_EXPLAINED: f64 = 0.02;
+/// Most findings one run reports.
+pub const MAX_FINDINGS: usize = 6;
+
+/// What the model already has: the plant, its effects (with their parameter values, which fix
+/// the nonlinear parameters of their regressors) and its constants.
+#[derive(Debug, Clone)]
+pub struct Structure {
+    pub plant: Plant,
+    /// Effects of the model, including its base friction (`coulomb`, `viscous`, ...).
+    pub effects: Vec<Effect<f64>>,
+    /// Torque constant K_t [N·m/A] (ignored for a torque plant).
+    pub kt: f64,
+}
+
+impl Structure {
+    /// A structure with the given effects and the paper motor's K_t.
+    pub fn with_effects(plant: Plant, effects: Vec<Effect<f64>>) -> Structure {
+        Structure {
+            plant,
+            effects,
+            kt: MotorParams::<f64>::paper().kt,
+        }
+    }
+
+    /// The effect kinds the model has.
+    pub fn kinds(&self) -> Vec<EffectKind> {
+        self.effects.iter().map(|e| e.kind()).collect()
+    }
+
+    fn has(&self, k: EffectKind) -> bool {
+        self.effects.iter().any(|e| e.kind() == k)
+    }
+}
+
+/// Tuning of a run (defaults: the documented constants).
+#[derive(Debug, Clone, Copy)]
+pub struct Options {
+    pub alpha: f64,
+    pub min_explained: f64,
+    /// Weak-form window half-width in samples.
+    pub half_width: usize,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Options {
+            alpha: FAMILY_ALPHA,
+            min_explained: MIN_EXPLAINED,
+            half_width: weakform::HALF_WIDTH,
+        }
+    }
+}
+
+/// One effect the data shows the model is missing.
+#[derive(Debug, Clone, Serialize)]
+pub struct Finding {
+    pub name: String,
+    /// Spec with estimated parameters, accepted by `fit --add`.
+    pub spec: String,
+    /// Fraction of the equation's base residual sum of squares the effect explains (0..1).
+    pub score: f64,
+    /// One sentence of physics.
+    pub explanation: String,
+    pub equation: Equation,
+    pub p_value: f64,
+    pub f: f64,
+    pub delta_bic: f64,
+    #[serde(skip)]
+    pub kind: Option<EffectKind>,
+}
+
+/// One candidate's best test (kept or not), for tables.
+#[derive(Debug, Clone, Serialize)]
+pub struct Tested {
+    pub name: String,
+    pub equation: Equation,
+    pub spec: String,
+    pub explained: f64,
+    pub p_value: f64,
+    pub kept: bool,
+}
+
+/// Residual of one equation.
+#[derive(Debug, Clone, Serialize)]
+pub struct EquationResidual {
+    pub equation: Equation,
+    /// Time of each weak-form window centre [s].
+    pub t: Vec<f64>,
+    /// Sample index of each window centre.
+    #[serde(skip)]
+    pub centres: Vec<usize>,
+    /// Residual of the model's own structure, per window.
+    pub base: Vec<f64>,
+    /// Residual after the findings were added.
+    pub after: Vec<f64>,
+    /// Effective sample count of the base residual.
+    pub n_eff: f64,
+    /// Whiteness of the base residual and its correlation with the input.
+    #[serde(skip)]
+    pub whiteness: stats::Whiteness,
+    /// Unit of the residual.
+    pub unit: &'static str,
+}
+
+/// Result of a diagnosis.
+#[derive(Debug, Clone, Serialize)]
+pub struct Diagnosis {
+    /// Significant and relevant missing effects, most important first.
+    pub effects: Vec<Finding>,
+    /// Every candidate's best test.
+    pub tested: Vec<Tested>,
+    /// Equation residuals.
+    pub equations: Vec<EquationResidual>,
+    /// Per-test level after Bonferroni.
+    pub alpha_per_test: f64,
+    pub min_explained: f64,
+}
+
+struct EqData {
+    eq: Equation,
+    y: Vec<f64>,
+    base_cols: Vec<Vec<f64>>,
+    cand: Vec<(Variant, Vec<Vec<f64>>)>,
+}
+
+/// Diagnose a log against a model structure.
+pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
+    let s = Signals::from_log(log, st.plant, st.kt);
+    let h = opts.half_width.max(2);
+    let wf = weakform::WeakForm::new(s.len(), s.dt, h, h);
+    let voltage = s.plant == Plant::Voltage && s.i.is_some();
+
+    // Base columns per equation.
+    let mut mech = EqData {
+        eq: Equation::Mechanical,
+        y: wf.integral(&s.drive),
+        base_cols: vec![wf.second_derivative(&s.theta)],
+        cand: vec![],
+    };
+    let mut elec = EqData {
+        eq: Equation::Electrical,
+        y: wf.integral(&s.u),
+        base_cols: vec![],
+        cand: vec![],
+    };
+    if voltage {
+        let i = s.i.as_ref().unwrap();
+        elec.base_cols.push(wf.integral(i));
+        elec.base_cols.push(wf.derivative(i));
+        elec.base_cols.push(wf.derivative(&s.theta));
+    }
+    for e in &st.effects {
+        for (eq, col) in candidates::present_columns(e, &s) {
+            let target = if eq == Equation::Mechanical {
+                &mut mech
+            } else {
+                &mut elec
+            };
+            target.base_cols.push(wf.integral(&col));
+        }
+    }
+    // Any Coulomb-like friction sticks at standstill (the smooth sign creeps below 0.05
+    // rad/s, which no Hall sensor resolves): the stick column belongs to the base then.
+    if !st.has(EffectKind::Coulomb)
+        && (st.has(EffectKind::Presliding) || st.has(EffectKind::Stribeck))
+    {
+        mech.base_cols.push(wf.integral(&s.stick_column()));
+    }
+    let coulomb_guess = st
+        .effects
+        .iter()
+        .find_map(|e| match e {
+            Effect::Coulomb { fc } => Some(*fc),
+            _ => None,
+        })
+        .unwrap_or(0.0);
+
+    // Candidates.
+    let mut n_variants = 0usize;
+    for kind in EffectKind::ALL {
+        if st.has(kind) {
+            continue;
+        }
+        for v in candidates::variants(kind, &s, coulomb_guess) {
+            let cols: Vec<Vec<f64>> = v.columns.iter().map(|c| wf.integral(c)).collect();
+            n_variants += 1;
+            if v.equation == Equation::Mechanical {
+                mech.cand.push((v, cols));
+            } else if voltage {
+                elec.cand.push((v, cols));
+            }
+        }
+    }
+    let alpha_per_test = opts.alpha / n_variants.max(1) as f64;
+
+    let mut findings = Vec::new();
+    let mut tested = Vec::new();
+    let mut equations = Vec::new();
+    let mut r_elec = None;
+    // Electrical first: its resistance converts current-offset and thermal coefficients.
+    for data in [elec, mech] {
+        if data.y.is_empty() || (data.eq == Equation::Electrical && !voltage) {
+            continue;
+        }
+        let out = forward_select(&data, opts, alpha_per_test, &mut r_elec, st.kt);
+        findings.extend(out.0);
+        tested.extend(out.1);
+        let centres = wf.centres.clone();
+        let input: Vec<f64> = centres.iter().map(|&c| s.u[c]).collect();
+        let whiteness = stats::whiteness(&out.2, &input, 30);
+        equations.push(EquationResidual {
+            equation: data.eq,
+            t: centres.iter().map(|&c| s.t[c]).collect(),
+            centres,
+            base: out.2,
+            after: out.3,
+            n_eff: out.4,
+            whiteness,
+            unit: if data.eq == Equation::Mechanical {
+                if voltage {
+                    "N·m·s"
+                } else {
+                    "u·s"
+                }
+            } else {
+                "V·s"
+            },
+        });
+    }
+    resolve_offsets(&mut findings, st.kt);
+    findings.sort_by(|a, b| b.score.total_cmp(&a.score));
+    findings.truncate(MAX_FINDINGS);
+    Diagnosis {
+        effects: findings,
+        tested,
+        equations,
+        alpha_per_test,
+        min_explained: opts.min_explained,
+    }
+}
+
+type SelectOut = (Vec<Finding>, Vec<Tested>, Vec<f64>, Vec<f64>, f64);
+
+fn forward_select(
+    data: &EqData,
+    opts: &Options,
+    alpha_per_test: f64,
+    r_elec: &mut Option<f64>,
+    kt: f64,
+) -> SelectOut {
+    let mut all_cols: Vec<Vec<f64>> = data.base_cols.clone();
+    let mut cand_idx: Vec<Vec<usize>> = Vec::new();
+    for (_, cols) in &data.cand {
+        let start = all_cols.len();
+        all_cols.extend(cols.iter().cloned());
+        cand_idx.push((start..start + cols.len()).collect());
+    }
+    let gram = Gram::new(&all_cols, &data.y);
+    let mut base: Vec<usize> = (0..data.base_cols.len()).collect();
+    let (beta0, rss0) = gram.fit(&base);
+    if std::env::var_os("MOTORID_DIAG_DEBUG").is_some() {
+        eprintln!("{:?} base beta {:?} rss0 {rss0:.3e} yty {:.3e}", data.eq, beta0, gram.yty());
+    }
+    if data.eq == Equation::Electrical && beta0.first().is_some_and(|r| *r > 0.0) {
+        *r_elec = Some(beta0[0]);
+    }
+    let resid_of = |subset: &[usize], beta: &[f64]| -> Vec<f64> {
+        let mut r = data.y.clone();
+        for (j, b) in subset.iter().zip(beta) {
+            for (v, c) in r.iter_mut().zip(&all_cols[*j]) {
+                *v -= b * c;
+            }
+        }
+        r
+    };
+    let base_resid = resid_of(&base, &beta0);
+    let n_eff_base = stats::effective_n(&base_resid);
+    let units = Units {
+        r: r_elec.unwrap_or(MotorParams::<f64>::paper().r),
+        kt,
+    };
+
+    // Best variant per effect kind, tested against the current base.
+    let mut chosen_kinds: Vec<EffectKind> = Vec::new();
+    let mut findings = Vec::new();
+    let mut first_round: Vec<Tested> = Vec::new();
+    let mut rss_cur = rss0;
+    let mut resid_cur = base_resid.clone();
+    loop {
+        let n_eff = stats::effective_n(&resid_cur);
+        let mut best_by_kind: Vec<(usize, f64, stats::FTest)> = Vec::new();
+        for (ci, (v, _)) in data.cand.iter().enumerate() {
+            if chosen_kinds.contains(&v.kind) {
+                continue;
+            }
+            let mut subset = base.clone();
+            subset.extend(&cand_idx[ci]);
+            let (_, rss1) = gram.fit(&subset);
+            let t = stats::f_test(rss_cur, rss1, cand_idx[ci].len(), base.len(), n_eff);
+            match best_by_kind
+                .iter_mut()
+                .find(|(j, _, _)| data.cand[*j].0.kind == v.kind)
+            {
+                Some(slot) if slot.1 <= rss1 => {}
+                Some(slot) => *slot = (ci, rss1, t),
+                None => best_by_kind.push((ci, rss1, t)),
+            }
+        }
+        if first_round.is_empty() {
+            for (ci, _, t) in &best_by_kind {
+                let v = &data.cand[*ci].0;
+                let mut subset = base.clone();
+                subset.extend(&cand_idx[*ci]);
+                let (beta, _) = gram.fit(&subset);
+                first_round.push(Tested {
+                    name: v.kind.name().to_string(),
+                    equation: data.eq,
+                    spec: candidates::spec_of(v, &beta[base.len()..], units).to_string(),
+                    explained: t.explained,
+                    p_value: t.p_value,
+                    kept: false,
+                });
+            }
+        }
+        let Some(&(ci, rss1, t)) = best_by_kind
+            .iter()
+            .filter(|(_, _, t)| {
+                t.p_value < alpha_per_test
+                    && t.explained >= opts.min_explained
+                    && t.delta_bic < 0.0
+            })
+            .max_by(|a, b| b.1.total_cmp(&a.1))
+        else {
+            break;
+        };
+        let v = &data.cand[ci].0;
+        let mut subset = base.clone();
+        subset.extend(&cand_idx[ci]);
+        let (beta, _) = gram.fit(&subset);
+        let spec = candidates::spec_of(v, &beta[base.len()..], units);
+        let score = if rss0 > 0.0 {
+            (rss_cur - rss1) / rss0
+        } else {
+            0.0
+        };
+        findings.push(Finding {
+            name: v.kind.name().to_string(),
+            explanation: explain(&spec, score, data.eq),
+            spec: spec.to_string(),
+            score,
+            equation: data.eq,
+            p_value: t.p_value,
+            f: t.f,
+            delta_bic: t.delta_bic,
+            kind: Some(v.kind),
+        });
+        if let Some(x) = first_round.iter_mut().find(|x| x.name == v.kind.name()) {
+            x.kept = true;
+        }
+        chosen_kinds.push(v.kind);
+        base = subset;
+        rss_cur = rss1;
+        resid_cur = resid_of(&base, &beta);
+        if findings.len() >= MAX_FINDINGS {
+            break;
+        }
+    }
+    (findings, first_round, base_resid, resid_cur, n_eff_base)
+}
+
+/// A current-sensor offset `i0` also shows in the torque equation as a constant `K_t·i0`;
+/// when both `current_offset` and `offset` are found and the latter is mostly that constant,
+/// only the current offset is real.
+fn resolve_offsets(findings: &mut Vec<Finding>, kt: f64) {
+    let get = |name: &str| {
+        findings
+            .iter()
+            .find(|f| f.name == name)
+            .and_then(|f| EffectSpec::parse(&f.spec).ok())
+    };
+    if let (Some(co), Some(off)) = (get("current_offset"), get("offset")) {
+        let implied = kt * co.get("i0");
+        let t0 = off.get("t0");
+        if t0 != 0.0 && (t0 - implied).abs() < 0.5 * t0.abs() {
+            findings.retain(|f| f.name != "offset");
+        }
+    }
+}
+
+/// One sentence of physics for a finding.
+pub fn explain(spec: &EffectSpec, score: f64, eq: Equation) -> String {
+    let pct = 100.0 * score;
+    let g = |k: &str| spec.get(k);
+    let what = match spec.kind {
+        EffectKind::Coulomb => format!(
+            "a constant friction of {:.3} N·m opposes the motion in either direction (Coulomb)",
+            g("fc")
+        ),
+        EffectKind::Viscous => format!(
+            "friction grows in proportion to speed, {:.2e} N·m per rad/s (viscous)",
+            g("b")
+        ),
+        EffectKind::Stribeck => format!(
+            "friction is {:.3} N·m higher at low speed and falls off above about {} rad/s (Stribeck)",
+            g("fs"),
+            g("vs")
+        ),
+        EffectKind::Presliding => "friction builds up over a small deflection after each reversal instead of switching at once (presliding, the LuGre bristle state)".to_string(),
+        EffectKind::Cogging => format!(
+            "a torque of {:.3} N·m repeats {} times per revolution (cogging between magnets and stator teeth)",
+            g("amp"),
+            g("harmonic")
+        ),
+        EffectKind::PositionLoad => format!(
+            "a torque of {:.3} N·m repeats once per revolution (gravity on an arm or an unbalanced load)",
+            g("amp")
+        ),
+        EffectKind::Offset => format!(
+            "a constant load torque of {:.3} N·m pulls in one direction",
+            g("t0")
+        ),
+        EffectKind::Asymmetry => format!(
+            "friction differs by direction: viscous friction {:+.2e} N·m per rad/s going forward against backward",
+            2.0 * g("dv")
+        ),
+        EffectKind::Deadtime => format!(
+            "the inverter loses {:.3} V with the sign of the current (dead time)",
+            g("vd")
+        ),
+        EffectKind::CurrentOffset => format!(
+            "the current sensor reads {:.3} A too much at zero current (offset)",
+            g("i0")
+        ),
+        EffectKind::Thermal => format!(
+            "the winding resistance rises as the current heats the motor ({:.1e} per A², time constant {} s)",
+            g("k"),
+            g("tau")
+        ),
+        EffectKind::LoadFriction => format!(
+            "friction grows with the transmitted torque, {:.3} N·m per N·m (gears, screws)",
+            g("mu")
+        ),
+    };
+    format!(
+        "{}{}; it explains {:.0}% of the {} residual.",
+        what[..1].to_uppercase(),
+        &what[1..],
+        pct,
+        eq.label()
+    )
+}

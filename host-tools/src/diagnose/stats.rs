@@ -1,0 +1,410 @@
+//! Statistics of the model-error workbench: least squares, the nested-model F-test with an
+//! effective sample size, information criteria, residual whiteness and the cross-correlation
+//! of the residual with the input, with confidence bands (as MATLAB's `resid`).
+//!
+//! Least squares uses faer's QR; the F and normal distributions come from `statrs`.
+use faer::linalg::solvers::SolveLstsq;
+use faer::Mat;
+use statrs::distribution::{ContinuousCDF, FisherSnedecor, Normal};
+
+/// Result of a least-squares fit `y ≈ Σ beta_j·col_j`.
+#[derive(Debug, Clone)]
+pub struct LinFit {
+    /// Coefficients, one per column (0 for a column that is identically zero).
+    pub beta: Vec<f64>,
+    /// Residual sum of squares.
+    pub rss: f64,
+    /// Residual `y − X·beta`.
+    pub resid: Vec<f64>,
+}
+
+/// Relative ridge added to the (column-scaled) normal problem so that collinear columns give
+/// finite coefficients instead of a blow-up: 1e-9 of a unit-RMS column's energy. It changes a
+/// well-posed fit by less than a part per billion.
+const RIDGE: f64 = 1e-9;
+
+/// Least squares `y ≈ X·beta` with X given by columns. Columns are scaled to unit RMS and a
+/// tiny ridge keeps collinear columns finite.
+pub fn lstsq(cols: &[&[f64]], y: &[f64]) -> LinFit {
+    let n = y.len();
+    let p = cols.len();
+    if p == 0 || n == 0 {
+        let rss = y.iter().map(|v| v * v).sum();
+        return LinFit {
+            beta: vec![0.0; p],
+            rss,
+            resid: y.to_vec(),
+        };
+    }
+    let scale: Vec<f64> = cols
+        .iter()
+        .map(|c| {
+            let ms = c.iter().map(|v| v * v).sum::<f64>() / n as f64;
+            if ms > 0.0 && ms.is_finite() {
+                ms.sqrt()
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    let ridge = (RIDGE * n as f64).sqrt();
+    let a = Mat::<f64>::from_fn(n + p, p, |r, c| {
+        if r < n {
+            if scale[c] > 0.0 {
+                cols[c][r] / scale[c]
+            } else {
+                0.0
+            }
+        } else if r - n == c {
+            ridge
+        } else {
+            0.0
+        }
+    });
+    let b = Mat::<f64>::from_fn(n + p, 1, |r, _| if r < n { y[r] } else { 0.0 });
+    let x = a.qr().solve_lstsq(&b);
+    let beta: Vec<f64> = (0..p)
+        .map(|c| {
+            if scale[c] > 0.0 {
+                x[(c, 0)] / scale[c]
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    let mut resid = y.to_vec();
+    for (c, col) in cols.iter().enumerate() {
+        if beta[c] != 0.0 {
+            for (r, v) in resid.iter_mut().enumerate() {
+                *v -= beta[c] * col[r];
+            }
+        }
+    }
+    let rss = resid.iter().map(|v| v * v).sum();
+    LinFit { beta, rss, resid }
+}
+
+/// Outcome of a nested-model F-test.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FTest {
+    /// F statistic computed with the effective sample size.
+    pub f: f64,
+    /// Its p-value (upper tail of F(q, n_eff − p_full)).
+    pub p_value: f64,
+    /// Fraction of the base model's residual sum of squares the added columns explain.
+    pub explained: f64,
+    /// Change of the Bayesian information criterion (negative: the larger model is better).
+    pub delta_bic: f64,
+}
+
+/// Nested-model F-test: the base model has `p_base` columns and residual sum of squares
+/// `rss0`; adding `q` columns gives `rss1`. `n_eff` is the effective number of independent
+/// samples (see [`effective_n`]): with autocorrelated residuals the nominal count overstates
+/// the evidence, so the statistic is computed with `n_eff`.
+pub fn f_test(rss0: f64, rss1: f64, q: usize, p_base: usize, n_eff: f64) -> FTest {
+    let p_full = (p_base + q) as f64;
+    let d2 = (n_eff - p_full).max(1.0);
+    let explained = if rss0 > 0.0 {
+        ((rss0 - rss1) / rss0).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let f = if rss1 > 0.0 && q > 0 {
+        ((rss0 - rss1).max(0.0) / q as f64) / (rss1 / d2)
+    } else {
+        0.0
+    };
+    let p_value = match FisherSnedecor::new(q.max(1) as f64, d2) {
+        Ok(dist) if f.is_finite() => dist.sf(f),
+        _ => 1.0,
+    };
+    FTest {
+        f,
+        p_value,
+        explained,
+        delta_bic: delta_bic(rss0, rss1, q, n_eff),
+    }
+}
+
+/// Change of BIC `n·ln(RSS/n) + p·ln(n)` when `q` parameters are added, with `n = n_eff`.
+pub fn delta_bic(rss0: f64, rss1: f64, q: usize, n_eff: f64) -> f64 {
+    if rss0 <= 0.0 || rss1 <= 0.0 {
+        return 0.0;
+    }
+    n_eff * (rss1 / rss0).ln() + q as f64 * n_eff.max(2.0).ln()
+}
+
+/// Lag-`k` autocorrelation coefficients `r_1..r_max_lag` (mean removed, biased estimator as
+/// in Box–Jenkins).
+pub fn autocorr(x: &[f64], max_lag: usize) -> Vec<f64> {
+    let n = x.len();
+    if n < 2 {
+        return vec![0.0; max_lag];
+    }
+    let m = x.iter().sum::<f64>() / n as f64;
+    let c0: f64 = x.iter().map(|v| (v - m) * (v - m)).sum();
+    (1..=max_lag)
+        .map(|k| {
+            if k >= n || c0 <= 0.0 {
+                return 0.0;
+            }
+            let ck: f64 = (0..n - k).map(|t| (x[t] - m) * (x[t + k] - m)).sum();
+            ck / c0
+        })
+        .collect()
+}
+
+/// Cross-correlation `r_xu(k)` for `k = −max_lag..=max_lag` (index `k + max_lag`):
+/// correlation of `x(t)` with `u(t − k)`, means removed, normalised by both energies.
+pub fn xcorr(x: &[f64], u: &[f64], max_lag: usize) -> Vec<f64> {
+    let n = x.len().min(u.len());
+    let mx = x[..n].iter().sum::<f64>() / n.max(1) as f64;
+    let mu = u[..n].iter().sum::<f64>() / n.max(1) as f64;
+    let ex: f64 = x[..n].iter().map(|v| (v - mx) * (v - mx)).sum();
+    let eu: f64 = u[..n].iter().map(|v| (v - mu) * (v - mu)).sum();
+    let norm = (ex * eu).sqrt();
+    (0..=2 * max_lag)
+        .map(|idx| {
+            let k = idx as isize - max_lag as isize;
+            if norm <= 0.0 {
+                return 0.0;
+            }
+            let mut s = 0.0;
+            for t in 0..n as isize {
+                let j = t - k;
+                if j >= 0 && (j as usize) < n {
+                    s += (x[t as usize] - mx) * (u[j as usize] - mu);
+                }
+            }
+            s / norm
+        })
+        .collect()
+}
+
+/// Half-width of the confidence band of a correlation coefficient of white noise over `n`
+/// samples: `z_{1−(1−level)/2}/√n` (MATLAB's `resid` draws the 99 % band).
+pub fn correlation_band(n: usize, level: f64) -> f64 {
+    let z = Normal::new(0.0, 1.0)
+        .map(|d| d.inverse_cdf(0.5 + level / 2.0))
+        .unwrap_or(2.576);
+    z / (n.max(1) as f64).sqrt()
+}
+
+/// Effective number of independent samples of an autocorrelated residual, from its lag-1
+/// autocorrelation ρ (AR(1) approximation, Bretherton et al. 1999): `n·(1 − ρ)/(1 + ρ)`,
+/// never more than `n` and never less than 2.
+pub fn effective_n(resid: &[f64]) -> f64 {
+    let n = resid.len() as f64;
+    let rho = autocorr(resid, 1)[0].clamp(0.0, 0.999);
+    (n * (1.0 - rho) / (1.0 + rho)).clamp(2.0f64.min(n), n)
+}
+
+/// Residual whiteness and independence from the input, as MATLAB's `resid`.
+#[derive(Debug, Clone)]
+pub struct Whiteness {
+    /// Autocorrelation of the residual at lags 1..=max_lag.
+    pub acf: Vec<f64>,
+    /// Cross-correlation residual/input at lags −max_lag..=max_lag.
+    pub xcf: Vec<f64>,
+    /// Half-width of the 99 % confidence band.
+    pub band: f64,
+    /// Fraction of autocorrelation lags outside the band (≈ 0.01 for white noise).
+    pub acf_outside: f64,
+    /// Fraction of cross-correlation lags outside the band.
+    pub xcf_outside: f64,
+}
+
+/// Confidence level of the whiteness bands: 99 %, as MATLAB's `resid`.
+pub const WHITENESS_LEVEL: f64 = 0.99;
+
+/// Whiteness test of `resid` and its cross-correlation with the input `u`.
+pub fn whiteness(resid: &[f64], u: &[f64], max_lag: usize) -> Whiteness {
+    let acf = autocorr(resid, max_lag);
+    let xcf = xcorr(resid, u, max_lag);
+    let band = correlation_band(resid.len(), WHITENESS_LEVEL);
+    let out = |v: &[f64]| v.iter().filter(|r| r.abs() > band).count() as f64 / v.len().max(1) as f64;
+    Whiteness {
+        acf_outside: out(&acf),
+        xcf_outside: out(&xcf),
+        acf,
+        xcf,
+        band,
+    }
+}
+
+/// Root mean square.
+pub fn rms(x: &[f64]) -> f64 {
+    if x.is_empty() {
+        return 0.0;
+    }
+    (x.iter().map(|v| v * v).sum::<f64>() / x.len() as f64).sqrt()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+    use rand_distr::StandardNormal;
+
+    fn noise(n: usize, seed: u64) -> Vec<f64> {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+        (0..n).map(|_| rng.sample(StandardNormal)).collect()
+    }
+
+    #[test]
+    fn lstsq_recovers_coefficients() {
+        let n = 500;
+        let x1: Vec<f64> = (0..n).map(|k| (k as f64 * 0.1).sin()).collect();
+        let x2: Vec<f64> = (0..n).map(|k| k as f64 / n as f64).collect();
+        let e = noise(n, 1);
+        let y: Vec<f64> = (0..n).map(|k| 2.0 * x1[k] - 0.5 * x2[k] + 1e-3 * e[k]).collect();
+        let fit = lstsq(&[&x1, &x2], &y);
+        assert!((fit.beta[0] - 2.0).abs() < 1e-3);
+        assert!((fit.beta[1] + 0.5).abs() < 1e-3);
+        // A duplicated column stays finite.
+        let fit2 = lstsq(&[&x1, &x1], &y);
+        assert!(fit2.beta.iter().all(|b| b.is_finite()));
+        assert!((fit2.beta[0] + fit2.beta[1] - 2.0).abs() < 1e-2);
+    }
+
+    #[test]
+    fn f_test_separates_signal_from_noise() {
+        let n = 2000;
+        let e = noise(n, 2);
+        let x: Vec<f64> = noise(n, 3);
+        let base = lstsq(&[], &e);
+        let with = lstsq(&[&x], &e);
+        let t = f_test(base.rss, with.rss, 1, 0, n as f64);
+        assert!(t.p_value > 1e-3, "noise flagged: {t:?}");
+        let y: Vec<f64> = (0..n).map(|k| e[k] + 0.3 * x[k]).collect();
+        let base = lstsq(&[], &y);
+        let with = lstsq(&[&x], &y);
+        let t = f_test(base.rss, with.rss, 1, 0, n as f64);
+        assert!(t.p_value < 1e-10 && t.explained > 0.05 && t.delta_bic < 0.0, "{t:?}");
+    }
+
+    #[test]
+    fn effective_n_shrinks_with_autocorrelation() {
+        let e = noise(5000, 4);
+        assert!(effective_n(&e) > 4000.0);
+        let mut ar = vec![0.0; 5000];
+        for k in 1..5000 {
+            ar[k] = 0.9 * ar[k - 1] + e[k];
+        }
+        let ne = effective_n(&ar);
+        assert!(ne > 100.0 && ne < 500.0, "{ne}");
+    }
+
+    #[test]
+    fn whiteness_of_white_and_coloured_noise() {
+        let e = noise(4000, 5);
+        let u = noise(4000, 6);
+        let w = whiteness(&e, &u, 25);
+        assert!(w.acf_outside < 0.1 && w.xcf_outside < 0.1, "{w:?}");
+        let coloured: Vec<f64> = (0..4000).map(|k| e[k] + 0.5 * u[k]).collect();
+        let w = whiteness(&coloured, &u, 25);
+        // The residual correlates with the input at lag 0.
+        assert!(w.xcf[25] > 0.3);
+        assert!((correlation_band(10_000, 0.99) - 0.02576).abs() < 1e-4);
+    }
+}
+
+/// Gram matrix of a set of columns and a target, for many nested least-squares fits over
+/// subsets of the same columns (each fit then costs O(p³) instead of O(n·p²)).
+#[derive(Debug, Clone)]
+pub struct Gram {
+    /// `XᵀX` of the unit-RMS-scaled columns.
+    xtx: Vec<Vec<f64>>,
+    /// `Xᵀy` of the scaled columns.
+    xty: Vec<f64>,
+    /// `yᵀy`.
+    yty: f64,
+    /// RMS of each column (its scale; 0 for a zero column).
+    scale: Vec<f64>,
+    /// Number of rows.
+    pub n: usize,
+}
+
+impl Gram {
+    /// Gram matrix of `cols` (all of length `y.len()`) and `y`.
+    pub fn new(cols: &[Vec<f64>], y: &[f64]) -> Gram {
+        let n = y.len();
+        let p = cols.len();
+        let scale: Vec<f64> = cols
+            .iter()
+            .map(|c| {
+                let ms = c.iter().map(|v| v * v).sum::<f64>() / n.max(1) as f64;
+                if ms > 0.0 && ms.is_finite() {
+                    ms.sqrt()
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        let scaled: Vec<Vec<f64>> = cols
+            .iter()
+            .zip(&scale)
+            .map(|(c, s)| {
+                if *s > 0.0 {
+                    c.iter().map(|v| v / s).collect()
+                } else {
+                    vec![0.0; n]
+                }
+            })
+            .collect();
+        let mut xtx = vec![vec![0.0; p]; p];
+        for a in 0..p {
+            for b in a..p {
+                let d: f64 = scaled[a].iter().zip(&scaled[b]).map(|(x, y)| x * y).sum();
+                xtx[a][b] = d;
+                xtx[b][a] = d;
+            }
+        }
+        let xty = scaled
+            .iter()
+            .map(|c| c.iter().zip(y).map(|(x, y)| x * y).sum())
+            .collect();
+        let yty = y.iter().map(|v| v * v).sum();
+        Gram {
+            xtx,
+            xty,
+            yty,
+            scale,
+            n,
+        }
+    }
+
+    /// Least squares on the columns `subset`: returns (coefficients in the original units,
+    /// residual sum of squares).
+    pub fn fit(&self, subset: &[usize]) -> (Vec<f64>, f64) {
+        let p = subset.len();
+        if p == 0 {
+            return (vec![], self.yty);
+        }
+        let ridge = RIDGE * self.n as f64;
+        let a = Mat::<f64>::from_fn(p, p, |r, c| {
+            self.xtx[subset[r]][subset[c]] + if r == c { ridge } else { 0.0 }
+        });
+        let b = Mat::<f64>::from_fn(p, 1, |r, _| self.xty[subset[r]]);
+        let x = match a.llt(faer::Side::Lower) {
+            Ok(llt) => {
+                use faer::linalg::solvers::Solve;
+                llt.solve(&b)
+            }
+            Err(_) => a.qr().solve_lstsq(&b),
+        };
+        let mut fitted = 0.0;
+        let mut beta = Vec::with_capacity(p);
+        for r in 0..p {
+            fitted += x[(r, 0)] * self.xty[subset[r]];
+            let s = self.scale[subset[r]];
+            beta.push(if s > 0.0 { x[(r, 0)] / s } else { 0.0 });
+        }
+        (beta, (self.yty - fitted).max(0.0))
+    }
+
+    /// `yᵀy`, the residual sum of squares of the empty model.
+    pub fn yty(&self) -> f64 {
+        self.yty
+    }
+}

@@ -1,0 +1,311 @@
+//! The built-in motor emulator: the reference paper's BLDC motor (DC-equivalent model, LuGre
+//! friction with the paper's parameters) plus any of the contract's physical effects, read
+//! through the board's sensors (Hall sensors and decoder, noisy current sensor, the
+//! firmware's velocity estimator) at the 12 ms control period.
+//!
+//! | module | what it is |
+//! |---|---|
+//! | [`plant`] | the motor, step by step, with its implicit integrator ([`Plant`]) |
+//! | [`sensors`] | Hall sensors + decoder, current sensor, velocity estimator |
+//! | [`signals`] | the paper's excitation signals `a`, `b`, `c`, `d`, `steady`, `ramp` |
+//! | [`experiments`] | closed-form steady states (for checks) and the static-friction experiment |
+//!
+//! ```no_run
+//! use motorid::emulator::{simulate, signal, EmulatorConfig, SignalKind, SAMPLE_PERIOD};
+//! let mut cfg = EmulatorConfig::paper();
+//! cfg.effects.push(control::effects::Effect::Offset { t0: 0.03 });
+//! let u = signal(SignalKind::A, 90.0, cfg.seed);
+//! let res = simulate(&cfg, &u, SAMPLE_PERIOD).unwrap();
+//! res.log_with_truth().write(std::path::Path::new("a.csv")).unwrap();
+//! ```
+pub mod experiments;
+pub mod plant;
+pub mod scalar_root;
+pub mod sensors;
+pub mod signals;
+
+pub use plant::{LoadInputs, Plant, TrueState};
+pub use signals::{signal, signal_at, SignalKind, SAMPLE_PERIOD};
+
+use crate::effect_spec::EffectSpec;
+use crate::log::MotorLog;
+use anyhow::{bail, Result};
+use control::effects::Effect;
+use control::lugre::LugreParams;
+use control::motor::MotorParams;
+use control::velocity::{MovingAverage, VelocityEstimator, PAPER_WINDOW};
+use std::path::PathBuf;
+use std::sync::Arc;
+
+/// An extra load torque [N·m] opposing motion, as a function of the true state: physics the
+/// effect list does not have (a tabulated load curve, a non-sinusoidal cogging profile,
+/// temperature-dependent friction...). It is evaluated inside the implicit solve, so it
+/// must be a pure function of its inputs; jumps (a hard `sgn(ω)`) are handled.
+pub type ExtraLoad = Arc<dyn Fn(LoadInputs) -> f64 + Send + Sync>;
+
+/// Default Hall pole pairs: the paper's 0.095 rad resolution is 2π/(6·11).
+pub const DEFAULT_POLE_PAIRS: u16 = control::hall::PAPER_POLE_PAIRS;
+/// Default current-sensor noise [A] (standard deviation): a typical shunt amplifier + 12-bit
+/// ADC on the B-G431B-ESC1 after the firmware's averaging.
+pub const DEFAULT_CURRENT_NOISE: f64 = 0.02;
+/// Default fine integration step [s]: 0.2 ms, 60 steps per 12 ms sample, 1/7 of the
+/// winding's L/R = 1.4 ms.
+pub const DEFAULT_FINE_STEP: f64 = 0.2e-3;
+
+/// Everything that defines an emulated motor.
+#[derive(Clone)]
+pub struct EmulatorConfig {
+    /// Motor constants (default: the paper's, `MotorParams::paper()`).
+    pub motor: MotorParams<f64>,
+    /// LuGre friction of the base motor (default: the paper's table). A `presliding` effect
+    /// replaces its σ0 and σ1.
+    pub lugre: LugreParams<f64>,
+    /// Physical effects added to the base motor.
+    pub effects: Vec<Effect<f64>>,
+    /// Pole pairs seen by the Hall sensors (resolution 2π/(6·pole_pairs)).
+    pub pole_pairs: u16,
+    /// Current-sensor noise standard deviation [A].
+    pub current_noise: f64,
+    /// Seed of the sensor noise (and, by convention, of the excitation signal).
+    pub seed: u64,
+    /// Largest fine integration step [s].
+    pub fine_step: f64,
+    /// Extra load torque, for tests that need physics outside the effect list.
+    pub extra_load: Option<ExtraLoad>,
+}
+
+impl std::fmt::Debug for EmulatorConfig {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("EmulatorConfig")
+            .field("motor", &self.motor)
+            .field("lugre", &self.lugre)
+            .field("effects", &self.effects)
+            .field("pole_pairs", &self.pole_pairs)
+            .field("current_noise", &self.current_noise)
+            .field("seed", &self.seed)
+            .field("fine_step", &self.fine_step)
+            .field("extra_load", &self.extra_load.as_ref().map(|_| "closure"))
+            .finish()
+    }
+}
+
+impl Default for EmulatorConfig {
+    fn default() -> Self {
+        Self::paper()
+    }
+}
+
+impl EmulatorConfig {
+    /// The paper's motor with no added effect, default sensors, seed 1.
+    pub fn paper() -> Self {
+        EmulatorConfig {
+            motor: MotorParams::paper(),
+            lugre: LugreParams::paper(),
+            effects: Vec::new(),
+            pole_pairs: DEFAULT_POLE_PAIRS,
+            current_noise: DEFAULT_CURRENT_NOISE,
+            seed: 1,
+            fine_step: DEFAULT_FINE_STEP,
+            extra_load: None,
+        }
+    }
+
+    /// The same with these effects.
+    pub fn with_effects(mut self, effects: Vec<Effect<f64>>) -> Self {
+        self.effects = effects;
+        self
+    }
+
+    /// The same with an extra load closure.
+    pub fn with_extra_load(
+        mut self,
+        f: impl Fn(LoadInputs) -> f64 + Send + Sync + 'static,
+    ) -> Self {
+        self.extra_load = Some(Arc::new(f));
+        self
+    }
+
+    /// The LuGre parameters in force: the base ones, with σ0/σ1 of a `presliding` effect.
+    pub fn effective_lugre(&self) -> LugreParams<f64> {
+        let mut p = self.lugre;
+        for e in &self.effects {
+            if let Effect::Presliding { sigma0, sigma1 } = *e {
+                p.sigma0 = sigma0;
+                p.sigma1 = sigma1;
+            }
+        }
+        p
+    }
+
+    /// Hall resolution [rad].
+    pub fn hall_resolution(&self) -> f64 {
+        sensors::hall_resolution(self.pole_pairs)
+    }
+
+    /// The effects as spec strings (`cogging:harmonic=7,amp=0.03,phase=0`).
+    pub fn effect_specs(&self) -> Vec<String> {
+        self.effects
+            .iter()
+            .map(|e| EffectSpec::from_effect(e).to_string())
+            .collect()
+    }
+
+    /// Refuse what cannot be simulated, with a message for a person.
+    pub fn check(&self) -> Result<()> {
+        let m = &self.motor;
+        for (name, v) in [
+            ("R", m.r),
+            ("L", m.l),
+            ("K_t", m.kt),
+            ("K_b", m.kb),
+            ("J", m.j),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                bail!("motor constant {name} must be a positive number (got {v})");
+            }
+        }
+        if self.pole_pairs == 0 || self.pole_pairs > 1000 {
+            bail!(
+                "pole pairs must be between 1 and 1000 (got {})",
+                self.pole_pairs
+            );
+        }
+        if !(self.current_noise.is_finite() && self.current_noise >= 0.0) {
+            bail!(
+                "current noise must be 0 or more amperes (got {})",
+                self.current_noise
+            );
+        }
+        if !(self.fine_step.is_finite() && self.fine_step > 0.0 && self.fine_step <= 0.012) {
+            bail!("fine step must be in (0, 0.012] s (got {})", self.fine_step);
+        }
+        let p = self.effective_lugre();
+        if !p.is_valid() || p.s(0.0) <= 0.0 || p.sigma1 < 0.0 || p.alpha2 < 0.0 {
+            bail!("LuGre parameters are not usable: need σ0 > 0, σ1 ≥ 0, α2 ≥ 0, s(0) > 0 (got {p:?})");
+        }
+        for e in &self.effects {
+            if let Effect::Thermal { tau, .. } = e {
+                if !(*tau > 0.0) {
+                    bail!("effect 'thermal': tau must be positive (got {tau})");
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The true states at the samples of a simulation.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Truth {
+    /// True angle [rad].
+    pub theta: Vec<f64>,
+    /// True velocity [rad/s].
+    pub omega: Vec<f64>,
+    /// True bristle deflection [rad].
+    pub z: Vec<f64>,
+    /// True current [A].
+    pub i: Vec<f64>,
+}
+
+/// What [`simulate`] returns: the log as the board would record it, and the truth.
+#[derive(Debug, Clone)]
+pub struct SimResult {
+    pub log: MotorLog,
+    pub truth: Truth,
+}
+
+impl SimResult {
+    /// The log with the truth as extra columns `theta_true, omega_true, z_true, i_true`.
+    pub fn log_with_truth(&self) -> MotorLog {
+        let mut log = self.log.clone();
+        log.extra
+            .push(("theta_true".into(), self.truth.theta.clone()));
+        log.extra
+            .push(("omega_true".into(), self.truth.omega.clone()));
+        log.extra.push(("z_true".into(), self.truth.z.clone()));
+        log.extra.push(("i_true".into(), self.truth.i.clone()));
+        log
+    }
+}
+
+/// Run the emulated motor under `input` (voltages held for `ts` each, zero-order hold) from
+/// rest. Row k of the log is what the board measures at `t = k·ts`, before `input[k]` is
+/// applied: `theta` from the Hall decoder, `i` from the current sensor, `omega` from the
+/// firmware's estimator. Metadata: `sample_period`, `hall_resolution_rad`, `pole_pairs`,
+/// `seed`, `current_noise`, `fine_step`, `effects` (spec strings separated by `;`).
+pub fn simulate(cfg: &EmulatorConfig, input: &[f64], ts: f64) -> Result<SimResult> {
+    if !(ts.is_finite() && ts > 0.0) {
+        bail!("sample period must be a positive number of seconds (got {ts})");
+    }
+    if input.len() < 2 {
+        bail!(
+            "the input has {} samples; a simulation needs at least 2",
+            input.len()
+        );
+    }
+    if let Some(k) = input.iter().position(|v| !v.is_finite()) {
+        bail!("input sample {k} is not a finite voltage ({})", input[k]);
+    }
+    let mut plant = Plant::new(cfg.clone())?;
+    let mut est = MovingAverage::new(PAPER_WINDOW, ts);
+    let n = input.len();
+    let mut log = MotorLog {
+        source: PathBuf::from("emulator"),
+        ..MotorLog::default()
+    };
+    let (mut i_meas, mut omega_est) = (Vec::with_capacity(n), Vec::with_capacity(n));
+    let mut truth = Truth::default();
+    for (k, u) in input.iter().enumerate() {
+        let th = plant.hall_angle();
+        log.t.push(k as f64 * ts);
+        log.u.push(*u);
+        log.theta.push(th);
+        i_meas.push(plant.measured_current());
+        omega_est.push(est.update(th, 0));
+        let s = plant.truth();
+        truth.theta.push(s.theta);
+        truth.omega.push(s.omega);
+        truth.z.push(s.z);
+        truth.i.push(s.i);
+        plant.apply(*u, ts);
+    }
+    log.i = Some(i_meas);
+    log.omega = Some(omega_est);
+    let specs = cfg.effect_specs();
+    let meta = [
+        ("sample_period", format!("{ts}")),
+        ("hall_resolution_rad", format!("{}", cfg.hall_resolution())),
+        ("pole_pairs", format!("{}", cfg.pole_pairs)),
+        ("seed", format!("{}", cfg.seed)),
+        ("current_noise", format!("{}", cfg.current_noise)),
+        ("fine_step", format!("{}", cfg.fine_step)),
+        (
+            "effects",
+            if specs.is_empty() {
+                "none".to_string()
+            } else {
+                specs.join(";")
+            },
+        ),
+        (
+            "source",
+            "motorid emulator (paper motor, LuGre friction)".to_string(),
+        ),
+    ];
+    for (k, v) in meta {
+        log.meta.insert(k.to_string(), v);
+    }
+    Ok(SimResult { log, truth })
+}
+
+/// [`simulate`] under one of the paper's signals (seeded with `cfg.seed`), at 12 ms; the
+/// log's metadata also names the signal.
+pub fn simulate_signal(cfg: &EmulatorConfig, kind: SignalKind, duration: f64) -> Result<SimResult> {
+    if !(duration.is_finite() && duration > 0.0) {
+        bail!("duration must be a positive number of seconds (got {duration})");
+    }
+    let u = signal(kind, duration, cfg.seed);
+    let mut res = simulate(cfg, &u, SAMPLE_PERIOD)?;
+    res.log.meta.insert("signal".into(), kind.name().into());
+    Ok(res)
+}

@@ -1,0 +1,161 @@
+//! The free parameters of a model structure: which numbers of a [`Model`] a fit may move,
+//! with their units and bounds, read and written by name.
+use crate::effect_spec::{keys, EffectSpec};
+use crate::model::{Model, Parameter};
+use control::effects::EffectKind;
+
+/// One number inside a model.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Slot {
+    /// Winding resistance R.
+    R,
+    /// Winding inductance L.
+    L,
+    /// Back-EMF constant K_b; K_t is tied to it (equal in SI units for a BLDC motor).
+    Kb,
+    /// Inertia J (or mass).
+    J,
+    /// Viscous friction of the linear model.
+    Viscous,
+    /// A LuGre field: alpha0, alpha1, alpha2, v0, sigma0, sigma1.
+    Lugre(&'static str),
+    /// Key of the i-th effect.
+    Effect(usize, &'static str),
+}
+
+/// A free parameter: where it lives and its bounds.
+#[derive(Debug, Clone)]
+pub struct Free {
+    pub slot: Slot,
+    pub lo: f64,
+    pub hi: f64,
+}
+
+impl Slot {
+    /// Display name (`R`, `alpha0`, `cogging.amp`).
+    pub fn name(&self, m: &Model) -> String {
+        match self {
+            Slot::R => "R".into(),
+            Slot::L => "L".into(),
+            Slot::Kb => "Kb".into(),
+            Slot::J => "J".into(),
+            Slot::Viscous => "b".into(),
+            Slot::Lugre(f) => (*f).into(),
+            Slot::Effect(i, k) => format!("{}.{k}", m.effects[*i].kind().name()),
+        }
+    }
+
+    /// SI unit.
+    pub fn unit(&self, m: &Model) -> String {
+        let torque_plant = m.plant == crate::log::Plant::Torque;
+        match self {
+            Slot::R => "Ω".into(),
+            Slot::L => "H".into(),
+            Slot::Kb => "V·s/rad".into(),
+            Slot::J if torque_plant => "u·s²/rad".into(),
+            Slot::J => "kg·m²".into(),
+            Slot::Viscous | Slot::Lugre("alpha2") | Slot::Lugre("sigma1") => "N·m·s/rad".into(),
+            Slot::Lugre("v0") => "rad/s".into(),
+            Slot::Lugre("sigma0") => "N·m/rad".into(),
+            Slot::Lugre(_) => "N·m".into(),
+            Slot::Effect(i, k) => keys(m.effects[*i].kind())
+                .iter()
+                .find(|key| key.name == *k)
+                .map(|key| key.unit.to_string())
+                .unwrap_or_default(),
+        }
+    }
+
+    pub fn get(&self, m: &Model) -> f64 {
+        match self {
+            Slot::R => m.motor.r,
+            Slot::L => m.motor.l,
+            Slot::Kb => m.motor.kb,
+            Slot::J => m.motor.j,
+            Slot::Viscous => m.viscous,
+            Slot::Lugre(f) => {
+                let l = m.lugre.unwrap_or_else(crate::model::LugreParams::paper);
+                match *f {
+                    "alpha0" => l.alpha0,
+                    "alpha1" => l.alpha1,
+                    "alpha2" => l.alpha2,
+                    "v0" => l.v0,
+                    "sigma0" => l.sigma0,
+                    _ => l.sigma1,
+                }
+            }
+            Slot::Effect(i, k) => EffectSpec::from_effect(&m.effects[*i]).get(k),
+        }
+    }
+
+    pub fn set(&self, m: &mut Model, v: f64) {
+        match self {
+            Slot::R => m.motor.r = v,
+            Slot::L => m.motor.l = v,
+            Slot::Kb => {
+                m.motor.kb = v;
+                m.motor.kt = v;
+            }
+            Slot::J => m.motor.j = v,
+            Slot::Viscous => m.viscous = v,
+            Slot::Lugre(f) => {
+                let l = m.lugre.get_or_insert_with(crate::model::LugreParams::paper);
+                match *f {
+                    "alpha0" => l.alpha0 = v,
+                    "alpha1" => l.alpha1 = v,
+                    "alpha2" => l.alpha2 = v,
+                    "v0" => l.v0 = v,
+                    "sigma0" => l.sigma0 = v,
+                    _ => l.sigma1 = v,
+                }
+            }
+            Slot::Effect(i, k) => {
+                let mut s = EffectSpec::from_effect(&m.effects[*i]);
+                s.values.insert(k.to_string(), v);
+                m.effects[*i] = s.to_effect();
+            }
+        }
+    }
+}
+
+/// The continuous (estimable) keys of an effect, with bounds. Structural keys (cogging
+/// `harmonic`) stay fixed. Bounds: physical sign where there is one, else ± a generous range.
+pub fn effect_keys(kind: EffectKind) -> Vec<(&'static str, f64, f64)> {
+    use std::f64::consts::PI;
+    match kind {
+        EffectKind::Coulomb => vec![("fc", 0.0, 10.0)],
+        EffectKind::Viscous => vec![("b", 0.0, 10.0)],
+        EffectKind::Stribeck => vec![("fs", 0.0, 10.0), ("vs", 0.05, 500.0)],
+        EffectKind::Presliding => vec![("sigma0", 1.0, 1e5), ("sigma1", 0.0, 1e3)],
+        EffectKind::Cogging => vec![("amp", -10.0, 10.0), ("phase", -4.0 * PI, 4.0 * PI)],
+        EffectKind::PositionLoad => vec![("amp", -10.0, 10.0), ("phase", -4.0 * PI, 4.0 * PI)],
+        EffectKind::Offset => vec![("t0", -10.0, 10.0)],
+        EffectKind::Asymmetry => vec![("dv", -10.0, 10.0), ("dc", -10.0, 10.0)],
+        EffectKind::Deadtime => vec![("vd", -5.0, 5.0)],
+        EffectKind::CurrentOffset => vec![("i0", -50.0, 50.0)],
+        EffectKind::Thermal => vec![("k", 0.0, 1.0), ("tau", 0.5, 1e4)],
+        EffectKind::LoadFriction => vec![("mu", 0.0, 2.0)],
+    }
+}
+
+/// The parameter table of a model for these free parameters, with standard errors.
+pub fn parameter_rows(m: &Model, free: &[Free], std_err: &[Option<f64>]) -> Vec<Parameter> {
+    free.iter()
+        .enumerate()
+        .map(|(k, f)| {
+            let mut p = Parameter::new(&f.slot.name(m), f.slot.get(m), &f.slot.unit(m));
+            p.std_err = std_err.get(k).copied().flatten();
+            if let Some(se) = p.std_err {
+                // Relative standard error above 50 %: the data does not pin it down.
+                if !se.is_finite() || se > 0.5 * p.value.abs().max(1e-12) {
+                    p.identifiable = false;
+                    p.note = format!(
+                        "relative standard error {:.0} %: the data barely constrains it",
+                        100.0 * se / p.value.abs().max(1e-300)
+                    );
+                }
+            }
+            p
+        })
+        .collect()
+}

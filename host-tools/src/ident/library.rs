@@ -1,0 +1,305 @@
+//! The SINDYc candidate library `Θ(x, ẋ, z, I, u)`: the reference paper's 17 terms (its
+//! §4.4) plus the terms that physical effects add (`fit --add`), each allowed in some of the
+//! three state equations (acceleration eq. 44, internal state eq. 45, current eq. 46).
+//!
+//! Terms are the firmware's [`control::sindy::Term`]s, so the board evaluates exactly the
+//! equations identified here. Columns are evaluated with one tight loop per term (the 17
+//! paper terms) or through [`Term::eval`] (effect terms); a test checks both agree.
+//!
+//! Effect → terms (documented choice):
+//!
+//! | effect | terms | equation |
+//! |---|---|---|
+//! | `coulomb` | `sgn(xdot)` | acceleration |
+//! | `viscous` | (ẋ is already in the library) | – |
+//! | `stribeck` | `exp(-(xdot/vs)^2)*sgn(xdot)` | acceleration |
+//! | `presliding` | (z terms are already in the library) | – |
+//! | `cogging:harmonic=k` | `sin(k*x)`, `cos(k*x)` | acceleration |
+//! | `position_load` | `sin(1*x)`, `cos(1*x)` | acceleration |
+//! | `offset` | `1` | acceleration |
+//! | `asymmetry` | `|xdot|`, `|sgn(xdot)|` | acceleration |
+//! | `load_friction` | `|i|*sgn(xdot)` | acceleration |
+//! | `deadtime` | `sgn(i)` | current |
+//! | `current_offset` | `1` | current |
+//! | `thermal` | `i^2` | current |
+//!
+//! `thermal`: the firmware's term inputs carry no heat state, so the resistance rise
+//! `R·h(t)·I` with `h ∝ running mean of I²` is approximated by the instantaneous `I²` term
+//! (the heat proxy at thermal equilibrium, sign-less); the main job's thermal recovery is the
+//! grey-box models' business, SINDYc only gets this proxy.
+//!
+//! With `--plant torque` there is no current: terms containing `I` are left out and there is
+//! no current equation.
+use crate::effect_spec::EffectSpec;
+use crate::log::Plant;
+use anyhow::Result;
+use control::effects::EffectKind;
+use control::sindy::{Term, TermInputs};
+use faer::Mat;
+
+/// Index of the acceleration equation (eq. 44).
+pub const ACCEL: usize = 0;
+/// Index of the internal-state equation (eq. 45).
+pub const ZDOT: usize = 1;
+/// Index of the current equation (eq. 46).
+pub const IDOT: usize = 2;
+/// Equation names, by index.
+pub const EQUATION_NAMES: [&str; 3] = ["d(xdot)/dt", "dz/dt", "di/dt"];
+
+/// One library column: a term and the equations it may appear in.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Candidate {
+    pub term: Term,
+    /// Allowed in (acceleration, internal state, current).
+    pub allowed: [bool; 3],
+}
+
+/// The candidate library.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Library {
+    pub candidates: Vec<Candidate>,
+    /// tanh gain `a` of `tanh(a·ẋ)`, `tanh(a·z)`.
+    pub a: f64,
+    /// Stribeck velocity [rad/s] of the Stribeck term.
+    pub vs: f64,
+}
+
+/// The signals the library is evaluated on (same length; `i` absent for a torque plant).
+#[derive(Debug, Clone, Copy)]
+pub struct Signals<'a> {
+    pub x: &'a [f64],
+    pub xdot: &'a [f64],
+    pub z: &'a [f64],
+    pub i: Option<&'a [f64]>,
+    pub u: &'a [f64],
+}
+
+impl Signals<'_> {
+    /// Number of samples.
+    pub fn len(&self) -> usize {
+        self.x.len()
+    }
+
+    /// True when there are no samples.
+    pub fn is_empty(&self) -> bool {
+        self.x.is_empty()
+    }
+
+    /// The term inputs at sample `k`.
+    pub fn at(&self, k: usize) -> TermInputs<f64> {
+        TermInputs {
+            x: self.x[k],
+            xdot: self.xdot[k],
+            z: self.z[k],
+            i: self.i.map_or(0.0, |i| i[k]),
+            u: self.u[k],
+        }
+    }
+}
+
+impl Library {
+    /// The paper's 17 terms, allowed in every equation (the current equation only exists
+    /// for a voltage plant; terms with `I` only when there is a current).
+    pub fn paper(plant: Plant, a: f64, vs: f64) -> Library {
+        let mut lib = Library {
+            candidates: Vec::new(),
+            a,
+            vs,
+        };
+        for t in Term::PAPER_LIBRARY {
+            lib.add(t, [true, true, true], plant);
+        }
+        lib
+    }
+
+    /// The paper's library plus the terms of `adds` (see the module doc's table).
+    pub fn with_effects(plant: Plant, a: f64, vs: f64, adds: &[EffectSpec]) -> Result<Library> {
+        let mut lib = Self::paper(plant, a, vs);
+        const ACC: [bool; 3] = [true, false, false];
+        const CUR: [bool; 3] = [false, false, true];
+        for spec in adds {
+            match spec.kind {
+                EffectKind::Coulomb => lib.add(Term::SgnXdot, ACC, plant),
+                EffectKind::Viscous | EffectKind::Presliding => {}
+                EffectKind::Stribeck => {
+                    lib.vs = spec.get("vs");
+                    lib.add(Term::StribeckXdot, ACC, plant);
+                }
+                EffectKind::Cogging => {
+                    let k = spec.get("harmonic").round().clamp(1.0, u16::MAX as f64) as u16;
+                    lib.add(Term::SinTheta(k), ACC, plant);
+                    lib.add(Term::CosTheta(k), ACC, plant);
+                }
+                EffectKind::PositionLoad => {
+                    lib.add(Term::SinTheta(1), ACC, plant);
+                    lib.add(Term::CosTheta(1), ACC, plant);
+                }
+                EffectKind::Offset => lib.add(Term::One, ACC, plant),
+                EffectKind::Asymmetry => {
+                    lib.add(Term::AbsXdot, ACC, plant);
+                    lib.add(Term::AbsSgnXdot, ACC, plant);
+                }
+                EffectKind::LoadFriction => lib.add(Term::AbsISgnXdot, ACC, plant),
+                EffectKind::Deadtime => lib.add(Term::SgnI, CUR, plant),
+                EffectKind::CurrentOffset => lib.add(Term::One, CUR, plant),
+                EffectKind::Thermal => lib.add(Term::ISquared, CUR, plant),
+            }
+        }
+        Ok(lib)
+    }
+
+    /// Add a term (merging the allowed equations when it is already there). Terms with `I`
+    /// are skipped for a torque plant, as is the current equation.
+    pub fn add(&mut self, term: Term, allowed: [bool; 3], plant: Plant) {
+        if plant == Plant::Torque && term.has_current() {
+            return;
+        }
+        let mut allowed = allowed;
+        if plant == Plant::Torque {
+            allowed[IDOT] = false;
+        }
+        if !allowed.iter().any(|a| *a) {
+            return;
+        }
+        if let Some(c) = self.candidates.iter_mut().find(|c| c.term == term) {
+            for e in 0..3 {
+                c.allowed[e] |= allowed[e];
+            }
+        } else {
+            self.candidates.push(Candidate { term, allowed });
+        }
+    }
+
+    /// Number of columns.
+    pub fn len(&self) -> usize {
+        self.candidates.len()
+    }
+
+    /// True when the library has no terms.
+    pub fn is_empty(&self) -> bool {
+        self.candidates.is_empty()
+    }
+
+    /// The terms in column order.
+    pub fn terms(&self) -> Vec<Term> {
+        self.candidates.iter().map(|c| c.term).collect()
+    }
+
+    /// Evaluate one term on every sample into `out`.
+    pub fn column(&self, term: Term, s: &Signals, out: &mut [f64]) {
+        let a = self.a;
+        let (x, v, z, u) = (s.x, s.xdot, s.z, s.u);
+        let zero;
+        let i = match s.i {
+            Some(i) => i,
+            None => {
+                zero = vec![0.0; s.len()];
+                &zero
+            }
+        };
+        macro_rules! fill {
+            (|$k:ident| $e:expr) => {
+                for ($k, o) in out.iter_mut().enumerate() {
+                    *o = $e;
+                }
+            };
+        }
+        match term {
+            Term::X => out.copy_from_slice(x),
+            Term::Xdot => out.copy_from_slice(v),
+            Term::Z => out.copy_from_slice(z),
+            Term::I => out.copy_from_slice(i),
+            Term::U => out.copy_from_slice(u),
+            Term::TanhXdot => fill!(|k| (a * v[k]).tanh()),
+            Term::TanhZ => fill!(|k| (a * z[k]).tanh()),
+            Term::AbsXdotXdot => fill!(|k| v[k].abs() * v[k]),
+            Term::AbsXdotXdot2 => fill!(|k| v[k].abs() * v[k] * v[k]),
+            Term::AbsZZ => fill!(|k| z[k].abs() * z[k]),
+            Term::AbsZZ2 => fill!(|k| z[k].abs() * z[k] * z[k]),
+            Term::ZXdot => fill!(|k| z[k] * v[k]),
+            Term::Z2Xdot => fill!(|k| z[k] * z[k] * v[k]),
+            Term::ZXdot2 => fill!(|k| z[k] * v[k] * v[k]),
+            Term::ZU => fill!(|k| z[k] * u[k]),
+            Term::Z2U => fill!(|k| z[k] * z[k] * u[k]),
+            Term::ZU2 => fill!(|k| z[k] * u[k] * u[k]),
+            Term::One => out.fill(1.0),
+            t => fill!(|k| t.eval(&s.at(k), a, self.vs)),
+        }
+    }
+
+    /// The library matrix `Θ` (`N × len()`, column-major).
+    pub fn matrix(&self, s: &Signals) -> Mat<f64> {
+        let n = s.len();
+        let mut m = Mat::<f64>::zeros(n, self.len());
+        for (j, c) in self.candidates.iter().enumerate() {
+            self.column(c.term, s, m.col_as_slice_mut(j));
+        }
+        m
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn columns_equal_the_firmware_terms() {
+        let n = 257;
+        let f = |c: f64| {
+            (0..n)
+                .map(|k| (k as f64 * c).sin() * 3.0)
+                .collect::<Vec<f64>>()
+        };
+        let (x, v, z, i, u) = (f(0.11), f(0.07), f(0.013), f(0.05), f(0.031));
+        let s = Signals {
+            x: &x,
+            xdot: &v,
+            z: &z,
+            i: Some(&i),
+            u: &u,
+        };
+        let adds: Vec<EffectSpec> = [
+            "coulomb",
+            "stribeck:vs=3",
+            "cogging:harmonic=7",
+            "position_load",
+            "offset",
+            "asymmetry",
+            "load_friction",
+            "deadtime",
+            "current_offset",
+            "thermal",
+        ]
+        .iter()
+        .map(|s| EffectSpec::parse(s).unwrap())
+        .collect();
+        let lib = Library::with_effects(Plant::Voltage, 4.0, 1.0, &adds).unwrap();
+        assert_eq!(lib.vs, 3.0);
+        // 17 + sgn, stribeck, sin7, cos7, sin1, cos1, 1, |xdot|, |sgn|, |i|sgn, sgn(i), i^2
+        assert_eq!(lib.len(), 17 + 12);
+        let one = lib.candidates.iter().find(|c| c.term == Term::One).unwrap();
+        assert_eq!(one.allowed, [true, false, true]);
+        let m = lib.matrix(&s);
+        for (j, c) in lib.candidates.iter().enumerate() {
+            for k in 0..n {
+                let want = c.term.eval(&s.at(k), lib.a, lib.vs);
+                assert!(
+                    (m[(k, j)] - want).abs() <= 1e-12 * want.abs().max(1.0),
+                    "{}",
+                    c.term
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn torque_plant_has_no_current_terms() {
+        let adds = vec![EffectSpec::parse("deadtime").unwrap()];
+        let lib = Library::with_effects(Plant::Torque, 4.0, 1.0, &adds).unwrap();
+        assert_eq!(lib.len(), 16);
+        assert!(lib
+            .candidates
+            .iter()
+            .all(|c| !c.term.has_current() && !c.allowed[IDOT]));
+    }
+}

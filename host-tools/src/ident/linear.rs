@@ -1,0 +1,307 @@
+//! The linear motor model (paper eqs. 1–2, viscous friction only), and the weak-form
+//! regression that gives every model kind its first estimate of the motor constants and of
+//! the linear-in-parameter effects.
+//!
+//! Electrical equation, tested with φ over each window (see [`super::weak_form`]):
+//! `∫φ·u = L·(−∫φ'·I) + R·∫φ·I + K_b·(−∫φ'·θ) + v_d·∫φ·sgn(I) − R·i0·∫φ`.
+//! Mechanical equation, with K_t = K_b (SI units; the data fixes only K_t/J otherwise):
+//! `K_t·∫φ·I = J·∫φ''·θ + b·(−∫φ'·θ) + Σ c_e·∫φ·g_e(θ, ω, I)`.
+//! Then every parameter is refined on the free-run simulation error.
+use super::free_params::{effect_keys, Free, Slot};
+use super::weak_form::{self, least_squares};
+use super::{nlsq, sim_error, FitRequest};
+use crate::log::{MotorLog, Plant};
+use crate::model::{Model, ModelKind, Parameter};
+use anyhow::Result;
+use control::effects::{smooth_sign, Effect, EffectKind, CURRENT_EPS, VELOCITY_EPS};
+
+/// Model skeleton for a request: kind, plant, sample period, sensor chain, effects.
+pub fn skeleton(req: &FitRequest, kind: ModelKind) -> Model {
+    let first = &req.logs[0];
+    let mut m = Model::new(kind, req.plant, first.sample_period());
+    m.sensor.hall_resolution_rad = super::sensor_chain::hall_resolution(first);
+    if let Some(pp) = first.meta_f64("pole_pairs") {
+        m.sensor.pole_pairs = Some(pp as u32);
+    }
+    if req.plant == Plant::Torque {
+        m.motor.r = 0.0;
+        m.motor.l = 0.0;
+        m.motor.kb = 0.0;
+        m.motor.kt = 1.0;
+    }
+    for spec in req.adds {
+        // The model's own friction law already has these terms.
+        let dup = match (kind, spec.kind) {
+            (ModelKind::Linear, EffectKind::Viscous) => true,
+            (ModelKind::Lugre, k) => matches!(
+                k,
+                EffectKind::Viscous
+                    | EffectKind::Coulomb
+                    | EffectKind::Stribeck
+                    | EffectKind::Presliding
+            ),
+            _ => false,
+        };
+        if !dup && !m.effects.iter().any(|e| e == &spec.to_effect()) {
+            m.effects.push(spec.to_effect());
+        }
+    }
+    m
+}
+
+/// Mechanical regressors g_e of the linear-in-parameter effects: (effect index, key(s)).
+enum EffCols {
+    One(usize, &'static str),
+    SinCos(usize, f64),
+}
+
+/// Weak-form estimate of the motor constants, the viscous (and, with `coulomb`, Coulomb)
+/// friction and the linear-in-parameter effects. Returns (b, fc).
+pub fn weak_estimate(m: &mut Model, logs: &[MotorLog], coulomb: bool) -> (f64, f64) {
+    let voltage = m.plant == Plant::Voltage;
+    // Electrical equation.
+    if voltage {
+        let mut cols: Vec<Vec<f64>> = vec![Vec::new(); 3];
+        let mut extra: Vec<(usize, EffectKind)> = Vec::new();
+        for (k, e) in m.effects.iter().enumerate() {
+            if matches!(e.kind(), EffectKind::Deadtime | EffectKind::CurrentOffset) {
+                extra.push((k, e.kind()));
+                cols.push(Vec::new());
+            }
+        }
+        let mut y = Vec::new();
+        for log in logs {
+            let Some(i) = &log.i else { continue };
+            let sgn_i: Vec<f64> = i.iter().map(|&c| smooth_sign(c, CURRENT_EPS)).collect();
+            let ones = vec![1.0; log.len()];
+            for w in weak_form::windows(&log.t, weak_form::WINDOW, weak_form::HOP) {
+                y.push(w.int_zoh(&log.t, &log.u));
+                cols[0].push(-w.int_d(i));
+                cols[1].push(w.int(i));
+                cols[2].push(-w.int_d(&log.theta));
+                for (c, (_, kind)) in extra.iter().enumerate() {
+                    cols[3 + c].push(match kind {
+                        EffectKind::Deadtime => w.int(&sgn_i),
+                        _ => w.int(&ones),
+                    });
+                }
+            }
+        }
+        if y.len() > cols.len() {
+            let (x, _) = least_squares(&cols, &y);
+            let fallback = control::motor::MotorParams::<f64>::paper();
+            m.motor.l = if x[0] > 0.0 { x[0] } else { fallback.l };
+            m.motor.r = if x[1] > 0.0 { x[1] } else { fallback.r };
+            if x[2] > 0.0 {
+                m.motor.kb = x[2];
+                m.motor.kt = x[2];
+            }
+            for (c, (k, kind)) in extra.iter().enumerate() {
+                let v = x[3 + c];
+                m.effects[*k] = match kind {
+                    EffectKind::Deadtime => Effect::Deadtime { vd: v },
+                    _ => Effect::CurrentOffset {
+                        i0: -v / m.motor.r,
+                    },
+                };
+            }
+        }
+    }
+    // Mechanical equation.
+    let mut cols: Vec<Vec<f64>> = vec![Vec::new(); 2];
+    let mut map: Vec<EffCols> = Vec::new();
+    if coulomb {
+        cols.push(Vec::new());
+    }
+    let base = cols.len();
+    for (k, e) in m.effects.iter().enumerate() {
+        match *e {
+            Effect::Coulomb { .. } => map.push(EffCols::One(k, "fc")),
+            Effect::Stribeck { .. } => map.push(EffCols::One(k, "fs")),
+            Effect::Offset { .. } => map.push(EffCols::One(k, "t0")),
+            Effect::LoadFriction { .. } => map.push(EffCols::One(k, "mu")),
+            Effect::Viscous { .. } => map.push(EffCols::One(k, "b")),
+            Effect::Asymmetry { .. } => {
+                map.push(EffCols::One(k, "dv"));
+                map.push(EffCols::One(k, "dc"));
+            }
+            Effect::Cogging { harmonic, .. } => map.push(EffCols::SinCos(k, harmonic as f64)),
+            Effect::PositionLoad { .. } => map.push(EffCols::SinCos(k, 1.0)),
+            _ => {}
+        }
+    }
+    for c in &map {
+        cols.push(Vec::new());
+        if let EffCols::SinCos(..) = c {
+            cols.push(Vec::new());
+        }
+    }
+    let offset = control::effects::total_sensor_offset(&m.effects);
+    let mut y = Vec::new();
+    for log in logs {
+        let ws = weak_form::smooth_velocity(log, 5);
+        let sgn: Vec<f64> = ws.iter().map(|&w| smooth_sign(w, VELOCITY_EPS)).collect();
+        let cur: Vec<f64> = match (voltage, &log.i) {
+            (true, Some(i)) => i.iter().map(|c| c - offset).collect(),
+            (true, None) => continue,
+            (false, _) => log.u.clone(),
+        };
+        let mut g: Vec<Vec<f64>> = Vec::new();
+        for c in &map {
+            match *c {
+                EffCols::One(k, key) => g.push(match (m.effects[k], key) {
+                    (Effect::Stribeck { vs, .. }, _) => ws
+                        .iter()
+                        .zip(&sgn)
+                        .map(|(w, s)| (-(w / vs).powi(2)).exp() * s)
+                        .collect(),
+                    (Effect::Offset { .. }, _) => vec![1.0; log.len()],
+                    (Effect::LoadFriction { .. }, _) => cur
+                        .iter()
+                        .zip(&sgn)
+                        .map(|(c, s)| (m.motor.kt * c).abs() * s)
+                        .collect(),
+                    (Effect::Viscous { .. }, _) => ws.clone(),
+                    (Effect::Asymmetry { .. }, "dv") => ws.iter().map(|w| w.abs()).collect(),
+                    (Effect::Asymmetry { .. }, _) => sgn.iter().map(|s| s.abs()).collect(),
+                    _ => sgn.clone(),
+                }),
+                EffCols::SinCos(_, h) => {
+                    g.push(log.theta.iter().map(|t| (h * t).sin()).collect());
+                    g.push(log.theta.iter().map(|t| (h * t).cos()).collect());
+                }
+            }
+        }
+        for w in weak_form::windows(&log.t, weak_form::WINDOW, weak_form::HOP) {
+            let lhs = if voltage {
+                m.motor.kt * w.int(&cur)
+            } else {
+                w.int_zoh(&log.t, &cur)
+            };
+            y.push(lhs);
+            cols[0].push(w.int_dd(&log.theta));
+            cols[1].push(-w.int_d(&log.theta));
+            if coulomb {
+                cols[2].push(w.int(&sgn));
+            }
+            for (c, gv) in g.iter().enumerate() {
+                cols[base + c].push(w.int(gv));
+            }
+        }
+    }
+    let mut b = 0.0;
+    let mut fc = 0.0;
+    if y.len() > cols.len() {
+        let (x, _) = least_squares(&cols, &y);
+        if x[0] > 0.0 {
+            m.motor.j = x[0];
+        }
+        b = x[1].max(0.0);
+        if coulomb {
+            fc = x[2].max(0.0);
+        }
+        let mut c = base;
+        for e in &map {
+            match *e {
+                EffCols::One(k, key) => {
+                    let v = x[c];
+                    let slot = Slot::Effect(k, key);
+                    let (lo, hi) = bounds_of(m.effects[k].kind(), key);
+                    slot.set(m, v.clamp(lo, hi));
+                    c += 1;
+                }
+                EffCols::SinCos(k, _) => {
+                    let (a, bb) = (x[c], x[c + 1]);
+                    Slot::Effect(k, "amp").set(m, a.hypot(bb));
+                    Slot::Effect(k, "phase").set(m, bb.atan2(a));
+                    c += 2;
+                }
+            }
+        }
+    }
+    (b, fc)
+}
+
+fn bounds_of(kind: EffectKind, key: &str) -> (f64, f64) {
+    effect_keys(kind)
+        .into_iter()
+        .find(|(k, _, _)| *k == key)
+        .map(|(_, lo, hi)| (lo, hi))
+        .unwrap_or((f64::NEG_INFINITY, f64::INFINITY))
+}
+
+/// The motor constants a fit moves, with bounds (generous physical ranges).
+pub fn motor_free(plant: Plant) -> Vec<Free> {
+    let f = |slot, lo, hi| Free { slot, lo, hi };
+    match plant {
+        Plant::Voltage => vec![
+            f(Slot::R, 1e-4, 1e3),
+            f(Slot::L, 1e-7, 1.0),
+            f(Slot::Kb, 1e-5, 100.0),
+            f(Slot::J, 1e-9, 1e3),
+        ],
+        Plant::Torque => vec![f(Slot::J, 1e-9, 1e6)],
+    }
+}
+
+/// The effects' continuous keys as free parameters.
+pub fn effect_free(m: &Model) -> Vec<Free> {
+    let mut out = Vec::new();
+    for (k, e) in m.effects.iter().enumerate() {
+        for (key, lo, hi) in effect_keys(e.kind()) {
+            out.push(Free {
+                slot: Slot::Effect(k, key),
+                lo,
+                hi,
+            });
+        }
+    }
+    out
+}
+
+/// Rows for numbers the fit did not move (fixed by assumption).
+pub fn fixed_rows(m: &Model) -> Vec<Parameter> {
+    let mut out = Vec::new();
+    match m.plant {
+        Plant::Voltage => {
+            let mut p = Parameter::new("Kt", m.motor.kt, "N·m/A");
+            p.note = "set equal to Kb (SI units): the data fixes only Kt/J".into();
+            out.push(p);
+        }
+        Plant::Torque => {
+            let mut p = Parameter::new("Kt", m.motor.kt, "1");
+            p.note = "input gain fixed to 1: u is the torque/force command".into();
+            out.push(p);
+        }
+    }
+    for e in &m.effects {
+        if let Effect::Cogging { harmonic, .. } = e {
+            let mut p = Parameter::new("cogging.harmonic", *harmonic as f64, "1/rev");
+            p.note = "structural, kept fixed".into();
+            out.push(p);
+        }
+    }
+    out
+}
+
+/// Fit the linear model.
+pub fn fit(req: &FitRequest) -> Result<Model> {
+    let mut m = skeleton(req, ModelKind::Linear);
+    let (b, _) = weak_estimate(&mut m, req.logs, false);
+    m.viscous = b;
+    let mut free = motor_free(req.plant);
+    free.push(Free {
+        slot: Slot::Viscous,
+        lo: 0.0,
+        hi: 100.0,
+    });
+    free.extend(effect_free(&m));
+    let mut rows = sim_error::refine(&mut m, &free, req.logs, nlsq::Options::default(), &mut |_, _| {})?;
+    rows.extend(fixed_rows(&m));
+    m.parameters = rows;
+    m.data.sample_period = m.sample_period;
+    m.data.method = "weak-form regression, then bounded Levenberg–Marquardt on the free-run \
+                     simulation error"
+        .into();
+    Ok(m)
+}

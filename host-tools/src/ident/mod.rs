@@ -1,0 +1,260 @@
+//! Identification: fit a linear, LuGre or SINDYc model to motor logs, and score a model.
+//!
+//! | module | what it is |
+//! |---|---|
+//! | [`fitpct`] | the paper's fit percentage |
+//! | [`freerun`] | free-run simulation of a model with a log's input |
+//! | [`sensor_chain`] | Hall quantisation and the firmware's velocity estimator |
+//! | [`weak_form`] | integral (weak-form) regression features: no derivatives of noisy data |
+//! | [`linear`] | the linear model (viscous friction), paper eqs. 1–2 |
+//! | [`lugre_fit`] | LuGre static curve and dynamic parameters |
+//! | [`nlsq`] | bounded nonlinear least squares (Levenberg–Marquardt with projection) |
+//! | [`hankel`], [`stlsq`], [`library`], [`sindyc`] | SINDYc (the colleague's files) |
+//!
+//! Entry points: [`fit`] and [`score`].
+pub mod fitpct;
+pub mod freerun;
+pub mod free_params;
+pub mod hankel;
+pub mod library;
+pub mod linear;
+pub mod lugre_fit;
+pub mod nlsq;
+pub mod sim_error;
+pub mod sindyc;
+pub mod sensor_chain;
+pub mod stlsq;
+pub mod weak_form;
+
+use crate::effect_spec::EffectSpec;
+use crate::log::{MotorLog, Plant};
+use crate::model::{Model, ModelKind};
+use anyhow::{bail, Result};
+pub use freerun::Prediction;
+use serde::Serialize;
+
+/// What to fit.
+#[derive(Debug, Clone, Copy)]
+pub struct FitRequest<'a> {
+    pub kind: ModelKind,
+    /// Logs to fit on (at least one).
+    pub logs: &'a [MotorLog],
+    /// Logs to report validation fits on (not fitted).
+    pub validate: &'a [MotorLog],
+    /// Effects to add to the model's structure (`fit --add`).
+    pub adds: &'a [EffectSpec],
+    pub plant: Plant,
+}
+
+/// The result of [`fit`].
+#[derive(Debug, Clone)]
+pub struct FitReport {
+    pub model: Model,
+    /// A readable summary: parameter table with units and standard errors, fit percentages.
+    pub summary_text: String,
+}
+
+/// Fit percentages of angle, velocity and current.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Fits {
+    pub x: f64,
+    pub xdot: f64,
+    pub i: Option<f64>,
+}
+
+/// The scores `compare` prints.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Scores {
+    /// Model states as they are against the log's columns.
+    pub fit: Fits,
+    /// Model states through the sensor chain first.
+    pub fit_sensor: Fits,
+    pub samples: usize,
+}
+
+/// Minimum number of samples a log needs to be fitted: a few velocity-estimator windows.
+pub const MIN_SAMPLES: usize = 50;
+
+/// Checks a log is usable for fitting: enough samples, a non-constant input and angle.
+pub fn check_log(log: &MotorLog, plant: Plant) -> Result<()> {
+    let p = log.source.display();
+    if log.len() < MIN_SAMPLES {
+        bail!(
+            "{p}: only {} samples; fitting needs at least {MIN_SAMPLES}",
+            log.len()
+        );
+    }
+    let constant = |v: &[f64]| {
+        let (lo, hi) = v
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
+                (a.min(x), b.max(x))
+            });
+        hi - lo <= 1e-12 * (1.0 + hi.abs())
+    };
+    // Line 0 would be wrong: name the column; the whole column is at fault.
+    if constant(&log.u) {
+        bail!("{p}: column 'u': the input is constant, so it excites nothing to identify");
+    }
+    if constant(&log.theta) {
+        bail!("{p}: column 'theta': the angle never changes (the motor did not move)");
+    }
+    if plant == Plant::Voltage {
+        if let Some(i) = &log.i {
+            if constant(i) {
+                bail!("{p}: column 'i': the current is constant (is the sensor connected?)");
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Fit a model.
+pub fn fit(req: &FitRequest) -> Result<FitReport> {
+    if req.logs.is_empty() {
+        bail!("no data to fit: give at least one DATA.csv");
+    }
+    for log in req.logs {
+        check_log(log, req.plant)?;
+    }
+    let mut model = match req.kind {
+        ModelKind::Linear => linear::fit(req)?,
+        ModelKind::Lugre => lugre_fit::fit(req)?,
+        ModelKind::Sindyc => sindyc_fit(req)?,
+    };
+    model.data.files = req
+        .logs
+        .iter()
+        .map(|l| l.source.display().to_string())
+        .collect();
+    model.data.validate = req
+        .validate
+        .iter()
+        .map(|l| l.source.display().to_string())
+        .collect();
+    model.data.samples = req.logs.iter().map(MotorLog::len).sum();
+    let summary_text = summary(&model, req)?;
+    Ok(FitReport {
+        model,
+        summary_text,
+    })
+}
+
+/// A readable summary: parameters, then fits on the fitting and validation logs.
+pub fn summary(model: &Model, req: &FitRequest) -> Result<String> {
+    use std::fmt::Write;
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "{} model ({} plant), {} samples at {} s",
+        model.kind.name(),
+        match model.plant {
+            Plant::Voltage => "voltage",
+            Plant::Torque => "torque",
+        },
+        model.data.samples,
+        model.sample_period
+    );
+    s.push_str(&parameter_table(model));
+    for (what, logs) in [("fit", req.logs), ("validation", req.validate)] {
+        for log in logs {
+            match score(model, log) {
+                Ok(sc) => {
+                    let _ = writeln!(s, "{what} {}: {}", log.source.display(), fits_line(&sc));
+                }
+                Err(e) => {
+                    let _ = writeln!(s, "{what} {}: cannot score: {e:#}", log.source.display());
+                }
+            }
+        }
+    }
+    Ok(s)
+}
+
+/// `x 91.2 %, xdot 88.0 %, i 95.1 % (sensor chain: x ..., xdot ...)`.
+pub fn fits_line(sc: &Scores) -> String {
+    let f = |x: &Fits| {
+        let mut s = format!("x {:6.2} %, xdot {:6.2} %", x.x, x.xdot);
+        if let Some(i) = x.i {
+            s.push_str(&format!(", i {:6.2} %", i));
+        }
+        s
+    };
+    format!("{}  (through sensor: {})", f(&sc.fit), f(&sc.fit_sensor))
+}
+
+/// The parameter table with units, standard errors and identifiability notes.
+pub fn parameter_table(model: &Model) -> String {
+    use std::fmt::Write;
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "  {:<18} {:>13} {:<12} {:>11}  note",
+        "parameter", "value", "unit", "std err"
+    );
+    for p in &model.parameters {
+        let se = match p.std_err {
+            Some(e) => format!("{e:.3e}"),
+            None => "-".to_string(),
+        };
+        let mut note = p.note.clone();
+        if !p.identifiable {
+            note = format!("NOT IDENTIFIABLE: {note}");
+        }
+        let _ = writeln!(
+            s,
+            "  {:<18} {:>13.6e} {:<12} {:>11}  {}",
+            p.name, p.value, p.unit, se, note
+        );
+    }
+    s
+}
+
+/// Score a model on a log: free-run fits of angle, velocity and current, as they are and
+/// through the sensor chain.
+pub fn score(model: &Model, log: &MotorLog) -> Result<Scores> {
+    let pred = freerun::simulate(model, log)?;
+    score_prediction(model, log, &pred)
+}
+
+/// Score an existing prediction (see [`score`]).
+pub fn score_prediction(model: &Model, log: &MotorLog, pred: &Prediction) -> Result<Scores> {
+    let src = log.source.display();
+    let window = model.sensor.velocity_window;
+    let res = match sensor_chain::hall_resolution(log) {
+        r if r > 0.0 => r,
+        _ => model.sensor.hall_resolution_rad,
+    };
+    let wmeas = sensor_chain::measured_velocity(log, window);
+    let named = |col: &str, r: Result<f64>| r.map_err(|e| anyhow::anyhow!("{src}: column '{col}': {e}"));
+    let fi = match (&log.i, &pred.i) {
+        (Some(i), Some(ip)) => Some(named("i", fitpct::fit_percent(i, ip))?),
+        _ => None,
+    };
+    let fit = Fits {
+        x: named("theta", fitpct::fit_percent(&log.theta, &pred.theta))?,
+        xdot: named("omega", fitpct::fit_percent(&wmeas, &pred.omega))?,
+        i: fi,
+    };
+    let (q, wq) = sensor_chain::through_sensor(&pred.t, &pred.theta, res, window);
+    let fit_sensor = Fits {
+        x: named("theta", fitpct::fit_percent(&log.theta, &q))?,
+        xdot: named("omega", fitpct::fit_percent(&wmeas, &wq))?,
+        i: fi,
+    };
+    Ok(Scores {
+        fit,
+        fit_sensor,
+        samples: log.len(),
+    })
+}
+
+/// SINDYc fitting (the colleague's `sindyc.rs`); this is the single call site.
+fn sindyc_fit(req: &FitRequest) -> Result<Model> {
+    sindyc::fit_model(req)
+}
+
+/// SINDYc free-run simulation (the colleague's `sindyc.rs`); this is the single call site.
+pub(crate) fn sindyc_simulate(model: &Model, log: &MotorLog) -> Result<Prediction> {
+    sindyc::simulate_model(model, log)
+}

@@ -1,0 +1,878 @@
+//! SINDYc identification as in the reference paper (§4.3–4.4, eqs. 43–46): hidden state `z`
+//! from the time-delay embedding of the velocity ([`super::hankel`]), the candidate library
+//! ([`super::library`]), sparse regression ([`super::stlsq`]), then the paper's one-by-one
+//! hard thresholding judged by the free-run validation fit, with divergent candidates
+//! rejected. The identified equations are a [`control::sindy::SindyModel`], exactly what the
+//! firmware evaluates.
+//!
+//! # Pipeline
+//! 1. **Signals.** `x` = the log's angle; `ẋ` = centred slope of the angle over ±5 samples
+//!    (the same 10-sample span as the firmware's moving average, but centred, so it is not
+//!    54 ms late; a Hall-quantised angle allows no sharper estimate); `I`, `u` from the log.
+//! 2. **Hidden state.** `z` = the Hankel embedding (60 delays, energy < 0.001: the paper's
+//!    settings) of `ẋ`, fitted on all fitting logs, scaled to unit RMS (the paper normalises
+//!    `z` too; its scale is arbitrary and absorbed by the coefficients).
+//! 3. **Weak form.** No derivative of quantised data is taken: each equation is multiplied
+//!    by the hub's smooth test functions ([`super::weak_form`], 40-sample windows, hop 20)
+//!    and integrated by parts: `∫φ·dẋ/dt = ∫φ''·x`, `∫φ·dz/dt = −∫φ'·z`,
+//!    `∫φ·dI/dt = −∫φ'·I`; the library columns become `∫φ·θ_j`.
+//! 4. **STLSQ** on the normal equations of those rows for several thresholds; the start is
+//!    the candidate with the best validation fit that does not diverge.
+//! 5. **One-by-one thresholding** (the paper's): try removing each of the smallest-
+//!    contribution terms (the 4 smallest), refit that equation on its support, simulate the
+//!    validation logs in free run; keep the best removal while the validation fit on `ẋ`
+//!    stays within `tolerance` points of the best seen. Every step is a row of the Pareto
+//!    table (number of terms vs validation fit).
+//!
+//! # Free run
+//! States `(x, ẋ, z, I)`, `u` held between samples. Steps are exponential Rosenbrock–Euler
+//! (the hub's scheme, [`super::freerun`]: exact for the linear part, stable however stiff the
+//! current or `z` equation), [`SUBSTEPS`] sub-steps per sample; `z` is clamped to `±z_max` after each
+//! step as the firmware's observer does. A non-finite state or a velocity/current beyond ten
+//! times the data's range is a divergence: such a candidate is never returned.
+use super::freerun::{self, Prediction};
+use super::hankel::{HankelEmbedding, Selection, DEFAULT_DELAYS, DEFAULT_ENERGY};
+use super::library::{Library, Signals, ACCEL, EQUATION_NAMES, ZDOT};
+use super::stlsq::{Normal, StlsqOptions};
+use super::{fitpct, sensor_chain, weak_form};
+use crate::effect_spec::EffectSpec;
+use crate::log::{MotorLog, Plant};
+use anyhow::{anyhow, bail, Context, Result};
+use control::sindy::{SindyModel, SparseEq, Term, TermInputs, MAX_TERMS};
+use faer::Mat;
+use std::fmt::Write as _;
+
+/// Default tanh gain `a` [s/rad] of `tanh(a·ẋ)`: the paper only asks for "a close
+/// approximation of the unit step"; 5 s/rad makes the step complete (tanh > 0.99) at
+/// 0.5 rad/s, below the 0.79 rad/s velocity resolution of the paper's sensor. With `z`
+/// normalised to unit RMS, `tanh(a·z)` is then a sign of `z` too.
+pub const DEFAULT_A: f64 = 5.0;
+/// Half-width [samples] of the centred velocity estimate (10-sample span as the paper's).
+pub const VELOCITY_HALF: usize = 5;
+/// Multipliers of the base STLSQ threshold tried for the starting model.
+const THRESHOLD_LADDER: [f64; 5] = [1.0, 3.0, 10.0, 30.0, 100.0];
+/// Candidates tried per round of the one-by-one thresholding.
+const TRIES_PER_ROUND: usize = 4;
+/// Sub-steps per sample of the free run: 4 keeps the frozen-Jacobian error of the
+/// exponential Rosenbrock–Euler step small at the mechanical time constant (~13 ms for the
+/// paper's motor, about one 12 ms sample).
+pub const SUBSTEPS: usize = 4;
+/// Bound on the free-run simulations one identification may spend.
+const MAX_SIMULATIONS: usize = 400;
+
+/// Settings of [`identify`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct SindycOptions {
+    pub plant: Plant,
+    /// Number of delays of the Hankel embedding (paper: 60).
+    pub delays: usize,
+    /// Which singular components make `z` (paper: energy below 0.001).
+    pub selection: Selection,
+    /// tanh gain `a`.
+    pub a: f64,
+    /// Base STLSQ settings (the threshold ladder multiplies its threshold).
+    pub stlsq: StlsqOptions,
+    /// Allowed drop of the validation fit [points] when removing a term. Default 0.5: below
+    /// the run-to-run spread of fits on Hall-quantised data.
+    pub tolerance: f64,
+    /// Velocity-estimator window of the measured `omega` used for scoring (paper: 10).
+    pub velocity_window: usize,
+}
+
+impl Default for SindycOptions {
+    fn default() -> Self {
+        SindycOptions {
+            plant: Plant::Voltage,
+            delays: DEFAULT_DELAYS,
+            selection: Selection::EnergyBelow(DEFAULT_ENERGY),
+            a: DEFAULT_A,
+            stlsq: StlsqOptions::default(),
+            tolerance: 0.5,
+            velocity_window: 10,
+        }
+    }
+}
+
+/// How `z` was made (stored with the model).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HankelSettings {
+    pub delays: usize,
+    /// Kept components, 1-based inclusive.
+    pub components: (usize, usize),
+    /// `z` = Hankel reconstruction / `z_scale`.
+    pub z_scale: f64,
+}
+
+/// One row of the Pareto table.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ParetoRow {
+    /// Number of terms over all equations.
+    pub terms: usize,
+    /// Mean validation fit on ẋ [%]; `None` when the candidate diverged.
+    pub fit: Option<f64>,
+    /// What produced it.
+    pub step: String,
+    /// Whether it was kept on the path.
+    pub accepted: bool,
+}
+
+/// The result of [`identify`].
+#[derive(Debug, Clone)]
+pub struct SindycResult {
+    pub model: SindyModel<f64>,
+    pub hankel: HankelSettings,
+    pub pareto: Vec<ParetoRow>,
+    /// The equations with named terms.
+    pub equations_text: String,
+    /// The Pareto table as text.
+    pub pareto_text: String,
+    /// Validation fit on ẋ of the returned model [%].
+    pub validation_fit: f64,
+    /// Correlation of the extracted z with the true z when the fitting logs have `z_true`.
+    pub z_correlation: Option<f64>,
+}
+
+/// Centred velocity estimate: slope of the angle over ±`half` samples (one-sided at the
+/// ends).
+pub fn centred_velocity(t: &[f64], theta: &[f64], half: usize) -> Vec<f64> {
+    let n = theta.len();
+    (0..n)
+        .map(|k| {
+            let a = k.saturating_sub(half);
+            let b = (k + half).min(n.saturating_sub(1));
+            if b > a && t[b] > t[a] {
+                (theta[b] - theta[a]) / (t[b] - t[a])
+            } else {
+                0.0
+            }
+        })
+        .collect()
+}
+
+/// Pearson correlation of two equally long series (0 when one is constant).
+pub fn correlation(a: &[f64], b: &[f64]) -> f64 {
+    let n = a.len().min(b.len()) as f64;
+    if n < 2.0 {
+        return 0.0;
+    }
+    let ma = a.iter().sum::<f64>() / n;
+    let mb = b.iter().sum::<f64>() / n;
+    let (mut sab, mut saa, mut sbb) = (0.0, 0.0, 0.0);
+    for (x, y) in a.iter().zip(b) {
+        sab += (x - ma) * (y - mb);
+        saa += (x - ma) * (x - ma);
+        sbb += (y - mb) * (y - mb);
+    }
+    if saa <= 0.0 || sbb <= 0.0 {
+        0.0
+    } else {
+        sab / (saa * sbb).sqrt()
+    }
+}
+
+/// The regression rows of the weak form for one log: library integrals (`rows × p`) and
+/// targets (`rows × 3`: acceleration, z, current).
+pub fn weak_rows(lib: &Library, t: &[f64], s: &Signals) -> (Mat<f64>, Mat<f64>) {
+    let theta = lib.matrix(s);
+    let wins = weak_form::windows(t, weak_form::WINDOW, weak_form::HOP);
+    let p = lib.len();
+    let a = Mat::<f64>::from_fn(wins.len(), p, |r, j| wins[r].int(theta.col_as_slice(j)));
+    let y = Mat::<f64>::from_fn(wins.len(), 3, |r, e| match e {
+        ACCEL => wins[r].int_dd(s.x),
+        ZDOT => -wins[r].int_d(s.z),
+        _ => s.i.map_or(0.0, |i| -wins[r].int_d(i)),
+    });
+    (a, y)
+}
+
+/// Limits beyond which a free run counts as divergent.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Limits {
+    pub omega: f64,
+    pub current: f64,
+}
+
+impl Default for Limits {
+    /// The hub's limits for scoring (runaway to 1e7).
+    fn default() -> Self {
+        Limits {
+            omega: 1e7,
+            current: 1e7,
+        }
+    }
+}
+
+/// Free-run simulation of a SINDYc model with the input of `log` from its first samples.
+/// Errors when the model diverges (never returns non-finite values).
+pub fn simulate(
+    model: &SindyModel<f64>,
+    plant: Plant,
+    log: &MotorLog,
+    limits: Limits,
+) -> Result<Prediction> {
+    let n = log.len();
+    if n == 0 {
+        bail!("{}: the log has no samples", log.source.display());
+    }
+    let voltage = plant == Plant::Voltage;
+    let i0 = match (&log.i, voltage) {
+        (Some(i), true) => i[0],
+        _ => 0.0,
+    };
+    let mut s = [log.theta[0], freerun::initial_omega(log), 0.0, i0];
+    let zb = model.z_bound();
+    let rhs = |s: &[f64; 4], u: f64| -> [f64; 4] {
+        let p = TermInputs {
+            x: s[0],
+            xdot: s[1],
+            z: s[2],
+            i: s[3],
+            u,
+        };
+        let di = if voltage { model.idot_rhs(&p) } else { 0.0 };
+        [s[1], model.accel_rhs(&p), model.zdot_rhs(&p), di]
+    };
+    let mut out = Prediction {
+        t: log.t.clone(),
+        theta: Vec::with_capacity(n),
+        omega: Vec::with_capacity(n),
+        i: voltage.then(|| Vec::with_capacity(n)),
+        z: Some(Vec::with_capacity(n)),
+    };
+    let sub = SUBSTEPS;
+    for k in 0..n {
+        out.theta.push(s[0]);
+        out.omega.push(s[1]);
+        if let Some(i) = &mut out.i {
+            i.push(s[3]);
+        }
+        if let Some(z) = &mut out.z {
+            z.push(s[2]);
+        }
+        if k + 1 == n {
+            break;
+        }
+        let u = log.u[k];
+        let dt = (log.t[k + 1] - log.t[k]) / sub as f64;
+        for _ in 0..sub {
+            s = rosenbrock_step(&rhs, &s, u, dt);
+            s[2] = s[2].clamp(-zb, zb);
+        }
+        if !s.iter().all(|v| v.is_finite())
+            || s[1].abs() > limits.omega
+            || s[3].abs() > limits.current
+        {
+            bail!(
+                "{}: the SINDYc model diverged in free run at t = {} s (sample {})",
+                log.source.display(),
+                log.t[k + 1],
+                k + 2
+            );
+        }
+    }
+    Ok(out)
+}
+
+/// One exponential Rosenbrock–Euler step `s⁺ = s + h·φ1(h·A)·f(s)` (A: central-difference
+/// Jacobian), through the hub's augmented-matrix exponential.
+fn rosenbrock_step(
+    rhs: &impl Fn(&[f64; 4], f64) -> [f64; 4],
+    s: &[f64; 4],
+    u: f64,
+    dt: f64,
+) -> [f64; 4] {
+    let f0 = rhs(s, u);
+    let mut m = [[0.0; 5]; 5];
+    for j in 0..4 {
+        let d = 1e-6 * s[j].abs().max(1e-3);
+        let mut sp = *s;
+        let mut sm = *s;
+        sp[j] += d;
+        sm[j] -= d;
+        let fp = rhs(&sp, u);
+        let fm = rhs(&sm, u);
+        for i in 0..4 {
+            m[i][j] = (fp[i] - fm[i]) / (2.0 * d) * dt;
+        }
+    }
+    for i in 0..4 {
+        m[i][4] = f0[i] * dt;
+    }
+    let e = freerun::expm(&m);
+    let mut out = *s;
+    for i in 0..4 {
+        out[i] += e[i][4];
+    }
+    out
+}
+
+/// Prepared signals of one log.
+struct Prepared {
+    xdot: Vec<f64>,
+    z: Vec<f64>,
+}
+
+/// Sparse coefficients of the three equations (normalised, one vector per equation).
+#[derive(Clone)]
+struct Candidate {
+    xn: [Vec<f64>; 3],
+}
+
+impl Candidate {
+    fn terms(&self) -> usize {
+        self.xn
+            .iter()
+            .map(|x| x.iter().filter(|v| **v != 0.0).count())
+            .sum()
+    }
+}
+
+struct Search<'a> {
+    lib: &'a Library,
+    ne: Normal,
+    plant: Plant,
+    val: &'a [MotorLog],
+    val_omega: Vec<Vec<f64>>,
+    limits: Limits,
+    z_max: f64,
+    sims: usize,
+}
+
+impl Search<'_> {
+    fn equations(&self) -> usize {
+        if self.plant == Plant::Voltage {
+            3
+        } else {
+            2
+        }
+    }
+
+    fn model(&self, c: &Candidate) -> SindyModel<f64> {
+        let mut m = SindyModel::empty(self.lib.a, self.lib.vs, 0.0);
+        m.z_max = self.z_max;
+        for e in 0..self.equations() {
+            let coef = self.ne.denormalise(&c.xn[e]);
+            let mut eq = SparseEq::new();
+            for (j, v) in coef.iter().enumerate() {
+                if *v != 0.0 {
+                    let _ = eq.push(self.lib.candidates[j].term, *v);
+                }
+            }
+            match e {
+                ACCEL => m.accel = eq,
+                ZDOT => m.zdot = eq,
+                _ => m.idot = eq,
+            }
+        }
+        m
+    }
+
+    /// Mean validation fit on ẋ, None when the model diverges on any log.
+    fn score(&mut self, c: &Candidate) -> Option<f64> {
+        self.sims += 1;
+        let m = self.model(c);
+        let mut total = 0.0;
+        for (log, w) in self.val.iter().zip(&self.val_omega) {
+            let pred = simulate(&m, self.plant, log, self.limits).ok()?;
+            total += fitpct::fit_percent(w, &pred.omega).ok()?;
+        }
+        Some(total / self.val.len() as f64)
+    }
+
+    /// Remove term `j` from equation `e` and refit that equation.
+    fn without(&self, c: &Candidate, e: usize, j: usize) -> Candidate {
+        let mut sup: Vec<bool> = c.xn[e].iter().map(|v| *v != 0.0).collect();
+        sup[j] = false;
+        let mut next = c.clone();
+        next.xn[e] = self.ne.solve_normalised(e, &sup);
+        // Keep the support exact (a refit may produce an exact zero only by accident).
+        for (k, s) in sup.iter().enumerate() {
+            if !s {
+                next.xn[e][k] = 0.0;
+            }
+        }
+        next
+    }
+}
+
+/// Identify a SINDYc model. `val_logs` judge the thresholding (the fitting logs are used
+/// when none are given).
+pub fn identify(
+    fit_logs: &[MotorLog],
+    val_logs: &[MotorLog],
+    adds: &[EffectSpec],
+    opts: &SindycOptions,
+) -> Result<SindycResult> {
+    if fit_logs.is_empty() {
+        bail!("SINDYc: no data to fit");
+    }
+    let voltage = opts.plant == Plant::Voltage;
+    for log in fit_logs.iter().chain(val_logs) {
+        if voltage && log.i.is_none() {
+            bail!(
+                "{}: column 'i': SINDYc with --plant voltage needs the measured current",
+                log.source.display()
+            );
+        }
+        if log.len() < 2 * opts.delays.max(weak_form::WINDOW) {
+            bail!(
+                "{}: {} samples are too few for SINDYc (the delay embedding needs at least {})",
+                log.source.display(),
+                log.len(),
+                2 * opts.delays.max(weak_form::WINDOW)
+            );
+        }
+    }
+    // 1-2: velocities, Hankel embedding on all fitting logs, z normalised to unit RMS.
+    let vel: Vec<Vec<f64>> = fit_logs
+        .iter()
+        .map(|l| centred_velocity(&l.t, &l.theta, VELOCITY_HALF))
+        .collect();
+    let all: Vec<f64> = vel.iter().flatten().copied().collect();
+    let emb = HankelEmbedding::fit(&all, opts.delays, opts.selection)
+        .with_context(|| format!("{}: column 'theta'", fit_logs[0].source.display()))?;
+    let mut prepared = Vec::new();
+    let mut ss = 0.0;
+    let mut count = 0usize;
+    for v in vel {
+        let z = emb.extract(&v)?;
+        ss += z.iter().map(|x| x * x).sum::<f64>();
+        count += z.len();
+        prepared.push(Prepared { xdot: v, z });
+    }
+    let z_scale = (ss / count as f64).sqrt();
+    if !(z_scale.is_finite() && z_scale > 0.0) {
+        bail!("SINDYc: the extracted hidden state is zero; the velocity has no low-energy content");
+    }
+    let mut z_peak: f64 = 0.0;
+    for p in &mut prepared {
+        for z in &mut p.z {
+            *z /= z_scale;
+            z_peak = z_peak.max(z.abs());
+        }
+    }
+    let z_correlation = fit_logs[0]
+        .extra("z_true")
+        .map(|zt| correlation(zt, &prepared[0].z));
+
+    // 3: weak-form rows of every fitting log, stacked.
+    let lib = Library::with_effects(opts.plant, opts.a, 1.0, adds)?;
+    let mut blocks = Vec::new();
+    for (log, p) in fit_logs.iter().zip(&prepared) {
+        let s = Signals {
+            x: &log.theta,
+            xdot: &p.xdot,
+            z: &p.z,
+            i: if voltage { log.i.as_deref() } else { None },
+            u: &log.u,
+        };
+        blocks.push(weak_rows(&lib, &log.t, &s));
+    }
+    let rows: usize = blocks.iter().map(|(a, _)| a.nrows()).sum();
+    if rows < lib.len() + 1 {
+        bail!(
+            "SINDYc: the logs are too short for {} library terms",
+            lib.len()
+        );
+    }
+    let mut a = Mat::<f64>::zeros(rows, lib.len());
+    let mut y = Mat::<f64>::zeros(rows, 3);
+    let mut r0 = 0;
+    for (ba, by) in &blocks {
+        a.as_mut()
+            .submatrix_mut(r0, 0, ba.nrows(), ba.ncols())
+            .copy_from(ba);
+        y.as_mut().submatrix_mut(r0, 0, by.nrows(), 3).copy_from(by);
+        r0 += ba.nrows();
+    }
+    let ne = Normal::new(a.as_ref(), y.as_ref());
+
+    // Validation logs and divergence limits.
+    let val: &[MotorLog] = if val_logs.is_empty() {
+        fit_logs
+    } else {
+        val_logs
+    };
+    let val_omega: Vec<Vec<f64>> = val
+        .iter()
+        .map(|l| sensor_chain::measured_velocity(l, opts.velocity_window))
+        .collect();
+    let wmax = val_omega
+        .iter()
+        .chain(prepared.iter().map(|p| &p.xdot))
+        .flatten()
+        .fold(0.0f64, |m, v| m.max(v.abs()));
+    let imax = fit_logs
+        .iter()
+        .chain(val)
+        .filter_map(|l| l.i.as_ref())
+        .flatten()
+        .fold(0.0f64, |m, v| m.max(v.abs()));
+    let mut search = Search {
+        lib: &lib,
+        ne,
+        plant: opts.plant,
+        val,
+        val_omega,
+        limits: Limits {
+            omega: 10.0 * wmax + 10.0,
+            current: 10.0 * imax + 10.0,
+        },
+        // Observer clamp: 1.5× the largest |z| of the training data.
+        z_max: 1.5 * z_peak.max(1e-9),
+        sims: 0,
+    };
+    let neq = search.equations();
+    let usable = search.ne.usable();
+    let allowed = |e: usize| -> Vec<bool> {
+        lib.candidates
+            .iter()
+            .zip(&usable)
+            .map(|(c, u)| *u && c.allowed[e])
+            .collect()
+    };
+
+    // 4: STLSQ ladder → starting candidate.
+    let mut pareto = Vec::new();
+    let mut best: Option<(Candidate, Option<f64>)> = None;
+    for mult in THRESHOLD_LADDER {
+        let o = StlsqOptions {
+            threshold: opts.stlsq.threshold * mult,
+            ..opts.stlsq
+        };
+        let mut c = Candidate {
+            xn: [
+                vec![0.0; lib.len()],
+                vec![0.0; lib.len()],
+                vec![0.0; lib.len()],
+            ],
+        };
+        for e in 0..neq {
+            let mut xn = search.ne.stlsq_normalised(e, &allowed(e), &o);
+            // The firmware holds at most MAX_TERMS terms per equation: drop the smallest.
+            while xn.iter().filter(|v| **v != 0.0).count() > MAX_TERMS {
+                let j = smallest(&xn);
+                let mut sup: Vec<bool> = xn.iter().map(|v| *v != 0.0).collect();
+                sup[j] = false;
+                xn = search.ne.solve_normalised(e, &sup);
+                for (k, s) in sup.iter().enumerate() {
+                    if !s {
+                        xn[k] = 0.0;
+                    }
+                }
+            }
+            c.xn[e] = xn;
+        }
+        let fit = search.score(&c);
+        pareto.push(ParetoRow {
+            terms: c.terms(),
+            fit,
+            step: format!("STLSQ, threshold {:.3}", o.threshold),
+            accepted: false,
+        });
+        let better = match &best {
+            None => true,
+            Some((_, bf)) => fit.unwrap_or(f64::NEG_INFINITY) > bf.unwrap_or(f64::NEG_INFINITY),
+        };
+        if better {
+            best = Some((c, fit));
+        }
+    }
+    let (mut cur, mut cur_fit) = best.expect("the ladder is not empty");
+    if let Some(row) = pareto
+        .iter_mut()
+        .find(|r| r.fit == cur_fit && r.terms == cur.terms())
+    {
+        row.accepted = true;
+    }
+    let mut best_fit = cur_fit.unwrap_or(f64::NEG_INFINITY);
+
+    // 5: one-by-one hard thresholding judged by the validation fit.
+    loop {
+        if search.sims >= MAX_SIMULATIONS || cur.terms() <= 1 {
+            break;
+        }
+        let mut order: Vec<(f64, usize, usize)> = Vec::new();
+        for e in 0..neq {
+            let yn = search.ne.target_norm(e).max(f64::MIN_POSITIVE);
+            for (j, v) in cur.xn[e].iter().enumerate() {
+                if *v != 0.0 {
+                    order.push((v.abs() / yn, e, j));
+                }
+            }
+        }
+        order.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let mut round_best: Option<(Candidate, f64, String)> = None;
+        for &(_, e, j) in order.iter().take(TRIES_PER_ROUND) {
+            let c = search.without(&cur, e, j);
+            let fit = search.score(&c);
+            let step = format!("removed {}: {}", EQUATION_NAMES[e], lib.candidates[j].term);
+            if let Some(f) = fit {
+                if round_best.as_ref().is_none_or(|(_, bf, _)| f > *bf) {
+                    round_best = Some((c, f, step));
+                }
+            }
+        }
+        match round_best {
+            Some((c, f, step)) if f >= best_fit - opts.tolerance => {
+                pareto.push(ParetoRow {
+                    terms: c.terms(),
+                    fit: Some(f),
+                    step,
+                    accepted: true,
+                });
+                best_fit = best_fit.max(f);
+                cur = c;
+                cur_fit = Some(f);
+            }
+            Some((c, f, step)) => {
+                pareto.push(ParetoRow {
+                    terms: c.terms(),
+                    fit: Some(f),
+                    step: format!("{step} (rejected: fit drops)"),
+                    accepted: false,
+                });
+                if cur_fit.is_some() {
+                    break;
+                }
+                // The current model diverges: any working candidate is progress.
+                cur = c;
+                cur_fit = Some(f);
+                best_fit = f;
+            }
+            None => {
+                if cur_fit.is_some() {
+                    break;
+                }
+                // Everything tried diverges: drop the smallest term and go on.
+                let (_, e, j) = order[0];
+                cur = search.without(&cur, e, j);
+            }
+        }
+    }
+    let Some(validation_fit) = cur_fit else {
+        bail!(
+            "SINDYc: every candidate model diverges in free run on the validation data; \
+             try more data, other --add effects, or the lugre model"
+        );
+    };
+    let model = search.model(&cur);
+    let equations_text = equations_text(&model, opts.plant);
+    let pareto_text = pareto_text(&pareto);
+    Ok(SindycResult {
+        model,
+        hankel: HankelSettings {
+            delays: emb.delays(),
+            components: emb.selected(),
+            z_scale,
+        },
+        pareto,
+        equations_text,
+        pareto_text,
+        validation_fit,
+        z_correlation,
+    })
+}
+
+fn smallest(xn: &[f64]) -> usize {
+    let mut best = (f64::INFINITY, 0);
+    for (j, v) in xn.iter().enumerate() {
+        if *v != 0.0 && v.abs() < best.0 {
+            best = (v.abs(), j);
+        }
+    }
+    best.1
+}
+
+/// The equations with named terms, one line per equation (eq. 43 included).
+pub fn equations_text(m: &SindyModel<f64>, plant: Plant) -> String {
+    let mut s = String::from("dx/dt = xdot\n");
+    let eqs: Vec<(&str, &SparseEq<f64>)> = if plant == Plant::Voltage {
+        vec![
+            (EQUATION_NAMES[0], &m.accel),
+            (EQUATION_NAMES[1], &m.zdot),
+            (EQUATION_NAMES[2], &m.idot),
+        ]
+    } else {
+        vec![(EQUATION_NAMES[0], &m.accel), (EQUATION_NAMES[1], &m.zdot)]
+    };
+    for (name, eq) in eqs {
+        let _ = write!(s, "{name} =");
+        if eq.terms.is_empty() {
+            s.push_str(" 0");
+        }
+        for (k, (t, c)) in eq.terms.iter().enumerate() {
+            let sign = if *c < 0.0 {
+                "-"
+            } else if k == 0 {
+                ""
+            } else {
+                "+"
+            };
+            let _ = write!(s, " {sign} {:.6e}*{}", c.abs(), t);
+        }
+        s.push('\n');
+    }
+    let _ = writeln!(s, "(a = {}, vs = {}, |z| <= {:.4})", m.a, m.vs, m.z_max);
+    s
+}
+
+/// The Pareto table: terms vs validation fit, one row per candidate examined.
+pub fn pareto_text(rows: &[ParetoRow]) -> String {
+    let mut s = String::from("  terms  validation fit xdot %  kept  step\n");
+    for r in rows {
+        let fit = match r.fit {
+            Some(f) => format!("{f:8.2}"),
+            None => "diverged".to_string(),
+        };
+        let _ = writeln!(
+            s,
+            "  {:>5}  {:>22}  {:>4}  {}",
+            r.terms,
+            fit,
+            if r.accepted { "yes" } else { "" },
+            r.step
+        );
+    }
+    s
+}
+
+/// The `[sindy]` table of MODEL.toml: settings, then each equation as `term name = coef`.
+pub fn to_table(m: &SindyModel<f64>, h: &HankelSettings) -> toml::Table {
+    use toml::Value;
+    let mut t = toml::Table::new();
+    t.insert("a".into(), Value::Float(m.a));
+    t.insert("vs".into(), Value::Float(m.vs));
+    t.insert("j".into(), Value::Float(m.j));
+    t.insert("z_max".into(), Value::Float(m.z_max));
+    t.insert("hankel_delays".into(), Value::Integer(h.delays as i64));
+    t.insert(
+        "hankel_components".into(),
+        Value::Array(vec![
+            Value::Integer(h.components.0 as i64),
+            Value::Integer(h.components.1 as i64),
+        ]),
+    );
+    t.insert("z_scale".into(), Value::Float(h.z_scale));
+    for (name, eq) in [("accel", &m.accel), ("zdot", &m.zdot), ("idot", &m.idot)] {
+        let mut e = toml::Table::new();
+        for (term, c) in &eq.terms {
+            e.insert(term.name().as_str().to_string(), Value::Float(*c));
+        }
+        t.insert(name.into(), Value::Table(e));
+    }
+    t
+}
+
+/// Read the `[sindy]` table back (errors name the field).
+pub fn from_table(t: &toml::Table) -> Result<(SindyModel<f64>, HankelSettings)> {
+    let num = |k: &str| -> Result<f64> {
+        match t.get(k) {
+            Some(toml::Value::Float(v)) => Ok(*v),
+            Some(toml::Value::Integer(v)) => Ok(*v as f64),
+            Some(_) => bail!("field 'sindy.{k}': not a number"),
+            None => bail!("field 'sindy.{k}': missing"),
+        }
+    };
+    let mut m = SindyModel::empty(num("a")?, num("vs")?, num("j")?);
+    m.z_max = num("z_max")?;
+    for name in ["accel", "zdot", "idot"] {
+        let mut eq = SparseEq::new();
+        if let Some(v) = t.get(name) {
+            let tab = v.as_table().ok_or_else(|| {
+                anyhow!("field 'sindy.{name}': not a table of term = coefficient")
+            })?;
+            for (k, v) in tab {
+                let term = Term::parse(k)
+                    .ok_or_else(|| anyhow!("field 'sindy.{name}': unknown term '{k}'"))?;
+                let c = v
+                    .as_float()
+                    .or_else(|| v.as_integer().map(|i| i as f64))
+                    .filter(|c| c.is_finite())
+                    .ok_or_else(|| anyhow!("field 'sindy.{name}.\"{k}\"': not a number"))?;
+                eq.push(term, c)
+                    .map_err(|_| anyhow!("field 'sindy.{name}': more than {MAX_TERMS} terms"))?;
+            }
+        }
+        match name {
+            "accel" => m.accel = eq,
+            "zdot" => m.zdot = eq,
+            _ => m.idot = eq,
+        }
+    }
+    let comps = t
+        .get("hankel_components")
+        .and_then(|v| v.as_array())
+        .and_then(|a| Some((a.first()?.as_integer()?, a.get(1)?.as_integer()?)))
+        .unwrap_or((0, 0));
+    let h = HankelSettings {
+        delays: num("hankel_delays").unwrap_or(0.0) as usize,
+        components: (comps.0.max(0) as usize, comps.1.max(0) as usize),
+        z_scale: num("z_scale").unwrap_or(1.0),
+    };
+    Ok((m, h))
+}
+
+/// `fit --model sindyc`: identify and wrap as a [`crate::model::Model`] (the hub's call site).
+pub fn fit_model(req: &super::FitRequest) -> Result<crate::model::Model> {
+    use crate::model::{Model, ModelKind, Parameter};
+    let opts = SindycOptions {
+        plant: req.plant,
+        ..SindycOptions::default()
+    };
+    let res = identify(req.logs, req.validate, req.adds, &opts)?;
+    eprintln!("SINDYc equations:\n{}", res.equations_text);
+    eprintln!(
+        "SINDYc Pareto path (terms vs validation fit):\n{}",
+        res.pareto_text
+    );
+    let ts = req.logs[0].sample_period();
+    let mut model = Model::new(ModelKind::Sindyc, req.plant, ts);
+    let mut sm = res.model;
+    // Inertia for eq. 47 (friction torque = −J·Σ friction terms): K_t/b_I for a voltage
+    // plant, 1/b_u for a torque plant (u is the torque), else the motor's nominal J.
+    let (gain_term, gain) = match req.plant {
+        Plant::Voltage => (Term::I, model.motor.kt),
+        Plant::Torque => (Term::U, 1.0),
+    };
+    let b = sm.accel.coef(gain_term);
+    if b > 0.0 && (gain / b).is_finite() {
+        model.motor.j = gain / b;
+    }
+    if req.plant == Plant::Torque {
+        model.motor.kt = 1.0;
+        model.motor.r = 0.0;
+        model.motor.l = 0.0;
+        model.motor.kb = 0.0;
+    }
+    sm.j = model.motor.j;
+    model.effects = req.adds.iter().map(|s| s.to_effect()).collect();
+    model.sindy = Some(to_table(&sm, &res.hankel));
+    for (prefix, eq, unit) in [
+        ("accel", &sm.accel, "rad/s² per term unit"),
+        ("zdot", &sm.zdot, "1/s per term unit"),
+        ("idot", &sm.idot, "A/s per term unit"),
+    ] {
+        for (t, c) in &eq.terms {
+            let mut p = Parameter::new(&format!("{prefix}[{t}]"), *c, unit);
+            p.note = "SINDYc coefficient".into();
+            model.parameters.push(p);
+        }
+    }
+    model.data.method = format!(
+        "SINDYc: z from a {}-delay Hankel embedding of the velocity (components {}..{}), \
+         weak-form STLSQ, one-by-one thresholding on the validation fit ({:.2} % on xdot)",
+        res.hankel.delays, res.hankel.components.0, res.hankel.components.1, res.validation_fit
+    );
+    Ok(model)
+}
+
+/// Free run of a `sindyc` [`crate::model::Model`] (the hub's call site).
+pub fn simulate_model(model: &crate::model::Model, log: &MotorLog) -> Result<Prediction> {
+    let table = model
+        .sindy
+        .as_ref()
+        .ok_or_else(|| anyhow!("field 'sindy': a model of kind 'sindyc' needs a [sindy] table"))?;
+    let (m, _) = from_table(table)?;
+    simulate(&m, model.plant, log, Limits::default())
+}

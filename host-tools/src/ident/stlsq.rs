@@ -1,0 +1,397 @@
+//! Sequentially thresholded least squares (STLSQ, Brunton, Proctor & Kutz 2016, the SINDy
+//! regression): least squares on the candidate library, zero every coefficient whose
+//! contribution is below a threshold, refit on the remaining support, repeat until the
+//! support stops changing.
+//!
+//! # Choices
+//! - **Normal equations with Cholesky**, not QR on the tall library. The `(p+t) × (p+t)`
+//!   Gram matrix `[Θ Y]ᵀ[Θ Y]` is formed once with faer's matrix product (one pass over the
+//!   data); after that every fit — each STLSQ iteration, each target, each candidate of the
+//!   one-by-one thresholding in `sindyc` — is a `p × p` solve that costs microseconds. QR on
+//!   `10^6 × 17` costs ~4× the Gram product *per fit*. Accuracy: columns are normalised to
+//!   unit norm first (the Gram matrix gets a unit diagonal), which keeps the squared
+//!   condition number harmless for motor libraries; a test checks the result against faer's
+//!   QR least squares to 1e-8.
+//! - **Rank deficiency** (zero columns, duplicated or collinear terms): zero columns are
+//!   left out of every support; when Cholesky fails or a pivot is below 1e-12 (relative) the
+//!   solve falls back to the pseudo-inverse from faer's self-adjoint eigen-decomposition with
+//!   a relative eigenvalue cut-off of 1e-12. Never panics.
+//! - **Threshold** is relative and scale-free: term `j` is dropped when its contribution
+//!   `‖θ_j ξ_j‖` is below `threshold·‖y‖`. (With unit-norm columns the contribution is the
+//!   normalised coefficient, so this is pysindy's `normalize_columns=True` threshold
+//!   divided by `‖y‖`.)
+use faer::{Mat, MatRef, Side};
+
+/// STLSQ settings.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StlsqOptions {
+    /// Relative contribution below which a term is dropped (see the module doc).
+    /// Default 0.002: 0.2 % of the target's norm, below the noise of 12 ms Hall data.
+    pub threshold: f64,
+    /// Maximum number of threshold/refit rounds (pysindy's default is 20).
+    pub max_iter: usize,
+}
+
+impl Default for StlsqOptions {
+    fn default() -> Self {
+        StlsqOptions {
+            threshold: 0.002,
+            max_iter: 20,
+        }
+    }
+}
+
+/// The normal equations of a library `Θ` (`N × p`) and targets `Y` (`N × t`), column-normalised.
+#[derive(Debug, Clone)]
+pub struct Normal {
+    p: usize,
+    t: usize,
+    /// Normalised Gram matrix `D⁻¹ΘᵀΘD⁻¹`, row-major `p × p` (zero rows for zero columns).
+    g: Vec<f64>,
+    /// Normalised right-hand sides `D⁻¹Θᵀy`, one per target.
+    b: Vec<Vec<f64>>,
+    /// `yᵀy` per target.
+    yy: Vec<f64>,
+    /// Column norms `D` (0 for a zero column).
+    d: Vec<f64>,
+}
+
+impl Normal {
+    /// Build from a library matrix and a target matrix with the same number of rows.
+    pub fn new(theta: MatRef<'_, f64>, y: MatRef<'_, f64>) -> Normal {
+        assert_eq!(
+            theta.nrows(),
+            y.nrows(),
+            "library and targets differ in length"
+        );
+        let p = theta.ncols();
+        let t = y.ncols();
+        let gtt: Mat<f64> = theta.transpose() * theta;
+        let gty: Mat<f64> = theta.transpose() * y;
+        let yy: Vec<f64> = (0..t).map(|k| y.col(k).squared_norm_l2()).collect();
+        Self::from_products(p, t, |i, j| gtt[(i, j)], |i, k| gty[(i, k)], yy)
+    }
+
+    /// Build from the products directly: `gtt(i, j) = θ_iᵀθ_j`, `gty(i, k) = θ_iᵀy_k`,
+    /// `yy[k] = y_kᵀy_k` (for callers that accumulate them themselves).
+    pub fn from_products(
+        p: usize,
+        t: usize,
+        gtt: impl Fn(usize, usize) -> f64,
+        gty: impl Fn(usize, usize) -> f64,
+        yy: Vec<f64>,
+    ) -> Normal {
+        let d: Vec<f64> = (0..p)
+            .map(|i| {
+                let v = gtt(i, i);
+                if v.is_finite() && v > 0.0 {
+                    v.sqrt()
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        let mut g = vec![0.0; p * p];
+        for i in 0..p {
+            for j in 0..p {
+                if d[i] > 0.0 && d[j] > 0.0 {
+                    g[i * p + j] = gtt(i, j) / (d[i] * d[j]);
+                }
+            }
+        }
+        let b = (0..t)
+            .map(|k| {
+                (0..p)
+                    .map(|i| if d[i] > 0.0 { gty(i, k) / d[i] } else { 0.0 })
+                    .collect()
+            })
+            .collect();
+        Normal { p, t, g, b, yy, d }
+    }
+
+    /// Number of library terms.
+    pub fn terms(&self) -> usize {
+        self.p
+    }
+
+    /// Number of targets.
+    pub fn targets(&self) -> usize {
+        self.t
+    }
+
+    /// Norm of each library column.
+    pub fn column_norms(&self) -> &[f64] {
+        &self.d
+    }
+
+    /// `‖y_k‖`.
+    pub fn target_norm(&self, k: usize) -> f64 {
+        self.yy[k].max(0.0).sqrt()
+    }
+
+    /// Which columns are usable (non-zero).
+    pub fn usable(&self) -> Vec<bool> {
+        self.d.iter().map(|&d| d > 0.0).collect()
+    }
+
+    /// Least squares for target `k` on `support` (unusable columns are ignored).
+    /// Returns the normalised coefficients (`‖θ_j ξ_j‖` up to sign; 0 outside the support).
+    pub fn solve_normalised(&self, k: usize, support: &[bool]) -> Vec<f64> {
+        let idx: Vec<usize> = (0..self.p)
+            .filter(|&j| support[j] && self.d[j] > 0.0)
+            .collect();
+        let mut out = vec![0.0; self.p];
+        if idx.is_empty() {
+            return out;
+        }
+        let q = idx.len();
+        let a = Mat::<f64>::from_fn(q, q, |r, c| self.g[idx[r] * self.p + idx[c]]);
+        let rhs = Mat::<f64>::from_fn(q, 1, |r, _| self.b[k][idx[r]]);
+        let sol = solve_spd(a.as_ref(), rhs.as_ref());
+        for (r, &j) in idx.iter().enumerate() {
+            out[j] = sol[r];
+        }
+        out
+    }
+
+    /// Least squares for target `k` on `support`, coefficients in the library's units.
+    pub fn solve(&self, k: usize, support: &[bool]) -> Vec<f64> {
+        self.denormalise(&self.solve_normalised(k, support))
+    }
+
+    /// Normalised coefficients to the library's units.
+    pub fn denormalise(&self, xn: &[f64]) -> Vec<f64> {
+        xn.iter()
+            .zip(&self.d)
+            .map(|(x, d)| if *d > 0.0 { x / d } else { 0.0 })
+            .collect()
+    }
+
+    /// Squared residual `‖y_k − Θξ‖²` of normalised coefficients, from the normal equations.
+    pub fn residual2(&self, k: usize, xn: &[f64]) -> f64 {
+        let p = self.p;
+        let mut quad = 0.0;
+        let mut lin = 0.0;
+        for i in 0..p {
+            if xn[i] == 0.0 {
+                continue;
+            }
+            lin += xn[i] * self.b[k][i];
+            for j in 0..p {
+                quad += xn[i] * self.g[i * p + j] * xn[j];
+            }
+        }
+        (self.yy[k] - 2.0 * lin + quad).max(0.0)
+    }
+
+    /// STLSQ for target `k` starting from `support` (pass `usable()` for all terms).
+    /// Returns the normalised coefficients at the fixed point.
+    pub fn stlsq_normalised(&self, k: usize, support: &[bool], opts: &StlsqOptions) -> Vec<f64> {
+        let cut = opts.threshold * self.target_norm(k);
+        let mut sup: Vec<bool> = support
+            .iter()
+            .zip(&self.d)
+            .map(|(s, d)| *s && *d > 0.0)
+            .collect();
+        let mut xn = self.solve_normalised(k, &sup);
+        for _ in 0..opts.max_iter.max(1) {
+            let next: Vec<bool> = sup
+                .iter()
+                .zip(&xn)
+                .map(|(s, x)| *s && x.abs() >= cut)
+                .collect();
+            if next == sup {
+                break;
+            }
+            sup = next;
+            xn = self.solve_normalised(k, &sup);
+        }
+        xn
+    }
+
+    /// STLSQ for target `k` over every usable term; coefficients in the library's units.
+    pub fn stlsq(&self, k: usize, opts: &StlsqOptions) -> Vec<f64> {
+        self.denormalise(&self.stlsq_normalised(k, &self.usable(), opts))
+    }
+}
+
+/// Solve `A x = b` for a symmetric positive semi-definite `A` with unit-ish diagonal:
+/// Cholesky, or the eigen pseudo-inverse when `A` is (nearly) singular.
+fn solve_spd(a: MatRef<'_, f64>, b: MatRef<'_, f64>) -> Vec<f64> {
+    use faer::linalg::solvers::Solve;
+    let q = a.nrows();
+    let amax = (0..q).map(|i| a[(i, i)].abs()).fold(0.0, f64::max);
+    if let Ok(llt) = a.llt(Side::Lower) {
+        let l = llt.L();
+        let min_piv = (0..q)
+            .map(|i| l[(i, i)] * l[(i, i)])
+            .fold(f64::INFINITY, f64::min);
+        if min_piv > 1e-12 * amax {
+            let x = llt.solve(b);
+            let v: Vec<f64> = (0..q).map(|i| x[(i, 0)]).collect();
+            if v.iter().all(|x| x.is_finite()) {
+                return v;
+            }
+        }
+    }
+    // Pseudo-inverse: x = Σ_{λ_i > cut} u_i (u_iᵀ b) / λ_i.
+    let mut x = vec![0.0; q];
+    let Ok(evd) = a.self_adjoint_eigen(Side::Lower) else {
+        return x;
+    };
+    let s = evd.S().column_vector();
+    let u = evd.U();
+    let lmax = (0..q).map(|i| s[i].abs()).fold(0.0, f64::max);
+    let cut = 1e-12 * lmax.max(f64::MIN_POSITIVE);
+    for c in 0..q {
+        if s[c] > cut {
+            let proj: f64 = (0..q).map(|r| u[(r, c)] * b[(r, 0)]).sum::<f64>() / s[c];
+            for r in 0..q {
+                x[r] += u[(r, c)] * proj;
+            }
+        }
+    }
+    if x.iter().all(|v| v.is_finite()) {
+        x
+    } else {
+        vec![0.0; q]
+    }
+}
+
+/// STLSQ on every target of `Y` against library `Θ`: coefficients `p × t` (column `k` is
+/// target `k`), in the library's units.
+pub fn stlsq(theta: MatRef<'_, f64>, y: MatRef<'_, f64>, opts: &StlsqOptions) -> Mat<f64> {
+    let ne = Normal::new(theta, y);
+    let mut xi = Mat::<f64>::zeros(theta.ncols(), y.ncols());
+    for k in 0..y.ncols() {
+        let c = ne.stlsq(k, opts);
+        for (j, v) in c.into_iter().enumerate() {
+            xi[(j, k)] = v;
+        }
+    }
+    xi
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+
+    fn library(n: usize, seed: u64) -> Mat<f64> {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+        let x: Vec<f64> = (0..n).map(|_| rng.random_range(-2.0..2.0)).collect();
+        let v: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
+        // Columns of different scale: x, v, x², xv, v², x³, sin x, 1, 1000·v
+        Mat::from_fn(n, 9, |i, j| {
+            let (x, v) = (x[i], v[i]);
+            match j {
+                0 => x,
+                1 => v,
+                2 => x * x,
+                3 => x * v,
+                4 => v * v,
+                5 => x * x * x,
+                6 => x.sin(),
+                7 => 1.0,
+                _ => 1000.0 * v * v * v,
+            }
+        })
+    }
+
+    #[test]
+    fn recovers_sparse_system_exactly_without_noise() {
+        let th = library(4000, 1);
+        let truth = [1.5, 0.0, -0.7, 0.0, 0.0, 0.0, 2.0, 0.3, 0.0];
+        let y = Mat::from_fn(th.nrows(), 1, |i, _| {
+            (0..9).map(|j| th[(i, j)] * truth[j]).sum::<f64>()
+        });
+        let xi = stlsq(th.as_ref(), y.as_ref(), &StlsqOptions::default());
+        for j in 0..9 {
+            assert!(
+                (xi[(j, 0)] - truth[j]).abs() < 1e-9,
+                "term {j}: {}",
+                xi[(j, 0)]
+            );
+        }
+    }
+
+    #[test]
+    fn recovers_support_and_values_with_noise_for_two_targets() {
+        let th = library(20000, 2);
+        let t1 = [1.5, 0.0, -0.7, 0.0, 0.0, 0.0, 2.0, 0.3, 0.0];
+        let t2 = [0.0, -3.0, 0.0, 0.5, 0.0, 0.0, 0.0, 0.0, 0.001];
+        let mut rng = rand::rngs::StdRng::seed_from_u64(9);
+        let y = Mat::from_fn(th.nrows(), 2, |i, k| {
+            let t = if k == 0 { &t1 } else { &t2 };
+            (0..9).map(|j| th[(i, j)] * t[j]).sum::<f64>() + 0.05 * rng.random_range(-1.0..1.0)
+        });
+        let xi = stlsq(
+            th.as_ref(),
+            y.as_ref(),
+            &StlsqOptions {
+                threshold: 0.02,
+                max_iter: 20,
+            },
+        );
+        for (k, t) in [t1, t2].iter().enumerate() {
+            for j in 0..9 {
+                if t[j] == 0.0 {
+                    assert_eq!(xi[(j, k)], 0.0, "target {k} term {j} should be dropped");
+                } else {
+                    let rel = (xi[(j, k)] - t[j]).abs() / t[j].abs();
+                    assert!(
+                        rel < 0.02,
+                        "target {k} term {j}: {} vs {}",
+                        xi[(j, k)],
+                        t[j]
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn zero_and_duplicate_columns_do_not_break_it() {
+        let base = library(3000, 3);
+        // Columns: base..., a zero column, a copy of column 0.
+        let th = Mat::from_fn(base.nrows(), 11, |i, j| match j {
+            9 => 0.0,
+            10 => base[(i, 0)],
+            _ => base[(i, j)],
+        });
+        let y = Mat::from_fn(th.nrows(), 1, |i, _| 2.0 * th[(i, 0)] - th[(i, 2)]);
+        let xi = stlsq(th.as_ref(), y.as_ref(), &StlsqOptions::default());
+        assert!((0..11).all(|j| xi[(j, 0)].is_finite()));
+        assert_eq!(xi[(9, 0)], 0.0);
+        // The two copies share the coefficient 2; the prediction is exact.
+        assert!((xi[(0, 0)] + xi[(10, 0)] - 2.0).abs() < 1e-8);
+        assert!((xi[(2, 0)] + 1.0).abs() < 1e-8);
+        let all_zero = Mat::<f64>::zeros(100, 3);
+        let yz = Mat::from_fn(100, 1, |i, _| i as f64);
+        let xz = stlsq(all_zero.as_ref(), yz.as_ref(), &StlsqOptions::default());
+        assert!((0..3).all(|j| xz[(j, 0)] == 0.0));
+    }
+
+    #[test]
+    fn normal_equations_agree_with_qr_least_squares() {
+        use faer::linalg::solvers::SolveLstsq;
+        let th = library(5000, 4);
+        let mut rng = rand::rngs::StdRng::seed_from_u64(5);
+        let y = Mat::from_fn(th.nrows(), 1, |i, _| {
+            th[(i, 0)] - 0.2 * th[(i, 5)] + rng.random_range(-1.0..1.0)
+        });
+        let ne = Normal::new(th.as_ref(), y.as_ref());
+        let ours = ne.solve(0, &[true; 9]);
+        let qr = th.qr().solve_lstsq(&y);
+        for j in 0..9 {
+            let rel = (ours[j] - qr[(j, 0)]).abs() / qr[(j, 0)].abs().max(1e-3);
+            assert!(rel < 1e-8, "term {j}: {} vs {}", ours[j], qr[(j, 0)]);
+        }
+        // Residual from the normal equations matches the direct residual.
+        let xn = ne.solve_normalised(0, &[true; 9]);
+        let direct: f64 = (0..th.nrows())
+            .map(|i| (y[(i, 0)] - (0..9).map(|j| th[(i, j)] * ours[j]).sum::<f64>()).powi(2))
+            .sum();
+        assert!((ne.residual2(0, &xn) - direct).abs() < 1e-6 * direct);
+    }
+}

@@ -1,0 +1,376 @@
+//! MODEL.toml: an identified motor model, human-readable.
+//!
+//! A model is a motor (paper eqs. 1–2: `J·dω/dt = K_t·I − F_f − τ_effects`,
+//! `L·dI/dt = −R·I − K_b·ω + V − v_loss`) with a friction law `F_f` chosen by the model kind:
+//!
+//! * `linear`: viscous friction only, `F_f = b·ω` (the paper's linear model);
+//! * `lugre`: the LuGre law (paper eqs. 12–14), parameters in [`LugreParams`];
+//! * `sindyc`: sparse equations found by SINDYc (the colleague's `ident::sindyc`), stored as a
+//!   TOML table in `sindy`.
+//!
+//! Every model may carry extra physical effects (`[[effects]]`, one table per effect with its
+//! `name` and its keys, the same keys as an effect spec) and lists every identified number in
+//! `[[parameters]]` with its unit, standard error and whether the data could identify it.
+//!
+//! `--plant torque`: there is no electrical equation; `u` is the torque or force command,
+//! `motor.kt` is the input gain (torque or force per unit of `u`, fixed to 1), `motor.j` is the
+//! inertia (rotary, kg·m²) or the mass (linear axis, kg) in units of `u` per rad/s² (m/s²),
+//! and `motor.r`, `motor.l`, `motor.kb` are unused (0).
+use crate::effect_spec::EffectSpec;
+use crate::log::Plant;
+use anyhow::{anyhow, Context, Result};
+use control::effects::{Effect, EffectKind};
+use control::motor::MotorParams;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::path::Path;
+
+/// Which friction law the model uses.
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum, Default,
+)]
+#[serde(rename_all = "snake_case")]
+pub enum ModelKind {
+    /// Viscous friction only (paper eqs. 1–2).
+    #[default]
+    Linear,
+    /// LuGre friction (paper eqs. 12–14).
+    Lugre,
+    /// Sparse nonlinear equations identified by SINDYc (paper eqs. 43–46).
+    Sindyc,
+}
+
+impl ModelKind {
+    /// The name used on the command line and in MODEL.toml.
+    pub fn name(self) -> &'static str {
+        match self {
+            ModelKind::Linear => "linear",
+            ModelKind::Lugre => "lugre",
+            ModelKind::Sindyc => "sindyc",
+        }
+    }
+}
+
+/// LuGre friction (paper eqs. 12–14), SI units, with the field names of the paper's Table 2
+/// (`control::lugre::LugreParams`, the same struct the firmware's observer runs):
+/// `F_f = σ0·z + σ1·dz/dt + α2·ω`, `dz/dt = ω − σ0·|ω|·z / s(ω)`,
+/// `s(ω) = α0 + α1·exp(−(ω/v0)²)`.
+pub type LugreParams = control::lugre::LugreParams<f64>;
+
+/// `dz/dt` of the LuGre bristle state at velocity ω and deflection z.
+pub fn lugre_z_rate(l: &LugreParams, omega: f64, z: f64) -> f64 {
+    omega - l.sigma0 * omega.abs() * z / l.s(omega).max(1e-12)
+}
+
+/// LuGre friction torque `σ0·z + σ1·dz/dt + α2·ω` [N·m] at state (ω, z).
+pub fn lugre_friction(l: &LugreParams, omega: f64, z: f64) -> f64 {
+    l.friction_at(omega, z, lugre_z_rate(l, omega, z))
+}
+
+/// One identified number.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Parameter {
+    /// Name, as in the equations (`R`, `alpha0`, `cogging.amp`, ...).
+    pub name: String,
+    pub value: f64,
+    /// SI unit.
+    pub unit: String,
+    /// Standard error from the Jacobian at the optimum, σ²·(JᵀJ)⁻¹; absent when not estimated.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub std_err: Option<f64>,
+    /// False when the data cannot pin this number down (then `note` says why).
+    #[serde(default = "yes")]
+    pub identifiable: bool,
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub note: String,
+}
+
+fn yes() -> bool {
+    true
+}
+
+impl Parameter {
+    /// A parameter with a value and a unit, identifiable, no std error yet.
+    pub fn new(name: &str, value: f64, unit: &str) -> Parameter {
+        Parameter {
+            name: name.to_string(),
+            value,
+            unit: unit.to_string(),
+            std_err: None,
+            identifiable: true,
+            note: String::new(),
+        }
+    }
+}
+
+/// Where the model's data came from.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+pub struct Provenance {
+    /// The logs it was fitted on.
+    pub files: Vec<String>,
+    /// Logs used for validation only (if any).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub validate: Vec<String>,
+    /// Total number of samples fitted.
+    pub samples: usize,
+    /// Sample period [s].
+    pub sample_period: f64,
+    /// Free text: how the parameters were found.
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub method: String,
+}
+
+/// The measurement chain the data went through (needed for `fit_sensor`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Sensor {
+    /// Angle quantum of the Hall sensors [rad] (0 = not quantised).
+    pub hall_resolution_rad: f64,
+    /// Moving-average window of the velocity estimator [samples]. Default 10: the paper's
+    /// filter (Section 4: window of 10 samples at 12 ms).
+    pub velocity_window: usize,
+    /// Pole pairs of the motor, when known.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pole_pairs: Option<u32>,
+}
+
+impl Default for Sensor {
+    fn default() -> Self {
+        Sensor {
+            hall_resolution_rad: 0.0,
+            velocity_window: 10,
+            pole_pairs: None,
+        }
+    }
+}
+
+/// One effect as written in MODEL.toml: its name and its keys (the keys of its spec).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+struct EffectEntry {
+    name: String,
+    #[serde(flatten)]
+    values: BTreeMap<String, f64>,
+}
+
+mod effects_serde {
+    use super::*;
+    use serde::{Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(v: &[Effect<f64>], s: S) -> Result<S::Ok, S::Error> {
+        let entries: Vec<EffectEntry> = v
+            .iter()
+            .map(|e| {
+                let spec = EffectSpec::from_effect(e);
+                EffectEntry {
+                    name: spec.kind.name().to_string(),
+                    values: spec.values,
+                }
+            })
+            .collect();
+        entries.serialize(s)
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<Effect<f64>>, D::Error> {
+        let entries = Vec::<EffectEntry>::deserialize(d)?;
+        entries
+            .into_iter()
+            .map(|en| {
+                let kind = EffectKind::from_name(&en.name).ok_or_else(|| {
+                    serde::de::Error::custom(format!("unknown effect '{}'", en.name))
+                })?;
+                let keys = crate::effect_spec::keys(kind);
+                for k in en.values.keys() {
+                    if !keys.iter().any(|key| key.name == k) {
+                        return Err(serde::de::Error::custom(format!(
+                            "effect '{}': unknown key '{k}'",
+                            en.name
+                        )));
+                    }
+                }
+                Ok(EffectSpec {
+                    kind,
+                    values: en.values,
+                }
+                .to_effect())
+            })
+            .collect()
+    }
+}
+
+/// An identified model (MODEL.toml).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Model {
+    /// `linear`, `lugre` or `sindyc`.
+    pub kind: ModelKind,
+    /// `voltage` (u is a voltage, eqs. 1–2) or `torque` (u is a torque/force command).
+    pub plant: Plant,
+    /// Sample period [s] the model was identified at (free-run simulation step).
+    pub sample_period: f64,
+    /// Motor constants: r [Ω], l [H], kt [N·m/A], kb [V·s/rad], j [kg·m²]
+    /// (see the file's doc comment for `--plant torque`).
+    pub motor: MotorParams<f64>,
+    /// Viscous friction b [N·m·s/rad] of the linear model (0 for the other kinds).
+    #[serde(default)]
+    pub viscous: f64,
+    /// LuGre friction (kind `lugre`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lugre: Option<LugreParams>,
+    /// SINDYc equations (kind `sindyc`), as written by `ident::sindyc`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sindy: Option<toml::Table>,
+    /// Extra physical effects, added with `fit --add`.
+    #[serde(default, with = "effects_serde")]
+    pub effects: Vec<Effect<f64>>,
+    /// The measurement chain.
+    #[serde(default)]
+    pub sensor: Sensor,
+    /// Where the data came from.
+    #[serde(default)]
+    pub data: Provenance,
+    /// Every identified number with its unit and standard error (for people; the simulation
+    /// reads the sections above).
+    #[serde(default)]
+    pub parameters: Vec<Parameter>,
+}
+
+impl Model {
+    /// A model of the given kind with the paper's motor and nothing fitted.
+    pub fn new(kind: ModelKind, plant: Plant, sample_period: f64) -> Model {
+        Model {
+            kind,
+            plant,
+            sample_period,
+            motor: MotorParams::paper(),
+            viscous: 0.0,
+            lugre: None,
+            sindy: None,
+            effects: Vec::new(),
+            sensor: Sensor::default(),
+            data: Provenance::default(),
+            parameters: Vec::new(),
+        }
+    }
+
+    /// Parse MODEL.toml text; `path` names the file in errors (with line and column).
+    pub fn parse(text: &str, path: &Path) -> Result<Model> {
+        let p = path.display();
+        toml::from_str::<Model>(text).map_err(|e| {
+            let msg = e.message().trim().to_string();
+            match e.span() {
+                Some(span) => {
+                    let before = &text[..span.start.min(text.len())];
+                    let line = before.matches('\n').count() + 1;
+                    let col = before.len() - before.rfind('\n').map(|i| i + 1).unwrap_or(0) + 1;
+                    anyhow!("{p}:{line}:{col}: {msg}")
+                }
+                None => anyhow!("{p}: {msg}"),
+            }
+        })
+    }
+
+    /// Read MODEL.toml.
+    pub fn load(path: &Path) -> Result<Model> {
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("{}: cannot read", path.display()))?;
+        let m = Self::parse(&text, path)?;
+        m.check().map_err(|e| anyhow!("{}: {e}", path.display()))?;
+        Ok(m)
+    }
+
+    /// Sanity checks a simulation relies on (field names in the message).
+    pub fn check(&self) -> Result<()> {
+        let pos = |name: &str, v: f64| -> Result<()> {
+            if !(v.is_finite() && v > 0.0) {
+                anyhow::bail!("field '{name}': must be a positive number (got {v})");
+            }
+            Ok(())
+        };
+        pos("sample_period", self.sample_period)?;
+        pos("motor.j", self.motor.j)?;
+        pos("motor.kt", self.motor.kt)?;
+        if self.plant == Plant::Voltage {
+            pos("motor.r", self.motor.r)?;
+            pos("motor.l", self.motor.l)?;
+        }
+        if self.kind == ModelKind::Lugre && self.lugre.is_none() {
+            anyhow::bail!("field 'lugre': a model of kind 'lugre' needs a [lugre] table");
+        }
+        if self.kind == ModelKind::Sindyc && self.sindy.is_none() {
+            anyhow::bail!("field 'sindy': a model of kind 'sindyc' needs a [sindy] table");
+        }
+        if let Some(l) = &self.lugre {
+            pos("lugre.v0", l.v0)?;
+            if l.alpha0 + l.alpha1 <= 0.0 {
+                anyhow::bail!("field 'lugre.alpha0': alpha0 + alpha1 must be positive");
+            }
+        }
+        Ok(())
+    }
+
+    /// The TOML text.
+    pub fn to_toml(&self) -> Result<String> {
+        let body = toml::to_string_pretty(self).context("cannot render the model as TOML")?;
+        Ok(format!(
+            "# motorid model ({}). Units are SI; see [[parameters]] for each number's unit and\n\
+             # standard error. Written by `motorid fit`.\n{body}",
+            self.kind.name()
+        ))
+    }
+
+    /// Write MODEL.toml atomically.
+    pub fn save(&self, path: &Path) -> Result<()> {
+        crate::atomic::write_str(path, &self.to_toml()?)
+    }
+
+    /// The effect specs of the model's effects (as `diagnose` prints them).
+    pub fn effect_specs(&self) -> Vec<EffectSpec> {
+        self.effects.iter().map(EffectSpec::from_effect).collect()
+    }
+
+    /// A parameter by name.
+    pub fn parameter(&self, name: &str) -> Option<&Parameter> {
+        self.parameters.iter().find(|p| p.name == name)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn toml_round_trip_keeps_effects_and_parameters() {
+        let mut m = Model::new(ModelKind::Lugre, Plant::Voltage, 0.012);
+        m.lugre = Some(LugreParams::paper());
+        m.effects.push(Effect::Cogging {
+            harmonic: 7,
+            amp: 0.0123456789,
+            phase: 0.5,
+        });
+        m.parameters.push(Parameter::new("R", 0.2, "Ω"));
+        let text = m.to_toml().unwrap();
+        assert!(text.contains("name = \"cogging\""), "{text}");
+        let back = Model::parse(&text, Path::new("m.toml")).unwrap();
+        assert_eq!(back, m);
+    }
+
+    #[test]
+    fn errors_name_line_and_field() {
+        let mut m = Model::new(ModelKind::Linear, Plant::Voltage, 0.012);
+        m.viscous = 0.001;
+        let text = m.to_toml().unwrap().replace("kind = \"linear\"", "kind = \"quadratic\"");
+        let e = Model::parse(&text, Path::new("m.toml")).unwrap_err().to_string();
+        let line = text.lines().position(|l| l.contains("quadratic")).unwrap() + 1;
+        assert!(e.starts_with(&format!("m.toml:{line}:")), "{e}");
+        let mut m2 = m.clone();
+        m2.motor.j = -1.0;
+        assert!(m2.check().unwrap_err().to_string().contains("motor.j"));
+    }
+
+    #[test]
+    fn bristles_rest_on_the_stribeck_curve() {
+        let l = LugreParams::paper();
+        // On the Stribeck curve the bristles are still and the friction is s(ω) + α2·ω.
+        let z = l.s(2.0) / l.sigma0;
+        assert!(lugre_z_rate(&l, 2.0, z).abs() < 1e-12);
+        assert!((lugre_friction(&l, 2.0, z) - l.steady_friction(2.0)).abs() < 1e-12);
+    }
+}

@@ -1,0 +1,27 @@
+//! `qemu-parity`: the control step over a recorded input trace, on two machines.
+//!
+//! * Built for `thumbv7em-none-eabihf`, it is a bare-metal program for QEMU's `mps2-an386`
+//!   (Cortex-M4F): it runs [`qemu_parity::run_trace`] on the embedded trace and prints every
+//!   output as raw `f32` bits through semihosting, then exits QEMU.
+//! * Built for the host, it runs the same code on the same trace and compares (`compare`), or
+//!   counts instructions per control step from QEMU's `-d exec` log (`count`).
+//!
+//! Printed lines (both runs): `markers <begin_none> <begin_lugre> <begin_sindyc> <end>`
+//! (code addresses of the step markers), `out <observer> <step> <bits> <bits> <bits>`,
+//! `done <steps>`.
+#![cfg_attr(target_os = "none", no_std)]
+#![cfg_attr(target_os = "none", no_main)]
+
+/// The recorded input trace (see `qemu_parity` for the format).
+static TRACE: &[u8] = include_bytes!("../trace/closed_loop.qpt");
+
+#[cfg(target_os = "none")]
+mod bare;
+
+#[cfg(not(target_os = "none"))]
+mod host;
+
+#[cfg(not(target_os = "none"))]
+fn main() -> std::process::ExitCode {
+    host::main(TRACE)
+}
