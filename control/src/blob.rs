@@ -49,7 +49,7 @@ pub const MAX_EFFECTS: usize = 8;
 pub const HALL_INVALID: u8 = 0xFF;
 
 /// CRC used by the blob, the slot header and the serial frames: CRC-32/ISO-HDLC.
-pub const CRC32: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
+pub static CRC32: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
 
 /// Which friction model the coefficients describe.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -154,11 +154,13 @@ impl Default for Coefficients {
                 comp_gain: 1.0,
             },
             limits: Limits {
-                // B-G431B-ESC1: UM2516 rates the board for 40 A peak and 6-28 V (6S LiPo);
-                // we stop well inside those.
+                // B-G431B-ESC1: 40 A peak output, bus 7-25 V (6S LiPo) as NuttX's board
+                // support states them (boards/arm/stm32/b-g431b-esc1/src/stm32_foc.c, from
+                // UM2516); the current limit stays below the peak rating, and the upper bus
+                // limit sits above a fully charged 6S pack (6 × 4.2 V = 25.2 V).
                 i_max: 30.0,
-                vbus_min: 6.0,
-                vbus_max: 28.0,
+                vbus_min: 7.0,
+                vbus_max: 26.0,
             },
         }
     }

@@ -103,9 +103,11 @@ pub fn current_from_raw(raw: u16, zero: u16) -> f32 {
 /// Bit mask of the three Hall inputs in GPIOB's input register (PB6, PB7, PB8).
 pub const HALL_SHIFT: u32 = 6;
 
-/// Independent watchdog timeout [µs]: 4 control periods. A stuck control task stops
-/// feeding it and the MCU resets with the bridge off (reset state of TIM1: outputs off).
-pub const WATCHDOG_US: u32 = 48_000;
+/// Independent watchdog timeout [µs]. A stuck control loop stops feeding it and the MCU
+/// resets with the bridge off (reset state of TIM1: outputs off). 100 ms = 8 control periods:
+/// long enough for a coefficient commit (page erase up to 40 ms, STM32G431 datasheet
+/// DS12589 flash characteristics, during which the single-bank flash stalls the CPU).
+pub const WATCHDOG_US: u32 = 100_000;
 
 /// Serial link speed on the ST-LINK virtual COM port.
 pub const BAUD: u32 = 115_200;

@@ -26,9 +26,9 @@ struct Multisine {
 fn multisine(m: &Multisine, t: f32) -> f32 {
     let mut s = 0.0;
     for k in 0..m.n {
-        // Log-spaced frequencies over [f_lo, f_hi].
+        // Evenly spaced frequencies over [f_lo, f_hi].
         let r = k as f32 / (m.n - 1) as f32;
-        let f = m.f_lo * libm::powf(m.f_hi / m.f_lo, r);
+        let f = m.f_lo + (m.f_hi - m.f_lo) * r;
         let phase = -PI * (k * (k + 1)) as f32 / m.n as f32;
         s += libm::sinf(2.0 * PI * f * t + phase);
     }

@@ -76,7 +76,12 @@ fn model_of(code: u8) -> ModelKind {
 pub fn load_coefficients(slots: &mut Slots<Flash<'static, Blocking>>) -> Option<Coefficients> {
     match slots.load() {
         Ok(Some((info, c))) => {
-            defmt::info!("coefficients: slot {} seq {} ({} bytes)", info.index, info.seq, info.len);
+            defmt::info!(
+                "coefficients: slot {} seq {} ({} bytes)",
+                info.index,
+                info.seq,
+                info.len
+            );
             COEFF_SEQ.store(info.seq, Ordering::Relaxed);
             MODEL.store(model_code(c.model), Ordering::Relaxed);
             Some(c)
@@ -86,7 +91,8 @@ pub fn load_coefficients(slots: &mut Slots<Flash<'static, Blocking>>) -> Option<
             None
         }
         Err(e) => {
-            defmt::warn!("flash read failed ({}): running without compensation", defmt::Debug2Format(&e));
+            let _ = e;
+            defmt::warn!("flash read failed: running without compensation");
             None
         }
     }
@@ -107,10 +113,7 @@ fn command(c: Command) {
 
 /// Receives, decodes and answers host messages.
 #[embassy_executor::task]
-pub async fn rx_task(
-    mut rx: BufferedUartRx<'static>,
-    mut slots: Slots<Flash<'static, Blocking>>,
-) {
+pub async fn rx_task(mut rx: BufferedUartRx<'static>, mut slots: Slots<Flash<'static, Blocking>>) {
     // Static: the decoder and the upload stage are 1.2 KiB; keep them off the task stack.
     static UPLOAD: static_cell::StaticCell<Upload> = static_cell::StaticCell::new();
     static DECODER: static_cell::StaticCell<FrameDecoder> = static_cell::StaticCell::new();
@@ -121,7 +124,8 @@ pub async fn rx_task(
         let n = match rx.read(&mut buf).await {
             Ok(n) => n,
             Err(e) => {
-                defmt::warn!("uart rx error {}", defmt::Debug2Format(&e));
+                let _ = e;
+                defmt::warn!("uart rx error");
                 decoder.reset();
                 continue;
             }
@@ -129,8 +133,8 @@ pub async fn rx_task(
         for &b in &buf[..n] {
             match decoder.push::<HostMsg>(b) {
                 None => {}
-                Some(Err(e)) => {
-                    defmt::debug!("bad frame: {}", defmt::Display2Format(&e));
+                Some(Err(_)) => {
+                    defmt::debug!("bad frame");
                     send(BoardMsg::Warning(Warning::BadFrame));
                 }
                 Some(Ok(msg)) => handle(msg, upload, &mut slots),
@@ -175,14 +179,18 @@ fn handle(msg: HostMsg, upload: &mut Upload, slots: &mut Slots<Flash<'static, Bl
                 Err(n) => send(BoardMsg::Nack(n)),
                 Ok((bytes, coeffs)) => match slots.store(bytes) {
                     Ok(info) => {
-                        defmt::info!("coefficients committed: slot {} seq {}", info.index, info.seq);
+                        defmt::info!(
+                            "coefficients committed: slot {} seq {}",
+                            info.index,
+                            info.seq
+                        );
                         COEFF_SEQ.store(info.seq, Ordering::Relaxed);
                         MODEL.store(model_code(coeffs.model), Ordering::Relaxed);
                         NEW_COEFFS.signal(coeffs);
                         send(BoardMsg::Committed { seq: info.seq });
                     }
-                    Err(e) => {
-                        defmt::error!("flash write failed: {}", defmt::Debug2Format(&e));
+                    Err(_) => {
+                        defmt::error!("flash write failed");
                         send(BoardMsg::Nack(Nack::Flash));
                     }
                 },
@@ -206,11 +214,11 @@ pub async fn tx_task(mut tx: BufferedUartTx<'static>) {
         let msg = OUTGOING.receive().await;
         match frame::encode_frame(&msg, &mut out) {
             Ok(f) => {
-                if let Err(e) = tx.write_all(f).await {
-                    defmt::warn!("uart tx error {}", defmt::Debug2Format(&e));
+                if tx.write_all(f).await.is_err() {
+                    defmt::warn!("uart tx error");
                 }
             }
-            Err(e) => defmt::error!("frame encode: {}", defmt::Display2Format(&e)),
+            Err(_) => defmt::error!("frame encode failed"),
         }
     }
 }

@@ -29,7 +29,6 @@ mod link;
 
 use core::sync::atomic::Ordering;
 
-
 use control::frame::{BoardMsg, Excitation, Fault, Mode, Sample, Warning};
 use control::slots::Slots;
 use control::step::{ControlStep, Faults, StepInputs};
@@ -135,7 +134,11 @@ async fn main(spawner: Spawner) {
     ];
 
     // Coefficients from flash: newest valid slot, or none (plain PI loop, a warning).
-    let slots = Slots::new(Flash::new_blocking(p.FLASH), link::SLOTS_OFFSET, link::SLOT_SIZE);
+    let slots = Slots::new(
+        Flash::new_blocking(p.FLASH),
+        link::SLOTS_OFFSET,
+        link::SLOT_SIZE,
+    );
     let (slots, coeffs) = match slots {
         Ok(mut s) => {
             let c = link::load_coefficients(&mut s);
@@ -171,8 +174,13 @@ async fn main(spawner: Spawner) {
     match (uart, slots) {
         (Ok(uart), Some(slots)) => {
             let (tx, rx) = uart.split();
-            spawner.spawn(link::tx_task(tx).unwrap());
-            spawner.spawn(link::rx_task(rx, slots).unwrap());
+            // Each task is spawned once: its pool (size 1) cannot be exhausted.
+            if let Ok(t) = link::tx_task(tx) {
+                spawner.spawn(t);
+            }
+            if let Ok(t) = link::rx_task(rx, slots) {
+                spawner.spawn(t);
+            }
         }
         _ => defmt::error!("serial link not started"),
     }
@@ -296,7 +304,7 @@ async fn main(spawner: Spawner) {
         if let Some(f) = fault {
             bridge.off();
             if latched.is_none() {
-                defmt::error!("fault {}: bridge off", defmt::Debug2Format(&f));
+                defmt::error!("fault {}: bridge off", f as u8);
                 let _ = OUTGOING.try_send(BoardMsg::Fault(f));
             }
             latched = Some(f);
@@ -325,7 +333,11 @@ async fn main(spawner: Spawner) {
             },
             Ordering::Relaxed,
         );
-        led.set_level(if bridge.is_on() { Level::High } else { Level::Low });
+        led.set_level(if bridge.is_on() {
+            Level::High
+        } else {
+            Level::Low
+        });
 
         // Log sample every 12 ms while running.
         if run != Run::Idle {
@@ -347,7 +359,11 @@ async fn main(spawner: Spawner) {
 #[panic_handler]
 fn panic(info: &core::panic::PanicInfo) -> ! {
     bridge::force_off();
-    defmt::error!("panic: {}", defmt::Display2Format(info));
+    // File and line only: formatting the message would link core::fmt (≈ 12 KiB).
+    match info.location() {
+        Some(l) => defmt::error!("panic at {=str}:{=u32}", l.file(), l.line()),
+        None => defmt::error!("panic"),
+    }
     loop {
         cortex_m::asm::nop();
     }
@@ -361,7 +377,3 @@ unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
         cortex_m::asm::nop();
     }
 }
-
-
-
-

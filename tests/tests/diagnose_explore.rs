@@ -48,3 +48,27 @@ fn explore() {
         }
     }
 }
+
+#[test]
+#[ignore]
+fn emulator_balance() {
+    let cfg = EmulatorConfig::paper();
+    let sim = simulate_signal(&cfg, SignalKind::A, 20.0).unwrap();
+    let tr = &sim.truth;
+    let m = control::motor::MotorParams::<f64>::paper();
+    let p = control::lugre::LugreParams::<f64>::paper();
+    let dt = 0.012;
+    let i = sim.log.i.as_ref().unwrap();
+    let mut stuck = 0;
+    for k in (200..1600).step_by(1) {
+        let acc = (tr.omega[k + 1] - tr.omega[k]) / dt;
+        let zdot = (tr.z[k + 1] - tr.z[k]) / dt;
+        let fr = p.sigma0 * tr.z[k + 1] + p.sigma1 * zdot + p.alpha2 * tr.omega[k + 1];
+        let res = m.kt * tr.i[k + 1] - m.j * acc - fr;
+        if tr.omega[k].abs() < 0.5 { stuck += 1; }
+        if k % 25 == 0 {
+            println!("k {k} u {:.2} w {:.3} i_true {:.3} i_meas {:.3} ktI {:.4} Jacc {:.4} fric {:.4} res {:.4} z {:.2e}", sim.log.u[k], tr.omega[k], tr.i[k], i[k], m.kt * tr.i[k + 1], m.j * acc, fr, res, tr.z[k]);
+        }
+    }
+    println!("stuck samples {stuck}");
+}

@@ -3,18 +3,19 @@
 //! board's sensors, one 12 ms period at a time.
 //!
 //! Per period, as the firmware's control task does: read the Hall state, the Hall edges
-//! captured since the last period (with their capture-timer counts) and the current; run
-//! the step; hold its voltage for the period. Edge times are the ends of 1 ms slices of the
-//! period ([`EDGE_SLICES`]), on a 1 MHz capture timer.
+//! captured since the last period (stamped by a 1 MHz capture timer, [`TICK_HZ`]) and the
+//! current; run the step; hold its voltage for the period.
 use crate::emulator::{EmulatorConfig, Plant};
 use anyhow::Result;
 use control::step::{ControlStep, HallEdge, StepConfig, StepInputs, StepOutputs, MAX_EDGES};
 
 /// Capture-timer frequency [Hz] (the firmware's embassy tick rate, tick-hz-1_000_000).
-pub const TICK_HZ: f64 = 1.0e6;
-/// Slices per period for timing Hall edges (1 ms resolution at 12 ms).
-pub const EDGE_SLICES: usize = 12;
+pub const TICK_HZ: f64 = control::blob::Coefficients::CAPTURE_TICK_HZ as f64;
 
+/// Capture-timer count at time `t` [s] (a free-running u32 counter that wraps).
+fn ticks_at(t: f64) -> u32 {
+    ((t * TICK_HZ).round() as u64 & u64::from(u32::MAX)) as u32
+}
 /// What one period did.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RigSample {
@@ -37,7 +38,6 @@ pub struct Rig {
     plant: Plant,
     ctl: ControlStep<f32>,
     dt: f64,
-    ticks: u32,
     t: f64,
     /// Hall edges captured during the running period, for the next step (more than
     /// [`MAX_EDGES`] is reported as an overflow, as the firmware's capture buffer does).
@@ -55,7 +55,6 @@ impl Rig {
             plant,
             ctl: ControlStep::new(cfg),
             dt: f64::from(cfg.dt),
-            ticks: 0,
             t: 0.0,
             pending: Vec::with_capacity(MAX_EDGES),
             recorded: None,
@@ -85,7 +84,7 @@ impl Rig {
         let i_meas = self.plant.measured_current();
         let mut inp = StepInputs {
             hall: self.plant.hall_state(),
-            now_ticks: self.ticks,
+            now_ticks: ticks_at(truth.t),
             i_meas: i_meas as f32,
             v_bus: f32::NAN, // no bus measurement: the configured nominal voltage
             omega_ref: omega_ref as f32,
@@ -101,18 +100,14 @@ impl Rig {
         if let Some(rec) = self.recorded.as_mut() {
             rec.push(inp);
         }
-        // Hold the command for the period; time the Hall edges per slice.
-        let h = self.dt / EDGE_SLICES as f64;
-        for k in 1..=EDGE_SLICES {
-            self.plant.apply(f64::from(out.v_cmd), h);
-            let at = self
-                .ticks
-                .wrapping_add((k as f64 * h * TICK_HZ).round() as u32);
-            for state in self.plant.take_hall_edges() {
-                self.pending.push(HallEdge { ticks: at, state });
-            }
+        // Hold the command for the period; the capture timer stamps each Hall edge.
+        self.plant.apply(f64::from(out.v_cmd), self.dt);
+        for e in self.plant.take_hall_edges() {
+            self.pending.push(HallEdge {
+                ticks: ticks_at(e.t),
+                state: e.state,
+            });
         }
-        self.ticks = self.ticks.wrapping_add((self.dt * TICK_HZ).round() as u32);
         let sample = RigSample {
             t: self.t,
             omega_ref,

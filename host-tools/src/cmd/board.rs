@@ -1,10 +1,121 @@
-//! `motorid board` (not yet written).
-use anyhow::{bail, Result};
+//! `motorid board`: the emulated board behind a pseudo-terminal.
+use crate::board::flash::RamFlash;
+use crate::board::pty::Pty;
+use crate::board::sim::BoardSim;
+use crate::effect_spec::EffectSpec;
+use crate::emulator::EmulatorConfig;
+use anyhow::{bail, Context, Result};
+use std::io::{Read, Write};
+use std::path::PathBuf;
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
 
-/// Not yet written.
+/// Run the emulated board: the firmware's control step and serial protocol (from the
+/// `control` crate) driving the built-in motor emulator, reachable through a pseudo-terminal
+/// as if it were the B-G431B-ESC1's serial port.
+///
+/// Prints the device path (e.g. /dev/pts/3) on the first line of standard output; point
+/// `motorid upload --port` and `motorid record --port` at it. Runs until interrupted.
 #[derive(clap::Args, Debug)]
-pub struct Args {}
+pub struct Args {
+    /// Serve on a new pseudo-terminal (the only transport for now).
+    #[arg(long)]
+    pub pty: bool,
+    /// Time factor: 1 = real time (one 12 ms step every 12 ms), 10 = ten times faster.
+    #[arg(long, default_value_t = 1.0)]
+    pub speed: f64,
+    /// Add a physical effect to the emulated motor (`NAME` or `NAME:key=value,...`, as in
+    /// `motorid simulate --effect`).
+    #[arg(long = "effect", value_name = "SPEC")]
+    pub effects: Vec<String>,
+    /// Seed of the sensor noise and of the excitation signals.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Keep the emulated coefficient flash in this file (survives restarts).
+    #[arg(long, value_name = "FILE")]
+    pub flash: Option<PathBuf>,
+}
 
-pub fn run(_args: Args) -> Result<()> {
-    bail!("'motorid board' is not implemented yet")
+pub fn run(args: Args) -> Result<()> {
+    if !args.pty {
+        bail!("choose how the emulated board is reached: --pty (a pseudo-terminal)");
+    }
+    if !(args.speed.is_finite() && args.speed > 0.0) {
+        bail!("--speed: must be a positive number (got {})", args.speed);
+    }
+    let mut plant = EmulatorConfig::paper();
+    plant.seed = args.seed;
+    for spec in &args.effects {
+        let s: EffectSpec = EffectSpec::parse(spec).with_context(|| format!("--effect {spec}"))?;
+        plant.effects.push(s.to_effect());
+    }
+    let mut sim = BoardSim::new(plant, RamFlash::new(args.flash.clone()))?;
+    let pty = Pty::open()?;
+    println!("{}", pty.path.display());
+    std::io::stdout().flush()?;
+    eprintln!(
+        "emulated board on {} (time ×{}, coefficients: {}); stop with Ctrl-C",
+        pty.path.display(),
+        args.speed,
+        if sim.coeff_seq() == 0 {
+            "none".to_string()
+        } else {
+            format!("slot sequence {}", sim.coeff_seq())
+        }
+    );
+
+    // Reader: bytes from the host. Writer: bytes to the host; when nobody reads and the
+    // terminal's buffer is full, output is dropped, as a UART with nobody listening would.
+    let mut master_r = pty.master.try_clone().context("cannot duplicate the pty")?;
+    let mut master_w = pty.master.try_clone().context("cannot duplicate the pty")?;
+    let (in_tx, in_rx) = mpsc::channel::<Vec<u8>>();
+    std::thread::spawn(move || {
+        let mut buf = [0u8; 256];
+        while let Ok(n) = master_r.read(&mut buf) {
+            if n == 0 || in_tx.send(buf[..n].to_vec()).is_err() {
+                break;
+            }
+        }
+    });
+    let (out_tx, out_rx) = mpsc::sync_channel::<Vec<u8>>(4096);
+    std::thread::spawn(move || {
+        while let Ok(bytes) = out_rx.recv() {
+            if master_w.write_all(&bytes).is_err() {
+                break;
+            }
+        }
+    });
+
+    let period = Duration::from_secs_f64(f64::from(control::CONTROL_PERIOD_S) / args.speed);
+    let mut next = Instant::now() + period;
+    loop {
+        // Wait for host bytes until the next period starts.
+        loop {
+            let now = Instant::now();
+            if now >= next {
+                break;
+            }
+            match in_rx.recv_timeout(next - now) {
+                Ok(bytes) => sim.receive(&bytes),
+                Err(mpsc::RecvTimeoutError::Timeout) => break,
+                Err(mpsc::RecvTimeoutError::Disconnected) => bail!("the pseudo-terminal closed"),
+            }
+            flush(&mut sim, &out_tx);
+        }
+        sim.tick();
+        flush(&mut sim, &out_tx);
+        next += period;
+        let now = Instant::now();
+        if next + 10 * period < now {
+            // Far behind (a slow machine at a high --speed): do not try to catch up.
+            next = now + period;
+        }
+    }
+}
+
+fn flush(sim: &mut BoardSim, out: &mpsc::SyncSender<Vec<u8>>) {
+    let bytes = sim.take_output();
+    if !bytes.is_empty() {
+        let _ = out.try_send(bytes);
+    }
 }

@@ -314,6 +314,13 @@ fn forward_select(
         r
     };
     let base_resid = resid_of(&base, &beta0);
+    if let Some(path) = std::env::var_os("MOTORID_DIAG_DUMP") {
+        let mut out = String::new();
+        for (k, r) in base_resid.iter().enumerate() {
+            out.push_str(&format!("{k},{r},{}\n", all_cols.iter().map(|c| c[k].to_string()).collect::<Vec<_>>().join(",")));
+        }
+        let _ = std::fs::write(format!("{}_{:?}.csv", path.to_string_lossy(), data.eq), out);
+    }
     let n_eff_base = stats::effective_n(&base_resid);
     let units = Units {
         r: r_elec.unwrap_or(MotorParams::<f64>::paper().r),

@@ -25,6 +25,7 @@ pub mod sensors;
 pub mod signals;
 
 pub use plant::{LoadInputs, Plant, TrueState};
+pub use sensors::HallEdge;
 pub use signals::{signal, signal_at, SignalKind, SAMPLE_PERIOD};
 
 use crate::effect_spec::EffectSpec;

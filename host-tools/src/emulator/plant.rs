@@ -24,8 +24,17 @@
 //! equilibria (its fixed points are the model's steady states). In presliding the paper's
 //! σ0, σ1 make the rotor creep with the time constant σ1/σ0 ≈ 70 ms before breakaway: a
 //! visible stiction delay at every reversal, which we keep (it is the paper's model).
+//!
+//! A second consequence of the paper's σ1 (checked, kept, documented): in sliding, z tracks
+//! `s(ω)/σ0`, so `σ1·ż ≈ σ1·s'(ω)·ω̇/σ0` acts as an inertia of `σ1·s'(ω)/σ0`, negative on the
+//! Stribeck slope. At |ω| = v0/√2 ≈ 2.6 rad/s it is −2.86e-4 kg·m², leaving an effective
+//! inertia of only 1.4e-5 kg·m² (the model would be ill-posed with J < 2.9e-4). Linearised
+//! there, the rotor has a lightly damped friction mode near 100 Hz. The 0.2 ms backward
+//! Euler damps it; finer steps resolve some chatter at 1.5-4 rad/s. The difference between
+//! 0.2 and 0.1 ms there is ~0.03 rad/s rms, 4% of the 0.79 rad/s velocity resolution of the
+//! board, so the logs do not depend on it (tests/tests/simulate_physics.rs).
 use super::scalar_root::find_root;
-use super::sensors::{CurrentSensor, HallSensor};
+use super::sensors::{CurrentSensor, HallEdge, HallSensor};
 use super::EmulatorConfig;
 use control::effects::{total_sensor_offset, total_torque, total_voltage_loss, EffectInputs};
 use control::lugre::{z_step, LugreParams};
@@ -153,7 +162,7 @@ impl Plant {
         self.state.i = i;
         self.state.z = z;
         self.omega_prev = omega;
-        self.hall.track(theta);
+        self.hall.track(theta, self.state.t);
     }
 
     /// The 3-bit Hall state now.
@@ -161,10 +170,10 @@ impl Plant {
         self.hall.state()
     }
 
-    /// Hall states entered since the last call, in order (each one edge). The first call
-    /// starts the recording; feed them to a decoder to see every edge, as the board's
-    /// edge interrupt does.
-    pub fn take_hall_edges(&mut self) -> Vec<u8> {
+    /// Hall edges (time, state entered) since the last call, in order. The first call
+    /// starts the recording; feed them to a decoder / edge-timing estimator to see every
+    /// edge, as the board's edge interrupt does.
+    pub fn take_hall_edges(&mut self) -> Vec<HallEdge> {
         self.hall.take_edges()
     }
 
@@ -258,6 +267,6 @@ impl Plant {
             load,
             applied_voltage: v - total_voltage_loss(&self.cfg.effects, i),
         };
-        self.hall.track(theta);
+        self.hall.track(theta, t1);
     }
 }

@@ -35,6 +35,16 @@ pub fn hall_code(sector: i64) -> u8 {
         .unwrap_or(0)
 }
 
+/// One Hall edge: the time the rotor crossed a sector boundary (interpolated within the fine
+/// step) and the state entered.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HallEdge {
+    /// Time [s].
+    pub t: f64,
+    /// Hall state entered (3 bits).
+    pub state: u8,
+}
+
 /// Hall sensors on the true rotor angle, and the firmware's decoder
 /// (`control::hall::HallDecoder`) reading them.
 #[derive(Debug, Clone)]
@@ -46,8 +56,10 @@ pub struct HallSensor {
     sector0: i64,
     decoder: HallDecoder,
     /// Hall states entered since the last [`HallSensor::take_edges`], if anybody asks.
-    edges: Vec<u8>,
+    edges: Vec<HallEdge>,
     keep_edges: bool,
+    /// Last tracked angle and time (for edge times).
+    last: (f64, f64),
 }
 
 impl HallSensor {
@@ -64,6 +76,7 @@ impl HallSensor {
             decoder,
             edges: Vec::new(),
             keep_edges: false,
+            last: (theta, 0.0),
         }
     }
 
@@ -72,18 +85,32 @@ impl HallSensor {
         self.step
     }
 
-    /// Follow the rotor to `theta`: every boundary crossed is one edge for the decoder.
-    pub fn track(&mut self, theta: f64) {
+    /// Follow the rotor to `theta` at time `t`: every boundary crossed is one edge for the
+    /// decoder, timed by linear interpolation from the previous call.
+    pub fn track(&mut self, theta: f64, t: f64) {
         if !theta.is_finite() {
             return;
         }
+        let (th0, t0) = self.last;
+        self.last = (theta, t);
         let target = sector_index(theta, self.step);
         while self.sector != target {
-            self.sector += (target - self.sector).signum();
+            let dir = (target - self.sector).signum();
+            // Boundary between sectors k and k+1 is at (k + 1/2)·step.
+            let boundary = (self.sector as f64 + 0.5 * dir as f64) * self.step;
+            self.sector += dir;
             let code = hall_code(self.sector);
             self.decoder.update(code);
             if self.keep_edges {
-                self.edges.push(code);
+                let frac = if theta != th0 {
+                    ((boundary - th0) / (theta - th0)).clamp(0.0, 1.0)
+                } else {
+                    1.0
+                };
+                self.edges.push(HallEdge {
+                    t: t0 + frac * (t - t0),
+                    state: code,
+                });
             }
         }
     }
@@ -109,8 +136,8 @@ impl HallSensor {
         self.decoder.fault_count() as u64
     }
 
-    /// Hall states entered since the last call (in order). The first call starts recording.
-    pub fn take_edges(&mut self) -> Vec<u8> {
+    /// Hall edges since the last call (in order). The first call starts recording.
+    pub fn take_edges(&mut self) -> Vec<HallEdge> {
         self.keep_edges = true;
         std::mem::take(&mut self.edges)
     }
@@ -164,17 +191,17 @@ mod tests {
         let mut h = HallSensor::new(11, 0.0);
         let step = h.step();
         for k in 0..=300 {
-            h.track(k as f64 * 0.013);
+            h.track(k as f64 * 0.013, 0.0);
         }
         let th = 300.0 * 0.013;
         assert!((h.angle() - th).abs() <= step / 2.0 + 1e-12);
         for k in (0..=300).rev() {
-            h.track(k as f64 * 0.013 - 1.0);
+            h.track(k as f64 * 0.013 - 1.0, 0.0);
         }
         assert!((h.angle() + 1.0).abs() <= step / 2.0 + 1e-12);
         assert_eq!(h.faults(), 0);
         // A jump of many sectors at once is still every edge.
-        h.track(50.0);
+        h.track(50.0, 0.0);
         assert_eq!(h.faults(), 0);
         assert_eq!(h.angle(), h.ideal_angle());
     }

@@ -147,13 +147,23 @@ pub fn parameter_rows(m: &Model, free: &[Free], std_err: &[Option<f64>]) -> Vec<
             p.std_err = std_err.get(k).copied().flatten();
             if let Some(se) = p.std_err {
                 // Relative standard error above 50 %: the data does not pin it down.
-                if !se.is_finite() || se > 0.5 * p.value.abs().max(1e-12) {
+                if !se.is_finite() || se > 0.5 * p.value.abs() {
                     p.identifiable = false;
-                    p.note = format!(
-                        "relative standard error {:.0} %: the data barely constrains it",
-                        100.0 * se / p.value.abs().max(1e-300)
-                    );
+                    p.note = if p.value.abs() > 1e-12 && se.is_finite() {
+                        format!(
+                            "relative standard error {:.0} %: the data barely constrains it",
+                            100.0 * se / p.value.abs()
+                        )
+                    } else {
+                        "the data does not constrain it (flat cost)".to_string()
+                    };
                 }
+            }
+            let v = p.value;
+            if v <= f.lo || v >= f.hi {
+                let b = if v <= f.lo { f.lo } else { f.hi };
+                let sep = if p.note.is_empty() { "" } else { "; " };
+                p.note = format!("{}{sep}at its bound {b}", p.note);
             }
             p
         })

@@ -21,6 +21,9 @@ use control::effects::{smooth_sign, VELOCITY_EPS};
 
 /// Shortest run of constant input used as a steady-state point [samples]: 1 s at 12 ms.
 const MIN_RUN: usize = 80;
+/// Samples skipped at the start of a constant-input run (transient): 0.5 s at 12 ms, many
+/// mechanical time constants (J·R/(K_t·K_b) ≈ 13 ms) and presliding creeps (σ1/σ0 ≈ 70 ms).
+const SETTLE: usize = 40;
 /// Quasi-steady window [samples] for logs without constant-input runs: 0.6 s.
 const QS_WINDOW: usize = 50;
 
@@ -31,8 +34,19 @@ pub struct SteadyPoint {
     pub friction: f64,
 }
 
-/// Steady-state points of a log (see the module doc), with the motor constants of `m`.
-pub fn steady_points(m: &Model, log: &MotorLog) -> Vec<SteadyPoint> {
+/// Steady-state points of the logs: constant-input runs if there are at least 6 over all
+/// logs, else quasi-steady windows.
+pub fn all_steady_points(m: &Model, logs: &[MotorLog]) -> Vec<SteadyPoint> {
+    let runs: Vec<SteadyPoint> = logs.iter().flat_map(|l| steady_points(m, l, false)).collect();
+    if runs.len() >= 6 {
+        return runs;
+    }
+    logs.iter().flat_map(|l| steady_points(m, l, true)).collect()
+}
+
+/// Steady-state points of a log (see the module doc), with the motor constants of `m`:
+/// constant-input runs, or with `quasi` quasi-steady windows.
+pub fn steady_points(m: &Model, log: &MotorLog, quasi: bool) -> Vec<SteadyPoint> {
     let res = super::sensor_chain::hall_resolution(log).max(m.sensor.hall_resolution_rad);
     let offset = control::effects::total_sensor_offset(&m.effects);
     let torque = |k: usize| -> Option<f64> {
@@ -46,18 +60,20 @@ pub fn steady_points(m: &Model, log: &MotorLog) -> Vec<SteadyPoint> {
     let n = log.len();
     // Runs of constant input.
     let mut a = 0;
-    while a < n {
+    while a < n && !quasi {
         let mut b = a + 1;
         while b < n && log.u[b] == log.u[a] {
             b += 1;
         }
         if b - a >= MIN_RUN {
-            let s = a + (b - a) / 2;
+            // Skip the transient (the first SETTLE samples or a third of the run), then the
+            // velocity is the least-squares slope of the angle: it averages the Hall steps.
+            let s = a + SETTLE.min((b - a) / 3);
             let e = b - 1;
-            let span = log.t[e] - log.t[s];
-            let w = (log.theta[e] - log.theta[s]) / span;
+            let moved = (log.theta[e] - log.theta[s]).abs();
             // Moving by less than two Hall steps: stuck (or unresolvable), not sliding.
-            if (log.theta[e] - log.theta[s]).abs() > 2.0 * res.max(1e-9) {
+            if moved > 2.0 * res.max(1e-9) {
+                let w = slope(&log.t[s..=e], &log.theta[s..=e]);
                 let tq: Option<Vec<f64>> = (s..=e).map(torque).collect();
                 if let Some(tq) = tq {
                     pts.push(SteadyPoint {
@@ -69,7 +85,7 @@ pub fn steady_points(m: &Model, log: &MotorLog) -> Vec<SteadyPoint> {
         }
         a = b;
     }
-    if pts.len() >= 6 {
+    if !quasi {
         return pts;
     }
     // Quasi-steady windows: velocity from the angle over each half, inertia corrected.
@@ -97,9 +113,29 @@ pub fn steady_points(m: &Model, log: &MotorLog) -> Vec<SteadyPoint> {
     pts
 }
 
+/// Least-squares slope of y over t.
+fn slope(t: &[f64], y: &[f64]) -> f64 {
+    let n = t.len() as f64;
+    let tm = t.iter().sum::<f64>() / n;
+    let ym = y.iter().sum::<f64>() / n;
+    let num: f64 = t.iter().zip(y).map(|(a, b)| (a - tm) * (b - ym)).sum();
+    let den: f64 = t.iter().map(|a| (a - tm).powi(2)).sum();
+    if den > 0.0 {
+        num / den
+    } else {
+        0.0
+    }
+}
+
 /// Fit the Stribeck curve `s(ω)·sgn(ω) + α2·ω` to steady points. Returns the parameters
 /// (σ0, σ1 untouched) and the std errors of (α0, α1, α2, v0).
-pub fn fit_static(pts: &[SteadyPoint], init: LugreParams) -> Result<(LugreParams, Vec<f64>)> {
+/// With `fix_alpha2` the viscous coefficient stays at `init.alpha2` (steady points over a
+/// narrow velocity range cannot separate it from α0).
+pub fn fit_static(
+    pts: &[SteadyPoint],
+    init: LugreParams,
+    fix_alpha2: bool,
+) -> Result<(LugreParams, Vec<f64>)> {
     if pts.len() < 5 {
         bail!(
             "only {} steady-state points: the static LuGre curve needs constant-input runs of \
@@ -125,8 +161,12 @@ pub fn fit_static(pts: &[SteadyPoint], init: LugreParams) -> Result<(LugreParams
             .collect())
     };
     let x0 = [init.alpha0, init.alpha1, init.alpha2, init.v0];
-    let lo = [0.0, -10.0, 0.0, 0.05];
-    let hi = [10.0, 10.0, 10.0, 500.0];
+    let mut lo = [0.0, -10.0, 0.0, 0.05];
+    let mut hi = [10.0, 10.0, 10.0, 500.0];
+    if fix_alpha2 {
+        lo[2] = init.alpha2;
+        hi[2] = init.alpha2;
+    }
     let scale = [
         init.alpha0.abs().max(1e-3),
         init.alpha1.abs().max(1e-3),
@@ -165,7 +205,6 @@ pub fn fit_static(pts: &[SteadyPoint], init: LugreParams) -> Result<(LugreParams
 pub fn fit(req: &FitRequest) -> Result<Model> {
     let mut m = skeleton(req, ModelKind::Lugre);
     let (b, fc) = weak_estimate(&mut m, req.logs, true);
-    let pts: Vec<SteadyPoint> = req.logs.iter().flat_map(|l| steady_points(&m, l)).collect();
     // Initial bristles: deflection of 1 mrad at breakaway, critically damped with the rotor
     // (σ1 = 2·sqrt(σ0·J)), the usual LuGre starting point (Canudas de Wit et al. 1995).
     let s_guess = fc.max(1e-4);
@@ -178,14 +217,15 @@ pub fn fit(req: &FitRequest) -> Result<Model> {
         sigma0,
         sigma1: 2.0 * (sigma0 * m.motor.j).sqrt(),
     };
-    let (lugre, static_se) = fit_static(&pts, init)?;
+    let pts: Vec<SteadyPoint> = all_steady_points(&m, req.logs);
+    let (lugre, static_se) = fit_static(&pts, init, false)?;
     m.lugre = Some(lugre);
     let static_free: Vec<Free> = ["alpha0", "alpha1", "alpha2", "v0"]
         .into_iter()
         .map(|f| Free {
             slot: Slot::Lugre(f),
-            lo: 0.0,
-            hi: 0.0,
+            lo: f64::NEG_INFINITY,
+            hi: f64::INFINITY,
         })
         .collect();
     let se: Vec<Option<f64>> = static_se.iter().map(|v| Some(*v)).collect();
@@ -204,6 +244,11 @@ pub fn fit(req: &FitRequest) -> Result<Model> {
     // Dynamic step.
     let mut free = vec![
         Free {
+            slot: Slot::Lugre("alpha2"),
+            lo: 0.0,
+            hi: 10.0,
+        },
+        Free {
             slot: Slot::Lugre("sigma0"),
             lo: 1.0,
             hi: 1e6,
@@ -218,6 +263,32 @@ pub fn fit(req: &FitRequest) -> Result<Model> {
     free.extend(effect_free(&m));
     let mut dyn_rows =
         sim_error::refine(&mut m, &free, req.logs, nlsq::Options::default(), &mut |_, _| {})?;
+    // Static curve again with the refined K_t and J (the friction points scale with K_t).
+    // α2 stays at the value the whole data gave when the points span a narrow velocity range.
+    let pts2: Vec<SteadyPoint> = all_steady_points(&m, req.logs);
+    let (wmin, wmax) = pts2.iter().fold((f64::INFINITY, 0.0f64), |(a, b), p| {
+        (a.min(p.omega.abs()), b.max(p.omega.abs()))
+    });
+    let narrow = wmax < 5.0 * wmin;
+    let lugre = match fit_static(&pts2, m.lugre.unwrap_or(lugre), narrow) {
+        Ok((l, se2)) => {
+            for (r, v) in rows.iter_mut().zip(&se2) {
+                r.std_err = Some(*v);
+            }
+            if narrow {
+                rows[2].std_err = None;
+                rows[2].note = "from the free-run simulation error on all the data (the \
+                                steady points span too narrow a velocity range)"
+                    .into();
+            }
+            for (r, v) in rows.iter_mut().zip([l.alpha0, l.alpha1, l.alpha2, l.v0]) {
+                r.value = v;
+            }
+            m.lugre = Some(l);
+            l
+        }
+        Err(_) => lugre,
+    };
     let res = m.sensor.hall_resolution_rad;
     for r in &mut dyn_rows {
         if r.name == "sigma0" && !r.identifiable {
@@ -229,6 +300,7 @@ pub fn fit(req: &FitRequest) -> Result<Model> {
             );
         }
     }
+    dyn_rows.retain(|r| r.name != "alpha2");
     rows.extend(dyn_rows);
     rows.extend(fixed_rows(&m));
     m.parameters = rows;

@@ -4,7 +4,9 @@
 //! (see its README.md for origins and licences); nothing is copied into the repository.
 pub mod butterworth;
 pub mod emps;
+pub mod emps_loop;
 pub mod omni_dc;
+pub mod plots;
 pub mod regression;
 pub mod screw_drives;
 pub mod static_curve;

@@ -1,0 +1,238 @@
+//! The serial link client: talks to the board (or `motorid board --pty`) with the frames of
+//! `control::frame` over a serial device, with timeouts and retries.
+use anyhow::{anyhow, bail, Context, Result};
+use control::frame::{
+    self, BoardMsg, Excitation, FrameDecoder, HostMsg, Nack, Sample, CHUNK_LEN, MAX_ENCODED_LEN,
+};
+use std::io::{Read, Write};
+use std::time::{Duration, Instant};
+
+/// Baud rate of the board's link (ST-LINK virtual COM port, USART2 at 115200 8N1).
+pub const BAUD: u32 = 115_200;
+/// How long to wait for an answer before resending a request. 115200 baud moves a 64-byte
+/// chunk in ~7 ms; the board answers within one 12 ms period; 500 ms leaves ample margin.
+pub const ANSWER_TIMEOUT: Duration = Duration::from_millis(500);
+/// Attempts per request (the first and 4 retries).
+pub const ATTEMPTS: usize = 5;
+
+/// What the board says about itself.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Identity {
+    pub protocol: u16,
+    pub firmware: String,
+    pub model: control::blob::ModelKind,
+    pub coeff_seq: u32,
+}
+
+/// An open link to a board.
+pub struct Link {
+    port: Box<dyn serialport::SerialPort>,
+    name: String,
+    decoder: FrameDecoder,
+    /// Samples that arrived while waiting for an answer.
+    pub pending_samples: Vec<Sample>,
+}
+
+impl Link {
+    /// Open the serial device `path` (e.g. /dev/ttyACM0, or the path `motorid board --pty`
+    /// printed).
+    pub fn open(path: &str) -> Result<Link> {
+        let port = serialport::new(path, BAUD)
+            .timeout(Duration::from_millis(20))
+            .open()
+            .with_context(|| format!("{path}: cannot open the serial port"))?;
+        Ok(Link {
+            port,
+            name: path.to_string(),
+            decoder: FrameDecoder::new(),
+            pending_samples: Vec::new(),
+        })
+    }
+
+    /// The device path.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// Send one message.
+    pub fn send(&mut self, msg: &HostMsg) -> Result<()> {
+        let mut buf = [0u8; MAX_ENCODED_LEN];
+        let f = frame::encode_frame(msg, &mut buf).map_err(|e| anyhow!("{e}"))?;
+        self.port
+            .write_all(f)
+            .and_then(|_| self.port.flush())
+            .with_context(|| format!("{}: cannot write", self.name))
+    }
+
+    /// The next message from the board, or `None` after `timeout` without one. Frames that
+    /// do not decode are skipped (the board's stream resynchronises at the next zero byte).
+    pub fn recv(&mut self, timeout: Duration) -> Result<Option<BoardMsg>> {
+        let deadline = Instant::now() + timeout;
+        let mut byte = [0u8; 1];
+        loop {
+            match self.port.read(&mut byte) {
+                Ok(1) => {
+                    if let Some(Ok(msg)) = self.decoder.push::<BoardMsg>(byte[0]) {
+                        return Ok(Some(msg));
+                    }
+                }
+                Ok(_) => {}
+                Err(e) if e.kind() == std::io::ErrorKind::TimedOut => {}
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                Err(e) => return Err(e).with_context(|| format!("{}: cannot read", self.name)),
+            }
+            if Instant::now() >= deadline {
+                return Ok(None);
+            }
+        }
+    }
+
+    /// Send `msg` and return the board's answer (not a sample or a warning), resending on
+    /// silence.
+    pub fn request(&mut self, msg: &HostMsg) -> Result<BoardMsg> {
+        for _ in 0..ATTEMPTS {
+            self.send(msg)?;
+            let deadline = Instant::now() + ANSWER_TIMEOUT;
+            while let Some(left) = deadline.checked_duration_since(Instant::now()) {
+                match self.recv(left)? {
+                    Some(BoardMsg::Sample(s)) => self.pending_samples.push(s),
+                    Some(BoardMsg::Warning(_)) => {}
+                    Some(BoardMsg::Fault(f)) => {
+                        bail!("{}: the board reports a fault: {f:?}", self.name)
+                    }
+                    Some(other) => return Ok(other),
+                    None => break,
+                }
+            }
+        }
+        bail!(
+            "{}: no answer from the board after {ATTEMPTS} attempts (is it connected, powered and \
+             running the motorid firmware?)",
+            self.name
+        )
+    }
+
+    /// Ask the board who it is.
+    pub fn identify(&mut self) -> Result<Identity> {
+        match self.request(&HostMsg::Identify)? {
+            BoardMsg::Identity {
+                protocol,
+                firmware,
+                model,
+                coeff_seq,
+            } => {
+                if protocol != frame::PROTOCOL_VERSION {
+                    bail!(
+                        "{}: the board speaks protocol {protocol}, this motorid speaks {}; update one of them",
+                        self.name,
+                        frame::PROTOCOL_VERSION
+                    );
+                }
+                Ok(Identity {
+                    protocol,
+                    firmware: firmware.as_str().to_string(),
+                    model,
+                    coeff_seq,
+                })
+            }
+            other => bail!("{}: unexpected answer to Identify: {other:?}", self.name),
+        }
+    }
+
+    fn expect(
+        &mut self,
+        msg: &HostMsg,
+        what: &str,
+        ok: impl Fn(&BoardMsg) -> bool,
+    ) -> Result<BoardMsg> {
+        let ans = self.request(msg)?;
+        if ok(&ans) {
+            return Ok(ans);
+        }
+        match ans {
+            BoardMsg::Nack(n) => bail!("{}: the board refused {what}: {}", self.name, nack_text(n)),
+            other => bail!("{}: unexpected answer to {what}: {other:?}", self.name),
+        }
+    }
+
+    /// Upload a blob: begin, chunks, commit. `progress(bytes_sent)` after each chunk.
+    /// Returns the flash slot sequence number the board committed.
+    pub fn upload(&mut self, blob: &[u8], mut progress: impl FnMut(usize)) -> Result<u32> {
+        let crc = control::blob::CRC32.checksum(blob);
+        let total_len = u16::try_from(blob.len())
+            .map_err(|_| anyhow!("the blob is too long ({} bytes)", blob.len()))?;
+        self.expect(
+            &HostMsg::UploadBegin { total_len, crc },
+            "the upload",
+            |m| matches!(m, BoardMsg::UploadAck { index: 0xFFFF }),
+        )?;
+        let mut sent = 0;
+        for (index, chunk) in blob.chunks(CHUNK_LEN).enumerate() {
+            let index = index as u16;
+            let mut data = heapless_chunk();
+            if let HostMsg::UploadChunk { data: d, .. } = &mut data {
+                d.extend_from_slice(chunk)
+                    .map_err(|_| anyhow!("chunk longer than {CHUNK_LEN} bytes"))?;
+            }
+            if let HostMsg::UploadChunk { index: i, .. } = &mut data {
+                *i = index;
+            }
+            self.expect(
+                &data,
+                "a chunk of the upload",
+                |m| matches!(m, BoardMsg::UploadAck { index: i } if *i == index),
+            )?;
+            sent += chunk.len();
+            progress(sent);
+        }
+        match self.expect(&HostMsg::UploadCommit, "the commit", |m| {
+            matches!(m, BoardMsg::Committed { .. })
+        })? {
+            BoardMsg::Committed { seq } => Ok(seq),
+            _ => unreachable!("expect() checked the variant"),
+        }
+    }
+
+    /// Start an open-loop experiment (the board streams samples until it ends).
+    pub fn start_experiment(&mut self, signal: Excitation, duration_s: f32) -> Result<()> {
+        self.pending_samples.clear();
+        self.expect(
+            &HostMsg::StartExperiment { signal, duration_s },
+            "the experiment",
+            |m| matches!(m, BoardMsg::Ack),
+        )?;
+        Ok(())
+    }
+
+    /// A request answered by a plain `Ack`.
+    pub fn command(&mut self, msg: &HostMsg, what: &str) -> Result<()> {
+        self.expect(msg, what, |m| matches!(m, BoardMsg::Ack))?;
+        Ok(())
+    }
+}
+
+/// An empty `UploadChunk` (its buffer type comes from `control::frame`).
+fn heapless_chunk() -> HostMsg {
+    HostMsg::UploadChunk {
+        index: 0,
+        data: Default::default(),
+    }
+}
+
+/// A refusal in words.
+pub fn nack_text(n: Nack) -> String {
+    match n {
+        Nack::NoUpload => "no upload in progress".into(),
+        Nack::TooLong => "the blob is too long for the board".into(),
+        Nack::OutOfOrder { expected } => format!("chunk out of order (expected {expected})"),
+        Nack::Conflict => "a chunk was resent with different bytes".into(),
+        Nack::Incomplete => "the upload is incomplete".into(),
+        Nack::BadCrc => "the received bytes do not match the blob's CRC".into(),
+        Nack::BadBlob => {
+            "the blob does not decode on the board (corrupted or wrong version)".into()
+        }
+        Nack::Busy => "the motor is running; stop it first".into(),
+        Nack::Flash => "writing the flash failed".into(),
+        Nack::Faulted => "a fault is latched; clear it first".into(),
+    }
+}

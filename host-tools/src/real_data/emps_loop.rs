@@ -1,0 +1,159 @@
+//! The generic identification loop on the EMPS benchmark: the same code paths as
+//! `motorid fit` / `diagnose` / `fit --add` (`ident::fit`, `diagnose::diagnose`,
+//! `ident::freerun`), run on data nobody here recorded, read with
+//! `--map t=t_s,u=vir_V,theta=qm_m --plant torque`.
+//!
+//! With `u = vir` [V] and the model's input gain fixed to 1, every force parameter comes out in
+//! volts of `vir`; multiplied by gτ = 35.15 N/V it is in newtons (M = gτ·J, Fv = gτ·b, ...).
+//!
+//! The benchmark's test is a free run `vir` → `qm` after a 20-sample initialisation window
+//! ([`benchmark_rmse_mm`]): the generic free-run simulation is started at sample 19 from the
+//! state that a straight line through the first 20 measured positions gives.
+use super::emps;
+use crate::diagnose::{self, Diagnosis, Structure};
+use crate::effect_spec::EffectSpec;
+use crate::ident::{self, freerun, FitRequest};
+use crate::log::{MotorLog, Plant};
+use crate::model::{Model, ModelKind};
+use anyhow::Result;
+use control::effects::Effect;
+
+/// Most refits of the loop (each adds what the previous diagnosis found).
+pub const MAX_ROUNDS: usize = 3;
+
+/// What the diagnosis sees of a model: its effects plus its viscous friction.
+pub fn structure_of(m: &Model) -> Structure {
+    let mut effects = m.effects.clone();
+    if m.kind == ModelKind::Linear && !effects.iter().any(|e| matches!(e, Effect::Viscous { .. })) {
+        effects.push(Effect::Viscous { b: m.viscous });
+    }
+    Structure {
+        plant: m.plant,
+        effects,
+        kt: m.motor.kt,
+    }
+}
+
+/// The benchmark's free-run test of a generic model on an EMPS log: RMSE [mm] of the
+/// simulated position from sample 20 on, and the simulated position (the first 19 samples are
+/// the measurement).
+pub fn benchmark_rmse_mm(model: &Model, log: &MotorLog) -> Result<(f64, Vec<f64>)> {
+    let n0 = emps::INIT_WINDOW;
+    let dt = log.sample_period();
+    let (q0, v0) = emps::initial_state(&log.theta, dt, n0);
+    let mut tail = MotorLog {
+        source: log.source.clone(),
+        meta: log.meta.clone(),
+        t: log.t[n0 - 1..].to_vec(),
+        u: log.u[n0 - 1..].to_vec(),
+        i: None,
+        theta: log.theta[n0 - 1..].to_vec(),
+        // Only its first value is used: the free run's initial velocity.
+        omega: Some(vec![v0; log.len() - n0 + 1]),
+        extra: Vec::new(),
+    };
+    tail.theta[0] = q0;
+    let pred = freerun::simulate(model, &tail)?;
+    let mut sim = log.theta[..n0 - 1].to_vec();
+    sim.extend(pred.theta);
+    let rmse = emps::rms_diff(&log.theta[n0..], &sim[n0..]);
+    Ok((1000.0 * rmse, sim))
+}
+
+/// The rigid-axis numbers of a generic model, in newtons (×gτ): M, Fv, Fc, OF and the
+/// asymmetry (dv, dc) when present.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Physical {
+    pub m: f64,
+    pub fv: f64,
+    pub fc: Option<f64>,
+    pub offset: Option<f64>,
+    pub asym: Option<(f64, f64)>,
+}
+
+/// Convert a generic model fitted with `u = vir` to newtons.
+pub fn physical(m: &Model, gain: f64) -> Physical {
+    let mut p = Physical {
+        m: gain * m.motor.j / m.motor.kt,
+        fv: gain * m.viscous / m.motor.kt,
+        ..Physical::default()
+    };
+    for e in &m.effects {
+        match *e {
+            Effect::Coulomb { fc } => p.fc = Some(gain * fc),
+            Effect::Viscous { b } => p.fv += gain * b,
+            Effect::Offset { t0 } => p.offset = Some(gain * t0),
+            Effect::Asymmetry { dv, dc } => p.asym = Some((gain * dv, gain * dc)),
+            _ => {}
+        }
+    }
+    p
+}
+
+/// One round of the loop.
+#[derive(Debug, Clone)]
+pub struct Round {
+    /// Effects added to the linear model (specs as `fit --add` takes them).
+    pub adds: Vec<String>,
+    pub model: Model,
+    /// Paper fit % of angle and velocity on the training and test logs.
+    pub train: ident::Scores,
+    pub test: ident::Scores,
+    /// Benchmark RMSE [mm] on the test log.
+    pub rmse_test_mm: f64,
+    /// The test's simulated position.
+    pub sim_test: Vec<f64>,
+    /// Diagnosis of this model on the training log.
+    pub diagnosis: Diagnosis,
+}
+
+/// Fit linear → diagnose → add what was found → refit, until nothing is found or
+/// [`MAX_ROUNDS`] refits. `progress` is called with a line per step.
+pub fn run(train: &MotorLog, test: &MotorLog, progress: &mut dyn FnMut(&str)) -> Result<Vec<Round>> {
+    let mut adds: Vec<EffectSpec> = Vec::new();
+    let mut rounds = Vec::new();
+    for round in 0..=MAX_ROUNDS {
+        let labels: Vec<String> = adds.iter().map(|a| a.to_string()).collect();
+        progress(&format!(
+            "EMPS: fitting linear{}",
+            if labels.is_empty() {
+                String::new()
+            } else {
+                format!(" --add {}", labels.join(" --add "))
+            }
+        ));
+        let rep = ident::fit(&FitRequest {
+            kind: ModelKind::Linear,
+            logs: std::slice::from_ref(train),
+            validate: &[],
+            adds: &adds,
+            plant: Plant::Torque,
+        })?;
+        let model = rep.model;
+        progress("EMPS: diagnosing");
+        let diagnosis =
+            diagnose::diagnose(train, &structure_of(&model), &diagnose::Options::default());
+        let (rmse_test_mm, sim_test) = benchmark_rmse_mm(&model, test)?;
+        let found: Vec<EffectSpec> = diagnosis
+            .effects
+            .iter()
+            .filter_map(|f| EffectSpec::parse(&f.spec).ok())
+            .collect();
+        rounds.push(Round {
+            adds: labels,
+            train: ident::score(&model, train)?,
+            test: ident::score(&model, test)?,
+            model,
+            rmse_test_mm,
+            sim_test,
+            diagnosis,
+        });
+        if found.is_empty() || round == MAX_ROUNDS {
+            break;
+        }
+        // Keep the bare names: the refit estimates every added effect afresh from the specs'
+        // values as starting points.
+        adds.extend(found);
+    }
+    Ok(rounds)
+}
