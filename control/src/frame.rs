@@ -271,7 +271,7 @@ fn decode_body<M: DeserializeOwned>(body: &[u8]) -> Result<M, FrameError> {
         return Err(FrameError::Crc);
     }
     match postcard::take_from_bytes::<M>(payload) {
-        Ok((m, rest)) if rest.is_empty() => Ok(m),
+        Ok((m, [])) => Ok(m),
         _ => Err(FrameError::Payload),
     }
 }

@@ -92,14 +92,14 @@ impl<F: NorFlash> Slots<F> {
     pub fn new(flash: F, base: u32, slot_size: u32) -> Result<Self, SlotError<F::Error>> {
         let erase = F::ERASE_SIZE as u32;
         let ok = erase > 0
-            && base % erase == 0
-            && slot_size % erase == 0
+            && base.is_multiple_of(erase)
+            && slot_size.is_multiple_of(erase)
             && slot_size as usize >= SLOT_HEADER_LEN + MAX_BLOB_LEN
             && (base as usize).saturating_add(2 * slot_size as usize) <= flash.capacity()
             && F::WRITE_SIZE <= MAX_WRITE_SIZE
-            && SLOT_HEADER_LEN % F::WRITE_SIZE == 0
-            && SLOT_HEADER_LEN % F::READ_SIZE == 0
-            && MAX_BLOB_LEN % F::READ_SIZE == 0;
+            && SLOT_HEADER_LEN.is_multiple_of(F::WRITE_SIZE)
+            && SLOT_HEADER_LEN.is_multiple_of(F::READ_SIZE)
+            && MAX_BLOB_LEN.is_multiple_of(F::READ_SIZE);
         if !ok {
             return Err(SlotError::Geometry);
         }
@@ -326,7 +326,7 @@ mod tests {
         const ERASE_SIZE: usize = PAGE;
         fn erase(&mut self, from: u32, to: u32) -> Result<(), MemError> {
             let (from, to) = (from as usize, to as usize);
-            if from % PAGE != 0 || to % PAGE != 0 || from > to {
+            if !from.is_multiple_of(PAGE) || !to.is_multiple_of(PAGE) || from > to {
                 return Err(MemError::Misaligned);
             }
             if to > self.mem.len() {
@@ -340,7 +340,7 @@ mod tests {
         }
         fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), MemError> {
             let o = offset as usize;
-            if o % 8 != 0 || bytes.len() % 8 != 0 {
+            if !o.is_multiple_of(8) || !bytes.len().is_multiple_of(8) {
                 return Err(MemError::Misaligned);
             }
             if o + bytes.len() > self.mem.len() {

@@ -43,7 +43,7 @@ pub fn step_for(sector: u8, v: f32) -> u8 {
 /// Duty cycle for a voltage magnitude and the bus voltage: `|V|/V_bus`, saturated at
 /// [`MAX_DUTY`]; zero when the bus voltage is not positive.
 pub fn duty(v: f32, v_bus: f32) -> f32 {
-    if !(v_bus > 0.0) || !v.is_finite() {
+    if v_bus.is_nan() || v_bus <= 0.0 || !v.is_finite() {
         return 0.0;
     }
     (v.abs() / v_bus).clamp(0.0, MAX_DUTY)

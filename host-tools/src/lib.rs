@@ -13,6 +13,7 @@
 //! | [`emulator`] | the built-in motor emulator: the paper's motor, effects, sensors, signals |
 pub mod atomic;
 pub mod board;
+pub mod closed_loop;
 pub mod cmd;
 pub mod diagnose;
 pub mod effect_spec;

@@ -196,6 +196,26 @@ mod effects_serde {
     }
 }
 
+/// ` field 'table.key':` for the `key = value` line starting at byte `start` (with the table
+/// header above it), or nothing.
+fn field_at(text: &str, start: usize) -> String {
+    let line = text[start..].lines().next().unwrap_or("");
+    let Some((key, _)) = line.split_once('=') else {
+        return String::new();
+    };
+    let key = key.trim();
+    let table = text[..start]
+        .lines()
+        .rev()
+        .map(str::trim)
+        .find(|l| l.starts_with('['))
+        .map(|l| l.trim_matches(|c| c == '[' || c == ']').to_string());
+    match table {
+        Some(t) => format!(" field '{t}.{key}':"),
+        None => format!(" field '{key}':"),
+    }
+}
+
 /// An identified model (MODEL.toml).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Model {
@@ -259,8 +279,9 @@ impl Model {
                 Some(span) => {
                     let before = &text[..span.start.min(text.len())];
                     let line = before.matches('\n').count() + 1;
-                    let col = before.len() - before.rfind('\n').map(|i| i + 1).unwrap_or(0) + 1;
-                    anyhow!("{p}:{line}:{col}: {msg}")
+                    let line_start = before.rfind('\n').map(|i| i + 1).unwrap_or(0);
+                    let col = before.len() - line_start + 1;
+                    anyhow!("{p}:{line}:{col}:{} {msg}", field_at(text, line_start))
                 }
                 None => anyhow!("{p}: {msg}"),
             }

@@ -96,18 +96,16 @@ pub fn sindy_f32(m: &SindyModel<f64>) -> SindyModel<f32> {
     }
 }
 
-/// The model's SINDYc equations as the control core reads them.
+/// The model's SINDYc equations as the control core reads them (the `[sindy]` table that
+/// `ident::sindyc` writes).
 pub fn sindy_model(model: &Model) -> Result<SindyModel<f64>> {
     let table = model
         .sindy
-        .clone()
+        .as_ref()
         .ok_or_else(|| anyhow!("field 'sindy': a model of kind 'sindyc' needs a [sindy] table"))?;
-    table.try_into::<SindyModel<f64>>().map_err(|e| {
-        anyhow!(
-            "field 'sindy': cannot read the SINDYc equations: {}",
-            e.message().trim()
-        )
-    })
+    crate::ident::sindyc::from_table(table)
+        .map(|(m, _)| m)
+        .map_err(|e| anyhow!("field 'sindy': {e}"))
 }
 
 /// Pole pairs of the model's motor: given, or from the Hall resolution 2π/(6·p), or the

@@ -55,6 +55,10 @@ pub struct Signals {
     pub omega: Vec<f64>,
     /// Motor torque: `K_t·I` (voltage plant) or `u` (torque plant).
     pub drive: Vec<f64>,
+    /// The drive torque as the model explains it from the motion (inertia and friction),
+    /// free of the measured current's noise and of the model's error: regressors built from
+    /// the measured drive would "explain" the residual with itself.
+    pub drive_model: Vec<f64>,
     pub plant: Plant,
     /// Torque constant used to express currents as torques (1 for a torque plant).
     pub kt: f64,
@@ -72,19 +76,17 @@ impl Signals {
         let dt = log.sample_period();
         let omega = super::weakform::smoothed_derivative(&log.theta, dt, VELOCITY_HALF);
         let theta_s = super::weakform::moving_average(&log.theta, 2);
-        // The input is held over [t_k, t_k+1) (zero-order hold) while angle and current are
-        // sampled at t_k: on the sample grid the input is the mean of the two intervals that
-        // meet at t_k. The winding settles within L/R ≈ 1.4 ms, so the current over an
-        // interval is the one sampled at its end, and likewise averaged onto the grid.
-        let u = zoh_to_grid(&log.u);
+        // The input u[k] is held over [t_k, t_k+1) while angle and current are sampled at t_k.
+        // The winding settles within L/R ≈ 1.4 ms, so the current sampled at t_k is the
+        // quasi-static response to the input held just before it, u[k−1]: on the sample grid
+        // the voltage equation pairs i[k] with u[k−1].
+        let mut u = log.u.clone();
+        if plant == Plant::Voltage && u.len() > 1 {
+            u.rotate_right(1);
+            u[0] = u[1];
+        }
         let i = match (plant, &log.i) {
-            (Plant::Voltage, Some(i)) => {
-                let mode = std::env::var("ALIGN").unwrap_or_default();
-                if mode == "raw" { Some(i.clone()) } else if mode == "zoh" { Some(zoh_to_grid(i)) } else {
-                let mut next: Vec<f64> = i[1.min(i.len())..].to_vec();
-                next.extend(i.last());
-                Some(zoh_to_grid(&next)) }
-            }
+            (Plant::Voltage, Some(i)) => Some(i.clone()),
             _ => None,
         };
         let (drive, kt) = match &i {
@@ -99,6 +101,7 @@ impl Signals {
             theta: log.theta.clone(),
             theta_s,
             omega,
+            drive_model: drive.clone(),
             drive,
             plant,
             kt,
@@ -192,6 +195,21 @@ impl Signals {
     /// `1` where the rotor is stuck (|ω| < [`STICK_SPEED`]), else `0`.
     pub fn stuck(&self) -> Vec<bool> {
         self.omega.iter().map(|w| w.abs() < STICK_SPEED).collect()
+    }
+
+    /// Load-dependent friction `|drive|·sgn(ω)` with the modelled drive, zero while stuck.
+    pub fn load_friction_column(&self) -> Vec<f64> {
+        self.drive_model
+            .iter()
+            .zip(&self.omega)
+            .map(|(d, w)| {
+                if w.abs() < STICK_SPEED {
+                    0.0
+                } else {
+                    d.abs() * smooth_sign(*w, VELOCITY_EPS)
+                }
+            })
+            .collect()
     }
 
     /// Static friction while stuck: it balances the drive, `drive·1[stuck]`.
@@ -321,7 +339,7 @@ pub fn variants(kind: EffectKind, s: &Signals, coulomb_guess: f64) -> Vec<Varian
         EffectKind::LoadFriction => vec![one(
             mech,
             vec![],
-            vec![s.drive.iter().zip(&sgn).map(|(d, g)| d.abs() * g).collect()],
+            vec![s.load_friction_column()],
         )],
         EffectKind::Deadtime if voltage => {
             let i = s.i.as_ref().unwrap();
@@ -388,7 +406,7 @@ pub fn present_columns(e: &Effect<f64>, s: &Signals) -> Vec<(Equation, Vec<f64>)
             let sgn = s.sgn_omega();
             vec![(
                 mech,
-                s.drive.iter().zip(&sgn).map(|(d, g)| d.abs() * g).collect(),
+                s.load_friction_column(),
             )]
         }
         Effect::Deadtime { .. } if voltage => {

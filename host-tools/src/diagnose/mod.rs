@@ -165,7 +165,8 @@ struct EqData {
 
 /// Diagnose a log against a model structure.
 pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
-    let s = Signals::from_log(log, st.plant, st.kt);
+    let mut s = Signals::from_log(log, st.plant, st.kt);
+    s.drive_model = modelled_drive(&s, st);
     let h = opts.half_width.max(2);
     let wf = weakform::WeakForm::new(s.len(), s.dt, h, h);
     let voltage = s.plant == Plant::Voltage && s.i.is_some();
@@ -277,6 +278,43 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
         alpha_per_test,
         min_explained: opts.min_explained,
     }
+}
+
+/// The drive torque the model's own mechanical structure predicts from the motion, sample
+/// by sample: a least-squares fit of the measured drive on inertia (smoothed acceleration)
+/// and the structure's friction columns, evaluated while moving.
+fn modelled_drive(s: &Signals, st: &Structure) -> Vec<f64> {
+    let acc = weakform::smoothed_derivative(&s.omega, s.dt, candidates::VELOCITY_HALF);
+    let mut cols = vec![acc];
+    for e in &st.effects {
+        if e.kind() == EffectKind::LoadFriction {
+            continue;
+        }
+        for (eq, col) in candidates::present_columns(e, s) {
+            if eq == Equation::Mechanical {
+                cols.push(col);
+            }
+        }
+    }
+    if !st.has(EffectKind::Coulomb) {
+        cols.push(s.omega.iter().map(|w| control::effects::smooth_sign(*w, control::effects::VELOCITY_EPS)).collect());
+    }
+    if !st.has(EffectKind::Viscous) {
+        cols.push(s.omega.clone());
+    }
+    let moving: Vec<usize> = (0..s.len())
+        .filter(|&k| s.omega[k].abs() >= candidates::STICK_SPEED)
+        .collect();
+    let y: Vec<f64> = moving.iter().map(|&k| s.drive[k]).collect();
+    let sub: Vec<Vec<f64>> = cols
+        .iter()
+        .map(|c| moving.iter().map(|&k| c[k]).collect())
+        .collect();
+    let refs: Vec<&[f64]> = sub.iter().map(|c| c.as_slice()).collect();
+    let fit = stats::lstsq(&refs, &y);
+    (0..s.len())
+        .map(|k| cols.iter().zip(&fit.beta).map(|(c, b)| b * c[k]).sum())
+        .collect()
 }
 
 type SelectOut = (Vec<Finding>, Vec<Tested>, Vec<f64>, Vec<f64>, f64);

@@ -186,7 +186,7 @@ impl EmulatorConfig {
         }
         for e in &self.effects {
             if let Effect::Thermal { tau, .. } = e {
-                if !(*tau > 0.0) {
+                if tau.is_nan() || *tau <= 0.0 {
                     bail!("effect 'thermal': tau must be positive (got {tau})");
                 }
             }

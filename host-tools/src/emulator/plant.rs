@@ -138,7 +138,7 @@ impl Plant {
     /// Hold voltage `v` for `dt` seconds (split into fine steps of at most
     /// `cfg.fine_step`).
     pub fn apply(&mut self, v: f64, dt: f64) {
-        if !(dt > 0.0) || !dt.is_finite() {
+        if dt.is_nan() || dt <= 0.0 || !dt.is_finite() {
             return;
         }
         let v = if v.is_finite() { v } else { 0.0 };

@@ -241,7 +241,31 @@ pub fn fit(req: &FitRequest) -> Result<Model> {
             }
         );
     }
-    // Dynamic step.
+    // Dynamic step. The simulation error has local minima in (σ0, σ1) (σ1 → 0 with a
+    // too-slow winding, for one): start from the best of a coarse grid over decades.
+    {
+        let res = sim_error::Residuals::new(req.logs, m.sensor.velocity_window);
+        let mut best = (f64::INFINITY, sigma0, init.sigma1);
+        for s0 in [30.0, 300.0, 3000.0] {
+            for s1 in [0.1, 1.0, 10.0, 30.0] {
+                let mut trial = m.clone();
+                if let Some(l) = trial.lugre.as_mut() {
+                    l.sigma0 = s0;
+                    l.sigma1 = s1;
+                }
+                if let Ok(r) = res.eval(&trial) {
+                    let c: f64 = r.iter().map(|v| v * v).sum();
+                    if c < best.0 {
+                        best = (c, s0, s1);
+                    }
+                }
+            }
+        }
+        if let Some(l) = m.lugre.as_mut() {
+            l.sigma0 = best.1;
+            l.sigma1 = best.2;
+        }
+    }
     let mut free = vec![
         Free {
             slot: Slot::Lugre("alpha2"),
@@ -277,6 +301,7 @@ pub fn fit(req: &FitRequest) -> Result<Model> {
             }
             if narrow {
                 rows[2].std_err = None;
+                rows[2].identifiable = true;
                 rows[2].note = "from the free-run simulation error on all the data (the \
                                 steady points span too narrow a velocity range)"
                     .into();

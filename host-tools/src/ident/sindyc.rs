@@ -18,11 +18,11 @@
 //!    `∫φ·dI/dt = −∫φ'·I`; the library columns become `∫φ·θ_j`.
 //! 4. **STLSQ** on the normal equations of those rows for several thresholds; the start is
 //!    the candidate with the best validation fit that does not diverge.
-//! 5. **One-by-one thresholding** (the paper's): try removing each of the smallest-
-//!    contribution terms (the 4 smallest), refit that equation on its support, simulate the
-//!    validation logs in free run; keep the best removal while the validation fit on `ẋ`
-//!    stays within `tolerance` points of the best seen. Every step is a row of the Pareto
-//!    table (number of terms vs validation fit).
+//! 5. **One-by-one thresholding** (the paper's): try removing terms from the smallest
+//!    contribution up, refitting that equation on its support and simulating the validation
+//!    logs in free run; keep the first removal whose validation fit on `ẋ` stays within
+//!    `tolerance` points of the best seen; stop when no removal qualifies. Every step is a
+//!    row of the Pareto table (number of terms vs validation fit).
 //!
 //! # Free run
 //! States `(x, ẋ, z, I)`, `u` held between samples. Steps are exponential Rosenbrock–Euler
@@ -51,12 +51,10 @@ pub const DEFAULT_A: f64 = 5.0;
 pub const VELOCITY_HALF: usize = 5;
 /// Multipliers of the base STLSQ threshold tried for the starting model.
 const THRESHOLD_LADDER: [f64; 5] = [1.0, 3.0, 10.0, 30.0, 100.0];
-/// Candidates tried per round of the one-by-one thresholding.
-const TRIES_PER_ROUND: usize = 4;
-/// Sub-steps per sample of the free run: 4 keeps the frozen-Jacobian error of the
+/// Sub-steps per sample of the free run: 2 keeps the frozen-Jacobian error of the
 /// exponential Rosenbrock–Euler step small at the mechanical time constant (~13 ms for the
 /// paper's motor, about one 12 ms sample).
-pub const SUBSTEPS: usize = 4;
+pub const SUBSTEPS: usize = 2;
 /// Bound on the free-run simulations one identification may spend.
 const MAX_SIMULATIONS: usize = 400;
 
@@ -276,7 +274,7 @@ pub fn simulate(
 }
 
 /// One exponential Rosenbrock–Euler step `s⁺ = s + h·φ1(h·A)·f(s)` (A: central-difference
-/// Jacobian), through the hub's augmented-matrix exponential.
+/// Jacobian, forward differences), through the hub's augmented-matrix exponential.
 fn rosenbrock_step(
     rhs: &impl Fn(&[f64; 4], f64) -> [f64; 4],
     s: &[f64; 4],
@@ -286,15 +284,14 @@ fn rosenbrock_step(
     let f0 = rhs(s, u);
     let mut m = [[0.0; 5]; 5];
     for j in 0..4 {
-        let d = 1e-6 * s[j].abs().max(1e-3);
+        // Forward differences: the Jacobian only shapes the step's stability and its
+        // O(dt²) error, so 1e-7 relative accuracy is plenty.
+        let d = 1e-7 * s[j].abs().max(1e-2);
         let mut sp = *s;
-        let mut sm = *s;
         sp[j] += d;
-        sm[j] -= d;
         let fp = rhs(&sp, u);
-        let fm = rhs(&sm, u);
         for i in 0..4 {
-            m[i][j] = (fp[i] - fm[i]) / (2.0 * d) * dt;
+            m[i][j] = (fp[i] - f0[i]) / d * dt;
         }
     }
     for i in 0..4 {
@@ -598,7 +595,12 @@ pub fn identify(
     // 4: STLSQ ladder → starting candidate.
     let mut pareto = Vec::new();
     let mut best: Option<(Candidate, Option<f64>)> = None;
-    for mult in THRESHOLD_LADDER {
+    // Each threshold is tried with the whole library and without the z terms (then z stays
+    // 0): the extracted z only earns its terms if it predicts better.
+    let ladder = THRESHOLD_LADDER
+        .iter()
+        .flat_map(|m| [(*m, false), (*m, true)]);
+    for (mult, z_free) in ladder {
         let o = StlsqOptions {
             threshold: opts.stlsq.threshold * mult,
             ..opts.stlsq
@@ -611,7 +613,16 @@ pub fn identify(
             ],
         };
         for e in 0..neq {
-            let mut xn = search.nes[e].stlsq_normalised(0, &allowed[e], &o);
+            if z_free && e == ZDOT {
+                continue;
+            }
+            let mut sup = allowed[e].clone();
+            if z_free {
+                for (k, c) in lib.candidates.iter().enumerate() {
+                    sup[k] &= !c.term.has_z();
+                }
+            }
+            let mut xn = search.nes[e].stlsq_normalised(0, &sup, &o);
             // The firmware holds at most MAX_TERMS terms per equation: drop the smallest.
             while xn.iter().filter(|v| **v != 0.0).count() > MAX_TERMS {
                 let j = smallest(&xn);
@@ -630,7 +641,11 @@ pub fn identify(
         pareto.push(ParetoRow {
             terms: c.terms(),
             fit,
-            step: format!("STLSQ, threshold {:.3}", o.threshold),
+            step: format!(
+                "STLSQ, threshold {:.3}{}",
+                o.threshold,
+                if z_free { ", without z" } else { "" }
+            ),
             accepted: false,
         });
         let better = match &best {
@@ -667,52 +682,59 @@ pub fn identify(
             }
         }
         order.sort_by(|a, b| a.0.total_cmp(&b.0));
-        let mut round_best: Option<(Candidate, f64, String)> = None;
-        for &(_, e, j) in order.iter().take(TRIES_PER_ROUND) {
+        if order.is_empty() {
+            break;
+        }
+        // Try the terms from the smallest contribution up; keep the first removal whose
+        // validation fit stays within the tolerance of the best seen (or, while the current
+        // model diverges, the first that does not diverge).
+        let mut accepted = false;
+        let mut first_rejected: Option<ParetoRow> = None;
+        for &(_, e, j) in &order {
+            if search.sims >= MAX_SIMULATIONS {
+                break;
+            }
             let c = search.without(&cur, e, j);
             let fit = search.score(&c);
             let step = format!("removed {}: {}", EQUATION_NAMES[e], lib.candidates[j].term);
-            if let Some(f) = fit {
-                if round_best.as_ref().is_none_or(|(_, bf, _)| f > *bf) {
-                    round_best = Some((c, f, step));
+            match fit {
+                Some(f) if cur_fit.is_none() || f >= best_fit - opts.tolerance => {
+                    pareto.push(ParetoRow {
+                        terms: c.terms(),
+                        fit: Some(f),
+                        step,
+                        accepted: true,
+                    });
+                    best_fit = if cur_fit.is_none() {
+                        f
+                    } else {
+                        best_fit.max(f)
+                    };
+                    cur = c;
+                    cur_fit = Some(f);
+                    accepted = true;
+                    break;
+                }
+                _ => {
+                    if first_rejected.is_none() {
+                        first_rejected = Some(ParetoRow {
+                            terms: c.terms(),
+                            fit,
+                            step: format!("{step} (rejected)"),
+                            accepted: false,
+                        });
+                    }
                 }
             }
         }
-        match round_best {
-            Some((c, f, step)) if f >= best_fit - opts.tolerance => {
-                pareto.push(ParetoRow {
-                    terms: c.terms(),
-                    fit: Some(f),
-                    step,
-                    accepted: true,
-                });
-                best_fit = best_fit.max(f);
-                cur = c;
-                cur_fit = Some(f);
+        if !accepted {
+            pareto.extend(first_rejected);
+            if cur_fit.is_some() || search.sims >= MAX_SIMULATIONS {
+                break;
             }
-            Some((c, f, step)) => {
-                pareto.push(ParetoRow {
-                    terms: c.terms(),
-                    fit: Some(f),
-                    step: format!("{step} (rejected: fit drops)"),
-                    accepted: false,
-                });
-                if cur_fit.is_some() {
-                    break;
-                }
-                // The current model diverges: any working candidate is progress.
-                cur = c;
-                cur_fit = Some(f);
-                best_fit = f;
-            }
-            None => {
-                if cur_fit.is_some() {
-                    break;
-                }
-                // Everything tried diverges: drop the smallest term and go on.
-                let (_, e, j) = order[0];
-                cur = search.without(&cur, e, j);
-            }
+            // Every removal diverges too: drop the smallest term and go on.
+            let (_, e, j) = order[0];
+            cur = search.without(&cur, e, j);
         }
     }
     let Some(validation_fit) = cur_fit else {
@@ -971,5 +993,57 @@ mod tests {
         eprintln!("validation b: SINDYc {ours:.2} %, true states {truth:.2} %");
         assert!((ours - res.validation_fit).abs() < 1e-9);
         assert!(ours > truth - 5.0, "{ours} vs {truth}");
+        // Every returned model is finite in free run on the other signals too.
+        for (k, kind) in [SignalKind::C, SignalKind::D].into_iter().enumerate() {
+            let log = emulated(kind, 10 + k as u64);
+            let p = simulate(&res.model, Plant::Voltage, &log, Limits::default()).unwrap();
+            assert!(p.omega.iter().all(|w| w.is_finite()));
+        }
+        // The table round-trips.
+        let t = to_table(&res.model, &res.hankel);
+        let (back, h) = from_table(&t).unwrap();
+        // (TOML tables are sorted by name: compare term by term, a sum has no order.)
+        for (a, b) in [
+            (&back.accel, &res.model.accel),
+            (&back.zdot, &res.model.zdot),
+            (&back.idot, &res.model.idot),
+        ] {
+            assert_eq!(a.terms.len(), b.terms.len());
+            for (t, c) in &b.terms {
+                assert_eq!(a.coef(*t), *c, "{t}");
+            }
+        }
+        assert_eq!(
+            (back.a, back.vs, back.z_max),
+            (res.model.a, res.model.vs, res.model.z_max)
+        );
+        assert_eq!(h, res.hankel);
+    }
+
+    /// The paper's hidden state on emulated LuGre data. Finding (reported, not hidden): with
+    /// the paper's low-energy selection the extracted z is almost uncorrelated with the
+    /// emulator's bristle deflection (|r| ≈ 0.05), because the LuGre z is nearly a static
+    /// function of the velocity (r ≈ 0.93 with tanh(ω/0.5)) and lives in the high-energy
+    /// subspace the method discards. What the test pins down: the low-energy z carries
+    /// almost none of the velocity itself (it is a projection onto the complementary
+    /// subspace), and dropping only the dominant component keeps clearly more of z_true.
+    #[test]
+    fn hankel_state_on_lugre_data() {
+        let a = emulated(SignalKind::A, 1);
+        let zt = a.extra("z_true").unwrap();
+        let v = centred_velocity(&a.t, &a.theta, VELOCITY_HALF);
+        let paper = HankelEmbedding::fit(&v, 60, Selection::EnergyBelow(0.001)).unwrap();
+        let zp = paper.extract(&v).unwrap();
+        let broad = HankelEmbedding::fit(&v, 60, Selection::Range(2, 60)).unwrap();
+        let zb = broad.extract(&v).unwrap();
+        let r_paper = correlation(zt, &zp);
+        let r_broad = correlation(zt, &zb);
+        eprintln!(
+            "corr(z_true, z): paper selection {:?} {r_paper:.3}, components 2..60 {r_broad:.3}",
+            paper.selected()
+        );
+        assert_eq!(zp.len(), v.len());
+        assert!(correlation(&v, &zp).abs() < 0.1);
+        assert!(r_broad.abs() > r_paper.abs() + 0.2);
     }
 }

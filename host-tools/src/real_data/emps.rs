@@ -308,3 +308,48 @@ pub fn relative_error_pct(a: &[f64], b: &[f64]) -> f64 {
     let n: f64 = a.iter().map(|x| x * x).sum();
     100.0 * (e / n).sqrt()
 }
+
+/// One nested-model test on the IDIM-LS regression.
+#[derive(Debug, Clone)]
+pub struct TermTest {
+    /// Effect name (contract's list).
+    pub name: &'static str,
+    /// What the smaller model is.
+    pub against: &'static str,
+    /// The test, with the effective sample size of the larger model's residual (the statistics
+    /// `diagnose` uses: [`crate::diagnose::stats`]).
+    pub test: crate::diagnose::stats::FTest,
+}
+
+/// Is each friction term of the IDIM-LS model needed? Nested F-tests on the decimated
+/// observation matrix: Coulomb against (M, Fv); offset against (M, Fv, Fc); asymmetry
+/// (one Fv/Fc per direction) against the symmetric model with offset.
+pub fn term_tests(log: &MotorLog, gain: f64) -> Result<Vec<TermTest>> {
+    use crate::diagnose::stats::{effective_n, f_test};
+    let (sym, y) = observation(log, gain, false);
+    let (asym, _) = observation(log, gain, true);
+    let resid = |cols: &[Vec<f64>]| -> Result<(f64, Vec<f64>)> {
+        let f = ols(cols, &y)?;
+        let r: Vec<f64> = (0..y.len())
+            .map(|k| y[k] - cols.iter().zip(&f.theta).map(|(c, t)| c[k] * t).sum::<f64>())
+            .collect();
+        Ok((f.rss, r))
+    };
+    let steps: [(&'static str, &'static str, Vec<Vec<f64>>, Vec<Vec<f64>>); 3] = [
+        ("coulomb", "M, Fv", sym[..2].to_vec(), sym[..3].to_vec()),
+        ("offset", "M, Fv, Fc", sym[..3].to_vec(), sym.clone()),
+        ("asymmetry", "M, Fv, Fc, OF", sym.clone(), asym.clone()),
+    ];
+    let mut out = Vec::new();
+    for (name, against, small, big) in steps {
+        let (rss0, _) = resid(&small)?;
+        let (rss1, r1) = resid(&big)?;
+        let q = big.len() - small.len();
+        out.push(TermTest {
+            name,
+            against,
+            test: f_test(rss0, rss1, q, small.len(), effective_n(&r1)),
+        });
+    }
+    Ok(out)
+}

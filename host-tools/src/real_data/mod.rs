@@ -16,7 +16,8 @@ use anyhow::{bail, Result};
 use std::path::{Path, PathBuf};
 
 /// The data directory: `dir` if given, else `../shared/data` relative to the repository root
-/// (found from the current directory upwards: the first ancestor that has `../shared/data`).
+/// (the first ancestor of the current directory, or else of the `motorid` executable, that has
+/// `../shared/data/README.md`).
 pub fn locate(dir: Option<&Path>) -> Result<PathBuf> {
     if let Some(d) = dir {
         if !d.is_dir() {
@@ -24,11 +25,13 @@ pub fn locate(dir: Option<&Path>) -> Result<PathBuf> {
         }
         return Ok(d.to_path_buf());
     }
-    let cwd = std::env::current_dir()?;
-    for a in cwd.ancestors() {
-        let c = a.join("..").join("shared").join("data");
-        if c.join("README.md").is_file() {
-            return Ok(c);
+    let starts = [std::env::current_dir().ok(), std::env::current_exe().ok()];
+    for start in starts.iter().flatten() {
+        for a in start.ancestors() {
+            let c = a.join("..").join("shared").join("data");
+            if c.join("README.md").is_file() {
+                return Ok(c);
+            }
         }
     }
     bail!(

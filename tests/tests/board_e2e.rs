@@ -1,0 +1,202 @@
+//! End to end over a real serial device node: `motorid board --pty` (the firmware's control
+//! step and protocol handler on the emulated motor, behind a pseudo-terminal), then
+//! `motorid upload` and `motorid record` against the device it printed.
+use std::io::{BufRead, BufReader};
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+use tests::{motorid, motorid_bin};
+
+/// The emulated board, killed when dropped.
+struct Board {
+    child: Child,
+    port: String,
+}
+
+impl Board {
+    fn start(dir: &Path, speed: &str) -> Board {
+        let mut child = Command::new(motorid_bin())
+            .args(["board", "--pty", "--speed", speed])
+            .current_dir(dir)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("cannot start motorid board");
+        let mut line = String::new();
+        BufReader::new(child.stdout.take().unwrap())
+            .read_line(&mut line)
+            .unwrap();
+        let port = line.trim().to_string();
+        assert!(port.starts_with("/dev/"), "board printed '{line}'");
+        assert!(Path::new(&port).exists(), "{port} does not exist");
+        Board { child, port }
+    }
+}
+
+impl Drop for Board {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+const MODEL: &str = r#"
+kind = "lugre"
+plant = "voltage"
+sample_period = 0.012
+
+[motor]
+r = 0.2162
+l = 0.0003
+kt = 0.07126
+kb = 0.07126
+j = 0.0003
+
+[lugre]
+alpha0 = 0.08
+alpha1 = 0.0175
+alpha2 = 0.0016
+v0 = 3.676
+sigma0 = 317.225
+sigma1 = 22.2464
+"#;
+
+fn ok(out: &std::process::Output) -> String {
+    assert!(
+        out.status.success(),
+        "stderr: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).to_string()
+}
+
+/// (header, rows) of a contract CSV log.
+fn read_log(path: &Path) -> (Vec<String>, Vec<Vec<f64>>, Vec<String>) {
+    let text = std::fs::read_to_string(path).unwrap();
+    let meta: Vec<String> = text
+        .lines()
+        .filter(|l| l.starts_with('#'))
+        .map(String::from)
+        .collect();
+    let mut lines = text.lines().filter(|l| !l.starts_with('#'));
+    let header: Vec<String> = lines.next().unwrap().split(',').map(String::from).collect();
+    let rows = lines
+        .map(|l| l.split(',').map(|x| x.parse().unwrap()).collect())
+        .collect();
+    (header, rows, meta)
+}
+
+#[test]
+fn upload_record_and_speed_control_over_a_pty() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("m.toml"), MODEL).unwrap();
+    ok(&motorid(d, &["export", "m.toml", "-o", "c.bin"]));
+    let board = Board::start(d, "50");
+
+    // Upload: committed into flash slot 1, then 2 (the two-slot store alternates).
+    let out = ok(&motorid(d, &["upload", "c.bin", "--port", &board.port]));
+    assert!(out.contains("lugre") && out.contains("sequence 1"), "{out}");
+    let out = ok(&motorid(d, &["upload", "c.bin", "--port", &board.port]));
+    assert!(out.contains("sequence 2 (was 1)"), "{out}");
+
+    // A damaged blob never reaches the board.
+    let mut bad = std::fs::read(d.join("c.bin")).unwrap();
+    let n = bad.len();
+    bad[n / 2] ^= 0x55;
+    std::fs::write(d.join("bad.bin"), &bad).unwrap();
+    let out = motorid(d, &["upload", "bad.bin", "--port", &board.port]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.starts_with("error: bad.bin:"), "{err}");
+
+    // Record signal a for 6 s: 500 samples of the contract's columns.
+    ok(&motorid(
+        d,
+        &[
+            "record",
+            "--port",
+            &board.port,
+            "--signal",
+            "a",
+            "--duration",
+            "6",
+            "-o",
+            "a.csv",
+        ],
+    ));
+    let (header, rows, meta) = read_log(&d.join("a.csv"));
+    assert_eq!(header, ["t", "u", "i", "theta", "omega"]);
+    assert!(
+        meta.iter().any(|m| m == "# sample_period=0.012"),
+        "{meta:?}"
+    );
+    assert!(meta
+        .iter()
+        .any(|m| m.starts_with("# hall_resolution_rad=0.0951")));
+    assert_eq!(rows.len(), 500);
+    for w in rows.windows(2) {
+        let dt = w[1][0] - w[0][0];
+        assert!((dt - 0.012).abs() < 1e-4, "time step {dt}");
+    }
+    let u_max = rows.iter().map(|r| r[1].abs()).fold(0.0, f64::max);
+    assert!(u_max > 1.0 && u_max <= 12.0 + 1e-6, "|u| max {u_max}");
+    // The motor turned: the Hall-quantised angle moved by many 0.095 rad steps.
+    let th: Vec<f64> = rows.iter().map(|r| r[3]).collect();
+    let span =
+        th.iter().cloned().fold(f64::MIN, f64::max) - th.iter().cloned().fold(f64::MAX, f64::min);
+    assert!(span > 10.0 * 0.0952, "angle span {span}");
+    for x in &th {
+        let steps = x / (std::f64::consts::TAU / 66.0);
+        assert!(
+            (steps - steps.round()).abs() < 1e-3,
+            "theta {x} not Hall-quantised"
+        );
+    }
+
+    // Closed-loop speed control at 30 rad/s with LuGre compensation: the firmware's
+    // estimate settles near the reference.
+    ok(&motorid(
+        d,
+        &[
+            "record",
+            "--port",
+            &board.port,
+            "--speed-ref",
+            "30",
+            "--duration",
+            "5",
+            "-o",
+            "s.csv",
+        ],
+    ));
+    let (_, rows, meta) = read_log(&d.join("s.csv"));
+    assert!(meta.iter().any(|m| m == "# speed_ref=30"), "{meta:?}");
+    let tail: Vec<f64> = rows[rows.len() - 100..].iter().map(|r| r[4]).collect();
+    let mean = tail.iter().sum::<f64>() / tail.len() as f64;
+    assert!(
+        (mean - 30.0).abs() < 3.0,
+        "mean speed over the last 1.2 s: {mean}"
+    );
+}
+
+#[test]
+fn no_board_is_one_error_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = motorid(
+        dir.path(),
+        &[
+            "record",
+            "--port",
+            "/dev/nonexistent-tty",
+            "--signal",
+            "a",
+            "-o",
+            "x.csv",
+        ],
+    );
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(err.starts_with("error: /dev/nonexistent-tty"), "{err}");
+    assert!(!dir.path().join("x.csv").exists());
+}
