@@ -437,6 +437,37 @@ mod tests {
     }
 
     #[test]
+    fn undecodable_newer_slot_is_skipped_and_outranked() {
+        // A newer slot whose header and CRC hold but whose blob does not decode (e.g. a blob
+        // format this firmware does not read): boot keeps the older valid one, and the next
+        // update replaces the undecodable slot with a higher sequence number.
+        let mut s = slots(MemFlash::new(4));
+        s.store(&blob_of(&coeffs(1))).unwrap();
+        let mut f = s.into_inner();
+        let mut bad = blob_of(&coeffs(2));
+        bad[4] = 0x7F; // blob version 0x..7F: refused by blob::decode
+        let seq = 5u32;
+        let base = 2 * PAGE; // slot 1
+        f.mem[base + SLOT_HEADER_LEN..base + SLOT_HEADER_LEN + bad.len()].copy_from_slice(&bad);
+        let mut h = [0u8; SLOT_HEADER_LEN];
+        h[0..4].copy_from_slice(&SLOT_MAGIC);
+        h[4..8].copy_from_slice(&seq.to_le_bytes());
+        h[8..12].copy_from_slice(&(bad.len() as u32).to_le_bytes());
+        let mut d = CRC32.digest();
+        d.update(&h[4..12]);
+        d.update(&bad);
+        h[12..16].copy_from_slice(&d.finalize().to_le_bytes());
+        f.mem[base..base + SLOT_HEADER_LEN].copy_from_slice(&h);
+
+        let (info, got) = loaded(&f).unwrap();
+        assert_eq!((info.index, got), (0, coeffs(1)));
+        let mut s = slots(f.rebooted());
+        let next = s.store(&blob_of(&coeffs(0))).unwrap();
+        assert_eq!((next.index, next.seq), (1, seq + 1));
+        assert_eq!(loaded(&s.into_inner()).unwrap().1, coeffs(0));
+    }
+
+    #[test]
     fn bad_geometry_is_refused() {
         assert!(Slots::new(MemFlash::new(4), 100, PAGE as u32).is_err());
         assert!(Slots::new(MemFlash::new(4), 3 * PAGE as u32, PAGE as u32).is_err());

@@ -97,6 +97,9 @@ pub fn current_from_raw(raw: u16, zero: u16) -> f32 {
 // - Hall / encoder connector: H1 PB6 (TIM4_CH1), H2 PB7 (TIM4_CH2), H3 PB8 (TIM4_CH3)
 //   [NuttX src/b-g431b-esc1.h, GPIO_HALL_PHA..C; include/board.h, TIM4 pins].
 //   ASSUMED: open-collector sensors, so the internal pull-ups are enabled.
+//   PB8 is also the STM32G431's BOOT0 pin (DS12589 pinout "PB8-BOOT0"): a Hall level high
+//   at reset can start the ROM bootloader unless the option bytes take BOOT0 from nBOOT0
+//   (nSWBOOT0 = 0, nBOOT0 = 1). Program them once with STM32CubeProgrammer or probe-rs.
 // - USART2 (ST-LINK virtual COM port): TX PB3, RX PB4 [NuttX include/board.h; UM2516].
 // - User LED LD2: PC6; user button: PC10 [NuttX src/b-g431b-esc1.h; UM2516].
 

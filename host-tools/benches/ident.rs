@@ -2,6 +2,11 @@
 //! Hankel state extraction (target ≤ 0.25 s) and one SINDYc regression with the paper's
 //! 17-term library and STLSQ (target ≤ 0.2 s), on a 2-core machine.
 //!
+//! Benchmarks (group `ident_1e6`): `hankel_extract` (Gram matrix + eigen-decomposition +
+//! FIR extraction of z, m = 60), `sindyc_library` (the 17 columns), `sindyc_regression`
+//! (library + normal equations + STLSQ for 3 pointwise targets: the problem pysindy solves),
+//! `sindyc_weak_regression` (library + weak-form integrals + STLSQ: what `fit` does).
+//!
 //! The data is a deterministic motor-like record (multisine voltage, first-order velocity
 //! with tanh friction, Hall-quantised angle, current from the quasi-static electrical
 //! equation plus pseudo-noise). It is also written to `target/bench-data/ident_1e6.f64`
@@ -125,10 +130,10 @@ fn benches(c: &mut Criterion) {
     };
     let lib = Library::paper(Plant::Voltage, 5.0, 1.0);
     assert_eq!(lib.terms(), Term::PAPER_LIBRARY.to_vec());
-    let mut g = c.benchmark_group("1e6 samples");
+    let mut g = c.benchmark_group("ident_1e6");
     g.sample_size(10);
 
-    g.bench_function("hankel: fit (m=60, Gram + eigen) + extract z", |b| {
+    g.bench_function("hankel_extract", |b| {
         b.iter(|| {
             let emb =
                 HankelEmbedding::fit(black_box(&d.xdot), DEFAULT_DELAYS, Selection::Range(31, 60))
@@ -137,7 +142,7 @@ fn benches(c: &mut Criterion) {
         })
     });
 
-    g.bench_function("sindyc: library (17 terms)", |b| {
+    g.bench_function("sindyc_library", |b| {
         b.iter(|| black_box(lib.matrix(black_box(&sig))))
     });
 
@@ -146,30 +151,24 @@ fn benches(c: &mut Criterion) {
         gradient(&d.z, DT),
         gradient(&d.i, DT),
     ];
-    g.bench_function(
-        "sindyc: regression (17-term library + normal eqs + STLSQ, 3 targets)",
-        |b| {
-            b.iter(|| {
-                let theta = lib.matrix(&sig);
-                let y = Mat::<f64>::from_fn(N, 3, |r, k| targets[k][r]);
-                let ne = Normal::new(theta.as_ref(), y.as_ref());
-                let opts = StlsqOptions::default();
-                black_box((0..3).map(|k| ne.stlsq(k, &opts)).collect::<Vec<_>>())
-            })
-        },
-    );
+    g.bench_function("sindyc_regression", |b| {
+        b.iter(|| {
+            let theta = lib.matrix(&sig);
+            let y = Mat::<f64>::from_fn(N, 3, |r, k| targets[k][r]);
+            let ne = Normal::new(theta.as_ref(), y.as_ref());
+            let opts = StlsqOptions::default();
+            black_box((0..3).map(|k| ne.stlsq(k, &opts)).collect::<Vec<_>>())
+        })
+    });
 
-    g.bench_function(
-        "sindyc: weak-form regression (library + test-function integrals + STLSQ)",
-        |b| {
-            b.iter(|| {
-                let (a, y, _) = weak_rows(&lib, &d.t, &sig);
-                let ne = Normal::new(a.as_ref(), y.as_ref());
-                let opts = StlsqOptions::default();
-                black_box((0..3).map(|k| ne.stlsq(k, &opts)).collect::<Vec<_>>())
-            })
-        },
-    );
+    g.bench_function("sindyc_weak_regression", |b| {
+        b.iter(|| {
+            let (a, y, _) = weak_rows(&lib, &d.t, &sig);
+            let ne = Normal::new(a.as_ref(), y.as_ref());
+            let opts = StlsqOptions::default();
+            black_box((0..3).map(|k| ne.stlsq(k, &opts)).collect::<Vec<_>>())
+        })
+    });
     g.finish();
 }
 

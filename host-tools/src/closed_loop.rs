@@ -106,6 +106,9 @@ pub fn coefficients_for(
             co.pi.ki = settings.ki;
             co.pi.u_max = settings.u_max;
             co.pi.comp_gain = 0.0;
+            if let Some(timeout_s) = settings.edge_timing {
+                co.estimator = control::blob::Estimator::EdgeTiming { timeout_s };
+            }
             if let Some((_, m)) = models.first() {
                 co.motor = coeffs::coefficients(m, settings)?.motor;
             }

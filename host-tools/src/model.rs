@@ -26,9 +26,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 /// Which friction law the model uses.
-#[derive(
-    Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum, Default,
-)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum, Default)]
 #[serde(rename_all = "snake_case")]
 pub enum ModelKind {
     /// Viscous friction only (paper eqs. 1–2).
@@ -377,8 +375,13 @@ mod tests {
     fn errors_name_line_and_field() {
         let mut m = Model::new(ModelKind::Linear, Plant::Voltage, 0.012);
         m.viscous = 0.001;
-        let text = m.to_toml().unwrap().replace("kind = \"linear\"", "kind = \"quadratic\"");
-        let e = Model::parse(&text, Path::new("m.toml")).unwrap_err().to_string();
+        let text = m
+            .to_toml()
+            .unwrap()
+            .replace("kind = \"linear\"", "kind = \"quadratic\"");
+        let e = Model::parse(&text, Path::new("m.toml"))
+            .unwrap_err()
+            .to_string();
         let line = text.lines().position(|l| l.contains("quadratic")).unwrap() + 1;
         assert!(e.starts_with(&format!("m.toml:{line}:")), "{e}");
         let mut m2 = m.clone();

@@ -145,12 +145,14 @@ fn main() -> ! {
         buf: [0; 160],
         len: 0,
     };
-    run_trace(
+    let done = run_trace(
         &trace,
+        crate::LUGRE,
+        crate::SINDYC,
         |obs, k, outs| {
             let _ = write!(line2, "out {} {}", obs.name(), k);
             for v in outs {
-                let _ = write!(line2, " {:08x}", v.to_bits());
+                let _ = write!(line2, " {v:08x}");
             }
             let _ = writeln!(line2);
             flush(&mut line2);
@@ -162,6 +164,9 @@ fn main() -> ! {
             (_, false) => qp_end(),
         },
     );
+    if let Err(e) = done {
+        panic!("embedded coefficient blob unreadable: {e}");
+    }
     let _ = writeln!(line, "done {}", trace.steps);
     flush(&mut line);
     loop {

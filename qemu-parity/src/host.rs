@@ -14,10 +14,15 @@ usage: qemu-parity                      print the host run (same lines as the QE
                                         instructions per control step, per observer, from
                                         QEMU's `-d exec,nochain -singlestep` log on stdin";
 
-pub fn main(trace_bytes: &[u8]) -> ExitCode {
+pub fn main(trace: &[u8], lugre: &[u8], sindyc: &[u8]) -> ExitCode {
+    let inputs = Inputs {
+        trace,
+        lugre,
+        sindyc,
+    };
     let args: Vec<String> = std::env::args().skip(1).collect();
     let result = match args.first().map(String::as_str) {
-        None => print_host(trace_bytes),
+        None => print_host(&inputs),
         Some("compare") if args.len() >= 2 => {
             let ulp = match args.iter().position(|a| a == "--ulp") {
                 Some(p) => args
@@ -26,7 +31,7 @@ pub fn main(trace_bytes: &[u8]) -> ExitCode {
                     .ok_or_else(|| "--ulp needs a whole number".to_string()),
                 None => Ok(0),
             };
-            ulp.and_then(|ulp| compare(trace_bytes, &args[1], ulp))
+            ulp.and_then(|ulp| compare(&inputs, &args[1], ulp))
         }
         Some("count") if args.len() >= 2 => count(&args[1]),
         _ => Err(USAGE.to_string()),
@@ -40,23 +45,33 @@ pub fn main(trace_bytes: &[u8]) -> ExitCode {
     }
 }
 
+/// The embedded trace and blobs.
+pub struct Inputs<'a> {
+    trace: &'a [u8],
+    lugre: &'a [u8],
+    sindyc: &'a [u8],
+}
+
 type Outputs = BTreeMap<(String, usize), [u32; N_OUTPUTS]>;
 
-fn host_outputs(trace_bytes: &[u8]) -> Result<(Outputs, usize), String> {
-    let trace = Trace::parse(trace_bytes).map_err(|e| format!("embedded trace: {e:?}"))?;
+fn host_outputs(inp: &Inputs) -> Result<(Outputs, usize), String> {
+    let trace = Trace::parse(inp.trace).map_err(|e| format!("embedded trace: {e:?}"))?;
     let mut outs = Outputs::new();
     run_trace(
         &trace,
+        inp.lugre,
+        inp.sindyc,
         |obs, k, o| {
-            outs.insert((obs.name().to_string(), k), o.map(f32::to_bits));
+            outs.insert((obs.name().to_string(), k), *o);
         },
         |_, _| {},
-    );
+    )
+    .map_err(|e| format!("embedded coefficient blob: {e}"))?;
     Ok((outs, trace.steps))
 }
 
-fn print_host(trace_bytes: &[u8]) -> Result<(), String> {
-    let (outs, steps) = host_outputs(trace_bytes)?;
+fn print_host(inp: &Inputs) -> Result<(), String> {
+    let (outs, steps) = host_outputs(inp)?;
     let stdout = std::io::stdout();
     let mut w = std::io::BufWriter::new(stdout.lock());
     let io = |e: std::io::Error| e.to_string();
@@ -123,8 +138,8 @@ fn read_qemu(path: &str) -> Result<(Outputs, Option<usize>, Option<[u64; 4]>), S
     Ok((outs, done, markers))
 }
 
-fn compare(trace_bytes: &[u8], path: &str, ulp_bound: u64) -> Result<(), String> {
-    let (host, steps) = host_outputs(trace_bytes)?;
+fn compare(inp: &Inputs, path: &str, ulp_bound: u64) -> Result<(), String> {
+    let (host, steps) = host_outputs(inp)?;
     let (qemu, done, _) = read_qemu(path)?;
     if done != Some(steps) {
         return Err(format!(
@@ -139,8 +154,13 @@ fn compare(trace_bytes: &[u8], path: &str, ulp_bound: u64) -> Result<(), String>
             let q = qemu
                 .get(&key)
                 .ok_or_else(|| format!("{path}: no output for observer {} step {k}", obs.name()))?;
-            for (a, b) in host[&key].iter().zip(q) {
-                let d = ulp_distance(*a, *b);
+            for (j, (a, b)) in host[&key].iter().zip(q).enumerate() {
+                // The last word is the fault bit set: equal or not.
+                let d = if j == N_OUTPUTS - 1 {
+                    u64::from(a != b) * u64::MAX
+                } else {
+                    ulp_distance(*a, *b)
+                };
                 total += 1;
                 same += usize::from(d == 0);
                 worst = worst.max(d);

@@ -5,21 +5,30 @@
 //! from code generation and floating point on the two machines, which is what the parity check
 //! measures.
 //!
-//! Trace format (`trace/*.qpt`, little-endian, written by `motorid emulate --trace-out`):
-//! magic `QPT1`, `u32` field count, `u32` step count, then `steps × fields` `f32` values,
-//! one row per 12 ms control step, fields in the order of [`TRACE_FIELDS`].
+//! * The trace (`trace/closed_loop.qpt`) is the control step's inputs recorded during a
+//!   closed-loop run on the emulated board: `motorid emulate --model trace/lugre.toml --model
+//!   trace/sindyc.toml --compensation sindyc --edge-timing 0.1 --trace-out trace/closed_loop.qpt`.
+//!   Format (little-endian): `QPT2`, u32 step count, then per step: hall u8, edge count u8,
+//!   flags u8 (bit 0 edge overflow, bit 1 voltage override), 0 u8, now_ticks u32, i_meas f32,
+//!   v_bus f32, omega_ref f32, v_override f32, then per edge: ticks u32, state u8, 3 zeros.
+//! * The configurations are the coefficient blobs `motorid export --edge-timing 0.1` wrote for
+//!   the two models (`trace/lugre.bin`, `trace/sindyc.bin`), decoded with
+//!   `control::blob::decode` and turned into a step configuration with
+//!   `Coefficients::step_config`, as the firmware does; "none" is the default coefficients.
 #![no_std]
 
-use control::lugre::{LugreObserver, LugreParams};
-
-/// Names of the trace's per-step fields, in file order.
-pub const TRACE_FIELDS: [&str; 4] = ["t", "theta", "i", "omega_ref"];
+use control::blob::{self, Coefficients};
+use control::step::{ControlStep, HallEdge, StepInputs, StepOutputs};
 
 /// Magic at the head of a trace file.
-pub const TRACE_MAGIC: [u8; 4] = *b"QPT1";
+pub const TRACE_MAGIC: [u8; 4] = *b"QPT2";
 
-/// Number of `f32` outputs a step reports.
-pub const N_OUTPUTS: usize = 3;
+/// Number of `f32` outputs a step reports (v_cmd, theta, omega, friction, v_comp, z) plus
+/// the fault bits as a seventh word.
+pub const N_OUTPUTS: usize = 7;
+
+/// Nominal bus voltage [V] of the configurations (the firmware's `V_BUS_NOMINAL`).
+pub const V_BUS: f32 = 22.2;
 
 /// The observer a control step runs for friction compensation.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -46,95 +55,112 @@ impl Observer {
     }
 }
 
-/// A decoded trace header; rows are read with [`Trace::row`].
-#[derive(Debug, Clone, Copy)]
+/// A parsed trace; steps are decoded one at a time by [`Trace::inputs`].
+#[derive(Debug, Clone)]
 pub struct Trace<'a> {
-    pub fields: usize,
     pub steps: usize,
+    /// Byte offset of each step in `data`.
     data: &'a [u8],
 }
 
 /// Why a trace could not be read.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum TraceError {
-    /// The first four bytes are not `QPT1`.
+    /// The first four bytes are not `QPT2`.
     BadMagic,
-    /// The field count differs from [`TRACE_FIELDS`].
-    BadFields,
-    /// Fewer bytes than the header announces.
+    /// Fewer bytes than the steps need.
     Truncated,
+    /// More edges in a step than the control step takes.
+    TooManyEdges,
+}
+
+const STEP_LEN: usize = 24;
+const EDGE_LEN: usize = 8;
+
+fn word(b: &[u8], k: usize) -> u32 {
+    u32::from_le_bytes([b[k], b[k + 1], b[k + 2], b[k + 3]])
 }
 
 impl<'a> Trace<'a> {
-    /// Parse a trace; checks the magic, the field count and the length.
+    /// Parse a trace: checks the magic and that every step is complete.
     pub fn parse(bytes: &'a [u8]) -> Result<Self, TraceError> {
-        if bytes.len() < 12 || bytes[..4] != TRACE_MAGIC {
+        if bytes.len() < 8 || bytes[..4] != TRACE_MAGIC {
             return Err(TraceError::BadMagic);
         }
-        let word =
-            |k: usize| u32::from_le_bytes([bytes[k], bytes[k + 1], bytes[k + 2], bytes[k + 3]]);
-        let fields = word(4) as usize;
-        let steps = word(8) as usize;
-        if fields != TRACE_FIELDS.len() {
-            return Err(TraceError::BadFields);
+        let steps = word(bytes, 4) as usize;
+        let data = &bytes[8..];
+        let mut at = 0;
+        for _ in 0..steps {
+            if at + STEP_LEN > data.len() {
+                return Err(TraceError::Truncated);
+            }
+            let n = data[at + 1] as usize;
+            if n > control::step::MAX_EDGES {
+                return Err(TraceError::TooManyEdges);
+            }
+            at += STEP_LEN + n * EDGE_LEN;
+            if at > data.len() {
+                return Err(TraceError::Truncated);
+            }
         }
-        let data = &bytes[12..];
-        if data.len() < fields * steps * 4 {
-            return Err(TraceError::Truncated);
-        }
-        Ok(Trace {
-            fields,
-            steps,
-            data,
+        Ok(Trace { steps, data })
+    }
+
+    /// Decode the steps in order.
+    pub fn inputs(&self) -> impl Iterator<Item = StepInputs<f32>> + '_ {
+        let mut at = 0;
+        (0..self.steps).map(move |_| {
+            let d = &self.data[at..];
+            let f = |k: usize| f32::from_bits(word(d, k));
+            let n = d[1] as usize;
+            let mut inp = StepInputs {
+                hall: d[0],
+                edges_overflow: d[2] & 1 != 0,
+                now_ticks: word(d, 4),
+                i_meas: f(8),
+                v_bus: f(12),
+                omega_ref: f(16),
+                v_override: if d[2] & 2 != 0 { Some(f(20)) } else { None },
+                ..StepInputs::default()
+            };
+            for e in 0..n {
+                let o = STEP_LEN + e * EDGE_LEN;
+                // parse() checked the count against MAX_EDGES.
+                let _ = inp.edges.push(HallEdge {
+                    ticks: word(d, o),
+                    state: d[o + 4],
+                });
+            }
+            at += STEP_LEN + n * EDGE_LEN;
+            inp
         })
     }
+}
 
-    /// Row `k` (0-based), `fields` values.
-    pub fn row(&self, k: usize) -> [f32; TRACE_FIELDS.len()] {
-        let mut row = [0.0f32; TRACE_FIELDS.len()];
-        let base = k * self.fields * 4;
-        for (j, v) in row.iter_mut().enumerate() {
-            let o = base + 4 * j;
-            *v = f32::from_le_bytes([
-                self.data[o],
-                self.data[o + 1],
-                self.data[o + 2],
-                self.data[o + 3],
-            ]);
-        }
-        row
+/// The coefficients of one observer configuration; `None` when a blob does not decode.
+pub fn coefficients(
+    obs: Observer,
+    lugre: &[u8],
+    sindyc: &[u8],
+) -> Result<Coefficients, blob::BlobError> {
+    match obs {
+        Observer::None => Ok(Coefficients::default()),
+        Observer::Lugre => blob::decode(lugre),
+        Observer::Sindyc => blob::decode(sindyc),
     }
 }
 
-/// The state the control step keeps between calls for one observer configuration.
-pub struct Runner {
-    observer: Observer,
-    lugre: LugreObserver<f32>,
-    prev_theta: f32,
-}
-
-impl Runner {
-    /// A runner at rest.
-    pub fn new(observer: Observer) -> Self {
-        Runner {
-            observer,
-            lugre: LugreObserver::new(LugreParams::paper()),
-            prev_theta: 0.0,
-        }
-    }
-
-    /// One control step on one trace row; returns the step's outputs.
-    #[inline(never)]
-    pub fn step(&mut self, row: &[f32; TRACE_FIELDS.len()]) -> [f32; N_OUTPUTS] {
-        let dt = control::CONTROL_PERIOD_S;
-        let omega = (row[1] - self.prev_theta) / dt;
-        self.prev_theta = row[1];
-        let friction = match self.observer {
-            Observer::None => 0.0,
-            Observer::Lugre | Observer::Sindyc => self.lugre.step(omega, dt),
-        };
-        [omega, friction, row[3] - omega]
-    }
+/// The step's outputs as raw words, in a fixed order.
+pub fn output_words(o: &StepOutputs<f32>) -> [u32; N_OUTPUTS] {
+    [
+        o.v_cmd.to_bits(),
+        o.theta.to_bits(),
+        o.omega.to_bits(),
+        o.friction.to_bits(),
+        o.v_comp.to_bits(),
+        o.z.to_bits(),
+        u32::from(o.faults.0),
+    ]
 }
 
 /// Run every observer over the whole trace; `emit(observer, step, outputs)` receives each
@@ -142,17 +168,20 @@ impl Runner {
 /// bare-metal run uses it to count instructions).
 pub fn run_trace(
     trace: &Trace<'_>,
-    mut emit: impl FnMut(Observer, usize, &[f32; N_OUTPUTS]),
+    lugre_blob: &[u8],
+    sindyc_blob: &[u8],
+    mut emit: impl FnMut(Observer, usize, &[u32; N_OUTPUTS]),
     mut mark: impl FnMut(Observer, bool),
-) {
+) -> Result<(), blob::BlobError> {
     for obs in Observer::ALL {
-        let mut runner = Runner::new(obs);
-        for k in 0..trace.steps {
-            let row = trace.row(k);
+        let co = coefficients(obs, lugre_blob, sindyc_blob)?;
+        let mut step = ControlStep::new(&co.step_config(V_BUS));
+        for (k, inp) in trace.inputs().enumerate() {
             mark(obs, true);
-            let out = runner.step(&row);
+            let out = step.step(&inp);
             mark(obs, false);
-            emit(obs, k, &out);
+            emit(obs, k, &output_words(&out));
         }
     }
+    Ok(())
 }

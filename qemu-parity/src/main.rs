@@ -7,13 +7,18 @@
 //!   counts instructions per control step from QEMU's `-d exec` log (`count`).
 //!
 //! Printed lines (both runs): `markers <begin_none> <begin_lugre> <begin_sindyc> <end>`
-//! (code addresses of the step markers), `out <observer> <step> <bits> <bits> <bits>`,
+//! (code addresses of the step markers), `out <observer> <step> <word>...` (the step's
+//! outputs v_cmd, theta, omega, friction, v_comp, z as f32 bits, then the fault bits),
 //! `done <steps>`.
 #![cfg_attr(target_os = "none", no_std)]
 #![cfg_attr(target_os = "none", no_main)]
 
 /// The recorded input trace (see `qemu_parity` for the format).
 static TRACE: &[u8] = include_bytes!("../trace/closed_loop.qpt");
+/// The LuGre model's coefficient blob (`motorid export`).
+static LUGRE: &[u8] = include_bytes!("../trace/lugre.bin");
+/// The SINDYc model's coefficient blob (`motorid export`).
+static SINDYC: &[u8] = include_bytes!("../trace/sindyc.bin");
 
 #[cfg(target_os = "none")]
 mod bare;
@@ -23,5 +28,5 @@ mod host;
 
 #[cfg(not(target_os = "none"))]
 fn main() -> std::process::ExitCode {
-    host::main(TRACE)
+    host::main(TRACE, LUGRE, SINDYC)
 }

@@ -19,7 +19,13 @@ fn fails_with(dir: &Path, args: &[&str], want: &[&str]) {
 fn ramp_log(n: usize, u: impl Fn(usize) -> f64) -> String {
     let mut s = String::from("# sample_period=0.012\nt,u,i,theta\n");
     for k in 0..n {
-        s.push_str(&format!("{},{},{},{}\n", k as f64 * 0.012, u(k), 0.1 * (k % 7) as f64, 0.01 * k as f64));
+        s.push_str(&format!(
+            "{},{},{},{}\n",
+            k as f64 * 0.012,
+            u(k),
+            0.1 * (k % 7) as f64,
+            0.01 * k as f64
+        ));
     }
     s
 }
@@ -29,26 +35,70 @@ fn bad_logs_and_models_are_one_clear_error_and_no_output() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     std::fs::write(d.join("text.csv"), "t,u,i,theta\n0,1,2,3\n0.012,one,2,3\n").unwrap();
-    fails_with(d, &["fit", "--model", "linear", "-o", "m.toml", "text.csv"], &["text.csv:3", "'u'"]);
+    fails_with(
+        d,
+        &["fit", "--model", "linear", "-o", "m.toml", "text.csv"],
+        &["text.csv:3", "'u'"],
+    );
     std::fs::write(d.join("nocol.csv"), "t,u,theta\n0,1,3\n0.012,1,3\n").unwrap();
-    fails_with(d, &["fit", "--model", "lugre", "-o", "m.toml", "nocol.csv"], &["nocol.csv:1", "'i'"]);
+    fails_with(
+        d,
+        &["fit", "--model", "lugre", "-o", "m.toml", "nocol.csv"],
+        &["nocol.csv:1", "'i'"],
+    );
     std::fs::write(d.join("nan.csv"), "t,u,i,theta\n0,1,2,3\n0.012,1,NaN,3\n").unwrap();
-    fails_with(d, &["fit", "--model", "linear", "-o", "m.toml", "nan.csv"], &["nan.csv:3", "'i'"]);
-    std::fs::write(d.join("time.csv"), "t,u,i,theta\n0,1,2,3\n0.012,1,2,3\n0.012,1,2,3\n").unwrap();
-    fails_with(d, &["fit", "--model", "linear", "-o", "m.toml", "time.csv"], &["time.csv:4", "'t'"]);
+    fails_with(
+        d,
+        &["fit", "--model", "linear", "-o", "m.toml", "nan.csv"],
+        &["nan.csv:3", "'i'"],
+    );
+    std::fs::write(
+        d.join("time.csv"),
+        "t,u,i,theta\n0,1,2,3\n0.012,1,2,3\n0.012,1,2,3\n",
+    )
+    .unwrap();
+    fails_with(
+        d,
+        &["fit", "--model", "linear", "-o", "m.toml", "time.csv"],
+        &["time.csv:4", "'t'"],
+    );
     std::fs::write(d.join("short.csv"), ramp_log(10, |k| k as f64)).unwrap();
-    fails_with(d, &["fit", "--model", "linear", "-o", "m.toml", "short.csv"], &["short.csv", "10 samples"]);
+    fails_with(
+        d,
+        &["fit", "--model", "linear", "-o", "m.toml", "short.csv"],
+        &["short.csv", "10 samples"],
+    );
     std::fs::write(d.join("flat.csv"), ramp_log(200, |_| 1.0)).unwrap();
-    fails_with(d, &["fit", "--model", "linear", "-o", "m.toml", "flat.csv"], &["flat.csv", "'u'", "constant"]);
+    fails_with(
+        d,
+        &["fit", "--model", "linear", "-o", "m.toml", "flat.csv"],
+        &["flat.csv", "'u'", "constant"],
+    );
     assert!(!d.join("m.toml").exists(), "an output file was written");
     // A broken model: the line and the field are named.
-    std::fs::write(d.join("good.csv"), ramp_log(200, |k| (k as f64 * 0.1).sin())).unwrap();
-    std::fs::write(d.join("bad.toml"), "kind = \"linear\"\nplant = \"voltage\"\nsample_period = \"fast\"\n").unwrap();
-    fails_with(d, &["compare", "bad.toml", "good.csv"], &["bad.toml:3", "sample_period"]);
+    std::fs::write(
+        d.join("good.csv"),
+        ramp_log(200, |k| (k as f64 * 0.1).sin()),
+    )
+    .unwrap();
+    std::fs::write(
+        d.join("bad.toml"),
+        "kind = \"linear\"\nplant = \"voltage\"\nsample_period = \"fast\"\n",
+    )
+    .unwrap();
+    fails_with(
+        d,
+        &["compare", "bad.toml", "good.csv"],
+        &["bad.toml:3", "sample_period"],
+    );
     std::fs::write(
         d.join("neg.toml"),
         "kind = \"linear\"\nplant = \"voltage\"\nsample_period = 0.012\n[motor]\nr = 0.2\nl = 0.0003\nkt = 0.07\nkb = 0.07\nj = -1.0\n",
     )
     .unwrap();
-    fails_with(d, &["compare", "neg.toml", "good.csv"], &["neg.toml", "motor.j"]);
+    fails_with(
+        d,
+        &["compare", "neg.toml", "good.csv"],
+        &["neg.toml", "motor.j"],
+    );
 }

@@ -21,6 +21,9 @@ pub struct LoopSettings {
     pub u_max: f32,
     /// Weight of the compensation voltage (1 = the paper's eq. 40, 0 = off).
     pub comp_gain: f32,
+    /// Velocity estimator: `None` = the model's moving average (the paper's, window from
+    /// MODEL.toml), `Some(timeout)` = Hall-edge timing with this standstill timeout [s].
+    pub edge_timing: Option<f32>,
 }
 
 impl Default for LoopSettings {
@@ -32,6 +35,7 @@ impl Default for LoopSettings {
             ki: 0.8,
             u_max: 24.0,
             comp_gain: 1.0,
+            edge_timing: None,
         }
     }
 }
@@ -147,8 +151,11 @@ pub fn coefficients(model: &Model, loop_settings: LoopSettings) -> Result<Coeffi
             j: m.j as f32,
         },
         pole_pairs: pole_pairs(model),
-        estimator: Estimator::MovingAverage {
-            window: model.sensor.velocity_window.clamp(1, 64) as u8,
+        estimator: match loop_settings.edge_timing {
+            Some(timeout_s) => Estimator::EdgeTiming { timeout_s },
+            None => Estimator::MovingAverage {
+                window: model.sensor.velocity_window.clamp(1, 64) as u8,
+            },
         },
         pi: PiGains {
             kp: loop_settings.kp,

@@ -8,13 +8,15 @@ use std::path::PathBuf;
 
 /// Score a model on a log.
 #[derive(clap::Args, Debug)]
-#[command(after_help = "Fit percentage (the paper's eq. 48): 100*(1 - |y - yhat| / |y - mean(y)|); \
+#[command(
+    after_help = "Fit percentage (the paper's eq. 48): 100*(1 - |y - yhat| / |y - mean(y)|); \
     100 is perfect, 0 is as good as the mean, negative is worse.\n\
     fit: the model's angle, velocity and current against the columns theta, omega (or the \
     firmware's 10-sample moving-average estimator applied to theta) and i.\n\
     fit_sensor: the model's angle first Hall-quantised and its velocity estimated like the \
     firmware does.\n\n\
-    --json prints {\"fit\": {\"x\": F, \"xdot\": F, \"i\": F|null}, \"fit_sensor\": {...}, \"samples\": N}.")]
+    --json prints {\"fit\": {\"x\": F, \"xdot\": F, \"i\": F|null}, \"fit_sensor\": {...}, \"samples\": N}."
+)]
 pub struct Args {
     /// The model (written by `motorid fit`).
     #[arg(value_name = "MODEL.toml")]
@@ -57,7 +59,9 @@ pub fn run(args: Args) -> Result<()> {
         );
         println!("              {:>9} {:>9} {:>9}", "x", "xdot", "i");
         let row = |name: &str, f: &ident::Fits| {
-            let i = f.i.map(|v| format!("{v:9.2}")).unwrap_or_else(|| format!("{:>9}", "-"));
+            let i =
+                f.i.map(|v| format!("{v:9.2}"))
+                    .unwrap_or_else(|| format!("{:>9}", "-"));
             println!("  {name:<11} {:9.2} {:9.2} {i}   (%)", f.x, f.xdot);
         };
         row("fit", &sc.fit);

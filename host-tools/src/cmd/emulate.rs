@@ -49,6 +49,14 @@ pub struct Args {
     /// PI integral gain [V per rad].
     #[arg(long, default_value_t = LoopSettings::default().ki)]
     pub ki: f32,
+    /// Velocity from Hall-edge timing (standstill after this many seconds without an edge)
+    /// instead of the paper's 10-sample moving average, for every compensation.
+    #[arg(long, value_name = "TIMEOUT_S")]
+    pub edge_timing: Option<f32>,
+    /// Write the run's time series as CSV (t, omega_ref, omega, omega_est, u, v_comp,
+    /// friction, i).
+    #[arg(long, value_name = "FILE")]
+    pub csv: Option<PathBuf>,
     /// Write the control step's inputs of this run as a QEMU parity trace (qemu-parity crate).
     #[arg(long, value_name = "FILE")]
     pub trace_out: Option<PathBuf>,
@@ -73,6 +81,7 @@ fn one(
     let settings = LoopSettings {
         kp: args.kp,
         ki: args.ki,
+        edge_timing: args.edge_timing,
         ..LoopSettings::default()
     };
     let co = closed_loop::coefficients_for(comp, models, settings)?;
@@ -159,6 +168,23 @@ pub fn run(args: Args) -> Result<()> {
         }
         if let Some(p) = &args.trace_out {
             write_trace(p, &r)?;
+        }
+        if let Some(p) = &args.csv {
+            let mut text = String::from("t,omega_ref,omega,omega_est,u,v_comp,friction,i\n");
+            for s in &r.samples {
+                text.push_str(&format!(
+                    "{},{},{},{},{},{},{},{}\n",
+                    s.t,
+                    s.omega_ref,
+                    s.omega_true,
+                    s.out.omega,
+                    s.out.v_cmd,
+                    s.out.v_comp,
+                    s.out.friction,
+                    s.i_meas
+                ));
+            }
+            crate::atomic::write_str(p, &text)?;
         }
         let s = r.scores();
         if args.json {

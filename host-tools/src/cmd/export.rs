@@ -29,6 +29,10 @@ pub struct Args {
     /// Weight of the friction compensation voltage: 1 = full (the paper's eq. 40), 0 = off.
     #[arg(long, default_value_t = LoopSettings::default().comp_gain)]
     pub comp_gain: f32,
+    /// Estimate the velocity from Hall-edge timing (standstill after this many seconds
+    /// without an edge) instead of the paper's 10-sample moving average.
+    #[arg(long, value_name = "TIMEOUT_S")]
+    pub edge_timing: Option<f32>,
 }
 
 pub fn run(args: Args) -> Result<()> {
@@ -38,6 +42,7 @@ pub fn run(args: Args) -> Result<()> {
         ki: args.ki,
         u_max: args.u_max,
         comp_gain: args.comp_gain,
+        edge_timing: args.edge_timing,
     };
     let co = coeffs::coefficients(&model, settings)
         .with_context(|| format!("{}", args.model.display()))?;

@@ -27,11 +27,13 @@ pub const PAPER: [(&str, [f64; 8]); 3] = [
 
 /// Regenerate the paper's fit table on emulated data.
 #[derive(clap::Args, Debug)]
-#[command(after_help = "The emulated motor is the paper's (LuGre friction, Hall sensors of \
+#[command(
+    after_help = "The emulated motor is the paper's (LuGre friction, Hall sensors of \
     0.095 rad, 10-sample moving-average velocity, 12 ms). The LuGre model's static curve is \
     fitted on the emulator's `steady` experiment as in the paper; every model is then scored \
     in free run. Two tables: `fit` (model states as they are) and `fit_sensor` (model states \
-    through the board's sensor chain), each beside the paper's numbers.")]
+    through the board's sensor chain), each beside the paper's numbers."
+)]
 pub struct Args {
     /// Write the markdown table to this file as well.
     #[arg(long, value_name = "FILE.md")]
@@ -73,8 +75,12 @@ pub fn run(args: Args) -> Result<()> {
     }
     bar.set_message("emulating the steady experiment");
     let steady = named(
-        emulator::simulate_signal(&cfg, SignalKind::Steady, SignalKind::Steady.default_duration())?
-            .log,
+        emulator::simulate_signal(
+            &cfg,
+            SignalKind::Steady,
+            SignalKind::Steady.default_duration(),
+        )?
+        .log,
         "steady",
     );
     bar.inc(1);
@@ -158,7 +164,12 @@ pub fn render(rows: &[(String, Vec<Option<Scores>>)], notes: &[String], duration
             let mut line = format!("| {name} (ours) ");
             for v in sc {
                 let f = v.map(|v| if sensor { v.fit_sensor } else { v.fit });
-                let _ = write!(line, "| {} | {} ", cell(f.map(|f| f.x)), cell(f.map(|f| f.xdot)));
+                let _ = write!(
+                    line,
+                    "| {} | {} ",
+                    cell(f.map(|f| f.x)),
+                    cell(f.map(|f| f.xdot))
+                );
             }
             let _ = writeln!(s, "{line}|");
             if let Some((_, p)) = PAPER.iter().find(|(n, _)| *n == name.as_str()) {

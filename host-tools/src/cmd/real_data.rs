@@ -103,6 +103,25 @@ fn emps_section(md: &mut String, data: &Path, args: &Args) -> Result<()> {
         "| relative error on DATA_EMPS | 3.112 % | {:.3} % |\n",
         asy.ols.rel_error_pct()
     );
+    let _ = writeln!(
+        md,
+        "Are the friction terms needed? Nested F-tests on the same regression, with the \
+         effective sample size of the residual (the statistics `diagnose` uses):\n"
+    );
+    let _ = writeln!(md, "| effect | tested against | explains | F | p |");
+    let _ = writeln!(md, "|---|---|---|---|---|");
+    for t in emps::term_tests(&train, g)? {
+        let _ = writeln!(
+            md,
+            "| {} | {} | {:.1} % of the residual | {:.1} | {:.1e} |",
+            t.name,
+            t.against,
+            100.0 * t.test.explained,
+            t.test.f,
+            t.test.p_value
+        );
+    }
+    md.push('\n');
 
     // Benchmark free-run test.
     let (rmse_sym, sim_sym) = emps::benchmark_rmse_mm(&sym.axis, g, &test);
@@ -122,14 +141,18 @@ fn emps_section(md: &mut String, data: &Path, args: &Args) -> Result<()> {
         let rounds = emps_loop::run(&train, &test, &mut |m| progress(m))?;
         let _ = writeln!(
             loop_md,
-            "The generic loop on the same data, exactly what `motorid fit --model linear --plant \
-             torque --map {}` then `motorid diagnose` and `fit --add` do. With `u = vir` the \
-             force parameters come out in volts of `vir`; they are shown ×gτ in newtons.\n",
+            "The generic loop on the same data: the code paths of `motorid fit --model linear \
+             --plant torque --map {}`, `motorid diagnose` and `fit --add` (ident::fit, \
+             diagnose::diagnose), on the training log in mm at 100 Hz (the generic tools' \
+             velocity constants are set for rad/s of a motor sampled at ~10 ms; see \
+             `real_data::emps_loop`). With `u = vir` the force parameters come out in volts of \
+             `vir`; they are shown ×gτ in newtons. Fit % (the paper's, free run) on the \
+             100 Hz training log and the 1 kHz test log.\n",
             emps::MAP
         );
         let _ = writeln!(
             loop_md,
-            "| round | added effects | M [kg] | Fv [N·s/m] | Fc [N] | OF [N] | asymmetry dv, dc | fit % q / q̇ (train) | fit % q / q̇ (test) | test RMSE [mm] | diagnosed next |"
+            "| round | added effects | M [kg] | Fv [N·s/m] | Fc [N] | OF [N] | asymmetry dv, dc | fit % q / q̇ (train) | fit % q / q̇ (test) | test RMSE [mm] | diagnosed next (share of residual) |"
         );
         let _ = writeln!(loop_md, "|---|---|---|---|---|---|---|---|---|---|---|");
         for (k, r) in rounds.iter().enumerate() {
@@ -237,7 +260,7 @@ fn emps_section(md: &mut String, data: &Path, args: &Args) -> Result<()> {
 }
 
 fn benchmark_train(model: &crate::model::Model, train: &crate::log::MotorLog) -> f64 {
-    emps_loop::benchmark_rmse_mm(model, train).map_or(f64::NAN, |r| r.0)
+    emps_loop::benchmark_rmse_mm(model, &emps_loop::prepare(train, 1)).map_or(f64::NAN, |r| r.0)
 }
 
 fn scale(x: &[f64], k: f64) -> Vec<f64> {
@@ -259,6 +282,13 @@ fn stribeck_p(sel: &Selection) -> String {
     }
 }
 
+fn one_sided(o: &crate::real_data::static_curve::OneSided) -> String {
+    match (o.p, o.vs) {
+        (Some(p), Some(vs)) => format!("{p:.1e}, {vs:.2}"),
+        _ => "no Fs > 0 fit".into(),
+    }
+}
+
 fn screw_section(md: &mut String, data: &Path, out: &Path) -> Result<()> {
     progress("screw drives: static curves");
     let _ = writeln!(md, "\n### TRO2021 screw drives (static friction curves)\n");
@@ -267,19 +297,20 @@ fn screw_section(md: &mut String, data: &Path, out: &Path) -> Result<()> {
         "Each speed set-point is reduced to one (mean velocity, mean torque) point (first 10 % \
          of each run skipped). Starting from Coulomb + viscous, offset, asymmetry (|v|) and \
          Stribeck `Fs·exp(−(v/vs)²)·sgn v` are added one at a time while the extra-sum-of-squares \
-         F-test gives p < {} (Stribeck also needs Fs > 0). Velocity in rad/s at the motor, torque \
-         in N·m.\n",
+         F-test gives p < {} (Stribeck also needs Fs > 0). Stribeck is also tested in each \
+         direction alone (line + Stribeck against a line). Velocity in rad/s at the motor \
+         (as recorded: the authors' loader negates both signals), torque in N·m.\n",
         crate::real_data::static_curve::ALPHA
     );
-    let _ = writeln!(md, "| drive | points | selected terms | Fc | Fv | offset | Dv | Fs | vs [rad/s] | authors' strbVelocity | Stribeck p | residual σ |");
-    let _ = writeln!(md, "|---|---|---|---|---|---|---|---|---|---|---|---|");
+    let _ = writeln!(md, "| drive | points | selected terms | Fc | Fv | offset | Dv | Fs | vs [rad/s] | authors' strbVelocity | Stribeck p (both directions) | Stribeck p, vs (v > 0 only) | Stribeck p, vs (v < 0 only) | residual σ |");
+    let _ = writeln!(md, "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     for k in 1..=3 {
         let r = screw_drives::analyse(data, k)?;
         let c = &r.selection.chosen;
         let names: Vec<&str> = c.terms.iter().map(|t| t.name()).collect();
         let _ = writeln!(
             md,
-            "| {} {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {:.2e} |",
+            "| {} {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {:.2e} |",
             k,
             r.name,
             r.points.len(),
@@ -292,6 +323,8 @@ fn screw_section(md: &mut String, data: &Path, out: &Path) -> Result<()> {
             c.vs.map_or("–".into(), |v| format!("{v:.3}")),
             r.authors_vs,
             stribeck_p(&r.selection),
+            one_sided(&r.one_sided[0]),
+            one_sided(&r.one_sided[1]),
             c.residual_std()
         );
         let vmax = r.points.iter().map(|p| p.v.abs()).fold(0.0, f64::max);

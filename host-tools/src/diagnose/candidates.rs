@@ -43,8 +43,11 @@ pub struct Signals {
     /// Sample period [s].
     pub dt: f64,
     pub t: Vec<f64>,
-    /// Input: voltage [V] (voltage plant) or torque command (torque plant).
+    /// Input on the sample grid: voltage [V] held just before each sample (voltage plant)
+    /// or torque command (torque plant).
     pub u: Vec<f64>,
+    /// Input as logged, held over `[t_k, t_k+1)`.
+    pub raw_u: Vec<f64>,
     /// Measured current [A] (voltage plant).
     pub i: Option<Vec<f64>>,
     /// Angle as measured [rad].
@@ -97,6 +100,7 @@ impl Signals {
             dt,
             t: log.t.clone(),
             u,
+            raw_u: log.u.clone(),
             i,
             theta: log.theta.clone(),
             theta_s,
@@ -199,7 +203,12 @@ impl Signals {
 
     /// Load-dependent friction `|drive|·sgn(ω)` with the modelled drive, zero while stuck.
     pub fn load_friction_column(&self) -> Vec<f64> {
-        self.drive_model
+        let drive = if self.i.is_some() {
+            &self.drive
+        } else {
+            &self.drive_model
+        };
+        drive
             .iter()
             .zip(&self.omega)
             .map(|(d, w)| {
@@ -212,9 +221,15 @@ impl Signals {
             .collect()
     }
 
-    /// Static friction while stuck: it balances the drive, `drive·1[stuck]`.
+    /// Static friction while stuck: it balances the drive, `drive·1[stuck]` (in volts, the
+    /// input, when the torque equation is written in volts).
     pub fn stick_column(&self) -> Vec<f64> {
-        self.drive
+        let drive = if self.i.is_some() {
+            &self.raw_u
+        } else {
+            &self.drive
+        };
+        drive
             .iter()
             .zip(self.stuck())
             .map(|(d, s)| if s { *d } else { 0.0 })
@@ -403,7 +418,6 @@ pub fn present_columns(e: &Effect<f64>, s: &Signals) -> Vec<(Equation, Vec<f64>)
         Effect::Offset { .. } => vec![(mech, vec![1.0; n])],
         Effect::Asymmetry { .. } => vec![(mech, s.omega.iter().map(|w| w.abs()).collect())],
         Effect::LoadFriction { .. } => {
-            let sgn = s.sgn_omega();
             vec![(
                 mech,
                 s.load_friction_column(),
@@ -431,6 +445,9 @@ pub struct Units {
     pub r: f64,
     /// Torque constant K_t [N·m/A].
     pub kt: f64,
+    /// Factor from a torque-equation coefficient to N·m (K_t/R when the torque equation is
+    /// written in volts, 1 for a torque plant).
+    pub mech_scale: f64,
 }
 
 /// The spec of an effect from a variant's fitted coefficients.
@@ -442,14 +459,20 @@ pub fn spec_of(v: &Variant, beta: &[f64], units: Units) -> EffectSpec {
     for (k, x) in &v.fixed {
         put(k, *x);
     }
-    let b0 = beta.first().copied().unwrap_or(0.0);
+    let scale = if v.equation == Equation::Mechanical {
+        units.mech_scale
+    } else {
+        1.0
+    };
+    let b0 = beta.first().copied().unwrap_or(0.0) * scale;
     match v.kind {
         EffectKind::Coulomb => put("fc", b0),
         EffectKind::Viscous => put("b", b0),
         EffectKind::Stribeck => put("fs", b0),
         EffectKind::Presliding => {}
         EffectKind::Cogging | EffectKind::PositionLoad => {
-            let (amp, phase) = harmonics::amp_phase(b0, beta.get(1).copied().unwrap_or(0.0));
+            let (amp, phase) =
+                harmonics::amp_phase(b0, beta.get(1).copied().unwrap_or(0.0) * scale);
             put("amp", amp);
             put("phase", phase);
         }

@@ -160,6 +160,8 @@ struct EqData {
     eq: Equation,
     y: Vec<f64>,
     base_cols: Vec<Vec<f64>>,
+    /// Sample-level columns to carry into the other equation's base.
+    base_sample: Vec<Vec<f64>>,
     cand: Vec<(Variant, Vec<Vec<f64>>)>,
 }
 
@@ -171,33 +173,43 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
     let wf = weakform::WeakForm::new(s.len(), s.dt, h, h);
     let voltage = s.plant == Plant::Voltage && s.i.is_some();
 
-    // Base columns per equation.
-    let mut mech = EqData {
-        eq: Equation::Mechanical,
-        y: wf.integral(&s.drive),
-        base_cols: vec![wf.second_derivative(&s.theta)],
-        cand: vec![],
-    };
+    // Electrical equation (voltage plant): V = R·I + L·İ + K_b·ω + losses, on the sample grid
+    // (the current sampled at t_k answers the input held just before).
     let mut elec = EqData {
         eq: Equation::Electrical,
         y: wf.integral(&s.u),
         base_cols: vec![],
+        base_sample: vec![],
         cand: vec![],
     };
     if voltage {
         let i = s.i.as_ref().unwrap();
         elec.base_cols.push(wf.integral(i));
-        elec.base_cols.push(wf.derivative(i));
+        // L·dI/dt just before a sample, where the current tracks the back-EMF
+        // quasi-statically: −(L·K_b/R)·ω̇ (the sampled current's own derivative would carry
+        // the input's steps, which the winding has settled from by then).
+        elec.base_cols.push(wf.second_derivative(&s.theta));
         elec.base_cols.push(wf.derivative(&s.theta));
     }
+    // Mechanical equation. Voltage plant: the current is eliminated with the electrical
+    // equation (L·İ ≈ 0 at this sample rate), `K_t·I = (K_t/R)·(V − K_b·ω − losses)`, so the
+    // torque balance reads in volts: `V − K_b·ω = (R/K_t)·(J·θ̈ + Σ torques) + losses`. The
+    // held input integrates exactly; no sampled current has to stand for its interval.
+    let mut mech = EqData {
+        eq: Equation::Mechanical,
+        y: vec![],
+        base_cols: vec![wf.second_derivative(&s.theta)],
+        base_sample: vec![],
+        cand: vec![],
+    };
     for e in &st.effects {
         for (eq, col) in candidates::present_columns(e, &s) {
-            let target = if eq == Equation::Mechanical {
-                &mut mech
+            if eq == Equation::Mechanical {
+                mech.base_cols.push(wf.integral(&col));
             } else {
-                &mut elec
-            };
-            target.base_cols.push(wf.integral(&col));
+                elec.base_cols.push(wf.integral(&col));
+                mech.base_sample.push(col);
+            }
         }
     }
     // Any Coulomb-like friction sticks at standstill (the smooth sign creeps below 0.05
@@ -207,14 +219,6 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
     {
         mech.base_cols.push(wf.integral(&s.stick_column()));
     }
-    let coulomb_guess = st
-        .effects
-        .iter()
-        .find_map(|e| match e {
-            Effect::Coulomb { fc } => Some(*fc),
-            _ => None,
-        })
-        .unwrap_or(0.0);
 
     // Candidates.
     let mut n_variants = 0usize;
@@ -222,7 +226,7 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
         if st.has(kind) {
             continue;
         }
-        for v in candidates::variants(kind, &s, coulomb_guess) {
+        for v in candidates::variants(kind, &s, 0.0) {
             let cols: Vec<Vec<f64>> = v.columns.iter().map(|c| wf.integral(c)).collect();
             n_variants += 1;
             if v.equation == Equation::Mechanical {
@@ -237,36 +241,68 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
     let mut findings = Vec::new();
     let mut tested = Vec::new();
     let mut equations = Vec::new();
-    let mut r_elec = None;
-    // Electrical first: its resistance converts current-offset and thermal coefficients.
-    for data in [elec, mech] {
-        if data.y.is_empty() || (data.eq == Equation::Electrical && !voltage) {
-            continue;
+    let paper = MotorParams::<f64>::paper();
+    let mut units = Units {
+        r: paper.r,
+        kt: st.kt,
+        mech_scale: 1.0,
+    };
+    let centres = wf.centres.clone();
+    let input: Vec<f64> = centres.iter().map(|&c| s.u[c]).collect();
+    let push_eq = |eq: Equation, out: &SelectOut, unit: &'static str| EquationResidual {
+        equation: eq,
+        t: centres.iter().map(|&c| s.t[c]).collect(),
+        centres: centres.clone(),
+        base: out.2.clone(),
+        after: out.3.clone(),
+        n_eff: out.4,
+        whiteness: stats::whiteness(&out.2, &input, 30),
+        unit,
+    };
+    let mut kb = 0.0;
+    if voltage && !elec.y.is_empty() {
+        let out = forward_select(&elec, opts, alpha_per_test, &mut units);
+        kb = out.5.get(2).copied().unwrap_or(paper.kb);
+        // Voltage losses found here act in the torque equation (written in volts) too.
+        for f in &out.0 {
+            if let Some(v) = elec.cand.iter().find(|(v, _)| {
+                Some(v.kind) == f.kind && EffectSpec::parse(&f.spec).is_ok_and(|sp| {
+                    v.fixed.iter().all(|(k, x)| (sp.get(k) - x).abs() < 1e-9)
+                })
+            }) {
+                if v.0.kind != EffectKind::CurrentOffset {
+                    mech.base_sample.extend(v.0.columns.iter().cloned());
+                }
+            }
         }
-        let out = forward_select(&data, opts, alpha_per_test, &mut r_elec, st.kt);
+        equations.push(push_eq(Equation::Electrical, &out, "V·s"));
         findings.extend(out.0);
         tested.extend(out.1);
-        let centres = wf.centres.clone();
-        let input: Vec<f64> = centres.iter().map(|&c| s.u[c]).collect();
-        let whiteness = stats::whiteness(&out.2, &input, 30);
-        equations.push(EquationResidual {
-            equation: data.eq,
-            t: centres.iter().map(|&c| s.t[c]).collect(),
-            centres,
-            base: out.2,
-            after: out.3,
-            n_eff: out.4,
-            whiteness,
-            unit: if data.eq == Equation::Mechanical {
-                if voltage {
-                    "N·m·s"
-                } else {
-                    "u·s"
-                }
-            } else {
-                "V·s"
-            },
-        });
+    }
+    if !wf.centres.is_empty() {
+        if voltage {
+            let zoh = wf.integral_zoh(&s.raw_u);
+            let w = wf.derivative(&s.theta);
+            mech.y = zoh.iter().zip(&w).map(|(a, b)| a - kb * b).collect();
+            units.mech_scale = st.kt / units.r;
+            // The winding's L·dI/dt over each input step (the current's transient).
+            mech.base_cols.push(wf.derivative(s.i.as_ref().unwrap()));
+            for col in std::mem::take(&mut mech.base_sample) {
+                // Current offsets do not reach the torque equation written in volts.
+                mech.base_cols.push(wf.integral(&col));
+            }
+        } else {
+            mech.y = wf.integral_zoh(&s.raw_u);
+            units.mech_scale = 1.0;
+        }
+        let out = forward_select(&mech, opts, alpha_per_test, &mut units);
+        equations.push(push_eq(
+            Equation::Mechanical,
+            &out,
+            if voltage { "V·s" } else { "u·s" },
+        ));
+        findings.extend(out.0);
+        tested.extend(out.1);
     }
     resolve_offsets(&mut findings, st.kt);
     findings.sort_by(|a, b| b.score.total_cmp(&a.score));
@@ -317,14 +353,14 @@ fn modelled_drive(s: &Signals, st: &Structure) -> Vec<f64> {
         .collect()
 }
 
-type SelectOut = (Vec<Finding>, Vec<Tested>, Vec<f64>, Vec<f64>, f64);
+/// (findings, first-round tests, base residual, final residual, n_eff, base coefficients)
+type SelectOut = (Vec<Finding>, Vec<Tested>, Vec<f64>, Vec<f64>, f64, Vec<f64>);
 
 fn forward_select(
     data: &EqData,
     opts: &Options,
     alpha_per_test: f64,
-    r_elec: &mut Option<f64>,
-    kt: f64,
+    units: &mut Units,
 ) -> SelectOut {
     let mut all_cols: Vec<Vec<f64>> = data.base_cols.clone();
     let mut cand_idx: Vec<Vec<usize>> = Vec::new();
@@ -340,8 +376,9 @@ fn forward_select(
         eprintln!("{:?} base beta {:?} rss0 {rss0:.3e} yty {:.3e}", data.eq, beta0, gram.yty());
     }
     if data.eq == Equation::Electrical && beta0.first().is_some_and(|r| *r > 0.0) {
-        *r_elec = Some(beta0[0]);
+        units.r = beta0[0];
     }
+    let units = *units;
     let resid_of = |subset: &[usize], beta: &[f64]| -> Vec<f64> {
         let mut r = data.y.clone();
         for (j, b) in subset.iter().zip(beta) {
@@ -360,10 +397,6 @@ fn forward_select(
         let _ = std::fs::write(format!("{}_{:?}.csv", path.to_string_lossy(), data.eq), out);
     }
     let n_eff_base = stats::effective_n(&base_resid);
-    let units = Units {
-        r: r_elec.unwrap_or(MotorParams::<f64>::paper().r),
-        kt,
-    };
 
     // Best variant per effect kind, tested against the current base.
     let mut chosen_kinds: Vec<EffectKind> = Vec::new();
@@ -450,7 +483,7 @@ fn forward_select(
             break;
         }
     }
-    (findings, first_round, base_resid, resid_cur, n_eff_base)
+    (findings, first_round, base_resid, resid_cur, n_eff_base, beta0)
 }
 
 /// A current-sensor offset `i0` also shows in the torque equation as a constant `K_t·i0`;

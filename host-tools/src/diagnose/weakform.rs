@@ -74,6 +74,36 @@ impl WeakForm {
         self.conv(&self.w0, x)
     }
 
+    /// `∫φ·x dt` for a signal held constant over each sample interval `[t_k, t_k+1)`
+    /// (zero-order hold, as the board applies its voltage): exact interval weights
+    /// `∫φ` over each interval (Simpson's rule, exact for the bump's polynomial to 1e-6).
+    pub fn integral_zoh(&self, x: &[f64]) -> Vec<f64> {
+        let h = self.half as f64;
+        let dt = self.w0[self.half] / 1.0; // φ(0)·dt = dt
+        let phi = |s: f64| {
+            let q = 1.0 - s * s;
+            if q > 0.0 {
+                q.powi(4)
+            } else {
+                0.0
+            }
+        };
+        let w: Vec<f64> = (-(self.half as isize)..(self.half as isize))
+            .map(|k| {
+                let a = k as f64 / h;
+                let b = (k + 1) as f64 / h;
+                dt / 6.0 * (phi(a) + 4.0 * phi(0.5 * (a + b)) + phi(b))
+            })
+            .collect();
+        self.centres
+            .iter()
+            .map(|&c| {
+                let start = c - self.half;
+                w.iter().zip(&x[start..]).map(|(a, b)| a * b).sum()
+            })
+            .collect()
+    }
+
     /// `∫φ·ẋ dt = −∫φ'·x dt` per window (the weak first derivative).
     pub fn derivative(&self, x: &[f64]) -> Vec<f64> {
         self.conv(&self.w1, x).into_iter().map(|v| -v).collect()

@@ -258,7 +258,8 @@ pub fn simulate(cfg: &EmulatorConfig, input: &[f64], ts: f64) -> Result<SimResul
     let mut truth = Truth::default();
     for (k, u) in input.iter().enumerate() {
         let th = plant.hall_angle();
-        log.t.push(k as f64 * ts);
+        // k·ts, rounded to the nanosecond so the CSV shows 0.036, not 0.036000000000000004.
+        log.t.push((k as f64 * ts * 1e9).round() / 1e9);
         log.u.push(*u);
         log.theta.push(th);
         i_meas.push(plant.measured_current());

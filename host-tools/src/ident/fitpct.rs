@@ -8,7 +8,11 @@ use anyhow::{bail, Result};
 /// when a value is not finite, or when `y` is constant (the measure is undefined).
 pub fn fit_percent(y: &[f64], yhat: &[f64]) -> Result<f64> {
     if y.len() != yhat.len() {
-        bail!("fit: {} measured values but {} predicted", y.len(), yhat.len());
+        bail!(
+            "fit: {} measured values but {} predicted",
+            y.len(),
+            yhat.len()
+        );
     }
     if y.is_empty() {
         bail!("fit: no samples");

@@ -13,10 +13,10 @@
 //! diverges at LuGre breakaway, where the bilinear |ω|·z term changes within a step.)
 //!
 //! SINDYc models are simulated by `ident::sindyc` (the equations live there).
+use crate::emulator::scalar_root::find_root;
 use crate::log::{MotorLog, Plant};
 use crate::model::{Model, ModelKind};
 use anyhow::{bail, Result};
-use crate::emulator::scalar_root::find_root;
 use control::effects::{self, EffectInputs};
 use control::lugre::z_step;
 
@@ -89,7 +89,14 @@ impl Dynamics<'_> {
 
     /// One backward-Euler sub-step of length `h` (z exact), from state x with input u and
     /// heat state h_th. Returns the new state.
-    pub fn implicit_step(&self, x: &[f64; NX], u: f64, h_th: f64, h: f64, w_guess: f64) -> [f64; NX] {
+    pub fn implicit_step(
+        &self,
+        x: &[f64; NX],
+        u: f64,
+        h_th: f64,
+        h: f64,
+        w_guess: f64,
+    ) -> [f64; NX] {
         let m = self.model;
         let p = &m.motor;
         let lugre = match (&m.lugre, m.kind) {
@@ -97,11 +104,7 @@ impl Dynamics<'_> {
             _ => None,
         };
         let r = p.r * (1.0 + h_th);
-        let vloss_max: f64 = m
-            .effects
-            .iter()
-            .map(|e| e.voltage_loss(1e9).abs())
-            .sum();
+        let vloss_max: f64 = m.effects.iter().map(|e| e.voltage_loss(1e9).abs()).sum();
         let current_for = |w: f64| -> f64 {
             match m.plant {
                 Plant::Torque => u,
@@ -326,7 +329,11 @@ mod tests {
         let pr = simulate(&m, &log).unwrap();
         // ω_ss from K_t·I = b·ω, R·I + K_b·ω = V.
         let w_ss = 6.0 * p.kt / (p.r * m.viscous + p.kt * p.kb);
-        assert!((pr.omega[399] - w_ss).abs() < 1e-6 * w_ss, "{}", pr.omega[399]);
+        assert!(
+            (pr.omega[399] - w_ss).abs() < 1e-6 * w_ss,
+            "{}",
+            pr.omega[399]
+        );
     }
 
     #[test]

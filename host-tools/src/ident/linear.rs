@@ -100,9 +100,7 @@ pub fn weak_estimate(m: &mut Model, logs: &[MotorLog], coulomb: bool) -> (f64, f
                 let v = x[3 + c];
                 m.effects[*k] = match kind {
                     EffectKind::Deadtime => Effect::Deadtime { vd: v },
-                    _ => Effect::CurrentOffset {
-                        i0: -v / m.motor.r,
-                    },
+                    _ => Effect::CurrentOffset { i0: -v / m.motor.r },
                 };
             }
         }
@@ -296,7 +294,13 @@ pub fn fit(req: &FitRequest) -> Result<Model> {
         hi: 100.0,
     });
     free.extend(effect_free(&m));
-    let mut rows = sim_error::refine(&mut m, &free, req.logs, nlsq::Options::default(), &mut |_, _| {})?;
+    let mut rows = sim_error::refine(
+        &mut m,
+        &free,
+        req.logs,
+        nlsq::Options::default(),
+        &mut |_, _| {},
+    )?;
     rows.extend(fixed_rows(&m));
     m.parameters = rows;
     m.data.sample_period = m.sample_period;

@@ -37,11 +37,16 @@ pub struct SteadyPoint {
 /// Steady-state points of the logs: constant-input runs if there are at least 6 over all
 /// logs, else quasi-steady windows.
 pub fn all_steady_points(m: &Model, logs: &[MotorLog]) -> Vec<SteadyPoint> {
-    let runs: Vec<SteadyPoint> = logs.iter().flat_map(|l| steady_points(m, l, false)).collect();
+    let runs: Vec<SteadyPoint> = logs
+        .iter()
+        .flat_map(|l| steady_points(m, l, false))
+        .collect();
     if runs.len() >= 6 {
         return runs;
     }
-    logs.iter().flat_map(|l| steady_points(m, l, true)).collect()
+    logs.iter()
+        .flat_map(|l| steady_points(m, l, true))
+        .collect()
 }
 
 /// Steady-state points of a log (see the module doc), with the motor constants of `m`:
@@ -285,8 +290,13 @@ pub fn fit(req: &FitRequest) -> Result<Model> {
     ];
     free.extend(motor_free(req.plant));
     free.extend(effect_free(&m));
-    let mut dyn_rows =
-        sim_error::refine(&mut m, &free, req.logs, nlsq::Options::default(), &mut |_, _| {})?;
+    let mut dyn_rows = sim_error::refine(
+        &mut m,
+        &free,
+        req.logs,
+        nlsq::Options::default(),
+        &mut |_, _| {},
+    )?;
     // Static curve again with the refined K_t and J (the friction points scale with K_t).
     // α2 stays at the value the whole data gave when the points span a narrow velocity range.
     let pts2: Vec<SteadyPoint> = all_steady_points(&m, req.logs);

@@ -13,16 +13,16 @@
 //!
 //! Entry points: [`fit`] and [`score`].
 pub mod fitpct;
-pub mod freerun;
 pub mod free_params;
+pub mod freerun;
 pub mod hankel;
 pub mod library;
 pub mod linear;
 pub mod lugre_fit;
 pub mod nlsq;
+pub mod sensor_chain;
 pub mod sim_error;
 pub mod sindyc;
-pub mod sensor_chain;
 pub mod stlsq;
 pub mod weak_form;
 
@@ -226,7 +226,8 @@ pub fn score_prediction(model: &Model, log: &MotorLog, pred: &Prediction) -> Res
         _ => model.sensor.hall_resolution_rad,
     };
     let wmeas = sensor_chain::measured_velocity(log, window);
-    let named = |col: &str, r: Result<f64>| r.map_err(|e| anyhow::anyhow!("{src}: column '{col}': {e}"));
+    let named =
+        |col: &str, r: Result<f64>| r.map_err(|e| anyhow::anyhow!("{src}: column '{col}': {e}"));
     let fi = match (&log.i, &pred.i) {
         (Some(i), Some(ip)) => Some(named("i", fitpct::fit_percent(i, ip))?),
         _ => None,

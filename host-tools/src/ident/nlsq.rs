@@ -253,7 +253,11 @@ fn covariance_diag(jtj: &[Vec<f64>], scale: &[f64]) -> Vec<f64> {
             }
             acc += v[(p, c)].powi(2) / s[c];
         }
-        out[j] = if flat { f64::INFINITY } else { acc / (d[j] * d[j]) };
+        out[j] = if flat {
+            f64::INFINITY
+        } else {
+            acc / (d[j] * d[j])
+        };
     }
     out
 }
@@ -268,8 +272,7 @@ mod tests {
         let y: Vec<f64> = t.iter().map(|t| 2.0 * (-0.7 * t).exp()).collect();
         // Third parameter does nothing: flat.
         let mut f = |x: &[f64]| -> Result<Vec<f64>> {
-            Ok(t
-                .iter()
+            Ok(t.iter()
                 .zip(&y)
                 .map(|(t, y)| x[0] * (-x[1] * t).exp() - y)
                 .collect())
@@ -284,7 +287,11 @@ mod tests {
             &mut |_, _| {},
         )
         .unwrap();
-        assert!((sol.x[0] - 2.0).abs() < 1e-5 && (sol.x[1] - 0.7).abs() < 1e-5, "{:?}", sol.x);
+        assert!(
+            (sol.x[0] - 2.0).abs() < 1e-5 && (sol.x[1] - 0.7).abs() < 1e-5,
+            "{:?}",
+            sol.x
+        );
         assert!(sol.std_err[2].is_infinite());
         // With an upper bound below the optimum, the answer sits on it.
         let sol = solve(

@@ -70,7 +70,10 @@ mod tests {
         let w = velocity_estimate(&t, &th, 10);
         assert!((w[25] - 3.0).abs() < 1e-12);
         let (q, wq) = through_sensor(&t, &th, 0.0952, 10);
-        assert!(q.iter().zip(&th).all(|(a, b)| (a - b).abs() <= 0.0476 + 1e-12));
+        assert!(q
+            .iter()
+            .zip(&th)
+            .all(|(a, b)| (a - b).abs() <= 0.0476 + 1e-12));
         assert!((wq[29] - 3.0).abs() < 0.0952 / 0.12 + 1e-9);
     }
 }

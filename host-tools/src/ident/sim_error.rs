@@ -93,11 +93,7 @@ pub fn refine(
     let scale: Vec<f64> = free
         .iter()
         .zip(&x0)
-        .map(|(f, x)| {
-            x.abs()
-                .max(1e-3 * (f.hi - f.lo).abs().min(1.0))
-                .max(1e-9)
-        })
+        .map(|(f, x)| x.abs().max(1e-3 * (f.hi - f.lo).abs().min(1.0)).max(1e-9))
         .collect();
     let base = model.clone();
     let mut f = |x: &[f64]| -> Result<Vec<f64>> {

@@ -21,8 +21,8 @@ fn phi(s: f64) -> (f64, f64, f64) {
     let b = 1.0 - s;
     let p = a.powi(4) * b.powi(4);
     let dp = 4.0 * a.powi(3) * b.powi(4) - 4.0 * a.powi(4) * b.powi(3);
-    let ddp = 12.0 * a.powi(2) * b.powi(4) - 32.0 * a.powi(3) * b.powi(3)
-        + 12.0 * a.powi(4) * b.powi(2);
+    let ddp =
+        12.0 * a.powi(2) * b.powi(4) - 32.0 * a.powi(3) * b.powi(3) + 12.0 * a.powi(4) * b.powi(2);
     (p, dp, ddp)
 }
 
@@ -198,7 +198,10 @@ mod tests {
         let w = &windows(&t, 1000, 500)[1];
         let lhs = w.int_dd(&th);
         let rhs = -w.int(&th);
-        assert!((lhs - rhs).abs() < 1e-6 * rhs.abs().max(1e-3), "{lhs} {rhs}");
+        assert!(
+            (lhs - rhs).abs() < 1e-6 * rhs.abs().max(1e-3),
+            "{lhs} {rhs}"
+        );
         let cos: Vec<f64> = t.iter().map(|t| t.cos()).collect();
         assert!((w.int(&cos) + w.int_d(&th)).abs() < 1e-7);
     }
@@ -207,9 +210,16 @@ mod tests {
     fn least_squares_recovers_coefficients() {
         let x1: Vec<f64> = (0..50).map(|k| k as f64).collect();
         let x2: Vec<f64> = (0..50).map(|k| ((k * 7) % 11) as f64 * 1e-3).collect();
-        let y: Vec<f64> = x1.iter().zip(&x2).map(|(a, b)| 2.0 * a - 300.0 * b).collect();
+        let y: Vec<f64> = x1
+            .iter()
+            .zip(&x2)
+            .map(|(a, b)| 2.0 * a - 300.0 * b)
+            .collect();
         let (c, se) = least_squares(&[x1, x2], &y);
-        assert!((c[0] - 2.0).abs() < 1e-9 && (c[1] + 300.0).abs() < 1e-6, "{c:?}");
+        assert!(
+            (c[0] - 2.0).abs() < 1e-9 && (c[1] + 300.0).abs() < 1e-6,
+            "{c:?}"
+        );
         assert!(se[0].unwrap() < 1e-6);
     }
 }

@@ -1,6 +1,7 @@
 //! Ordinary least squares with the statistics the real-data reports need: parameter standard
 //! deviations, relative standard deviations (as the EMPS IDIM-LS scripts print them), the
-//! condition number, and the extra-sum-of-squares F-test for nested models.
+//! condition number, and the extra-sum-of-squares F-test for nested models of independent
+//! points (for autocorrelated residuals use `diagnose::stats::f_test` with an effective n).
 //!
 //! The solve is a thin SVD from faer; the covariance is `σ²·V·S⁻²·Vᵀ` with
 //! `σ² = ‖y − Xθ‖² / (n − p)`.
@@ -113,85 +114,13 @@ pub fn f_test(rss0: f64, rss1: f64, q: usize, n: usize, p1: usize) -> (f64, f64)
     (f, f_sf(f, q as f64, d2))
 }
 
-/// Survival function of the F distribution, `P(F > f)`, via the regularised incomplete beta
-/// function: `P = I_{d2/(d2 + d1 f)}(d2/2, d1/2)`.
+/// Survival function of the F distribution, `P(F > f)` (statrs).
 pub fn f_sf(f: f64, d1: f64, d2: f64) -> f64 {
-    if f <= 0.0 {
-        return 1.0;
+    use statrs::distribution::{ContinuousCDF, FisherSnedecor};
+    match FisherSnedecor::new(d1, d2) {
+        Ok(d) if f.is_finite() && f > 0.0 => d.sf(f),
+        _ => 1.0,
     }
-    inc_beta(d2 / 2.0, d1 / 2.0, d2 / (d2 + d1 * f))
-}
-
-/// ln Γ(x) (Lanczos approximation, g = 7, 9 terms; accurate to ~1e-15 for x > 0).
-fn ln_gamma(x: f64) -> f64 {
-    const C: [f64; 9] = [
-        0.999_999_999_999_809_9,
-        676.520_368_121_885_1,
-        -1_259.139_216_722_402_8,
-        771.323_428_777_653_1,
-        -176.615_029_162_140_6,
-        12.507_343_278_686_905,
-        -0.138_571_095_265_720_12,
-        9.984_369_578_019_572e-6,
-        1.505_632_735_149_311_6e-7,
-    ];
-    if x < 0.5 {
-        let pi = std::f64::consts::PI;
-        return (pi / (pi * x).sin()).ln() - ln_gamma(1.0 - x);
-    }
-    let x = x - 1.0;
-    let mut a = C[0];
-    let t = x + 7.5;
-    for (i, c) in C.iter().enumerate().skip(1) {
-        a += c / (x + i as f64);
-    }
-    0.5 * (2.0 * std::f64::consts::PI).ln() + (x + 0.5) * t.ln() - t + a.ln()
-}
-
-/// Regularised incomplete beta function I_x(a, b) by its continued fraction
-/// (modified Lentz), using the symmetry I_x(a,b) = 1 − I_{1−x}(b,a) for fast convergence.
-fn inc_beta(a: f64, b: f64, x: f64) -> f64 {
-    if x <= 0.0 {
-        return 0.0;
-    }
-    if x >= 1.0 {
-        return 1.0;
-    }
-    let front = (ln_gamma(a + b) - ln_gamma(a) - ln_gamma(b) + a * x.ln() + b * (1.0 - x).ln())
-        .exp();
-    if x > (a + 1.0) / (a + b + 2.0) {
-        return 1.0 - inc_beta(b, a, 1.0 - x);
-    }
-    let tiny = 1e-300;
-    let mut c = 1.0;
-    let mut d = 1.0 - (a + b) * x / (a + 1.0);
-    if d.abs() < tiny {
-        d = tiny;
-    }
-    d = 1.0 / d;
-    let mut h = d;
-    for m in 1..500 {
-        let m = m as f64;
-        let even = m * (b - m) * x / ((a + 2.0 * m - 1.0) * (a + 2.0 * m));
-        let odd = -(a + m) * (a + b + m) * x / ((a + 2.0 * m) * (a + 2.0 * m + 1.0));
-        for numer in [even, odd] {
-            d = 1.0 + numer * d;
-            if d.abs() < tiny {
-                d = tiny;
-            }
-            c = 1.0 + numer / c;
-            if c.abs() < tiny {
-                c = tiny;
-            }
-            d = 1.0 / d;
-            h *= d * c;
-        }
-        let last = d * c;
-        if (last - 1.0).abs() < 1e-15 {
-            break;
-        }
-    }
-    front * h / a
 }
 
 #[cfg(test)]

@@ -69,6 +69,8 @@ pub struct DriveResult {
     pub authors_vs: f64,
     pub points: Vec<Point>,
     pub selection: Selection,
+    /// Stribeck tested per direction (v > 0, v < 0).
+    pub one_sided: Vec<static_curve::OneSided>,
 }
 
 /// Fit and test the static curve of drive `k`.
@@ -78,7 +80,9 @@ pub fn analyse(data: &Path, k: usize) -> Result<DriveResult> {
     let v: Vec<f64> = points.iter().map(|p| p.v).collect();
     let tau: Vec<f64> = points.iter().map(|p| p.tau).collect();
     let selection = static_curve::select(&v, &tau, static_curve::ALPHA)?;
+    let one_sided = static_curve::one_sided_stribeck(&v, &tau);
     Ok(DriveResult {
+        one_sided,
         drive: k,
         name,
         authors_vs,

@@ -1,5 +1,6 @@
 //! Static friction curves `τ(v)` fitted to steady-state (velocity, torque) points, and the
-//! significance test that decides which terms the data support.
+//! significance test that decides which terms the data support. The Stribeck velocity is
+//! searched only where the Stribeck level comes out positive (breakaway above Coulomb).
 //!
 //! Model: `τ = Fc·sgn v + Fv·v [+ τ0] [+ Dv·|v|] [+ Fs·exp(−(v/vs)²)·sgn v]`, i.e. the
 //! contract's effects `coulomb`, `viscous`, `offset`, `asymmetry` (the |v| part; its
@@ -135,8 +136,12 @@ pub fn fit(terms: &[Term], v: &[f64], tau: &[f64]) -> Result<Curve> {
         if !(lo > 0.0 && hi > lo) {
             bail!("static curve: Stribeck needs points at several non-zero speeds");
         }
+        // Stribeck is breakaway friction above Coulomb: only vs with Fs > 0 are admissible
+        // (Fs is the last coefficient, Stribeck sorts last).
         let cost = |lv: f64| {
             fit_fixed(&terms, v, tau, lv.exp())
+                .ok()
+                .filter(|f| f.theta.last().is_some_and(|fs| *fs > 0.0))
                 .map(|f| f.rss)
                 .unwrap_or(f64::INFINITY)
         };
@@ -156,6 +161,9 @@ pub fn fit(terms: &[Term], v: &[f64], tau: &[f64]) -> Result<Curve> {
             } else {
                 x0 = c;
             }
+        }
+        if !costs[best].is_finite() {
+            bail!("static curve: no Stribeck velocity gives a positive Stribeck level");
         }
         let vs = (0.5 * (x0 + x1)).exp();
         (fit_fixed(&terms, v, tau, vs)?, Some(vs))
@@ -220,7 +228,10 @@ pub fn select(v: &[f64], tau: &[f64], alpha: f64) -> Result<Selection> {
         for &t in &pool {
             let mut terms = cur.terms.clone();
             terms.push(t);
-            let Ok(c) = fit(&terms, v, tau) else { continue };
+            let c = match fit(&terms, v, tau) {
+                Ok(c) => c,
+                Err(_) => continue,
+            };
             let (f, p) = f_test(cur.rss, c.rss, t.dof(), v.len(), c.dof());
             let rejected = (t == Term::Stribeck && c.get(Term::Stribeck).unwrap_or(0.0) <= 0.0)
                 .then(|| "fitted Stribeck level Fs ≤ 0 (no breakaway above Coulomb)".to_string());
@@ -312,4 +323,55 @@ mod tests {
         assert!(s.has(Term::Offset));
         assert!(!s.has(Term::Stribeck), "{:?}", s.chosen.terms);
     }
+}
+
+/// Stribeck tested in one direction of motion only (points with `sign·v > 0`): a straight
+/// line `c + Fv·v` against the line plus `Fs·exp(−(v/vs)²)·sgn v` with Fs > 0. Friction that
+/// falls with speed in one direction but not in the other shows here while a symmetric
+/// Stribeck term averages it away.
+#[derive(Debug, Clone)]
+pub struct OneSided {
+    /// +1 or −1.
+    pub sign: f64,
+    pub points: usize,
+    /// F-test p-value, or None when no admissible Stribeck curve exists.
+    pub p: Option<f64>,
+    pub fs: Option<f64>,
+    pub vs: Option<f64>,
+}
+
+/// [`OneSided`] tests for both directions.
+pub fn one_sided_stribeck(v: &[f64], tau: &[f64]) -> Vec<OneSided> {
+    [1.0, -1.0]
+        .into_iter()
+        .map(|sign| {
+            let (vv, tt): (Vec<f64>, Vec<f64>) = v
+                .iter()
+                .zip(tau)
+                .filter(|(x, _)| sign * **x > 0.0)
+                .map(|(a, b)| (*a, *b))
+                .unzip();
+            let base = fit(&[Term::Offset, Term::Viscous], &vv, &tt);
+            let with = fit(&[Term::Offset, Term::Viscous, Term::Stribeck], &vv, &tt);
+            match (base, with) {
+                (Ok(b), Ok(w)) => {
+                    let (_, p) = f_test(b.rss, w.rss, 2, vv.len(), w.dof());
+                    OneSided {
+                        sign,
+                        points: vv.len(),
+                        p: Some(p),
+                        fs: w.get(Term::Stribeck),
+                        vs: w.vs,
+                    }
+                }
+                _ => OneSided {
+                    sign,
+                    points: vv.len(),
+                    p: None,
+                    fs: None,
+                    vs: None,
+                },
+            }
+        })
+        .collect()
 }
