@@ -16,8 +16,8 @@ fi
 out=${OUT:-$(mktemp -d)}
 mkdir -p "$out"
 "$MOTORID" simulate --signal a --duration 60 --seed 1 -o "$out/a.csv" >&2
-"$MOTORID" fit --model lugre -o "$out/lugre.toml" "$out/a.csv" >/dev/null
-"$MOTORID" fit --model sindyc -o "$out/sindyc.toml" "$out/a.csv" >/dev/null
+"$MOTORID" fit --model lugre -o "$out/lugre.toml" "$out/a.csv" >"$out/fit-lugre.log" 2>&1
+"$MOTORID" fit --model sindyc -o "$out/sindyc.toml" "$out/a.csv" >"$out/fit-sindyc.log" 2>&1
 "$MOTORID" emulate --table --model "$out/lugre.toml" --model "$out/sindyc.toml" \
   --svg "$out/compensation-sine.svg" "$@"
 echo "(models, logs and the chart are in $out)" >&2

@@ -24,11 +24,11 @@
 //! | `Identify` | `Identity { protocol, firmware, model, coeff_seq }` |
 //! | `UploadBegin { total_len, crc }` | `UploadAck { index: 0xFFFF }` or `Nack` |
 //! | `UploadChunk { index, data }` (≤ [`CHUNK_LEN`] bytes, index 0, 1, ...) | `UploadAck { index }` or `Nack` |
-//! | `UploadCommit` | `Committed { seq }` after the flash write, or `Nack` |
+//! | `UploadCommit` | `Committed { seq }` after the flash write, or `Nack` (`Busy` unless idle) |
 //! | `UploadAbort` | `UploadAck { index: 0xFFFF }` |
 //! | `SetSpeed { omega_ref }` | `Ack` |
-//! | `SetMode { mode }` | `Ack` or `Nack` (e.g. `Faulted`) |
-//! | `StartExperiment { signal, duration_s }` | `Ack`, then samples until done |
+//! | `SetMode { mode }` | `Ack` (`Nack(Busy)` if the command queue is full); with a latched fault the mode is not entered and the `Fault` is repeated |
+//! | `StartExperiment { signal, duration_s }` | `Ack`, then samples until done (`t` and `seq` restart at 0) |
 //! | `Stop` / `ClearFault` | `Ack` |
 //! | (nothing) | `Sample { .. }` every 12 ms while running, `Fault`, `Warning` |
 //!

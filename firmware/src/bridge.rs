@@ -10,9 +10,19 @@
 //! carries the winding current in both the on and the freewheel interval: the firmware
 //! reads that phase's op-amp at any time, without synchronising the ADC to the PWM.
 //!
+//! Commutation follows the rotor at every Hall edge: the TIM4 capture interrupt calls
+//! [`commutate`] with the new Hall state (`hall_capture`), and the 12 ms control loop only
+//! sets the drive (on/off, direction, duty) with [`set_drive`] and commutates once itself so
+//! a new duty applies at once. Commutating only every 12 ms would energise the wrong phase
+//! pair for most of each period above a few rad/s.
+//!
 //! [`Bridge::off`] clears MOE with OSSI = idle level and OIS = 0, which forces all six gate
 //! signals low (RM0440, "TIMx_BDTR", off-state selection); [`force_off`] does the same from
 //! a panic or fault handler without the driver object.
+use core::cell::Cell;
+use core::sync::atomic::{AtomicU8, Ordering};
+
+use critical_section::Mutex;
 use embassy_stm32::pac;
 use embassy_stm32::peripherals::TIM1;
 use embassy_stm32::timer::complementary_pwm::{ComplementaryPwm, Ossi, Ossr};
@@ -31,15 +41,6 @@ pub fn low_phase(k: u8) -> usize {
     STEPS[k as usize % 6].1
 }
 
-/// Commutation step for Hall sector `sector` and the sign of the voltage.
-pub fn step_for(sector: u8, v: f32) -> u8 {
-    if v >= 0.0 {
-        sector % 6
-    } else {
-        (sector + 3) % 6
-    }
-}
-
 /// Duty cycle for a voltage magnitude and the bus voltage: `|V|/V_bus`, saturated at
 /// [`MAX_DUTY`]; zero when the bus voltage is not positive.
 pub fn duty(v: f32, v_bus: f32) -> f32 {
@@ -49,10 +50,74 @@ pub fn duty(v: f32, v_bus: f32) -> f32 {
     (v.abs() / v_bus).clamp(0.0, MAX_DUTY)
 }
 
-/// The bridge.
+/// What the commutation applies (set by the control loop, read at every Hall edge).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Drive {
+    /// Outputs enabled.
+    pub on: bool,
+    /// Negative voltage: the reversed step (`k + 3`).
+    pub reverse: bool,
+    /// Compare value of the high phase (0..=max duty counts).
+    pub duty: u16,
+    /// Hall state → sector (the coefficients' table; negative = invalid state).
+    pub table: [i8; 8],
+}
+
+static DRIVE: Mutex<Cell<Drive>> = Mutex::new(Cell::new(Drive {
+    on: false,
+    reverse: false,
+    duty: 0,
+    table: [-1; 8],
+}));
+/// Step applied last (for the current measurement: its low phase's shunt).
+static LAST_STEP: AtomicU8 = AtomicU8::new(0);
+
+/// Sets what the next commutations apply.
+pub fn set_drive(d: Drive) {
+    critical_section::with(|cs| DRIVE.borrow(cs).set(d));
+}
+
+/// The commutation step applied last.
+pub fn last_step() -> u8 {
+    LAST_STEP.load(Ordering::Relaxed)
+}
+
+/// Applies the drive for Hall state `state`: the step of its sector, or all off when the
+/// drive is off or the state is invalid. Called from the TIM4 interrupt and the control loop.
+pub fn commutate(state: u8) {
+    let d = critical_section::with(|cs| DRIVE.borrow(cs).get());
+    let sector = d.table[(state & 7) as usize];
+    if !d.on || sector < 0 {
+        force_off();
+        return;
+    }
+    let k = if d.reverse {
+        (sector as u8 + 3) % 6
+    } else {
+        sector as u8 % 6
+    };
+    let (hi, lo) = STEPS[k as usize];
+    let t = pac::TIM1;
+    // Register access beside the ComplementaryPwm driver, which owns TIM1 but is only used
+    // for the configuration: CCR1-3, CCER and MOE are written here and in `force_off` only.
+    for p in 0..3 {
+        t.ccr(p)
+            .write(|w| w.set_ccr(if p == hi { d.duty } else { 0 }));
+    }
+    t.ccer().modify(|w| {
+        for p in 0..3 {
+            let en = p == hi || p == lo;
+            w.set_cce(p, en);
+            w.set_ccne(p, en);
+        }
+    });
+    t.bdtr().modify(|w| w.set_moe(true));
+    LAST_STEP.store(k, Ordering::Relaxed);
+}
+
+/// The bridge: owns TIM1 and its six pins, configured by embassy's `ComplementaryPwm`.
 pub struct Bridge<'d> {
     pwm: ComplementaryPwm<'d, TIM1>,
-    on: bool,
 }
 
 impl<'d> Bridge<'d> {
@@ -60,44 +125,32 @@ impl<'d> Bridge<'d> {
     pub fn new(mut pwm: ComplementaryPwm<'d, TIM1>) -> Self {
         pwm.set_off_state_selection_idle(Ossi::IDLE_LEVEL);
         pwm.set_off_state_selection_run(Ossr::IDLE_LEVEL);
-        let mut b = Bridge { pwm, on: true };
+        let mut b = Bridge { pwm };
         b.off();
         b
     }
 
-    /// All gates off.
+    /// All gates off, and no commutation until the drive is set again.
     pub fn off(&mut self) {
+        let mut d = critical_section::with(|cs| DRIVE.borrow(cs).get());
+        d.on = false;
+        set_drive(d);
         self.pwm.set_master_output_enable(false);
         for ch in PHASES {
             self.pwm.set_duty(ch, 0);
             self.pwm.disable(ch);
         }
-        self.on = false;
     }
 
     /// True while the outputs are enabled.
     pub fn is_on(&self) -> bool {
-        self.on
+        pac::TIM1.bdtr().read().moe()
     }
 
-    /// Applies commutation step `k` with duty `d` (0..=MAX_DUTY).
-    pub fn apply(&mut self, k: u8, d: f32) {
-        let (hi, lo) = STEPS[k as usize % 6];
+    /// Compare value for duty `d` (0..=MAX_DUTY).
+    pub fn duty_counts(&self, d: f32) -> u16 {
         let max = self.pwm.get_max_duty();
-        let counts = ((d.clamp(0.0, MAX_DUTY)) * max as f32) as u32;
-        for (p, ch) in PHASES.iter().enumerate() {
-            if p == hi {
-                self.pwm.set_duty(*ch, counts.min(max));
-                self.pwm.enable(*ch);
-            } else if p == lo {
-                self.pwm.set_duty(*ch, 0);
-                self.pwm.enable(*ch);
-            } else {
-                self.pwm.disable(*ch);
-            }
-        }
-        self.pwm.set_master_output_enable(true);
-        self.on = true;
+        ((d.clamp(0.0, MAX_DUTY) * max as f32) as u32).min(max) as u16
     }
 }
 

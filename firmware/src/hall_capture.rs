@@ -5,7 +5,8 @@
 //! channel 1 captures the counter on both edges. The TIM4 interrupt extends the 16-bit count
 //! to 32 bits with the overflow count, reads the Hall state from GPIOB and queues
 //! `(ticks, state)`; the control task takes the queue every 12 ms and hands it to
-//! `control::step` (which decodes and counts the edges and runs the edge-timing estimator).
+//! `control::step` (which decodes and counts the edges and runs the edge-timing estimator),
+//! and commutates the bridge for the new Hall state (`bridge::commutate`).
 //! An input filter of 8 samples at f_DTS/8 rejects switching noise shorter than ≈ 0.4 µs.
 //!
 //! Register access goes through the PAC (`unstable-pac`): embassy-stm32 0.6 has no
@@ -136,10 +137,10 @@ fn TIM4() {
             // Reading CCR1 clears CC1IF.
             let low = t.ccr(0).read().ccr();
             let ticks = extend(q.high, low, sr.uif());
-            let edge = HallEdge {
-                ticks,
-                state: hall_state(),
-            };
+            let state = hall_state();
+            // Commutate at once: the next phase pair for the new sector.
+            crate::bridge::commutate(state);
+            let edge = HallEdge { ticks, state };
             if q.edges.push(edge).is_err() {
                 q.overflow = true;
             }

@@ -2,7 +2,8 @@
 //!
 //! - [`board`]: clocks (170 MHz), pins and analog gains, with their sources.
 //! - [`bridge`]: TIM1 centre-aligned complementary PWM, six-step commutation, duty = V/V_bus.
-//! - [`hall_capture`]: Hall edges time-stamped by TIM4 input capture (1 MHz).
+//! - [`hall_capture`]: Hall edges time-stamped by TIM4 input capture (1 MHz); the capture
+//!   interrupt commutates the bridge at every edge.
 //! - [`link`]: the serial protocol of `control::frame` on USART2 (ST-LINK virtual COM port),
 //!   coefficient uploads into the two flash slots of `control::slots`.
 //! - [`excitation`]: open-loop experiment signals a-d, steady, ramp.
@@ -29,6 +30,7 @@ mod link;
 
 use core::sync::atomic::Ordering;
 
+use control::blob::{Coefficients, HALL_INVALID};
 use control::frame::{BoardMsg, Excitation, Fault, Mode, Sample, Warning};
 use control::slots::Slots;
 use control::step::{ControlStep, Faults, StepInputs};
@@ -71,6 +73,15 @@ enum Run {
         duration_s: f32,
         start: Instant,
     },
+}
+
+/// The coefficients' Hall table for the commutation (negative: invalid state).
+fn hall_table_of(c: &Coefficients) -> [i8; 8] {
+    let mut t = [-1i8; 8];
+    for (s, &b) in t.iter_mut().zip(&c.hall_table) {
+        *s = if b == HALL_INVALID { -1 } else { b as i8 };
+    }
+    t
 }
 
 fn fault_of(f: Faults) -> Option<Fault> {
@@ -154,6 +165,7 @@ async fn main(spawner: Spawner) {
     }
     let mut coeffs = coeffs.unwrap_or_default();
     let mut step = ControlStep::new(&coeffs.step_config(V_BUS_NOMINAL));
+    let mut hall_table = hall_table_of(&coeffs);
 
     hall_capture::start(p.TIM4, p.PB6, p.PB7, p.PB8);
 
@@ -191,21 +203,27 @@ async fn main(spawner: Spawner) {
     let mut run = Run::Idle;
     let mut omega_ref = 0.0f32;
     let mut latched: Option<Fault> = None;
-    let mut last_step_k = 0u8;
     let mut seq = 0u32;
     let mut run_start = Instant::now();
     let mut ticker = Ticker::every(Duration::from_micros(
         (control::CONTROL_PERIOD_S * 1.0e6) as u64,
     ));
 
+    let period = Duration::from_micros((control::CONTROL_PERIOD_S * 1.0e6) as u64);
+    let mut last_tick = Instant::now();
     loop {
         ticker.next().await;
         wdg.pet();
+        // A tick more than one period late means the loop overran (the ticker catches up).
+        let tick = Instant::now();
+        let overrun = tick - last_tick > period + period;
+        last_tick = tick;
 
         // New coefficients (only committed in Idle): rebuild the step.
         if let Some(c) = NEW_COEFFS.try_take() {
             coeffs = c;
             step = ControlStep::new(&coeffs.step_config(V_BUS_NOMINAL));
+            hall_table = hall_table_of(&coeffs);
         }
 
         // Host commands.
@@ -218,11 +236,13 @@ async fn main(spawner: Spawner) {
                     step.reset();
                     run = Run::Speed;
                     run_start = Instant::now();
+                    seq = 0;
                 }
                 Command::SetMode(Mode::Experiment) => {}
                 Command::Start { signal, duration_s } if latched.is_none() => {
                     step.reset();
                     run_start = Instant::now();
+                    seq = 0;
                     run = Run::Experiment {
                         signal,
                         duration_s,
@@ -231,14 +251,17 @@ async fn main(spawner: Spawner) {
                 }
                 Command::ClearFault => latched = None,
                 _ => {
-                    // Start refused while a fault is latched.
-                    let _ = OUTGOING.try_send(BoardMsg::Fault(latched.unwrap_or(Fault::Overrun)));
+                    // Start refused while a fault is latched: repeat the fault.
+                    if let Some(f) = latched {
+                        let _ = OUTGOING.try_send(BoardMsg::Fault(f));
+                    }
                 }
             }
         }
 
         // Measurements.
         let v_bus = board::vbus_from_raw(adc1.blocking_read(&mut vbus_pin, ST_VBUS));
+        let last_step_k = bridge::last_step();
         let lo = bridge::low_phase(last_step_k);
         let raw = match lo {
             0 => adc1.blocking_read(&mut i_u, ST_CURRENT),
@@ -296,6 +319,8 @@ async fn main(spawner: Spawner) {
             Some(Fault::OverVoltage)
         } else if active && v_bus < lim.vbus_min {
             Some(Fault::UnderVoltage)
+        } else if active && overrun {
+            Some(Fault::Overrun)
         } else if active {
             fault_of(out.faults)
         } else {
@@ -311,17 +336,21 @@ async fn main(spawner: Spawner) {
             run = Run::Idle;
         }
 
-        // Actuation.
+        // Actuation: set the drive; the Hall-edge interrupt commutates between samples.
         let v_applied = match (run, step.decoder().sector()) {
             (Run::Idle, _) | (_, None) => {
                 bridge.off();
                 0.0
             }
-            (_, Some(sector)) => {
-                let k = bridge::step_for(sector, out.v_cmd);
+            (_, Some(_)) => {
                 let d = bridge::duty(out.v_cmd, v_bus);
-                bridge.apply(k, d);
-                last_step_k = k;
+                bridge::set_drive(bridge::Drive {
+                    on: true,
+                    reverse: out.v_cmd < 0.0,
+                    duty: bridge.duty_counts(d),
+                    table: hall_table,
+                });
+                bridge::commutate(hall_capture::hall_state());
                 d * v_bus * if out.v_cmd < 0.0 { -1.0 } else { 1.0 }
             }
         };
@@ -355,9 +384,11 @@ async fn main(spawner: Spawner) {
     }
 }
 
-/// Panic: bridge off first, then log over defmt; the watchdog resets the MCU.
+/// Panic: interrupts off, bridge off, then log over defmt; the watchdog resets the MCU.
 #[panic_handler]
 fn panic(info: &core::panic::PanicInfo) -> ! {
+    // No interrupt may commutate again (the Hall-edge handler sets MOE).
+    cortex_m::interrupt::disable();
     bridge::force_off();
     // File and line only: formatting the message would link core::fmt (≈ 12 KiB).
     match info.location() {

@@ -80,7 +80,7 @@ fn data() -> Data {
         th += w * DT;
     }
     let xdot = motorid::ident::sindyc::centred_velocity(&t, &x, 5);
-    let emb = HankelEmbedding::fit(&xdot, DEFAULT_DELAYS, Selection::EnergyBelow(0.001)).unwrap();
+    let emb = HankelEmbedding::fit(&xdot, DEFAULT_DELAYS, Selection::Range(31, 60)).unwrap();
     let z = emb.extract(&xdot).unwrap();
     Data {
         t,

@@ -70,14 +70,18 @@ pub fn run(args: Args) -> Result<()> {
     Ok(())
 }
 
-/// `--report DIR`: not wired yet (the report module is being written).
+/// `--report DIR`: the HTML report (crate::report); the worst regions go to stderr.
 fn write_report(
-    _dir: &std::path::Path,
-    _model: &Model,
-    _log: &MotorLog,
-    _pred: &ident::Prediction,
-    _scores: &ident::Scores,
+    dir: &std::path::Path,
+    model: &Model,
+    log: &MotorLog,
+    pred: &ident::Prediction,
+    scores: &ident::Scores,
 ) -> Result<()> {
-    // REPORT CALL SITE: replace with crate::report::...(dir, model, log, pred, scores).
-    anyhow::bail!("--report: HTML reports are not available yet in this build")
+    let w = crate::report::write_compare_report(dir, model, log, pred, scores)?;
+    eprintln!("report: {}", w.path.display());
+    for s in &w.sentences {
+        eprintln!("  {s}");
+    }
+    Ok(())
 }

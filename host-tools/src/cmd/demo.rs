@@ -1,10 +1,250 @@
-//! `motorid demo` (not yet written).
-use anyhow::{bail, Result};
+//! `motorid demo`: the whole identification loop on the built-in emulator with a hidden
+//! physical effect: simulate fitting (signal a) and validation (signal b) data, fit LuGre,
+//! diagnose, add the top finding, refit, until nothing significant is left; print the
+//! validation fit after each step, name the hidden effect and whether it was found.
+use crate::diagnose::{self, Options, Structure};
+use crate::effect_spec::EffectSpec;
+use crate::emulator::{simulate_signal, EmulatorConfig, SignalKind};
+use crate::ident::{self, FitRequest};
+use crate::log::{MotorLog, Plant};
+use crate::model::{Model, ModelKind};
+use crate::report::{self, Iteration};
+use anyhow::{Context, Result};
+use control::effects::EffectKind;
+use indicatif::{ProgressBar, ProgressStyle};
+use std::path::PathBuf;
 
-/// Not yet written.
+/// Effects the demo hides when none is given: those a LuGre model lacks (its own friction
+/// law already has coulomb, viscous, stribeck and presliding).
+pub const RANDOM_EFFECTS: [EffectKind; 8] = [
+    EffectKind::Cogging,
+    EffectKind::PositionLoad,
+    EffectKind::Offset,
+    EffectKind::Asymmetry,
+    EffectKind::Deadtime,
+    EffectKind::CurrentOffset,
+    EffectKind::Thermal,
+    EffectKind::LoadFriction,
+];
+
+/// Most diagnose → add → refit rounds.
+pub const MAX_ROUNDS: usize = 4;
+/// Length of the fitting and validation signals [s]: long enough for the slow (0.05 Hz)
+/// validation components and a thermal time constant of 20 s, short enough that the demo
+/// runs in about a minute on two cores.
+pub const DURATION: f64 = 90.0;
+
+/// Run the whole loop on the emulator with a hidden effect.
 #[derive(clap::Args, Debug)]
-pub struct Args {}
+#[command(after_help = "Without --effect, one effect is drawn at random (from the seed) among: \
+    cogging, position_load, offset, asymmetry, deadtime, current_offset, thermal, \
+    load_friction, with its default size. Give --effect more than once to hide several.\n\n\
+    Each round: fit a LuGre model (with the effects added so far) on signal a, score it on \
+    signal b (fit %, the paper's eq. 48), diagnose it on signal a, add the top finding. \
+    Stops when nothing significant is left or after 4 rounds.")]
+pub struct Args {
+    /// Hidden effect, NAME or NAME:key=value,... (repeatable; default: one at random).
+    #[arg(long, value_name = "SPEC")]
+    pub effect: Vec<String>,
+    /// Seed of the emulator's noise, the signals and the random effect.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Where to write the HTML report.
+    #[arg(long, value_name = "DIR", default_value = "out/demo-report")]
+    pub report: PathBuf,
+    /// Length of each signal in seconds.
+    #[arg(long, value_name = "S", default_value_t = DURATION)]
+    pub duration: f64,
+}
 
-pub fn run(_args: Args) -> Result<()> {
-    bail!("'motorid demo' is not implemented yet")
+/// The outcome of a demo run (for tests and the report).
+#[derive(Debug, Clone)]
+pub struct Outcome {
+    pub hidden: Vec<EffectSpec>,
+    pub iterations: Vec<Iteration>,
+    /// Effects added, in order.
+    pub added: Vec<EffectSpec>,
+    pub report: Option<PathBuf>,
+}
+
+impl Outcome {
+    /// True when every hidden effect's kind was added.
+    pub fn found_all(&self) -> bool {
+        self.hidden
+            .iter()
+            .all(|h| self.added.iter().any(|a| a.kind == h.kind))
+    }
+}
+
+fn fit(log: &MotorLog, val: &MotorLog, adds: &[EffectSpec]) -> Result<Model> {
+    let logs = std::slice::from_ref(log);
+    let validate = std::slice::from_ref(val);
+    let req = FitRequest {
+        kind: ModelKind::Lugre,
+        logs,
+        validate,
+        adds,
+        plant: Plant::Voltage,
+    };
+    Ok(ident::fit(&req)?.model)
+}
+
+fn label(adds: &[EffectSpec]) -> String {
+    let mut s = String::from("LuGre");
+    for a in adds {
+        s.push_str(" + ");
+        s.push_str(a.kind.name());
+    }
+    s
+}
+
+/// The demo loop; `say` receives each line for the terminal.
+pub fn run_loop(
+    hidden: &[EffectSpec],
+    seed: u64,
+    duration: f64,
+    report_dir: Option<&std::path::Path>,
+    say: &mut dyn FnMut(&str),
+    bar: &ProgressBar,
+) -> Result<Outcome> {
+    let mut cfg = EmulatorConfig::paper();
+    cfg.seed = seed;
+    cfg.effects = hidden.iter().map(EffectSpec::to_effect).collect();
+    bar.set_message("simulating signals a (fit) and b (validation)");
+    let mut fit_log = simulate_signal(&cfg, SignalKind::A, duration)?.log;
+    fit_log.source = PathBuf::from("emulated signal a");
+    let mut val_cfg = cfg.clone();
+    val_cfg.seed = seed.wrapping_add(1000);
+    let mut val_log = simulate_signal(&val_cfg, SignalKind::B, duration)?.log;
+    val_log.source = PathBuf::from("emulated signal b");
+    bar.inc(1);
+    let mut adds: Vec<EffectSpec> = Vec::new();
+    let mut iterations = Vec::new();
+    let mut last = None;
+    for round in 0..=MAX_ROUNDS {
+        bar.set_message(format!("round {round}: fitting {}", label(&adds)));
+        let model = fit(&fit_log, &val_log, &adds)?;
+        bar.inc(1);
+        let pred = ident::freerun::simulate(&model, &val_log)?;
+        let sc = ident::score_prediction(&model, &val_log, &pred)?;
+        say(&format!(
+            "step {round}: {:<32} validation fit: x {:6.2} %, xdot {:6.2} %, i {}",
+            label(&adds),
+            sc.fit.x,
+            sc.fit.xdot,
+            sc.fit
+                .i
+                .map(|v| format!("{v:6.2} %"))
+                .unwrap_or_else(|| "-".into())
+        ));
+        bar.set_message(format!("round {round}: diagnosing"));
+        let d = diagnose::diagnose(&fit_log, &Structure::from_model(&model), &Options::default());
+        let next = d
+            .effects
+            .iter()
+            .find_map(|f| EffectSpec::parse(&f.spec).ok().filter(|s| !adds.iter().any(|a| a.kind == s.kind)));
+        let mut it = Iteration {
+            label: label(&adds),
+            validation: sc.fit,
+            added: None,
+        };
+        match (&next, round < MAX_ROUNDS) {
+            (Some(spec), true) => {
+                let f = d.effects.iter().find(|f| f.name == spec.kind.name()).unwrap();
+                say(&format!("        diagnose: {} (score {:.2}) — {}", f.spec, f.score, f.explanation));
+                it.added = Some(spec.to_string());
+                adds.push(spec.clone());
+                iterations.push(it);
+                last = Some((model, d, pred));
+            }
+            _ => {
+                if next.is_none() {
+                    say("        diagnose: nothing significant is left");
+                }
+                iterations.push(it);
+                last = Some((model, d, pred));
+                break;
+            }
+        }
+    }
+    let (model, d, pred) = last.context("the demo ran no round")?;
+    let mut outcome = Outcome {
+        hidden: hidden.to_vec(),
+        iterations,
+        added: adds,
+        report: None,
+    };
+    let verdict = if outcome.found_all() {
+        "Found: every hidden effect was identified and added."
+    } else {
+        "Not found: some hidden effect was not identified."
+    };
+    if let Some(dir) = report_dir {
+        bar.set_message("writing the report");
+        let hidden_s: Vec<String> = hidden.iter().map(|h| h.to_string()).collect();
+        let w = report::write_demo_report(
+            dir,
+            &hidden_s,
+            verdict,
+            &outcome.iterations,
+            (&model, &val_log, &d, &pred),
+        )?;
+        outcome.report = Some(w.path);
+    }
+    Ok(outcome)
+}
+
+pub fn run(args: Args) -> Result<()> {
+    let hidden: Vec<EffectSpec> = if args.effect.is_empty() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand::rngs::StdRng::seed_from_u64(args.seed);
+        let k = RANDOM_EFFECTS[rng.random_range(0..RANDOM_EFFECTS.len())];
+        let mut spec = EffectSpec::bare(k);
+        for key in crate::effect_spec::keys(k) {
+            spec.values.insert(key.name.to_string(), key.default);
+        }
+        vec![spec]
+    } else {
+        args.effect
+            .iter()
+            .map(|s| EffectSpec::parse(s).with_context(|| format!("--effect '{s}'")))
+            .collect::<Result<_>>()?
+    };
+    if !(args.duration.is_finite() && args.duration >= 10.0) {
+        anyhow::bail!("--duration: give at least 10 seconds (got {})", args.duration);
+    }
+    println!(
+        "Emulated motor (paper's BLDC motor, LuGre friction) with {} hidden effect(s); \
+         fitting on signal a, validating on signal b ({} s each).",
+        hidden.len(),
+        args.duration
+    );
+    let bar = ProgressBar::new((2 + MAX_ROUNDS) as u64);
+    bar.set_style(
+        ProgressStyle::with_template("{bar:30} {pos}/{len} {elapsed} {msg}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let mut say = |s: &str| bar.suspend(|| println!("{s}"));
+    let out = run_loop(
+        &hidden,
+        args.seed,
+        args.duration,
+        Some(&args.report),
+        &mut say,
+        &bar,
+    )?;
+    bar.finish_and_clear();
+    let hidden_s: Vec<String> = out.hidden.iter().map(|h| h.to_string()).collect();
+    println!("hidden effect: {}", hidden_s.join(", "));
+    for h in &out.hidden {
+        let found = out.added.iter().find(|a| a.kind == h.kind);
+        match found {
+            Some(a) => println!("  {}: FOUND (estimated {a})", h.kind.name()),
+            None => println!("  {}: NOT FOUND", h.kind.name()),
+        }
+    }
+    if let Some(p) = &out.report {
+        println!("report: {}", p.display());
+    }
+    Ok(())
 }

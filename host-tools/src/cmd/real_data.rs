@@ -139,6 +139,10 @@ fn emps_section(md: &mut String, data: &Path, args: &Args) -> Result<()> {
     let mut generic_sim = None;
     if !args.no_generic {
         let rounds = emps_loop::run(&train, &test, &mut |m| progress(m))?;
+        progress("EMPS: generic fits with the authors' structures");
+        let authors = emps_loop::authors_structures(&train, &test)?;
+        let n_loop = rounds.len();
+        let rounds: Vec<emps_loop::Round> = rounds.into_iter().chain(authors).collect();
         let _ = writeln!(
             loop_md,
             "The generic loop on the same data: the code paths of `motorid fit --model linear \
@@ -166,7 +170,8 @@ fn emps_section(md: &mut String, data: &Path, args: &Args) -> Result<()> {
                 .collect();
             let _ = writeln!(
                 loop_md,
-                "| {k} | {} | {:.2} | {:.2} | {} | {} | {} | {:.1} / {:.1} | {:.1} / {:.1} | {:.3} | {} |",
+                "| {} | {} | {:.2} | {:.2} | {} | {} | {} | {:.1} / {:.1} | {:.1} / {:.1} | {:.3} | {} |",
+                if k < n_loop { k.to_string() } else { "authors' structure".to_string() },
                 if r.adds.is_empty() { "– (linear)".to_string() } else { r.adds.iter().map(|a| format!("`{a}`")).collect::<Vec<_>>().join(" ") },
                 p.m,
                 p.fv,
@@ -182,25 +187,42 @@ fn emps_section(md: &mut String, data: &Path, args: &Args) -> Result<()> {
             );
             let label = if k == 0 {
                 "generic linear model (viscous only)".to_string()
-            } else {
+            } else if k < n_loop {
                 format!("generic model after round {k}")
+            } else {
+                format!("generic model + {}", r.adds.join(" + "))
             };
             rows.push((label, benchmark_train(&r.model, &train), r.rmse_test_mm));
         }
         let last = rounds.last().expect("at least one round");
-        generic_sim = Some((last.sim_test.clone(), rounds.len() - 1));
-        let tested: Vec<String> = rounds[0]
-            .diagnosis
-            .tested
-            .iter()
-            .map(|t| format!("{} p = {:.1e}{}", t.name, t.p_value, if t.kept { " (kept)" } else { "" }))
-            .collect();
+        generic_sim = Some((last.sim_test.clone(), last.adds.join(" + ")));
         let _ = writeln!(
             loop_md,
-            "\nFirst diagnosis, every candidate's best test (Bonferroni level {:.1e}): {}.\n",
-            rounds[0].diagnosis.alpha_per_test,
-            tested.join(", ")
+            "\nEvery candidate's best test per diagnosis (Bonferroni level {:.1e}):\n",
+            rounds[0].diagnosis.alpha_per_test
         );
+        for (k, r) in rounds.iter().enumerate() {
+            let tested: Vec<String> = r
+                .diagnosis
+                .tested
+                .iter()
+                .map(|t| {
+                    format!(
+                        "{} p = {:.1e}{}",
+                        t.name,
+                        t.p_value,
+                        if t.kept { " (kept)" } else { "" }
+                    )
+                })
+                .collect();
+            let what = if k < n_loop {
+                format!("round {k}")
+            } else {
+                format!("with {}", r.adds.join(" + "))
+            };
+            let _ = writeln!(loop_md, "- {what}: {}", tested.join(", "));
+        }
+        loop_md.push('\n');
     }
     md.push_str(&loop_md);
     let _ = writeln!(
@@ -246,7 +268,7 @@ fn emps_section(md: &mut String, data: &Path, args: &Args) -> Result<()> {
         Series::line(&format!("IDIM-LS model, free run ({rmse_sym:.2} mm)"), plots::thin(&test.t, &scale(&sim_sym, 1e3), 10), 1),
     ];
     if let Some((sim, k)) = &generic_sim {
-        series.push(Series::line(&format!("generic model, round {k}"), plots::thin(&test.t, &scale(sim, 1e3), 10), 2));
+        series.push(Series::line(&format!("generic model + {k}"), plots::thin(&test.t, sim, 10), 2));
     }
     plots::figure(
         &out.join("emps_test_free_run.svg"),

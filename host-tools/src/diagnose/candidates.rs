@@ -203,12 +203,7 @@ impl Signals {
 
     /// Load-dependent friction `|drive|·sgn(ω)` with the modelled drive, zero while stuck.
     pub fn load_friction_column(&self) -> Vec<f64> {
-        let drive = if self.i.is_some() {
-            &self.drive
-        } else {
-            &self.drive_model
-        };
-        drive
+        self.drive_model
             .iter()
             .zip(&self.omega)
             .map(|(d, w)| {

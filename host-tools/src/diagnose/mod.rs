@@ -249,17 +249,24 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
     };
     let centres = wf.centres.clone();
     let input: Vec<f64> = centres.iter().map(|&c| s.u[c]).collect();
-    let push_eq = |eq: Equation, out: &SelectOut, unit: &'static str| EquationResidual {
-        equation: eq,
-        t: centres.iter().map(|&c| s.t[c]).collect(),
-        centres: centres.clone(),
-        base: out.2.clone(),
-        after: out.3.clone(),
-        n_eff: out.4,
-        whiteness: stats::whiteness(&out.2, &input, 30),
-        unit,
+    let push_eq = |eq: Equation, out: &SelectOut, unit: &'static str, keep: Option<&[bool]>| {
+        let idx: Vec<usize> = (0..centres.len())
+            .filter(|&r| keep.is_none_or(|k| k[r]))
+            .collect();
+        let inp: Vec<f64> = idx.iter().map(|&r| input[r]).collect();
+        EquationResidual {
+            equation: eq,
+            t: idx.iter().map(|&r| s.t[centres[r]]).collect(),
+            centres: idx.iter().map(|&r| centres[r]).collect(),
+            base: out.2.clone(),
+            after: out.3.clone(),
+            n_eff: out.4,
+            whiteness: stats::whiteness(&out.2, &inp, 30),
+            unit,
+        }
     };
     let mut kb = 0.0;
+    let mut mech_keep: Option<Vec<bool>> = None;
     if voltage && !elec.y.is_empty() {
         let out = forward_select(&elec, opts, alpha_per_test, &mut units);
         kb = out.5.get(2).copied().unwrap_or(paper.kb);
@@ -275,7 +282,7 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
                 }
             }
         }
-        equations.push(push_eq(Equation::Electrical, &out, "V·s"));
+        equations.push(push_eq(Equation::Electrical, &out, "V·s", None));
         findings.extend(out.0);
         tested.extend(out.1);
     }
@@ -295,11 +302,35 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
             mech.y = wf.integral_zoh(&s.raw_u);
             units.mech_scale = 1.0;
         }
+        // Windows that touch a standstill are left out: there static friction is whatever
+        // balances the drive (an unknown per window), and the Hall angle cannot tell creep
+        // from rest.
+        if std::env::var_os("MOTORID_DIAG_KEEPALL").is_none() {
+            let keep: Vec<bool> = wf
+                .centres
+                .iter()
+                .map(|&c| {
+                    s.omega[c.saturating_sub(h)..(c + h + 1).min(s.len())]
+                        .iter()
+                        .all(|w| w.abs() >= candidates::STICK_SPEED)
+                })
+                .collect();
+            let filt = |v: &Vec<f64>| -> Vec<f64> {
+                v.iter().zip(&keep).filter(|(_, k)| **k).map(|(x, _)| *x).collect()
+            };
+            mech.y = filt(&mech.y);
+            mech.base_cols = mech.base_cols.iter().map(filt).collect();
+            for (_, cols) in mech.cand.iter_mut() {
+                *cols = cols.iter().map(filt).collect();
+            }
+            mech_keep = Some(keep);
+        }
         let out = forward_select(&mech, opts, alpha_per_test, &mut units);
         equations.push(push_eq(
             Equation::Mechanical,
             &out,
             if voltage { "V·s" } else { "u·s" },
+            mech_keep.as_deref(),
         ));
         findings.extend(out.0);
         tested.extend(out.1);
@@ -422,6 +453,11 @@ fn forward_select(
                 Some(slot) if slot.1 <= rss1 => {}
                 Some(slot) => *slot = (ci, rss1, t),
                 None => best_by_kind.push((ci, rss1, t)),
+            }
+        }
+        if std::env::var_os("MOTORID_DIAG_DEBUG").is_some() {
+            for (ci, rss1, t) in &best_by_kind {
+                eprintln!("  {:?} {} drop/yty {:.2e} expl {:.3}", data.eq, data.cand[*ci].0.kind.name(), (rss_cur - rss1) / gram.yty(), t.explained);
             }
         }
         if first_round.is_empty() {
@@ -566,4 +602,43 @@ pub fn explain(spec: &EffectSpec, score: f64, eq: Equation) -> String {
         pct,
         eq.label()
     )
+}
+
+impl Structure {
+    /// The structure of an identified model: its friction law as effects (linear: viscous;
+    /// LuGre: Coulomb, Stribeck, viscous, presliding; SINDYc: Coulomb and viscous, the terms
+    /// its library always offers) plus its added effects.
+    pub fn from_model(m: &crate::model::Model) -> Structure {
+        use crate::model::ModelKind;
+        let mut effects = Vec::new();
+        match (m.kind, &m.lugre) {
+            (ModelKind::Lugre, Some(l)) => {
+                effects.push(Effect::Coulomb { fc: l.alpha0 });
+                effects.push(Effect::Stribeck {
+                    fs: l.alpha1,
+                    vs: l.v0,
+                });
+                effects.push(Effect::Viscous { b: l.alpha2 });
+                effects.push(Effect::Presliding {
+                    sigma0: l.sigma0,
+                    sigma1: l.sigma1,
+                });
+            }
+            (ModelKind::Sindyc, _) => {
+                effects.push(Effect::Coulomb { fc: 0.0 });
+                effects.push(Effect::Viscous { b: 0.0 });
+            }
+            _ => effects.push(Effect::Viscous { b: m.viscous }),
+        }
+        for e in &m.effects {
+            if !effects.iter().any(|x| x.kind() == e.kind()) {
+                effects.push(*e);
+            }
+        }
+        Structure {
+            plant: m.plant,
+            effects,
+            kt: if m.motor.kt > 0.0 { m.motor.kt } else { 1.0 },
+        }
+    }
 }

@@ -160,8 +160,7 @@ impl HankelEmbedding {
             }
         };
         let mut proj = vec![0.0; m * m];
-        for k in lo - 1..hi {
-            let c = order[k];
+        for &c in &order[lo - 1..hi] {
             for a in 0..m {
                 let ua = u[(a, c)];
                 for b in 0..m {
@@ -281,9 +280,7 @@ impl HankelEmbedding {
                 self.sigma
                     .iter()
                     .enumerate()
-                    .filter(move |(k, s)| {
-                        **s > 0.0 && ((k + 1 >= self.lo && k + 1 <= self.hi) == sel)
-                    })
+                    .filter(move |(k, s)| **s > 0.0 && ((k + 1 >= self.lo && *k < self.hi) == sel))
                     .map(|(k, s)| (k + 1, *s))
                     .collect::<Vec<_>>()
             };

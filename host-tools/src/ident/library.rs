@@ -162,8 +162,8 @@ impl Library {
             return;
         }
         if let Some(c) = self.candidates.iter_mut().find(|c| c.term == term) {
-            for e in 0..3 {
-                c.allowed[e] |= allowed[e];
+            for (have, add) in c.allowed.iter_mut().zip(allowed) {
+                *have |= add;
             }
         } else {
             self.candidates.push(Candidate { term, allowed });

@@ -293,14 +293,8 @@ pub fn fit(req: &FitRequest) -> Result<Model> {
         lo: 0.0,
         hi: 100.0,
     });
-    free.extend(effect_free(&m));
-    let mut rows = sim_error::refine(
-        &mut m,
-        &free,
-        req.logs,
-        nlsq::Options::default(),
-        &mut |_, _| {},
-    )?;
+    let mut rows =
+        sim_error::refine_with_effects(&mut m, &free, req.logs, nlsq::Options::default())?;
     rows.extend(fixed_rows(&m));
     m.parameters = rows;
     m.data.sample_period = m.sample_period;

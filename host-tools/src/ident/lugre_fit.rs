@@ -12,7 +12,7 @@
 //!    σ0 acts below one Hall step (the bristle deflection s/σ0 is ~0.3 mrad against 95 mrad):
 //!    when the data cannot pin it down the parameter table says so.
 use super::free_params::{parameter_rows, Free, Slot};
-use super::linear::{effect_free, fixed_rows, motor_free, skeleton, weak_estimate};
+use super::linear::{fixed_rows, motor_free, skeleton, weak_estimate};
 use super::{nlsq, sim_error, FitRequest};
 use crate::log::{MotorLog, Plant};
 use crate::model::{LugreParams, Model, ModelKind};
@@ -253,7 +253,7 @@ pub fn fit(req: &FitRequest) -> Result<Model> {
         let mut best = (f64::INFINITY, sigma0, init.sigma1);
         for s0 in [30.0, 300.0, 3000.0] {
             for s1 in [0.1, 1.0, 10.0, 30.0] {
-                let mut trial = m.clone();
+                let mut trial = sim_error::scale_effect_magnitudes(&m, 0.0);
                 if let Some(l) = trial.lugre.as_mut() {
                     l.sigma0 = s0;
                     l.sigma1 = s1;
@@ -289,14 +289,8 @@ pub fn fit(req: &FitRequest) -> Result<Model> {
         },
     ];
     free.extend(motor_free(req.plant));
-    free.extend(effect_free(&m));
-    let mut dyn_rows = sim_error::refine(
-        &mut m,
-        &free,
-        req.logs,
-        nlsq::Options::default(),
-        &mut |_, _| {},
-    )?;
+    let mut dyn_rows =
+        sim_error::refine_with_effects(&mut m, &free, req.logs, nlsq::Options::default())?;
     // Static curve again with the refined K_t and J (the friction points scale with K_t).
     // α2 stays at the value the whole data gave when the points span a narrow velocity range.
     let pts2: Vec<SteadyPoint> = all_steady_points(&m, req.logs);

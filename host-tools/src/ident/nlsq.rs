@@ -196,11 +196,15 @@ fn damped_step(jtj: &[Vec<f64>], g: &[f64], active: &[bool], lambda: f64) -> Opt
     if k == 0 {
         return Some(step);
     }
+    // A variable the cost does not depend on (zero column) gets a floor on its damping, so
+    // the system stays positive definite and its step is zero.
+    let dmax = idx.iter().map(|&j| jtj[j][j]).fold(0.0, f64::max);
+    let floor = (1e-12 * dmax).max(1e-300);
     let a = faer::Mat::<f64>::from_fn(k, k, |p, q| {
         let v = jtj[idx[p]][idx[q]];
         if p == q {
-            let d = jtj[idx[p]][idx[p]].max(1e-300);
-            v + lambda * d
+            let d = jtj[idx[p]][idx[p]].max(floor);
+            v.max(floor) + lambda * d
         } else {
             v
         }

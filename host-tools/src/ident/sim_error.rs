@@ -77,6 +77,62 @@ impl<'a> Residuals<'a> {
     }
 }
 
+/// `Σ r²` of a model, ∞ when it diverges.
+pub fn cost(res: &Residuals, model: &Model) -> f64 {
+    res.eval(model)
+        .map(|r| r.iter().map(|v| v * v).sum())
+        .unwrap_or(f64::INFINITY)
+}
+
+/// The effects of `model` with their magnitudes multiplied by `f` (keys other than the
+/// magnitude, such as a phase or a time constant, kept); `f = 0` is the model without them.
+pub fn scale_effect_magnitudes(model: &Model, f: f64) -> Model {
+    use control::effects::Effect;
+    let mut m = model.clone();
+    for e in &mut m.effects {
+        match e {
+            Effect::Coulomb { fc } => *fc *= f,
+            Effect::Viscous { b } => *b *= f,
+            Effect::Stribeck { fs, .. } => *fs *= f,
+            Effect::Cogging { amp, .. } | Effect::PositionLoad { amp, .. } => *amp *= f,
+            Effect::Offset { t0 } => *t0 *= f,
+            Effect::Asymmetry { dv, dc } => {
+                *dv *= f;
+                *dc *= f
+            }
+            Effect::Deadtime { vd } => *vd *= f,
+            Effect::CurrentOffset { i0 } => *i0 *= f,
+            Effect::Thermal { k, .. } => *k *= f,
+            Effect::LoadFriction { mu } => *mu *= f,
+            Effect::Presliding { .. } => {}
+        }
+    }
+    m
+}
+
+/// Line search along the weak-form estimate of the effects: start from the magnitude factor
+/// (0, ¼, ½, ¾, 1, 1¼) with the lowest simulation error. The weak form gets phases right but
+/// its magnitudes can be off (Hall quantisation of θ inside sin(hθ)), and a free run with a
+/// wrong position-dependent torque drifts; factor 0 ("without the effect") is a candidate,
+/// so adding an effect never starts worse than not adding it.
+pub fn better_effect_start(model: &mut Model, logs: &[MotorLog]) {
+    if model.effects.is_empty() {
+        return;
+    }
+    let res = Residuals::new(logs, model.sensor.velocity_window);
+    let mut best = (f64::INFINITY, 1.0);
+    for f in [0.0, 0.25, 0.5, 0.75, 1.0, 1.25] {
+        let c = cost(&res, &scale_effect_magnitudes(model, f));
+        if std::env::var_os("MOTORID_DEBUG_IDENT").is_some() {
+            eprintln!("effects {:?} x {f}: cost {c:.4e}", model.effects);
+        }
+        if c < best.0 {
+            best = (c, f);
+        }
+    }
+    *model = scale_effect_magnitudes(model, best.1);
+}
+
 /// Refine the free parameters of `model` on `logs`. Returns the parameter rows with
 /// standard errors. `progress(iteration, cost)` reports progress.
 pub fn refine(
@@ -109,4 +165,30 @@ pub fn refine(
     }
     let se: Vec<Option<f64>> = sol.std_err.iter().map(|v| Some(*v)).collect();
     Ok(parameter_rows(model, free, &se))
+}
+
+/// Refine in two stages when the model has effects: first the base model (effects at zero
+/// magnitude) on `base_free`, then the effects from their weak-form estimate (line search
+/// along it, [`better_effect_start`]) with everything free. A position-dependent torque
+/// that is slightly wrong makes a free run stick or drift, so the base model must be right
+/// before the effects are searched.
+pub fn refine_with_effects(
+    model: &mut Model,
+    base_free: &[Free],
+    logs: &[MotorLog],
+    opts: nlsq::Options,
+) -> Result<Vec<Parameter>> {
+    if model.effects.is_empty() {
+        return refine(model, base_free, logs, opts, &mut |_, _| {});
+    }
+    let weak = model.effects.clone();
+    let mut base = scale_effect_magnitudes(model, 0.0);
+    refine(&mut base, base_free, logs, opts, &mut |_, _| {})?;
+    base.effects = weak;
+    better_effect_start(&mut base, logs);
+    let mut free = base_free.to_vec();
+    free.extend(super::linear::effect_free(&base));
+    let rows = refine(&mut base, &free, logs, opts, &mut |_, _| {})?;
+    *model = base;
+    Ok(rows)
 }

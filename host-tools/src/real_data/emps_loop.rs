@@ -138,6 +138,43 @@ pub struct Round {
     pub diagnosis: Diagnosis,
 }
 
+/// Fit the linear model with `adds` on a prepared training log, diagnose it, score it.
+fn fit_round(train: &MotorLog, test: &MotorLog, adds: &[EffectSpec]) -> Result<Round> {
+    let rep = ident::fit(&FitRequest {
+        kind: ModelKind::Linear,
+        logs: std::slice::from_ref(train),
+        validate: &[],
+        adds,
+        plant: Plant::Torque,
+    })?;
+    let model = rep.model;
+    let diagnosis =
+        diagnose::diagnose(train, &structure_of(&model), &diagnose::Options::default());
+    let (rmse_test_mm, sim_test) = benchmark_rmse_mm(&model, test)?;
+    Ok(Round {
+        adds: adds.iter().map(|a| a.to_string()).collect(),
+        train: ident::score(&model, train)?,
+        test: ident::score(&model, test)?,
+        model,
+        rmse_test_mm,
+        sim_test,
+        diagnosis,
+    })
+}
+
+/// The generic linear model with the authors' structures added by name (`fit --add coulomb
+/// --add offset [--add asymmetry]`), for comparison with the loop's own choices.
+pub fn authors_structures(train: &MotorLog, test: &MotorLog) -> Result<Vec<Round>> {
+    let (train, test) = (&prepare(train, DECIMATION), &prepare(test, 1));
+    let bare = |names: &[&str]| -> Result<Vec<EffectSpec>> {
+        names.iter().map(|n| EffectSpec::parse(n)).collect()
+    };
+    Ok(vec![
+        fit_round(train, test, &bare(&["coulomb", "offset"])?)?,
+        fit_round(train, test, &bare(&["coulomb", "offset", "asymmetry"])?)?,
+    ])
+}
+
 /// Fit linear → diagnose → add what was found → refit, until nothing is found or
 /// [`MAX_ROUNDS`] refits. `progress` is called with a line per step.
 pub fn run(train: &MotorLog, test: &MotorLog, progress: &mut dyn FnMut(&str)) -> Result<Vec<Round>> {
@@ -154,32 +191,14 @@ pub fn run(train: &MotorLog, test: &MotorLog, progress: &mut dyn FnMut(&str)) ->
                 format!(" --add {}", labels.join(" --add "))
             }
         ));
-        let rep = ident::fit(&FitRequest {
-            kind: ModelKind::Linear,
-            logs: std::slice::from_ref(train),
-            validate: &[],
-            adds: &adds,
-            plant: Plant::Torque,
-        })?;
-        let model = rep.model;
-        progress("EMPS: diagnosing");
-        let diagnosis =
-            diagnose::diagnose(train, &structure_of(&model), &diagnose::Options::default());
-        let (rmse_test_mm, sim_test) = benchmark_rmse_mm(&model, test)?;
-        let found: Vec<EffectSpec> = diagnosis
+        let r = fit_round(train, test, &adds)?;
+        let found: Vec<EffectSpec> = r
+            .diagnosis
             .effects
             .iter()
             .filter_map(|f| EffectSpec::parse(&f.spec).ok())
             .collect();
-        rounds.push(Round {
-            adds: labels,
-            train: ident::score(&model, train)?,
-            test: ident::score(&model, test)?,
-            model,
-            rmse_test_mm,
-            sim_test,
-            diagnosis,
-        });
+        rounds.push(r);
         if found.is_empty() || round == MAX_ROUNDS {
             break;
         }

@@ -1,0 +1,26 @@
+//! OmniRobot DC motors (../shared/data/OmniRobot_DC_motors): Coulomb + viscous friction beside
+//! the authors' b and T_0.
+use motorid::real_data::omni_dc;
+use motorid::real_data::static_curve::Term;
+use tests::shared_data;
+
+#[test]
+fn coulomb_and_viscous_near_the_authors_values() {
+    let Some(data) = shared_data("coulomb_and_viscous_near_the_authors_values") else {
+        return;
+    };
+    for m in 1..=3 {
+        let (b_ref, t0_ref) = omni_dc::REFERENCE[m - 1];
+        for file in omni_dc::FILES {
+            let r = omni_dc::analyse(&data, file, m).unwrap();
+            // 14 plateaus of ±25…±175 rad/s.
+            assert!(r.points.len() >= 12, "motor {m} {file}: {} points", r.points.len());
+            let t0 = r.curve.get(Term::Coulomb).unwrap();
+            let b = r.curve.get(Term::Viscous).unwrap();
+            // Stated tolerance: T_0 within 12 %, b within 30 % (b is the less certain: its
+            // standard error here is 10–20 %).
+            assert!((t0 - t0_ref).abs() < 0.12 * t0_ref, "motor {m} {file}: T_0 {t0} vs {t0_ref}");
+            assert!((b - b_ref).abs() < 0.30 * b_ref, "motor {m} {file}: b {b} vs {b_ref}");
+        }
+    }
+}
