@@ -48,7 +48,8 @@ if [ "${QEMU_PARITY_COUNT:-1}" != 0 ]; then
   echo "==> counting instructions per control step (one instruction per translation block)"
   # QEMU >= 8.1 replaced -singlestep with -accel tcg,one-insn-per-tb=on.
   ver=$(qemu-system-arm --version | sed -n 's/^QEMU emulator version \([0-9]*\)\.\([0-9]*\).*/\1 \2/p')
-  read -r major minor <<<"$ver"
+  read -r major minor <<<"$ver" || true
+  major=${major:-0}; minor=${minor:-0}
   if [ "$major" -gt 8 ] || { [ "$major" -eq 8 ] && [ "$minor" -ge 1 ]; }; then
     one=(-accel tcg,one-insn-per-tb=on)
   else

@@ -102,7 +102,10 @@ pub fn ulp_distance(a: u32, b: u32) -> u64 {
     (ordered(a) - ordered(b)).unsigned_abs()
 }
 
-fn read_qemu(path: &str) -> Result<(Outputs, Option<usize>, Option<[u64; 4]>), String> {
+/// What a QEMU run printed: outputs, the `done` step count, the marker addresses.
+type QemuRun = (Outputs, Option<usize>, Option<[u64; 4]>);
+
+fn read_qemu(path: &str) -> Result<QemuRun, String> {
     let text = std::fs::read_to_string(path).map_err(|e| format!("{path}: {e}"))?;
     let mut outs = Outputs::new();
     let mut done = None;

@@ -9,13 +9,28 @@ fn real_data_writes_figures_and_tables() {
     let dir = tempfile::tempdir().unwrap();
     let out = motorid(
         dir.path(),
-        &["real-data", "--data", data.to_str().unwrap(), "--out", "figs"],
+        &[
+            "real-data",
+            "--data",
+            data.to_str().unwrap(),
+            "--out",
+            "figs",
+        ],
     );
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let md = String::from_utf8_lossy(&out.stdout);
     let saved = std::fs::read_to_string(dir.path().join("figs/real-data.md")).unwrap();
     assert_eq!(md, saved);
-    for needle in ["| M | 95.1089", "DATA_EMPS_PULSES", "screw drives", "OmniRobot"] {
+    for needle in [
+        "| M | 95.1089",
+        "DATA_EMPS_PULSES",
+        "screw drives",
+        "OmniRobot",
+    ] {
         assert!(md.contains(needle), "tables lack {needle}");
     }
     for f in [
@@ -26,7 +41,10 @@ fn real_data_writes_figures_and_tables() {
         "omni_dc_motors_friction.svg",
     ] {
         let svg = std::fs::read_to_string(dir.path().join("figs").join(f)).unwrap();
-        assert!(svg.contains("<svg") && svg.trim_end().ends_with("</svg>"), "{f}");
+        assert!(
+            svg.contains("<svg") && svg.trim_end().ends_with("</svg>"),
+            "{f}"
+        );
         // Each figure links from the tables.
         assert!(md.contains(f), "{f} not linked");
     }

@@ -79,7 +79,10 @@ fn benchmark_free_run_of_the_rigid_model() {
         ..id.axis
     };
     let (rmse0, _) = emps::benchmark_rmse_mm(&no_friction, emps::GTAU, &test);
-    assert!(rmse0 > 2.0 * rmse, "without friction {rmse0} mm, with {rmse} mm");
+    assert!(
+        rmse0 > 2.0 * rmse,
+        "without friction {rmse0} mm, with {rmse} mm"
+    );
 }
 
 #[test]
@@ -133,7 +136,11 @@ fn cli_fits_emps_through_map_and_torque_plant() {
             train.to_str().unwrap(),
         ],
     );
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let model = motorid::model::Model::load(&dir.path().join("emps.toml")).unwrap();
     // u = vir [V]: the mass in V·s²/m times gτ is a mass in kg of the order of the 95 kg
     // reference (a linear model absorbs friction, so only the order is checked).
@@ -141,9 +148,20 @@ fn cli_fits_emps_through_map_and_torque_plant() {
     assert!((50.0..200.0).contains(&m), "M = {m} kg");
     let out = motorid(
         dir.path(),
-        &["compare", "emps.toml", test.to_str().unwrap(), "--map", emps::MAP, "--json"],
+        &[
+            "compare",
+            "emps.toml",
+            test.to_str().unwrap(),
+            "--map",
+            emps::MAP,
+            "--json",
+        ],
     );
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     // The velocity is followed (fit > 50 %) even by the linear model.
     let xdot = v["fit"]["xdot"].as_f64().unwrap();

@@ -14,13 +14,23 @@ fn coulomb_and_viscous_near_the_authors_values() {
         for file in omni_dc::FILES {
             let r = omni_dc::analyse(&data, file, m).unwrap();
             // 14 plateaus of ±25…±175 rad/s.
-            assert!(r.points.len() >= 12, "motor {m} {file}: {} points", r.points.len());
+            assert!(
+                r.points.len() >= 12,
+                "motor {m} {file}: {} points",
+                r.points.len()
+            );
             let t0 = r.curve.get(Term::Coulomb).unwrap();
             let b = r.curve.get(Term::Viscous).unwrap();
             // Stated tolerance: T_0 within 12 %, b within 30 % (b is the less certain: its
             // standard error here is 10–20 %).
-            assert!((t0 - t0_ref).abs() < 0.12 * t0_ref, "motor {m} {file}: T_0 {t0} vs {t0_ref}");
-            assert!((b - b_ref).abs() < 0.30 * b_ref, "motor {m} {file}: b {b} vs {b_ref}");
+            assert!(
+                (t0 - t0_ref).abs() < 0.12 * t0_ref,
+                "motor {m} {file}: T_0 {t0} vs {t0_ref}"
+            );
+            assert!(
+                (b - b_ref).abs() < 0.30 * b_ref,
+                "motor {m} {file}: b {b} vs {b_ref}"
+            );
         }
     }
 }

@@ -15,13 +15,22 @@ fn stribeck_where_the_authors_have_it_and_not_on_drive_2() {
     let d3 = screw_drives::analyse(&data, 3).unwrap();
     // Drive 1 (lead screw): Stribeck selected by the F-test, its velocity of the order of the
     // authors' 6.4 (this data gives ≈ 3.5 rad/s).
-    assert!(d1.selection.has(Term::Stribeck), "{:?}", d1.selection.chosen.terms);
+    assert!(
+        d1.selection.has(Term::Stribeck),
+        "{:?}",
+        d1.selection.chosen.terms
+    );
     let vs = d1.selection.chosen.vs.unwrap();
     assert!((1.0..10.0).contains(&vs), "drive 1 vs = {vs}");
     // Drive 2 (anti-backlash, authors: 0): no Stribeck, in neither direction.
     assert!(!d2.selection.has(Term::Stribeck));
     for o in &d2.one_sided {
-        assert!(o.p.map_or(true, |p| p > 0.01), "drive 2, direction {}: p = {:?}", o.sign, o.p);
+        assert!(
+            o.p.map_or(true, |p| p > 0.01),
+            "drive 2, direction {}: p = {:?}",
+            o.sign,
+            o.p
+        );
     }
     // Drive 3 (worm, authors: 0.688): the drop of friction at low speed shows in one direction
     // (v > 0 as recorded) with a Stribeck velocity below 2 rad/s; a symmetric Stribeck term
@@ -47,6 +56,9 @@ fn each_set_point_becomes_one_point() {
         assert_eq!(pts.len(), n, "drive {k}");
         assert!(pts.iter().all(|p| p.samples == 450));
         // Torque and velocity keep the same sign (friction opposes motion).
-        assert!(pts.iter().filter(|p| p.v.abs() > 0.5).all(|p| p.v * p.tau > 0.0 || p.v.abs() < 1.0));
+        assert!(pts
+            .iter()
+            .filter(|p| p.v.abs() > 0.5)
+            .all(|p| p.v * p.tau > 0.0 || p.v.abs() < 1.0));
     }
 }

@@ -1,5 +1,5 @@
-//! From an identified model (MODEL.toml) to the coefficient blob's [`Coefficients`], and from
-//! blob bytes. The control step's configuration comes from `Coefficients::step_config`, the
+//! From an identified model (MODEL.toml) to the coefficient blob's [`Coefficients`] and its
+//! bytes. The control step's configuration comes from `Coefficients::step_config`, the
 //! same call the firmware makes after loading a blob.
 use crate::model::{Model, ModelKind};
 use anyhow::{anyhow, bail, Result};

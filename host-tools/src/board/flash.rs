@@ -41,7 +41,7 @@ impl RamFlash {
 
     fn check(&self, offset: u32, len: usize, align: usize) -> Result<usize, FlashError> {
         let o = offset as usize;
-        if o % align != 0 || len % align != 0 {
+        if !o.is_multiple_of(align) || !len.is_multiple_of(align) {
             return Err(FlashError(NorFlashErrorKind::NotAligned));
         }
         if o + len > self.mem.len() {

@@ -3,8 +3,12 @@
 //!
 //! | module | what it is |
 //! |---|---|
-//! | [`coeffs`] | MODEL.toml → coefficient blob → control-step configuration |
+//! | [`coeffs`] | MODEL.toml → [`control::blob::Coefficients`] → blob bytes; blob files checked |
 //! | [`rig`] | the emulated board: control step (f32) + emulated motor, 12 ms at a time |
+//! | [`sim`] | the emulated firmware: serial protocol handler, modes, faults, log samples |
+//! | [`flash`] | the emulated coefficient flash (RAM or file) for `control::slots` |
+//! | [`pty`] | a raw pseudo-terminal whose slave device clients open as a serial port |
+//! | [`link`] | the serial link client: identify, upload, experiments, with retries |
 pub mod coeffs;
 pub mod flash;
 pub mod link;

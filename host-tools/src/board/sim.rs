@@ -297,3 +297,82 @@ pub fn excitation(signal: Excitation, duration_s: f64, seed: u64) -> Vec<f64> {
 pub fn decode_blob(bytes: &[u8]) -> Result<Coefficients> {
     blob::decode(bytes).map_err(|e| anyhow!("{e}"))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use control::frame::{decode_frame, encode_frame, CHUNK_LEN};
+
+    fn frame(msg: &HostMsg) -> Vec<u8> {
+        let mut buf = [0u8; MAX_ENCODED_LEN];
+        encode_frame(msg, &mut buf).unwrap().to_vec()
+    }
+
+    fn replies(sim: &mut BoardSim) -> Vec<BoardMsg> {
+        sim.take_output()
+            .split_inclusive(|&b| b == 0)
+            .map(|f| decode_frame::<BoardMsg>(f).unwrap())
+            .collect()
+    }
+
+    fn chunk(index: u16, bytes: &[u8]) -> HostMsg {
+        let mut m = HostMsg::UploadChunk {
+            index,
+            data: Default::default(),
+        };
+        if let HostMsg::UploadChunk { data, .. } = &mut m {
+            data.extend_from_slice(bytes).unwrap();
+        }
+        m
+    }
+
+    #[test]
+    fn upload_with_a_retried_chunk_commits_once_and_is_refused_while_running() {
+        let mut sim = BoardSim::new(EmulatorConfig::paper(), RamFlash::new(None)).unwrap();
+        assert_eq!(
+            replies(&mut sim),
+            [BoardMsg::Warning(Warning::NoCoefficients)]
+        );
+        let co = Coefficients {
+            model: control::blob::ModelKind::Lugre,
+            lugre: Some(control::lugre::LugreParams::paper()),
+            ..Coefficients::default()
+        };
+        let blob = crate::board::coeffs::encode(&co).unwrap();
+        let crc = control::blob::CRC32.checksum(&blob);
+        sim.receive(&frame(&HostMsg::UploadBegin {
+            total_len: blob.len() as u16,
+            crc,
+        }));
+        for (k, c) in blob.chunks(CHUNK_LEN).enumerate() {
+            sim.receive(&frame(&chunk(k as u16, c)));
+            // A lost ack: the host sends the same chunk again.
+            sim.receive(&frame(&chunk(k as u16, c)));
+        }
+        sim.receive(&frame(&HostMsg::UploadCommit));
+        let r = replies(&mut sim);
+        assert_eq!(r.last(), Some(&BoardMsg::Committed { seq: 1 }));
+        assert!(!r.iter().any(|m| matches!(m, BoardMsg::Nack(_))), "{r:?}");
+        assert_eq!(sim.coefficients(), &co);
+        // A replayed commit finds no upload.
+        sim.receive(&frame(&HostMsg::UploadCommit));
+        assert_eq!(replies(&mut sim), [BoardMsg::Nack(Nack::NoUpload)]);
+        // Running: samples flow, commits are refused.
+        sim.receive(&frame(&HostMsg::SetMode { mode: Mode::Speed }));
+        sim.tick();
+        sim.tick();
+        let r = replies(&mut sim);
+        assert_eq!(r[0], BoardMsg::Ack);
+        assert!(
+            matches!(r[2], BoardMsg::Sample(Sample { seq: 1, .. })),
+            "{r:?}"
+        );
+        sim.receive(&frame(&HostMsg::UploadBegin {
+            total_len: blob.len() as u16,
+            crc,
+        }));
+        sim.receive(&frame(&HostMsg::UploadCommit));
+        let r = replies(&mut sim);
+        assert_eq!(r.last(), Some(&BoardMsg::Nack(Nack::Busy)));
+    }
+}

@@ -36,12 +36,14 @@ pub const DURATION: f64 = 90.0;
 
 /// Run the whole loop on the emulator with a hidden effect.
 #[derive(clap::Args, Debug)]
-#[command(after_help = "Without --effect, one effect is drawn at random (from the seed) among: \
+#[command(
+    after_help = "Without --effect, one effect is drawn at random (from the seed) among: \
     cogging, position_load, offset, asymmetry, deadtime, current_offset, thermal, \
     load_friction, with its default size. Give --effect more than once to hide several.\n\n\
     Each round: fit a LuGre model (with the effects added so far) on signal a, score it on \
     signal b (fit %, the paper's eq. 48), diagnose it on signal a, add the top finding. \
-    Stops when nothing significant is left or after 4 rounds.")]
+    Stops when nothing significant is left or after 4 rounds."
+)]
 pub struct Args {
     /// Hidden effect, NAME or NAME:key=value,... (repeatable; default: one at random).
     #[arg(long, value_name = "SPEC")]
@@ -138,11 +140,16 @@ pub fn run_loop(
                 .unwrap_or_else(|| "-".into())
         ));
         bar.set_message(format!("round {round}: diagnosing"));
-        let d = diagnose::diagnose(&fit_log, &Structure::from_model(&model), &Options::default());
-        let next = d
-            .effects
-            .iter()
-            .find_map(|f| EffectSpec::parse(&f.spec).ok().filter(|s| !adds.iter().any(|a| a.kind == s.kind)));
+        let d = diagnose::diagnose(
+            &fit_log,
+            &Structure::from_model(&model),
+            &Options::default(),
+        );
+        let next = d.effects.iter().find_map(|f| {
+            EffectSpec::parse(&f.spec)
+                .ok()
+                .filter(|s| !adds.iter().any(|a| a.kind == s.kind))
+        });
         let mut it = Iteration {
             label: label(&adds),
             validation: sc.fit,
@@ -150,8 +157,15 @@ pub fn run_loop(
         };
         match (&next, round < MAX_ROUNDS) {
             (Some(spec), true) => {
-                let f = d.effects.iter().find(|f| f.name == spec.kind.name()).unwrap();
-                say(&format!("        diagnose: {} (score {:.2}) — {}", f.spec, f.score, f.explanation));
+                let f = d
+                    .effects
+                    .iter()
+                    .find(|f| f.name == spec.kind.name())
+                    .unwrap();
+                say(&format!(
+                    "        diagnose: {} (score {:.2}) — {}",
+                    f.spec, f.score, f.explanation
+                ));
                 it.added = Some(spec.to_string());
                 adds.push(spec.clone());
                 iterations.push(it);
@@ -211,7 +225,10 @@ pub fn run(args: Args) -> Result<()> {
             .collect::<Result<_>>()?
     };
     if !(args.duration.is_finite() && args.duration >= 10.0) {
-        anyhow::bail!("--duration: give at least 10 seconds (got {})", args.duration);
+        anyhow::bail!(
+            "--duration: give at least 10 seconds (got {})",
+            args.duration
+        );
     }
     println!(
         "Emulated motor (paper's BLDC motor, LuGre friction) with {} hidden effect(s); \

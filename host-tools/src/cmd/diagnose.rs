@@ -7,7 +7,8 @@ use std::path::PathBuf;
 
 /// Find the physical effects a model is missing.
 #[derive(clap::Args, Debug)]
-#[command(after_help = "How it decides: the log is written as two equation residuals \
+#[command(
+    after_help = "How it decides: the log is written as two equation residuals \
     (the torque balance and, for a voltage plant, the voltage balance) in weak form \
     (integrated against smooth windows, so the Hall-quantised angle is never differentiated). \
     The model's own structure is refitted in each; then every effect of the contract's list \
@@ -19,7 +20,8 @@ use std::path::PathBuf;
     residual sum of squares. No finding means the model explains the data down to its noise.\n\n\
     Each finding's `spec` carries the estimated parameters and is accepted by \
     `motorid fit --add SPEC`. --json prints {\"effects\": [{\"name\", \"spec\", \"score\", \
-    \"explanation\"}, ...]}, most important first; score = fraction of the residual explained.")]
+    \"explanation\"}, ...]}, most important first; score = fraction of the residual explained."
+)]
 pub struct Args {
     /// The model (written by `motorid fit`).
     #[arg(value_name = "MODEL.toml")]

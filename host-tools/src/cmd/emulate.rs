@@ -6,7 +6,7 @@ use crate::emulator::EmulatorConfig;
 use crate::model::Model;
 use anyhow::{bail, Context, Result};
 use serde_json::json;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// Closed-loop speed control of the emulated motor with friction compensation, as in the
 /// reference paper's compensation experiment: PI control (the same gains in every case)
@@ -102,7 +102,7 @@ fn run_json(r: &LoopRun) -> serde_json::Value {
     })
 }
 
-fn chart(runs: &[&LoopRun], path: &PathBuf) -> Result<()> {
+fn chart(runs: &[&LoopRun], path: &Path) -> Result<()> {
     let t: Vec<f64> = runs[0].samples.iter().map(|s| s.t).collect();
     let wref: Vec<f64> = runs[0].samples.iter().map(|s| s.omega_ref).collect();
     let ws: Vec<(String, Vec<f64>)> = runs
@@ -131,7 +131,7 @@ fn chart(runs: &[&LoopRun], path: &PathBuf) -> Result<()> {
 /// u8, flags u8 (bit 0 edge overflow, bit 1 voltage override), 0 u8, now_ticks u32,
 /// i_meas f32, v_bus f32, omega_ref f32, v_override f32, then per edge ticks u32, state u8,
 /// 3 zero bytes. Little-endian. Read by `qemu-parity` (`qemu_parity::Trace`).
-pub fn write_trace(path: &PathBuf, run: &LoopRun) -> Result<()> {
+pub fn write_trace(path: &Path, run: &LoopRun) -> Result<()> {
     let mut b = Vec::new();
     b.extend_from_slice(b"QPT2");
     b.extend_from_slice(&(run.inputs.len() as u32).to_le_bytes());

@@ -49,11 +49,11 @@ pub fn run(args: Args) -> Result<()> {
     use control::slots::Slots;
     use embedded_storage::nor_flash::ReadNorFlash;
     use probe_rs::flashing::{DownloadOptions, FlashLoader};
-    use probe_rs::{MemoryInterface, Permissions, Session};
+    use probe_rs::{MemoryInterface, Session, SessionConfig};
 
     let (bytes, co) = crate::board::coeffs::decode_file(&args.blob)?;
     let mut session =
-        Session::auto_attach(args.chip.as_str(), Permissions::default()).map_err(|e| {
+        Session::auto_attach(args.chip.as_str(), SessionConfig::default()).map_err(|e| {
             anyhow!(
                 "no debug probe attached, or it cannot reach the {}: {e}",
                 args.chip

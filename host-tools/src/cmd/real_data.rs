@@ -29,7 +29,7 @@ pub struct Args {
     /// Folder for the figures and the tables (real-data.md); created if missing.
     #[arg(long, value_name = "DIR", default_value = "real-data")]
     pub out: PathBuf,
-    /// Skip the generic fit/diagnose loop on EMPS (the slow part, ~1 min).
+    /// Skip the generic fit/diagnose loop on EMPS (the slow part: a few seconds).
     #[arg(long)]
     pub no_generic: bool,
 }
@@ -53,7 +53,10 @@ pub fn run(args: Args) -> Result<()> {
     let path = args.out.join("real-data.md");
     crate::atomic::write_str(&path, &md)?;
     print!("{md}");
-    progress(&format!("wrote {} and the figures beside it", path.display()));
+    progress(&format!(
+        "wrote {} and the figures beside it",
+        path.display()
+    ));
     Ok(())
 }
 
@@ -65,14 +68,20 @@ fn emps_section(md: &mut String, data: &Path, args: &Args) -> Result<()> {
     let g = emps::GTAU;
     let sym = emps::idim_ls(&train, g, false)?;
     let asy = emps::idim_ls(&train, g, true)?;
-    let _ = writeln!(md, "### EMPS benchmark (ball-screw axis, closed loop, 1 kHz)\n");
+    let _ = writeln!(
+        md,
+        "### EMPS benchmark (ball-screw axis, closed loop, 1 kHz)\n"
+    );
     let _ = writeln!(
         md,
         "Rigid model `gτ·vir = M·q̈ + Fv·q̇ + Fc·sign(q̇) + OF`, identified by IDIM-LS as the \
          benchmark's scripts do (4th-order Butterworth 100 Hz zero-phase, central differences, \
          parallel decimation by 10) on DATA_EMPS; σ% is the relative standard deviation.\n"
     );
-    let _ = writeln!(md, "| parameter | reference (σ%) | this tool (σ%) | difference |");
+    let _ = writeln!(
+        md,
+        "| parameter | reference (σ%) | this tool (σ%) | difference |"
+    );
     let _ = writeln!(md, "|---|---|---|---|");
     for (k, (name, val, sd)) in emps::REFERENCE.iter().enumerate() {
         let ours = sym.ols.theta[k];
@@ -92,7 +101,10 @@ fn emps_section(md: &mut String, data: &Path, args: &Args) -> Result<()> {
         sym.ols.rel_error_pct(),
         emps::idim_relative_error(&sym.axis, &test, g)
     );
-    let _ = writeln!(md, "Asymmetric friction (the authors' §4.2 model, one Fv/Fc per direction):\n");
+    let _ = writeln!(
+        md,
+        "Asymmetric friction (the authors' §4.2 model, one Fv/Fc per direction):\n"
+    );
     let _ = writeln!(md, "| parameter | reference | this tool |");
     let _ = writeln!(md, "|---|---|---|");
     for (k, (name, val)) in emps::REFERENCE_ASYM.iter().enumerate() {
@@ -128,7 +140,11 @@ fn emps_section(md: &mut String, data: &Path, args: &Args) -> Result<()> {
     let (rmse_asy, _) = emps::benchmark_rmse_mm(&asy.axis, g, &test);
     let (rmse_sym_tr, _) = emps::benchmark_rmse_mm(&sym.axis, g, &train);
     let mut rows: Vec<(String, f64, f64)> = vec![
-        ("IDIM-LS rigid model, symmetric friction".into(), rmse_sym_tr, rmse_sym),
+        (
+            "IDIM-LS rigid model, symmetric friction".into(),
+            rmse_sym_tr,
+            rmse_sym,
+        ),
         (
             "IDIM-LS rigid model, asymmetric friction".into(),
             emps::benchmark_rmse_mm(&asy.axis, g, &train).0,
@@ -250,9 +266,15 @@ fn emps_section(md: &mut String, data: &Path, args: &Args) -> Result<()> {
          from sample 50 (published figures use filtered measurements; the pulses of the test run \
          are not in the model):\n"
     );
-    let _ = writeln!(md, "| data | published | IDIM-LS symmetric (this tool) | asymmetric (this tool) |");
+    let _ = writeln!(
+        md,
+        "| data | published | IDIM-LS symmetric (this tool) | asymmetric (this tool) |"
+    );
     let _ = writeln!(md, "|---|---|---|---|");
-    for (log, name, publ) in [(&train, "DATA_EMPS", "0.0138 %"), (&test, "DATA_EMPS_PULSES", "0.0080 %")] {
+    for (log, name, publ) in [
+        (&train, "DATA_EMPS", "0.0138 %"),
+        (&test, "DATA_EMPS_PULSES", "0.0080 %"),
+    ] {
         let qg = log
             .extra("qg_m")
             .with_context(|| format!("{}: missing column 'qg_m'", log.source.display()))?;
@@ -260,15 +282,32 @@ fn emps_section(md: &mut String, data: &Path, args: &Args) -> Result<()> {
             let (q, _) = emps::simulate_closed_loop(a, qg, log.sample_period(), log.theta[0]);
             emps::relative_error_pct(&log.theta[50..], &q[50..])
         };
-        let _ = writeln!(md, "| {name} | {publ} | {:.4} % | {:.4} % |", e(&sym.axis), e(&asy.axis));
+        let _ = writeln!(
+            md,
+            "| {name} | {publ} | {:.4} % | {:.4} % |",
+            e(&sym.axis),
+            e(&asy.axis)
+        );
     }
     // Figure.
     let mut series = vec![
-        Series::line("measured qm", plots::thin(&test.t, &scale(&test.theta, 1e3), 10), 0),
-        Series::line(&format!("IDIM-LS model, free run ({rmse_sym:.2} mm)"), plots::thin(&test.t, &scale(&sim_sym, 1e3), 10), 1),
+        Series::line(
+            "measured qm",
+            plots::thin(&test.t, &scale(&test.theta, 1e3), 10),
+            0,
+        ),
+        Series::line(
+            &format!("IDIM-LS model, free run ({rmse_sym:.2} mm)"),
+            plots::thin(&test.t, &scale(&sim_sym, 1e3), 10),
+            1,
+        ),
     ];
     if let Some((sim, k)) = &generic_sim {
-        series.push(Series::line(&format!("generic model + {k}"), plots::thin(&test.t, sim, 10), 2));
+        series.push(Series::line(
+            &format!("generic model + {k}"),
+            plots::thin(&test.t, sim, 10),
+            2,
+        ));
     }
     plots::figure(
         &out.join("emps_test_free_run.svg"),
@@ -298,7 +337,9 @@ fn stribeck_p(sel: &Selection) -> String {
         Some(c) => format!(
             "{:.1e}{}",
             c.p,
-            c.rejected.as_ref().map_or(String::new(), |r| format!(" ({r})"))
+            c.rejected
+                .as_ref()
+                .map_or(String::new(), |r| format!(" ({r})"))
         ),
         None => "–".into(),
     }
@@ -325,7 +366,10 @@ fn screw_section(md: &mut String, data: &Path, out: &Path) -> Result<()> {
         crate::real_data::static_curve::ALPHA
     );
     let _ = writeln!(md, "| drive | points | selected terms | Fc | Fv | offset | Dv | Fs | vs [rad/s] | authors' strbVelocity | Stribeck p (both directions) | Stribeck p, vs (v > 0 only) | Stribeck p, vs (v < 0 only) | residual σ |");
-    let _ = writeln!(md, "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+    let _ = writeln!(
+        md,
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
+    );
     for k in 1..=3 {
         let r = screw_drives::analyse(data, k)?;
         let c = &r.selection.chosen;
@@ -358,7 +402,9 @@ fn screw_section(md: &mut String, data: &Path, out: &Path) -> Result<()> {
             grid.iter().map(|&v| (v, 1e3 * cv.eval(v))).collect()
         };
         let (neg, pos): (Vec<_>, Vec<_>) = curve(c).into_iter().partition(|p| p.0 < 0.0);
-        let (bneg, bpos): (Vec<_>, Vec<_>) = curve(&r.selection.base).into_iter().partition(|p| p.0 < 0.0);
+        let (bneg, bpos): (Vec<_>, Vec<_>) = curve(&r.selection.base)
+            .into_iter()
+            .partition(|p| p.0 < 0.0);
         let pts: Vec<(f64, f64)> = r.points.iter().map(|p| (p.v, 1e3 * p.tau)).collect();
         let name = format!("screw_drive_{k}_static_curve.svg");
         plots::figure(
@@ -376,7 +422,12 @@ fn screw_section(md: &mut String, data: &Path, out: &Path) -> Result<()> {
         )?;
     }
     for k in 1..=3 {
-        fig_link(md, out, &format!("screw_drive_{k}_static_curve.svg"), &format!("screw drive {k}"));
+        fig_link(
+            md,
+            out,
+            &format!("screw_drive_{k}_static_curve.svg"),
+            &format!("screw drive {k}"),
+        );
     }
     Ok(())
 }
@@ -428,7 +479,11 @@ fn omni_section(md: &mut String, data: &Path, out: &Path) -> Result<()> {
                         .map(|j| sign * vmax * j as f64 / 100.0)
                         .map(|v| (v, 1e3 * (t0_ref * v.signum() + b_ref * v)))
                         .collect();
-                    let label = if sign > 0.0 { format!("motor {m}: authors' b, T_0") } else { String::new() };
+                    let label = if sign > 0.0 {
+                        format!("motor {m}: authors' b, T_0")
+                    } else {
+                        String::new()
+                    };
                     series.push(Series::line(&label, pts, m));
                 }
             }
@@ -441,6 +496,11 @@ fn omni_section(md: &mut String, data: &Path, out: &Path) -> Result<()> {
         "torque k_t·i [mN·m]",
         &series,
     )?;
-    fig_link(md, out, "omni_dc_motors_friction.svg", "OmniRobot DC motors");
+    fig_link(
+        md,
+        out,
+        "omni_dc_motors_friction.svg",
+        "OmniRobot DC motors",
+    );
     Ok(())
 }

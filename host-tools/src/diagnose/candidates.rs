@@ -186,7 +186,13 @@ impl Signals {
 /// Map a signal held over sample intervals onto the sample grid: `(x[k−1] + x[k])/2`.
 pub fn zoh_to_grid(x: &[f64]) -> Vec<f64> {
     (0..x.len())
-        .map(|k| if k == 0 { x[0] } else { 0.5 * (x[k - 1] + x[k]) })
+        .map(|k| {
+            if k == 0 {
+                x[0]
+            } else {
+                0.5 * (x[k - 1] + x[k])
+            }
+        })
         .collect()
 }
 
@@ -346,11 +352,7 @@ pub fn variants(kind: EffectKind, s: &Signals, coulomb_guess: f64) -> Vec<Varian
                 vec![s.omega.iter().map(|w| w.abs()).collect()],
             )]
         }
-        EffectKind::LoadFriction => vec![one(
-            mech,
-            vec![],
-            vec![s.load_friction_column()],
-        )],
+        EffectKind::LoadFriction => vec![one(mech, vec![], vec![s.load_friction_column()])],
         EffectKind::Deadtime if voltage => {
             let i = s.i.as_ref().unwrap();
             vec![one(
@@ -413,10 +415,7 @@ pub fn present_columns(e: &Effect<f64>, s: &Signals) -> Vec<(Equation, Vec<f64>)
         Effect::Offset { .. } => vec![(mech, vec![1.0; n])],
         Effect::Asymmetry { .. } => vec![(mech, s.omega.iter().map(|w| w.abs()).collect())],
         Effect::LoadFriction { .. } => {
-            vec![(
-                mech,
-                s.load_friction_column(),
-            )]
+            vec![(mech, s.load_friction_column())]
         }
         Effect::Deadtime { .. } if voltage => {
             let i = s.i.as_ref().unwrap();

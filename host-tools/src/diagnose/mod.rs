@@ -162,6 +162,8 @@ struct EqData {
     base_cols: Vec<Vec<f64>>,
     /// Sample-level columns to carry into the other equation's base.
     base_sample: Vec<Vec<f64>>,
+    /// Smallest torque [N·m] (RMS of the effect's term) worth reporting.
+    min_torque: f64,
     cand: Vec<(Variant, Vec<Vec<f64>>)>,
 }
 
@@ -180,6 +182,7 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
         y: wf.integral(&s.u),
         base_cols: vec![],
         base_sample: vec![],
+        min_torque: 0.0,
         cand: vec![],
     };
     if voltage {
@@ -200,6 +203,7 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
         y: vec![],
         base_cols: vec![wf.second_derivative(&s.theta)],
         base_sample: vec![],
+        min_torque: min_torque(st, &s),
         cand: vec![],
     };
     for e in &st.effects {
@@ -266,16 +270,16 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
         }
     };
     let mut kb = 0.0;
-    let mut mech_keep: Option<Vec<bool>> = None;
+    let mech_keep: Option<Vec<bool>>;
     if voltage && !elec.y.is_empty() {
         let out = forward_select(&elec, opts, alpha_per_test, &mut units);
         kb = out.5.get(2).copied().unwrap_or(paper.kb);
         // Voltage losses found here act in the torque equation (written in volts) too.
         for f in &out.0 {
             if let Some(v) = elec.cand.iter().find(|(v, _)| {
-                Some(v.kind) == f.kind && EffectSpec::parse(&f.spec).is_ok_and(|sp| {
-                    v.fixed.iter().all(|(k, x)| (sp.get(k) - x).abs() < 1e-9)
-                })
+                Some(v.kind) == f.kind
+                    && EffectSpec::parse(&f.spec)
+                        .is_ok_and(|sp| v.fixed.iter().all(|(k, x)| (sp.get(k) - x).abs() < 1e-9))
             }) {
                 if v.0.kind != EffectKind::CurrentOffset {
                     mech.base_sample.extend(v.0.columns.iter().cloned());
@@ -305,7 +309,7 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
         // Windows that touch a standstill are left out: there static friction is whatever
         // balances the drive (an unknown per window), and the Hall angle cannot tell creep
         // from rest.
-        if std::env::var_os("MOTORID_DIAG_KEEPALL").is_none() {
+        {
             let keep: Vec<bool> = wf
                 .centres
                 .iter()
@@ -315,13 +319,14 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
                         .all(|w| w.abs() >= candidates::STICK_SPEED)
                 })
                 .collect();
-            let filt = |v: &Vec<f64>| -> Vec<f64> {
-                v.iter().zip(&keep).filter(|(_, k)| **k).map(|(x, _)| *x).collect()
-            };
-            mech.y = filt(&mech.y);
-            mech.base_cols = mech.base_cols.iter().map(filt).collect();
+            mech.y = select_rows(&mech.y, &keep);
+            mech.base_cols = mech
+                .base_cols
+                .iter()
+                .map(|c| select_rows(c, &keep))
+                .collect();
             for (_, cols) in mech.cand.iter_mut() {
-                *cols = cols.iter().map(filt).collect();
+                *cols = cols.iter().map(|c| select_rows(c, &keep)).collect();
             }
             mech_keep = Some(keep);
         }
@@ -364,7 +369,12 @@ fn modelled_drive(s: &Signals, st: &Structure) -> Vec<f64> {
         }
     }
     if !st.has(EffectKind::Coulomb) {
-        cols.push(s.omega.iter().map(|w| control::effects::smooth_sign(*w, control::effects::VELOCITY_EPS)).collect());
+        cols.push(
+            s.omega
+                .iter()
+                .map(|w| control::effects::smooth_sign(*w, control::effects::VELOCITY_EPS))
+                .collect(),
+        );
     }
     if !st.has(EffectKind::Viscous) {
         cols.push(s.omega.clone());
@@ -403,9 +413,6 @@ fn forward_select(
     let gram = Gram::new(&all_cols, &data.y);
     let mut base: Vec<usize> = (0..data.base_cols.len()).collect();
     let (beta0, rss0) = gram.fit(&base);
-    if std::env::var_os("MOTORID_DIAG_DEBUG").is_some() {
-        eprintln!("{:?} base beta {:?} rss0 {rss0:.3e} yty {:.3e}", data.eq, beta0, gram.yty());
-    }
     if data.eq == Equation::Electrical && beta0.first().is_some_and(|r| *r > 0.0) {
         units.r = beta0[0];
     }
@@ -420,13 +427,6 @@ fn forward_select(
         r
     };
     let base_resid = resid_of(&base, &beta0);
-    if let Some(path) = std::env::var_os("MOTORID_DIAG_DUMP") {
-        let mut out = String::new();
-        for (k, r) in base_resid.iter().enumerate() {
-            out.push_str(&format!("{k},{r},{}\n", all_cols.iter().map(|c| c[k].to_string()).collect::<Vec<_>>().join(",")));
-        }
-        let _ = std::fs::write(format!("{}_{:?}.csv", path.to_string_lossy(), data.eq), out);
-    }
     let n_eff_base = stats::effective_n(&base_resid);
 
     // Best variant per effect kind, tested against the current base.
@@ -455,11 +455,6 @@ fn forward_select(
                 None => best_by_kind.push((ci, rss1, t)),
             }
         }
-        if std::env::var_os("MOTORID_DIAG_DEBUG").is_some() {
-            for (ci, rss1, t) in &best_by_kind {
-                eprintln!("  {:?} {} drop/yty {:.2e} expl {:.3}", data.eq, data.cand[*ci].0.kind.name(), (rss_cur - rss1) / gram.yty(), t.explained);
-            }
-        }
         if first_round.is_empty() {
             for (ci, _, t) in &best_by_kind {
                 let v = &data.cand[*ci].0;
@@ -476,12 +471,38 @@ fn forward_select(
                 });
             }
         }
+        let spec_for = |ci: usize| {
+            let mut subset = base.clone();
+            subset.extend(&cand_idx[ci]);
+            let (beta, _) = gram.fit(&subset);
+            candidates::spec_of(&data.cand[ci].0, &beta[base.len()..], units)
+        };
+        // Size of the effect's torque [N·m]: RMS over the samples of its fitted term.
+        let size_of = |ci: usize| {
+            let mut subset = base.clone();
+            subset.extend(&cand_idx[ci]);
+            let (beta, _) = gram.fit(&subset);
+            let cols = &data.cand[ci].0.columns;
+            let n = cols.first().map_or(0, |c| c.len());
+            let mut ss = 0.0;
+            for k in 0..n {
+                let v: f64 = cols
+                    .iter()
+                    .zip(&beta[base.len()..])
+                    .map(|(c, b)| b * c[k])
+                    .sum();
+                ss += v * v;
+            }
+            units.mech_scale * (ss / n.max(1) as f64).sqrt()
+        };
         let Some(&(ci, rss1, t)) = best_by_kind
             .iter()
-            .filter(|(_, _, t)| {
+            .filter(|(ci, _, t)| {
                 t.p_value < alpha_per_test
                     && t.explained >= opts.min_explained
                     && t.delta_bic < 0.0
+                    && plausible(&spec_for(*ci))
+                    && (data.eq != Equation::Mechanical || size_of(*ci) >= data.min_torque)
             })
             .max_by(|a, b| b.1.total_cmp(&a.1))
         else {
@@ -519,7 +540,59 @@ fn forward_select(
             break;
         }
     }
-    (findings, first_round, base_resid, resid_cur, n_eff_base, beta0)
+    (
+        findings,
+        first_round,
+        base_resid,
+        resid_cur,
+        n_eff_base,
+        beta0,
+    )
+}
+
+/// The rows of `v` where `keep` is true.
+fn select_rows(v: &[f64], keep: &[bool]) -> Vec<f64> {
+    v.iter()
+        .zip(keep)
+        .filter(|(_, k)| **k)
+        .map(|(x, _)| *x)
+        .collect()
+}
+
+/// Smallest torque worth reporting, as a fraction of the model's Coulomb friction (or of the
+/// RMS drive torque when the model has none): 10 %. The weak-form torque balance carries
+/// systematic errors of a few percent of the friction (Hall quantisation at reversals, the
+/// sampled current standing for its interval); an effect below this would not change a fit.
+pub const MIN_TORQUE_FRACTION: f64 = 0.10;
+
+fn min_torque(st: &Structure, s: &Signals) -> f64 {
+    let fc = st.effects.iter().find_map(|e| match e {
+        Effect::Coulomb { fc } if *fc > 0.0 => Some(*fc),
+        _ => None,
+    });
+    MIN_TORQUE_FRACTION * fc.unwrap_or_else(|| stats::rms(&s.drive))
+}
+
+/// Largest load-dependent friction coefficient taken as physical: 0.5, a drive that loses
+/// half of its torque in friction (worm gears reach it; spur gears and ball screws lose
+/// 2–10 %). A larger fitted value means the column is standing in for something else.
+pub const MAX_LOAD_FRICTION: f64 = 0.5;
+
+/// Physical plausibility of a finding's parameters: dissipative terms must dissipate
+/// (Coulomb, viscous, Stribeck, dead time, heating ≥ 0) and load-dependent friction must stay
+/// below [`MAX_LOAD_FRICTION`]. An implausible best fit is not reported.
+pub fn plausible(spec: &EffectSpec) -> bool {
+    let g = |k: &str| spec.get(k);
+    match spec.kind {
+        EffectKind::Coulomb => g("fc") > 0.0,
+        EffectKind::Viscous => g("b") > 0.0,
+        EffectKind::Stribeck => g("fs") > 0.0,
+        EffectKind::Deadtime => g("vd") > 0.0,
+        EffectKind::Thermal => g("k") > 0.0,
+        EffectKind::LoadFriction => (0.0..=MAX_LOAD_FRICTION).contains(&g("mu")),
+        EffectKind::Presliding => true,
+        _ => true,
+    }
 }
 
 /// A current-sensor offset `i0` also shows in the torque equation as a constant `K_t·i0`;

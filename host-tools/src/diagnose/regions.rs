@@ -39,6 +39,9 @@ pub struct Breakdown {
     pub sentences: Vec<String>,
 }
 
+/// A velocity band: its name and which samples belong to it.
+type Band<'a> = (&'static str, Box<dyn Fn(usize) -> bool + 'a>);
+
 /// Inputs of the breakdown: one value per sample.
 pub struct RegionInputs<'a> {
     pub t: &'a [f64],
@@ -70,23 +73,30 @@ pub fn breakdown(x: &RegionInputs) -> Breakdown {
     let e = &x.error[..n];
     let overall = rms(e);
     let mut regions = Vec::new();
-    let pick = |f: &dyn Fn(usize) -> bool| -> Vec<f64> { (0..n).filter(|&k| f(k)).map(|k| e[k]).collect() };
+    let pick = |f: &dyn Fn(usize) -> bool| -> Vec<f64> {
+        (0..n).filter(|&k| f(k)).map(|k| e[k]).collect()
+    };
 
     // Velocity bands and reversals.
     let mut near_rev = vec![false; n];
     for k in 1..n {
         if x.omega[k].signum() != x.omega[k - 1].signum() && x.omega[k] != 0.0 {
-            for j in k.saturating_sub(REVERSAL_HALF)..(k + REVERSAL_HALF).min(n) {
-                near_rev[j] = true;
+            for v in
+                near_rev[k.saturating_sub(REVERSAL_HALF)..(k + REVERSAL_HALF).min(n)].iter_mut()
+            {
+                *v = true;
             }
         }
     }
     let high = {
         let mut v: Vec<f64> = x.omega[..n].iter().map(|w| w.abs()).collect();
         v.sort_by(f64::total_cmp);
-        v.get(n * 3 / 4).copied().unwrap_or(0.0).max(LOW_SPEED * 2.0)
+        v.get(n * 3 / 4)
+            .copied()
+            .unwrap_or(0.0)
+            .max(LOW_SPEED * 2.0)
     };
-    let bands: [(&str, Box<dyn Fn(usize) -> bool>); 5] = [
+    let bands: [Band; 5] = [
         (
             "standstill",
             Box::new(|k| x.omega[k].abs() < STANDSTILL && !near_rev[k]),
@@ -134,7 +144,12 @@ pub fn breakdown(x: &RegionInputs) -> Breakdown {
             let d = x.theta[k].rem_euclid(std::f64::consts::TAU).to_degrees();
             d >= lo && d < hi
         };
-        regions.extend(region("angle", format!("{lo:.0}–{hi:.0}°"), &pick(&f), overall));
+        regions.extend(region(
+            "angle",
+            format!("{lo:.0}–{hi:.0}°"),
+            &pick(&f),
+            overall,
+        ));
     }
     // Current quartiles.
     if let Some(i) = x.current {
@@ -254,10 +269,26 @@ mod tests {
             error: &error,
             what: "velocity error",
         });
-        assert!(b.sentences.iter().any(|s| s.contains("larger")), "{:?}", b.sentences);
-        let low = b.regions.iter().find(|r| r.label.starts_with("low speed")).unwrap();
-        let high = b.regions.iter().find(|r| r.label.starts_with("high speed")).unwrap();
+        assert!(
+            b.sentences.iter().any(|s| s.contains("larger")),
+            "{:?}",
+            b.sentences
+        );
+        let low = b
+            .regions
+            .iter()
+            .find(|r| r.label.starts_with("low speed"))
+            .unwrap();
+        let high = b
+            .regions
+            .iter()
+            .find(|r| r.label.starts_with("high speed"))
+            .unwrap();
         assert!(low.ratio > 2.0 && high.ratio < 0.5, "{low:?} {high:?}");
-        assert!(b.sentences.iter().any(|s| s.contains("repeats 7 times")), "{:?}", b.sentences);
+        assert!(
+            b.sentences.iter().any(|s| s.contains("repeats 7 times")),
+            "{:?}",
+            b.sentences
+        );
     }
 }

@@ -30,6 +30,7 @@
 //!
 //! With `--plant torque` there is no current: terms containing `I` are left out and there is
 //! no current equation.
+use super::stlsq::Normal;
 use crate::effect_spec::EffectSpec;
 use crate::log::Plant;
 use anyhow::Result;
@@ -83,6 +84,17 @@ impl Signals<'_> {
     /// True when there are no samples.
     pub fn is_empty(&self) -> bool {
         self.x.is_empty()
+    }
+
+    /// The samples `start..end`.
+    pub fn slice(&self, start: usize, end: usize) -> Signals<'_> {
+        Signals {
+            x: &self.x[start..end],
+            xdot: &self.xdot[start..end],
+            z: &self.z[start..end],
+            i: self.i.map(|i| &i[start..end]),
+            u: &self.u[start..end],
+        }
     }
 
     /// The term inputs at sample `k`.
@@ -229,12 +241,45 @@ impl Library {
 
     /// The library matrix `Θ` (`N × len()`, column-major).
     pub fn matrix(&self, s: &Signals) -> Mat<f64> {
-        let n = s.len();
-        let mut m = Mat::<f64>::zeros(n, self.len());
-        for (j, c) in self.candidates.iter().enumerate() {
-            self.column(c.term, s, m.col_as_slice_mut(j));
-        }
+        let mut m = Mat::<f64>::zeros(s.len(), self.len());
+        self.matrix_into(s, &mut m);
         m
+    }
+
+    /// Evaluate the library into the first `s.len()` rows of `out` (a reusable buffer).
+    pub fn matrix_into(&self, s: &Signals, out: &mut Mat<f64>) {
+        let n = s.len();
+        for (j, c) in self.candidates.iter().enumerate() {
+            self.column(c.term, s, &mut out.col_as_slice_mut(j)[..n]);
+        }
+    }
+
+    /// The normal equations of the library against pointwise `targets`, accumulated over
+    /// blocks of rows: `Θ` (`N × p`) is never held in memory, so 10^6 samples cost one pass
+    /// through the cache instead of a 136 MB matrix.
+    pub fn normal(&self, s: &Signals, targets: &[&[f64]]) -> Normal {
+        /// Rows per block: 4096 × 17 f64 = 0.5 MB, about an L2 cache.
+        const BLOCK: usize = 4096;
+        let (n, p, t) = (s.len(), self.len(), targets.len());
+        let mut buf = Mat::<f64>::zeros(BLOCK.min(n.max(1)), p);
+        let mut gtt = Mat::<f64>::zeros(p, p);
+        let mut gty = Mat::<f64>::zeros(p, t);
+        let mut yy = vec![0.0; t];
+        let mut start = 0;
+        while start < n {
+            let end = (start + BLOCK).min(n);
+            let len = end - start;
+            self.matrix_into(&s.slice(start, end), &mut buf);
+            let blk = buf.as_ref().subrows(0, len);
+            let y = Mat::<f64>::from_fn(len, t, |r, k| targets[k][start + r]);
+            gtt += blk.transpose() * blk;
+            gty += blk.transpose() * &y;
+            for (k, acc) in yy.iter_mut().enumerate() {
+                *acc += targets[k][start..end].iter().map(|v| v * v).sum::<f64>();
+            }
+            start = end;
+        }
+        Normal::from_products(p, t, |i, j| gtt[(i, j)], |i, k| gty[(i, k)], yy)
     }
 }
 
@@ -290,6 +335,44 @@ mod tests {
                 );
             }
         }
+    }
+
+    #[test]
+    fn blockwise_normal_equations_equal_the_full_matrix() {
+        let n = 10_000; // more than two blocks
+        let f = |c: f64| {
+            (0..n)
+                .map(|k| (k as f64 * c).sin() * 2.0)
+                .collect::<Vec<f64>>()
+        };
+        let (x, v, z, i, u) = (f(0.011), f(0.007), f(0.0013), f(0.005), f(0.0031));
+        let s = Signals {
+            x: &x,
+            xdot: &v,
+            z: &z,
+            i: Some(&i),
+            u: &u,
+        };
+        let lib = Library::paper(Plant::Voltage, 5.0, 1.0);
+        let y: Vec<f64> = (0..n)
+            .map(|k| 3.0 * v[k] - 0.5 * u[k] + z[k] * u[k])
+            .collect();
+        let blockwise = lib.normal(&s, &[&y]);
+        let th = lib.matrix(&s);
+        let full = Normal::new(th.as_ref(), Mat::from_fn(n, 1, |r, _| y[r]).as_ref());
+        let sup = vec![true; lib.len()];
+        let (a, b) = (blockwise.solve(0, &sup), full.solve(0, &sup));
+        for j in 0..lib.len() {
+            assert!(
+                (a[j] - b[j]).abs() < 1e-9 * (1.0 + b[j].abs()),
+                "{j}: {} {}",
+                a[j],
+                b[j]
+            );
+        }
+        assert!(
+            (a[1] - 3.0).abs() < 1e-9 && (a[13] + 0.5).abs() < 1e-9 && (a[14] - 1.0).abs() < 1e-9
+        );
     }
 
     #[test]

@@ -54,12 +54,22 @@ pub fn all_steady_points(m: &Model, logs: &[MotorLog]) -> Vec<SteadyPoint> {
 pub fn steady_points(m: &Model, log: &MotorLog, quasi: bool) -> Vec<SteadyPoint> {
     let res = super::sensor_chain::hall_resolution(log).max(m.sensor.hall_resolution_rad);
     let offset = control::effects::total_sensor_offset(&m.effects);
+    // Motor torque minus the load torque of the model's other effects (offset, cogging...,
+    // at their current estimates): what is left is the friction.
+    let ws = super::weak_form::smooth_velocity(log, 5);
     let torque = |k: usize| -> Option<f64> {
-        match (m.plant, &log.i) {
-            (Plant::Voltage, Some(i)) => Some(m.motor.kt * (i[k] - offset)),
-            (Plant::Voltage, None) => None,
-            (Plant::Torque, _) => Some(m.motor.kt * log.u[k]),
-        }
+        let cur = match (m.plant, &log.i) {
+            (Plant::Voltage, Some(i)) => i[k] - offset,
+            (Plant::Voltage, None) => return None,
+            (Plant::Torque, _) => log.u[k],
+        };
+        let x = control::effects::EffectInputs {
+            theta: log.theta[k],
+            omega: ws[k],
+            current: cur,
+            kt: m.motor.kt,
+        };
+        Some(m.motor.kt * cur - control::effects::total_torque(&m.effects, &x))
     };
     let mut pts = Vec::new();
     let n = log.len();

@@ -117,11 +117,10 @@ pub fn fit(req: &FitRequest) -> Result<FitReport> {
     for log in req.logs {
         check_log(log, req.plant)?;
     }
-    let mut model = match req.kind {
-        ModelKind::Linear => linear::fit(req)?,
-        ModelKind::Lugre => lugre_fit::fit(req)?,
-        ModelKind::Sindyc => sindyc_fit(req)?,
-    };
+    let mut model = fit_kind(req)?;
+    if !req.adds.is_empty() && !req.validate.is_empty() && req.kind != ModelKind::Sindyc {
+        model = guard_added_effects(req, model)?;
+    }
     model.data.files = req
         .logs
         .iter()
@@ -138,6 +137,83 @@ pub fn fit(req: &FitRequest) -> Result<FitReport> {
         model,
         summary_text,
     })
+}
+
+fn fit_kind(req: &FitRequest) -> Result<Model> {
+    match req.kind {
+        ModelKind::Linear => linear::fit(req),
+        ModelKind::Lugre => lugre_fit::fit(req),
+        ModelKind::Sindyc => sindyc_fit(req),
+    }
+}
+
+/// Validation score used to choose between candidate models: the mean over the validation
+/// logs of the velocity fit through the sensor chain and (when measured) the current fit;
+/// −∞ when a model cannot be simulated on one of them.
+fn validation_score(model: &Model, validate: &[MotorLog]) -> f64 {
+    let mut total = 0.0;
+    for log in validate {
+        match score(model, log) {
+            Ok(s) => {
+                total += match s.fit_sensor.i {
+                    Some(i) => 0.5 * (s.fit_sensor.xdot + i),
+                    None => s.fit_sensor.xdot,
+                }
+            }
+            Err(_) => return f64::NEG_INFINITY,
+        }
+    }
+    total / validate.len().max(1) as f64
+}
+
+/// `fit --add` must never make the model worse than the base structure: a wrongly estimated
+/// position-dependent or current-dependent torque makes a free run stick or drift on new
+/// data. Candidates: the fit with the added effects, the same with the effects' magnitudes
+/// at zero, and the base structure fitted afresh (keeping the added effects in the structure
+/// at zero magnitude, so the model still names them). The validation logs decide.
+fn guard_added_effects(req: &FitRequest, with: Model) -> Result<Model> {
+    let score_with = validation_score(&with, req.validate);
+    let zeroed = sim_error::scale_effect_magnitudes(&with, 0.0);
+    let mut best = (score_with, with.clone(), false);
+    let s = validation_score(&zeroed, req.validate);
+    if s > best.0 {
+        best = (s, zeroed, true);
+    }
+    let base_req = FitRequest { adds: &[], ..*req };
+    if let Ok(mut base) = fit_kind(&base_req) {
+        base.effects = sim_error::scale_effect_magnitudes(&with, 0.0).effects;
+        let s = validation_score(&base, req.validate);
+        if s > best.0 {
+            let mut params = base.parameters.clone();
+            params.extend(
+                with.parameters
+                    .iter()
+                    .filter(|p| p.name.contains('.'))
+                    .cloned()
+                    .map(|mut p| {
+                        p.value = 0.0;
+                        p.std_err = None;
+                        p
+                    }),
+            );
+            base.parameters = params;
+            best = (s, base, true);
+        }
+    }
+    let (_, mut model, rejected) = best;
+    if rejected {
+        model.data.method = format!(
+            "{}; the added effects were set to zero: with their estimated magnitudes the \
+             validation fit was worse ({score_with:.1} %)",
+            model.data.method
+        );
+        for p in &mut model.parameters {
+            if p.name.contains('.') && p.name != "cogging.harmonic" {
+                p.note = "set to zero: the validation data did not support it".into();
+            }
+        }
+    }
+    Ok(model)
 }
 
 /// A readable summary: parameters, then fits on the fitting and validation logs.

@@ -175,10 +175,28 @@ pub fn correlation(a: &[f64], b: &[f64]) -> f64 {
 /// (`rows × p`), targets (`rows × 3`: `∫φ·dẋ/dt`, `∫φ·dz/dt`, `∫φ·u`) and the column
 /// `∫φ·dI/dt` (`rows × 1`, zero without a current) of the current equation's inverse form.
 pub fn weak_rows(lib: &Library, t: &[f64], s: &Signals) -> (Mat<f64>, Mat<f64>, Mat<f64>) {
-    let theta = lib.matrix(s);
     let wins = weak_form::windows(t, weak_form::WINDOW, weak_form::HOP);
     let p = lib.len();
-    let a = Mat::<f64>::from_fn(wins.len(), p, |r, j| wins[r].int(theta.col_as_slice(j)));
+    // The library is evaluated window by window into a small reused buffer (never the
+    // whole N × p matrix: at 10^6 samples that allocation alone costs more than the fit).
+    let mut a = Mat::<f64>::zeros(wins.len(), p);
+    let mut buf = Mat::<f64>::zeros(weak_form::WINDOW, p);
+    for (r, w) in wins.iter().enumerate() {
+        if buf.nrows() < w.end - w.start {
+            buf = Mat::<f64>::zeros(w.end - w.start, p);
+        }
+        lib.matrix_into(&s.slice(w.start, w.end), &mut buf);
+        for j in 0..p {
+            let col = &buf.col_as_slice(j)[..w.end - w.start];
+            a[(r, j)] = w
+                .phi
+                .iter()
+                .zip(&w.w)
+                .zip(col)
+                .map(|((f, q), v)| f * q * v)
+                .sum();
+        }
+    }
     let y = Mat::<f64>::from_fn(wins.len(), 3, |r, e| match e {
         ACCEL => wins[r].int_dd(s.x),
         ZDOT => -wins[r].int_d(s.z),

@@ -23,7 +23,10 @@ pub struct LowPass {
 impl LowPass {
     /// Design an order-`order` (even, ≥ 2) low-pass with cut-off `fc` Hz at sample rate `fs` Hz.
     pub fn new(order: usize, fc: f64, fs: f64) -> LowPass {
-        assert!(order >= 2 && order % 2 == 0, "Butterworth order must be even");
+        assert!(
+            order >= 2 && order.is_multiple_of(2),
+            "Butterworth order must be even"
+        );
         assert!(fc > 0.0 && fc < fs / 2.0, "cut-off must lie below Nyquist");
         let k = (std::f64::consts::PI * fc / fs).tan();
         let sections = (0..order / 2)

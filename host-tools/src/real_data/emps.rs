@@ -144,13 +144,29 @@ pub fn observation(log: &MotorLog, gain: f64, asym: bool) -> (Vec<Vec<f64>>, Vec
     let dt = log.sample_period();
     let (_, dq, ddq) = filtered_states(&log.theta, dt);
     let force: Vec<f64> = log.u.iter().map(|u| gain * u).collect();
-    let sgn = |v: f64| if v > 0.0 { 1.0 } else if v < 0.0 { -1.0 } else { 0.0 };
+    let sgn = |v: f64| {
+        if v > 0.0 {
+            1.0
+        } else if v < 0.0 {
+            -1.0
+        } else {
+            0.0
+        }
+    };
     let mut cols: Vec<Vec<f64>> = vec![ddq.clone()];
     if asym {
         cols.push(dq.iter().map(|&v| v.max(0.0)).collect());
-        cols.push(dq.iter().map(|&v| if v > 0.0 { 1.0 } else { 0.0 }).collect());
+        cols.push(
+            dq.iter()
+                .map(|&v| if v > 0.0 { 1.0 } else { 0.0 })
+                .collect(),
+        );
         cols.push(dq.iter().map(|&v| v.min(0.0)).collect());
-        cols.push(dq.iter().map(|&v| if v < 0.0 { -1.0 } else { 0.0 }).collect());
+        cols.push(
+            dq.iter()
+                .map(|&v| if v < 0.0 { -1.0 } else { 0.0 })
+                .collect(),
+        );
     } else {
         cols.push(dq.clone());
         cols.push(dq.iter().map(|&v| sgn(v)).collect());
@@ -234,7 +250,14 @@ pub fn idim_relative_error(axis: &RigidAxis, log: &MotorLog, gain: f64) -> f64 {
 
 /// Open-loop free run: position driven by the force `gain·u`, starting from (q0, v0) at the
 /// first sample. Sample k+1 is the state after holding `u[k]` for `dt`.
-pub fn simulate_open_loop(axis: &RigidAxis, gain: f64, u: &[f64], dt: f64, q0: f64, v0: f64) -> Vec<f64> {
+pub fn simulate_open_loop(
+    axis: &RigidAxis,
+    gain: f64,
+    u: &[f64],
+    dt: f64,
+    q0: f64,
+    v0: f64,
+) -> Vec<f64> {
     let mut q = Vec::with_capacity(u.len());
     let (mut x, mut v) = (q0, v0);
     for &uk in u {
@@ -277,7 +300,12 @@ pub fn benchmark_rmse_mm(axis: &RigidAxis, gain: f64, log: &MotorLog) -> (f64, V
 /// The authors' closed-loop reference simulation: the axis under the loop
 /// `vir = kp·kv·(qg − q) − kv·q̇`, saturated at ±10 V, with q̇ the difference of the
 /// half-sum-filtered position (EMPS_Description.pdf). Returns (simulated q, simulated vir).
-pub fn simulate_closed_loop(axis: &RigidAxis, qg: &[f64], dt: f64, q0: f64) -> (Vec<f64>, Vec<f64>) {
+pub fn simulate_closed_loop(
+    axis: &RigidAxis,
+    qg: &[f64],
+    dt: f64,
+    q0: f64,
+) -> (Vec<f64>, Vec<f64>) {
     let (mut x, mut v) = (q0, 0.0);
     let (mut x_prev, mut qf_prev) = (q0, q0);
     let mut qs = Vec::with_capacity(qg.len());
@@ -321,6 +349,9 @@ pub struct TermTest {
     pub test: crate::diagnose::stats::FTest,
 }
 
+/// (name, smaller model, its columns, the larger model's columns).
+type Nested = (&'static str, &'static str, Vec<Vec<f64>>, Vec<Vec<f64>>);
+
 /// Is each friction term of the IDIM-LS model needed? Nested F-tests on the decimated
 /// observation matrix: Coulomb against (M, Fv); offset against (M, Fv, Fc); asymmetry
 /// (one Fv/Fc per direction) against the symmetric model with offset.
@@ -331,11 +362,17 @@ pub fn term_tests(log: &MotorLog, gain: f64) -> Result<Vec<TermTest>> {
     let resid = |cols: &[Vec<f64>]| -> Result<(f64, Vec<f64>)> {
         let f = ols(cols, &y)?;
         let r: Vec<f64> = (0..y.len())
-            .map(|k| y[k] - cols.iter().zip(&f.theta).map(|(c, t)| c[k] * t).sum::<f64>())
+            .map(|k| {
+                y[k] - cols
+                    .iter()
+                    .zip(&f.theta)
+                    .map(|(c, t)| c[k] * t)
+                    .sum::<f64>()
+            })
             .collect();
         Ok((f.rss, r))
     };
-    let steps: [(&'static str, &'static str, Vec<Vec<f64>>, Vec<Vec<f64>>); 3] = [
+    let steps: [Nested; 3] = [
         ("coulomb", "M, Fv", sym[..2].to_vec(), sym[..3].to_vec()),
         ("offset", "M, Fv, Fc", sym[..3].to_vec(), sym.clone()),
         ("asymmetry", "M, Fv, Fc, OF", sym.clone(), asym.clone()),

@@ -148,8 +148,7 @@ fn fit_round(train: &MotorLog, test: &MotorLog, adds: &[EffectSpec]) -> Result<R
         plant: Plant::Torque,
     })?;
     let model = rep.model;
-    let diagnosis =
-        diagnose::diagnose(train, &structure_of(&model), &diagnose::Options::default());
+    let diagnosis = diagnose::diagnose(train, &structure_of(&model), &diagnose::Options::default());
     let (rmse_test_mm, sim_test) = benchmark_rmse_mm(&model, test)?;
     Ok(Round {
         adds: adds.iter().map(|a| a.to_string()).collect(),
@@ -177,7 +176,11 @@ pub fn authors_structures(train: &MotorLog, test: &MotorLog) -> Result<Vec<Round
 
 /// Fit linear → diagnose → add what was found → refit, until nothing is found or
 /// [`MAX_ROUNDS`] refits. `progress` is called with a line per step.
-pub fn run(train: &MotorLog, test: &MotorLog, progress: &mut dyn FnMut(&str)) -> Result<Vec<Round>> {
+pub fn run(
+    train: &MotorLog,
+    test: &MotorLog,
+    progress: &mut dyn FnMut(&str),
+) -> Result<Vec<Round>> {
     let (train, test) = (&prepare(train, DECIMATION), &prepare(test, 1));
     let mut adds: Vec<EffectSpec> = Vec::new();
     let mut rounds = Vec::new();

@@ -56,8 +56,10 @@ fn range(series: &[Series], f: impl Fn(&(f64, f64)) -> f64) -> (f64, f64) {
         .iter()
         .flat_map(|s| s.points.iter().map(&f))
         .filter(|v| v.is_finite())
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| (a.min(v), b.max(v)));
-    if !(lo < hi) {
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+            (a.min(v), b.max(v))
+        });
+    if lo.partial_cmp(&hi) != Some(std::cmp::Ordering::Less) {
         return (lo - 1.0, lo + 1.0);
     }
     let pad = 0.05 * (hi - lo);
@@ -65,7 +67,13 @@ fn range(series: &[Series], f: impl Fn(&(f64, f64)) -> f64) -> (f64, f64) {
 }
 
 /// Draw `series` into an SVG file at `path` (atomic write).
-pub fn figure(path: &Path, title: &str, xlabel: &str, ylabel: &str, series: &[Series]) -> Result<()> {
+pub fn figure(
+    path: &Path,
+    title: &str,
+    xlabel: &str,
+    ylabel: &str,
+    series: &[Series],
+) -> Result<()> {
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, (800, 480)).into_drawing_area();

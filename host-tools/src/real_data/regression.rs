@@ -59,7 +59,10 @@ pub fn ols(cols: &[Vec<f64>], y: &[f64]) -> Result<Ols> {
     if cols.iter().any(|c| c.len() != n) {
         bail!("least squares: columns of unequal length");
     }
-    if y.iter().chain(cols.iter().flatten()).any(|v| !v.is_finite()) {
+    if y.iter()
+        .chain(cols.iter().flatten())
+        .any(|v| !v.is_finite())
+    {
         bail!("least squares: the data contain a value that is not finite");
     }
     let x = Mat::<f64>::from_fn(n, p, |i, j| cols[j][i]);

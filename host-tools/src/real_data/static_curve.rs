@@ -75,7 +75,10 @@ impl Curve {
 
     /// A coefficient by term (Fs for Stribeck).
     pub fn get(&self, t: Term) -> Option<f64> {
-        self.terms.iter().position(|&x| x == t).map(|k| self.coef[k])
+        self.terms
+            .iter()
+            .position(|&x| x == t)
+            .map(|k| self.coef[k])
     }
 
     /// The curve at velocity `v`.
@@ -127,7 +130,11 @@ pub fn fit(terms: &[Term], v: &[f64], tau: &[f64]) -> Result<Curve> {
     terms.sort();
     terms.dedup();
     if v.len() != tau.len() || v.len() <= terms.iter().map(|t| t.dof()).sum::<usize>() {
-        bail!("static curve: {} points are too few for {} terms", v.len(), terms.len());
+        bail!(
+            "static curve: {} points are too few for {} terms",
+            v.len(),
+            terms.len()
+        );
     }
     let (fit, vs) = if terms.contains(&Term::Stribeck) {
         let speeds: Vec<f64> = v.iter().map(|x| x.abs()).filter(|x| *x > 0.0).collect();
@@ -276,7 +283,9 @@ mod tests {
 
     fn speeds() -> Vec<f64> {
         let mut v = Vec::new();
-        for s in [0.1, 0.2, 0.4, 0.6, 0.8, 1.0, 1.5, 2.0, 3.0, 5.0, 8.0, 12.0, 16.0, 20.0] {
+        for s in [
+            0.1, 0.2, 0.4, 0.6, 0.8, 1.0, 1.5, 2.0, 3.0, 5.0, 8.0, 12.0, 16.0, 20.0,
+        ] {
             v.push(s);
             v.push(-s);
         }
@@ -299,7 +308,9 @@ mod tests {
             .iter()
             .enumerate()
             .map(|(k, &x)| {
-                1.0 * sgn(x) + 0.05 * x + 0.4 * (-(x / 0.7f64).powi(2)).exp() * sgn(x)
+                1.0 * sgn(x)
+                    + 0.05 * x
+                    + 0.4 * (-(x / 0.7f64).powi(2)).exp() * sgn(x)
                     + 0.003 * e[k]
             })
             .collect();
@@ -307,7 +318,11 @@ mod tests {
         assert!(s.has(Term::Stribeck));
         let vs = s.chosen.vs.unwrap();
         assert!((vs - 0.7).abs() < 0.05, "vs = {vs}");
-        assert!(!s.has(Term::Asymmetry), "{:#?}", s.tests.iter().map(|c| (c.term, c.p)).collect::<Vec<_>>());
+        assert!(
+            !s.has(Term::Asymmetry),
+            "{:#?}",
+            s.tests.iter().map(|c| (c.term, c.p)).collect::<Vec<_>>()
+        );
     }
 
     #[test]

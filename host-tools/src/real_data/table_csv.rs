@@ -33,18 +33,24 @@ impl Table {
             })?;
             let line = rec.position().map(|q| q.line()).unwrap_or(0);
             if rec.len() != names.len() {
-                bail!("{p}:{line}: {} fields, but the header has {}", rec.len(), names.len());
+                bail!(
+                    "{p}:{line}: {} fields, but the header has {}",
+                    rec.len(),
+                    names.len()
+                );
             }
             for (c, f) in rec.iter().enumerate() {
                 let v: f64 = f
                     .parse()
                     .ok()
                     .filter(|v: &f64| v.is_finite())
-                    .ok_or_else(|| anyhow!("{p}:{line}: column '{}': '{f}' is not a number", names[c]))?;
+                    .ok_or_else(|| {
+                        anyhow!("{p}:{line}: column '{}': '{f}' is not a number", names[c])
+                    })?;
                 cols[c].push(v);
             }
         }
-        if cols.first().map_or(true, |c| c.is_empty()) {
+        if cols.first().is_none_or(|c| c.is_empty()) {
             bail!("{p}: no data rows");
         }
         Ok(Table { names, cols })

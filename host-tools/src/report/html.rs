@@ -59,7 +59,11 @@ impl Page {
                 let _ = writeln!(self.body, "<figure>{s}</figure>");
             }
             Err(e) => {
-                let _ = writeln!(self.body, "<p class=\"note\">(chart not drawn: {})</p>", esc(&format!("{e:#}")));
+                let _ = writeln!(
+                    self.body,
+                    "<p class=\"note\">(chart not drawn: {})</p>",
+                    esc(&format!("{e:#}"))
+                );
             }
         }
         self
@@ -96,8 +100,9 @@ impl Page {
 
     /// Write the page as `DIR/index.html` (creating DIR; atomically). Returns its path.
     pub fn write(&self, dir: &Path) -> Result<PathBuf> {
-        std::fs::create_dir_all(dir)
-            .map_err(|e| anyhow::anyhow!("{}: cannot create the report directory: {e}", dir.display()))?;
+        std::fs::create_dir_all(dir).map_err(|e| {
+            anyhow::anyhow!("{}: cannot create the report directory: {e}", dir.display())
+        })?;
         let path = dir.join("index.html");
         crate::atomic::write_str(&path, &self.render())?;
         Ok(path)
@@ -124,6 +129,8 @@ mod tests {
         assert!(h.contains("<table>") && h.contains("<td>2</td>") && h.contains("<svg></svg>"));
         let dir = tempfile::tempdir().unwrap();
         let path = p.write(&dir.path().join("r")).unwrap();
-        assert!(std::fs::read_to_string(path).unwrap().starts_with("<!DOCTYPE html>"));
+        assert!(std::fs::read_to_string(path)
+            .unwrap()
+            .starts_with("<!DOCTYPE html>"));
     }
 }

@@ -101,7 +101,10 @@ fn prediction_charts(page: &mut Page, model: &Model, log: &MotorLog, pred: &Pred
         "Angle: measured vs model (free run)",
         "t [s]",
         "θ [rad]",
-        &[("measured", t, &log.theta[..n]), ("model", t, &pred.theta[..n])],
+        &[
+            ("measured", t, &log.theta[..n]),
+            ("model", t, &pred.theta[..n]),
+        ],
     ));
     let w = measured_velocity(model, log);
     page.chart(svg::line_chart(
@@ -149,7 +152,10 @@ pub fn write_compare_report(
     ));
     page.table(
         &["score", "x (angle) %", "xdot (velocity) %", "i (current) %"],
-        &[fits_row("fit", &scores.fit), fits_row("fit_sensor", &scores.fit_sensor)],
+        &[
+            fits_row("fit", &scores.fit),
+            fits_row("fit_sensor", &scores.fit_sensor),
+        ],
     );
     let effects: Vec<String> = model.effect_specs().iter().map(|s| s.to_string()).collect();
     page.paragraph(&format!(
@@ -185,7 +191,10 @@ fn equation_section(page: &mut Page, e: &EquationResidual) {
         100.0 * e.whiteness.xcf_outside
     ));
     page.chart(svg::line_chart(
-        &format!("{} residual: model as it is, and with the findings added", e.equation.label()),
+        &format!(
+            "{} residual: model as it is, and with the findings added",
+            e.equation.label()
+        ),
         "t [s]",
         e.unit,
         &[("model", &e.t, &e.base), ("with findings", &e.t, &e.after)],
@@ -226,7 +235,16 @@ fn findings_section(page: &mut Page, d: &Diagnosis) {
                 ]
             })
             .collect();
-        page.table(&["effect", "spec (for fit --add)", "score", "p-value", "physics"], &rows);
+        page.table(
+            &[
+                "effect",
+                "spec (for fit --add)",
+                "score",
+                "p-value",
+                "physics",
+            ],
+            &rows,
+        );
     }
     let rows: Vec<Vec<String>> = d
         .tested
@@ -250,7 +268,14 @@ fn findings_section(page: &mut Page, d: &Diagnosis) {
         100.0 * d.min_explained
     ));
     page.table(
-        &["candidate", "equation", "explains %", "p-value", "kept", "best spec"],
+        &[
+            "candidate",
+            "equation",
+            "explains %",
+            "p-value",
+            "kept",
+            "best spec",
+        ],
         &rows,
     );
 }
@@ -328,10 +353,7 @@ pub fn write_demo_report(
             r
         })
         .collect();
-    page.table(
-        &["model", "x %", "xdot %", "i %", "then added"],
-        &rows,
-    );
+    page.table(&["model", "x %", "xdot %", "i %", "then added"], &rows);
     let labels: Vec<String> = (0..iterations.len()).map(|k| format!("step {k}")).collect();
     let gap: Vec<f64> = iterations
         .iter()

@@ -24,7 +24,9 @@ pub fn colour(k: usize) -> RGBColor {
 fn bounds<'a>(it: impl Iterator<Item = &'a f64>) -> (f64, f64) {
     let (lo, hi) = it
         .filter(|v| v.is_finite())
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x)));
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
+            (a.min(x), b.max(x))
+        });
     if !lo.is_finite() {
         return (0.0, 1.0);
     }
@@ -101,7 +103,11 @@ pub fn bar_chart(title: &str, y_label: &str, labels: &[String], values: &[f64]) 
         let root = SVGBackend::with_string(&mut out, SIZE).into_drawing_area();
         root.fill(&WHITE).map_err(|e| anyhow!("chart: {e}"))?;
         let n = labels.len().max(1);
-        let top = values.iter().cloned().filter(|v| v.is_finite()).fold(0.0, f64::max);
+        let top = values
+            .iter()
+            .cloned()
+            .filter(|v| v.is_finite())
+            .fold(0.0, f64::max);
         let top = if top > 0.0 { top * 1.1 } else { 1.0 };
         let mut chart = ChartBuilder::on(&root)
             .caption(title, ("sans-serif", 18))
@@ -143,11 +149,7 @@ pub fn correlation_chart(title: &str, lags: &[f64], values: &[f64], band: f64) -
         let root = SVGBackend::with_string(&mut out, SIZE).into_drawing_area();
         root.fill(&WHITE).map_err(|e| anyhow!("chart: {e}"))?;
         let (x0, x1) = bounds(lags.iter());
-        let m = values
-            .iter()
-            .fold(band, |a, v| a.max(v.abs()))
-            .max(1e-6)
-            * 1.1;
+        let m = values.iter().fold(band, |a, v| a.max(v.abs())).max(1e-6) * 1.1;
         let mut chart = ChartBuilder::on(&root)
             .caption(title, ("sans-serif", 18))
             .margin(10)
@@ -187,7 +189,13 @@ mod tests {
     fn charts_are_svg_with_their_data() {
         let x: Vec<f64> = (0..100).map(|k| k as f64).collect();
         let y: Vec<f64> = x.iter().map(|v| v.sin()).collect();
-        let s = line_chart("Velocity", "t [s]", "ω", &[("measured", &x, &y), ("model", &x, &x)]).unwrap();
+        let s = line_chart(
+            "Velocity",
+            "t [s]",
+            "ω",
+            &[("measured", &x, &y), ("model", &x, &x)],
+        )
+        .unwrap();
         assert!(s.starts_with("<svg") && s.contains("Velocity") && s.contains("polyline"));
         let b = bar_chart("Error", "rms", &["a".into(), "b".into()], &[1.0, 2.0]).unwrap();
         assert!(b.contains("<rect"));

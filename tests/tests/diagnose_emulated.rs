@@ -1,0 +1,168 @@
+//! `diagnose` on emulated data: a hidden effect is ranked first, a correct model gets no
+//! finding, two hidden effects are both found, and physics outside our formulas (through the
+//! emulator's load closure) is still named by the nearest effect.
+//!
+//! The model structure is the emulator's own LuGre friction (the paper's values): what a
+//! perfect LuGre fit would have. Signals are 60 s of the paper's fitting signal `a`.
+use control::effects::{Effect, EffectKind};
+use motorid::diagnose::{diagnose, Diagnosis, Options, Structure};
+use motorid::effect_spec::EffectSpec;
+use motorid::emulator::{simulate_signal, EmulatorConfig, SignalKind};
+use motorid::log::Plant;
+
+fn lugre() -> Structure {
+    let p = control::lugre::LugreParams::<f64>::paper();
+    Structure::with_effects(
+        Plant::Voltage,
+        vec![
+            Effect::Coulomb { fc: p.alpha0 },
+            Effect::Stribeck {
+                fs: p.alpha1,
+                vs: p.v0,
+            },
+            Effect::Viscous { b: p.alpha2 },
+            Effect::Presliding {
+                sigma0: p.sigma0,
+                sigma1: p.sigma1,
+            },
+        ],
+    )
+}
+
+fn run(cfg: &EmulatorConfig) -> Diagnosis {
+    let log = simulate_signal(cfg, SignalKind::A, 60.0).unwrap().log;
+    diagnose(&log, &lugre(), &Options::default())
+}
+
+fn hidden(specs: &[&str], seed: u64) -> EmulatorConfig {
+    let mut cfg = EmulatorConfig::paper();
+    cfg.seed = seed;
+    cfg.effects = specs
+        .iter()
+        .map(|s| EffectSpec::parse(s).unwrap().to_effect())
+        .collect();
+    cfg
+}
+
+fn names(d: &Diagnosis) -> Vec<String> {
+    d.effects.iter().map(|f| f.spec.clone()).collect()
+}
+
+#[test]
+fn correct_model_gets_no_finding() {
+    for seed in [1, 2, 3] {
+        let d = run(&hidden(&[], seed));
+        assert!(
+            d.effects.is_empty(),
+            "seed {seed}: false alarm {:?}",
+            names(&d)
+        );
+    }
+}
+
+fn ranked_first(spec: &str, key: &str, truth: f64, tol: f64) {
+    let kind = EffectSpec::parse(spec).unwrap().kind;
+    let d = run(&hidden(&[spec], 1));
+    let top = d
+        .effects
+        .first()
+        .unwrap_or_else(|| panic!("{spec}: nothing found"));
+    assert_eq!(top.name, kind.name(), "{spec}: found {:?}", names(&d));
+    // The spec is accepted by `fit --add` and carries the estimated value.
+    let est = EffectSpec::parse(&top.spec).unwrap();
+    assert!(
+        (est.get(key) - truth).abs() <= tol,
+        "{spec}: estimated {} = {} (true {truth})",
+        key,
+        est.get(key)
+    );
+    assert!(top.score > 0.0 && top.score <= 1.0 && !top.explanation.is_empty());
+}
+
+#[test]
+fn offset_is_ranked_first() {
+    ranked_first("offset:t0=0.03", "t0", 0.03, 0.006);
+}
+
+#[test]
+fn cogging_is_ranked_first_with_its_harmonic() {
+    ranked_first("cogging:harmonic=7,amp=0.03", "harmonic", 7.0, 0.0);
+}
+
+#[test]
+fn position_load_is_ranked_first() {
+    ranked_first("position_load:amp=0.05", "amp", 0.05, 0.01);
+}
+
+#[test]
+fn asymmetry_is_ranked_first() {
+    ranked_first("asymmetry:dv=0.0008", "dv", 0.0008, 0.0002);
+}
+
+#[test]
+fn deadtime_is_ranked_first() {
+    ranked_first("deadtime:vd=0.3", "vd", 0.3, 0.05);
+}
+
+#[test]
+fn current_offset_is_ranked_first() {
+    ranked_first("current_offset:i0=0.2", "i0", 0.2, 0.05);
+}
+
+#[test]
+fn two_hidden_effects_are_both_found() {
+    let d = run(&hidden(&["offset:t0=0.03", "deadtime:vd=0.3"], 4));
+    let kinds: Vec<String> = d.effects.iter().map(|f| f.name.clone()).collect();
+    assert!(
+        kinds.contains(&"offset".to_string()) && kinds.contains(&"deadtime".to_string()),
+        "{kinds:?}"
+    );
+}
+
+/// Physics that is not our formula, through the emulator's closure hook.
+fn with_load(
+    f: impl Fn(motorid::emulator::LoadInputs) -> f64 + Send + Sync + 'static,
+) -> Diagnosis {
+    let cfg = EmulatorConfig::paper().with_extra_load(f);
+    run(&cfg)
+}
+
+#[test]
+fn non_sinusoidal_cogging_is_named_cogging() {
+    // A flat-topped profile (7 periods per turn) with a 14th harmonic: not a sine.
+    let d = with_load(|x| {
+        let s = (7.0 * x.theta).sin();
+        0.03 * s.signum() * s.abs().sqrt() + 0.01 * (14.0 * x.theta + 0.5).sin()
+    });
+    let top = d.effects.first().expect("nothing found");
+    assert_eq!(top.name, "cogging", "{:?}", names(&d));
+    assert_eq!(EffectSpec::parse(&top.spec).unwrap().get("harmonic"), 7.0);
+}
+
+#[test]
+fn tabulated_load_curve_is_named_position_load() {
+    // An arm's load torque tabulated every 45° and interpolated linearly: once per turn.
+    const TABLE: [f64; 9] = [0.0, 0.035, 0.05, 0.04, 0.0, -0.03, -0.05, -0.035, 0.0];
+    let d = with_load(|x| {
+        let a = x.theta.rem_euclid(std::f64::consts::TAU) / (std::f64::consts::TAU / 8.0);
+        let k = (a.floor() as usize).min(7);
+        let f = a - k as f64;
+        TABLE[k] * (1.0 - f) + TABLE[k + 1] * f
+    });
+    let top = d.effects.first().expect("nothing found");
+    assert_eq!(top.name, "position_load", "{:?}", names(&d));
+}
+
+#[test]
+fn direction_dependent_friction_is_named_asymmetry() {
+    // Extra friction only when turning forward, rising as the bearing warms up (with time).
+    let d = with_load(|x| {
+        if x.omega > 0.0 {
+            0.0015 * x.omega * (1.0 + x.t / 60.0).min(2.0)
+        } else {
+            0.0
+        }
+    });
+    let top = d.effects.first().expect("nothing found");
+    assert_eq!(top.name, EffectKind::Asymmetry.name(), "{:?}", names(&d));
+}
