@@ -182,14 +182,33 @@ impl<F: Float> LugreObserver<F> {
         }
     }
 
-    /// Advance by `dt` with velocity `v` held, and return the friction torque
+    /// Advance by `dt` with velocity `v` held, and return the model's friction torque
     /// `σ0·z_new + σ1·(mean dz/dt) + α2·v`. A non-finite `v` holds the state and returns
-    /// `σ0·z` (the velocity-dependent terms are unknown).
+    /// `σ0·z` (the velocity-dependent terms are unknown). For compensation use
+    /// [`Self::step_compensation`].
     pub fn step(&mut self, v: F, dt: F) -> F {
         let (z_new, zdot) = z_step(&self.params, self.z, v, dt);
         self.z = z_new;
         let v = if v.is_finite() { v } else { F::zero() };
         self.params.friction_at(v, z_new, zdot)
+    }
+
+    /// Advance by `dt` with velocity `v` held, and return the friction torque to compensate,
+    /// `σ0·z_new + α2·v`: the model without its damping term σ1·ż.
+    ///
+    /// Why σ1·ż is left out: over a 12 ms step the bristle state settles almost completely
+    /// (decay `exp(−σ0·|v|·dt/s(v))`), so the mean rate `(z_new − z)/dt` is a one-sample
+    /// pulse of area Δz whenever the velocity changes sign. With the paper's
+    /// σ1 = 22.2 N·m·s/rad that pulse is ≈ 1.3 N·m, 15× the Coulomb friction, and V_c would
+    /// kick the motor by ≈ 4 V at every reversal. The physical σ1·ż acts only during the
+    /// sub-millisecond bristle transient, which a 12 ms loop cannot follow; and the
+    /// end-of-step rate `v − σ0·|v|·z_new/s(v)` is ≈ 0 after such a settled step, so it would
+    /// add only noise. A non-finite `v` holds the state and returns `σ0·z`.
+    pub fn step_compensation(&mut self, v: F, dt: F) -> F {
+        let (z_new, _) = z_step(&self.params, self.z, v, dt);
+        self.z = z_new;
+        let v = if v.is_finite() { v } else { F::zero() };
+        self.params.friction_at(v, z_new, F::zero())
     }
 
     /// Friction torque for a given state, `σ0·z + σ1·ż + α2·v`.

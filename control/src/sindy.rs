@@ -137,34 +137,33 @@ impl Term {
         Term::ZU2,
     ];
 
-    /// Every term without a parameter (all but `SinTheta`/`CosTheta`).
-    pub const FIXED: [Term; 25] = [
-        Term::X,
-        Term::Xdot,
-        Term::Z,
-        Term::I,
-        Term::TanhXdot,
-        Term::TanhZ,
-        Term::AbsXdotXdot,
-        Term::AbsXdotXdot2,
-        Term::AbsZZ,
-        Term::AbsZZ2,
-        Term::ZXdot,
-        Term::Z2Xdot,
-        Term::ZXdot2,
-        Term::U,
-        Term::ZU,
-        Term::Z2U,
-        Term::ZU2,
-        Term::One,
-        Term::SgnXdot,
-        Term::AbsXdot,
-        Term::AbsSgnXdot,
-        Term::StribeckXdot,
-        Term::SgnI,
-        Term::AbsISgnXdot,
-        Term::ISquared,
-    ];
+    /// Every term without a parameter (all but `SinTheta`/`CosTheta`): the paper's library,
+    /// then the added terms.
+    pub const FIXED: [Term; 25] = {
+        let added = [
+            Term::One,
+            Term::SgnXdot,
+            Term::AbsXdot,
+            Term::AbsSgnXdot,
+            Term::StribeckXdot,
+            Term::SgnI,
+            Term::AbsISgnXdot,
+            Term::ISquared,
+        ];
+        let paper = Term::PAPER_LIBRARY;
+        let mut all = [Term::One; 25];
+        assert!(paper.len() + added.len() == all.len());
+        let mut k = 0;
+        while k < all.len() {
+            all[k] = if k < paper.len() {
+                paper[k]
+            } else {
+                added[k - paper.len()]
+            };
+            k += 1;
+        }
+        all
+    };
 
     /// Name of a term without parameter; `None` for `SinTheta`/`CosTheta`.
     pub fn fixed_name(self) -> Option<&'static str> {

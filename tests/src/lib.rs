@@ -48,3 +48,27 @@ pub fn shared_data(test: &str) -> Option<PathBuf> {
         None
     }
 }
+
+/// The paper's motor with the paper's LuGre friction as a MODEL.toml text (voltage plant,
+/// 12 ms sample period; numbers from the paper's parameter tables), for tests to append
+/// `[[effects]]` or `[sensor]` sections to.
+pub const PAPER_LUGRE_MODEL: &str = r#"
+kind = "lugre"
+plant = "voltage"
+sample_period = 0.012
+
+[motor]
+r = 0.2162
+l = 0.0003
+kt = 0.07126
+kb = 0.07126
+j = 0.0003
+
+[lugre]
+alpha0 = 0.08
+alpha1 = 0.0175
+alpha2 = 0.0016
+v0 = 3.676
+sigma0 = 317.225
+sigma1 = 22.2464
+"#;

@@ -4,7 +4,7 @@
 use std::io::{BufRead, BufReader};
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
-use tests::{motorid, motorid_bin};
+use tests::{motorid, motorid_bin, PAPER_LUGRE_MODEL};
 
 /// The emulated board, killed when dropped.
 struct Board {
@@ -39,27 +39,6 @@ impl Drop for Board {
     }
 }
 
-const MODEL: &str = r#"
-kind = "lugre"
-plant = "voltage"
-sample_period = 0.012
-
-[motor]
-r = 0.2162
-l = 0.0003
-kt = 0.07126
-kb = 0.07126
-j = 0.0003
-
-[lugre]
-alpha0 = 0.08
-alpha1 = 0.0175
-alpha2 = 0.0016
-v0 = 3.676
-sigma0 = 317.225
-sigma1 = 22.2464
-"#;
-
 fn ok(out: &std::process::Output) -> String {
     assert!(
         out.status.success(),
@@ -89,7 +68,7 @@ fn read_log(path: &Path) -> (Vec<String>, Vec<Vec<f64>>, Vec<String>) {
 fn upload_record_and_speed_control_over_a_pty() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    std::fs::write(d.join("m.toml"), MODEL).unwrap();
+    std::fs::write(d.join("m.toml"), PAPER_LUGRE_MODEL).unwrap();
     ok(&motorid(d, &["export", "m.toml", "-o", "c.bin"]));
     let board = Board::start(d, "50");
 

@@ -1,28 +1,14 @@
 //! `motorid export` → `motorid inspect`: the blob round-trips the model, and damaged blobs
 //! are refused with one `error:` line naming the file.
 use std::path::Path;
-use tests::motorid;
+use tests::{motorid, PAPER_LUGRE_MODEL};
 
-const MODEL: &str = r#"
-kind = "lugre"
-plant = "voltage"
-sample_period = 0.012
+/// The paper's LuGre motor with two effects.
+fn model() -> String {
+    format!("{PAPER_LUGRE_MODEL}{EFFECTS}")
+}
 
-[motor]
-r = 0.2162
-l = 0.0003
-kt = 0.07126
-kb = 0.07126
-j = 0.0003
-
-[lugre]
-alpha0 = 0.08
-alpha1 = 0.0175
-alpha2 = 0.0016
-v0 = 3.676
-sigma0 = 317.225
-sigma1 = 22.2464
-
+const EFFECTS: &str = r#"
 [[effects]]
 name = "cogging"
 harmonic = 6
@@ -35,7 +21,7 @@ t0 = -0.02
 "#;
 
 fn export(dir: &Path) -> Vec<u8> {
-    std::fs::write(dir.join("m.toml"), MODEL).unwrap();
+    std::fs::write(dir.join("m.toml"), model()).unwrap();
     let out = motorid(dir, &["export", "m.toml", "-o", "c.bin"]);
     assert!(
         out.status.success(),
@@ -128,7 +114,7 @@ fn damaged_blobs_are_refused() {
 #[test]
 fn bad_model_leaves_no_blob() {
     let dir = tempfile::tempdir().unwrap();
-    let bad = MODEL.replace("j = 0.0003", "j = -1.0");
+    let bad = model().replace("j = 0.0003", "j = -1.0");
     std::fs::write(dir.path().join("m.toml"), bad).unwrap();
     let line = error_line(&motorid(dir.path(), &["export", "m.toml", "-o", "c.bin"]));
     assert!(

@@ -40,6 +40,36 @@ fn xdot_sensor(dir: &Path, model: &str, data: &str) -> f64 {
     v["fit_sensor"]["xdot"].as_f64().unwrap()
 }
 
+/// The paper's fitting signal (a) and validation signal (b), 60 s each, as a.csv and b.csv.
+fn simulate_a_and_b(dir: &Path) {
+    run_ok(
+        dir,
+        &[
+            "simulate",
+            "--signal",
+            "a",
+            "--duration",
+            "60",
+            "-o",
+            "a.csv",
+        ],
+    );
+    run_ok(
+        dir,
+        &[
+            "simulate",
+            "--signal",
+            "b",
+            "--duration",
+            "60",
+            "--seed",
+            "2",
+            "-o",
+            "b.csv",
+        ],
+    );
+}
+
 /// The emulator's own model (paper motor, paper LuGre), as MODEL.toml.
 const TRUTH: &str = r#"kind = "lugre"
 plant = "voltage"
@@ -69,32 +99,7 @@ velocity_window = 10
 fn lugre_fit_recovers_the_static_curve_and_validates_like_the_truth() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    run_ok(
-        d,
-        &[
-            "simulate",
-            "--signal",
-            "a",
-            "--duration",
-            "60",
-            "-o",
-            "a.csv",
-        ],
-    );
-    run_ok(
-        d,
-        &[
-            "simulate",
-            "--signal",
-            "b",
-            "--duration",
-            "60",
-            "--seed",
-            "2",
-            "-o",
-            "b.csv",
-        ],
-    );
+    simulate_a_and_b(d);
     run_ok(d, &["simulate", "--signal", "steady", "-o", "steady.csv"]);
     std::fs::write(d.join("truth.toml"), TRUTH).unwrap();
     let text = run_ok(
@@ -149,32 +154,7 @@ fn lugre_fit_recovers_the_static_curve_and_validates_like_the_truth() {
 fn sindyc_fit_validates_like_the_truth() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    run_ok(
-        d,
-        &[
-            "simulate",
-            "--signal",
-            "a",
-            "--duration",
-            "60",
-            "-o",
-            "a.csv",
-        ],
-    );
-    run_ok(
-        d,
-        &[
-            "simulate",
-            "--signal",
-            "b",
-            "--duration",
-            "60",
-            "--seed",
-            "2",
-            "-o",
-            "b.csv",
-        ],
-    );
+    simulate_a_and_b(d);
     std::fs::write(d.join("truth.toml"), TRUTH).unwrap();
     run_ok(
         d,

@@ -267,7 +267,12 @@ mod tests {
         // A duplicated column stays finite.
         let fit2 = lstsq(&[&x1, &x1, &x2], &y);
         assert!(fit2.beta.iter().all(|b| b.is_finite()));
-        assert!(fit2.rss <= fit.rss * 1.01 + 1e-12, "{} vs {}", fit2.rss, fit.rss);
+        assert!(
+            fit2.rss <= fit.rss * 1.01 + 1e-12,
+            "{} vs {}",
+            fit2.rss,
+            fit.rss
+        );
     }
 
     #[test]

@@ -287,22 +287,26 @@ impl Library {
 mod tests {
     use super::*;
 
+    /// Sine waves `amp·sin(c·k)`, k < n, one per rate: x, xdot, z, i, u.
+    fn sines(n: usize, amp: f64, rates: [f64; 5]) -> [Vec<f64>; 5] {
+        rates.map(|c| (0..n).map(|k| (k as f64 * c).sin() * amp).collect())
+    }
+
+    fn signals(v: &[Vec<f64>; 5]) -> Signals<'_> {
+        Signals {
+            x: &v[0],
+            xdot: &v[1],
+            z: &v[2],
+            i: Some(&v[3]),
+            u: &v[4],
+        }
+    }
+
     #[test]
     fn columns_equal_the_firmware_terms() {
         let n = 257;
-        let f = |c: f64| {
-            (0..n)
-                .map(|k| (k as f64 * c).sin() * 3.0)
-                .collect::<Vec<f64>>()
-        };
-        let (x, v, z, i, u) = (f(0.11), f(0.07), f(0.013), f(0.05), f(0.031));
-        let s = Signals {
-            x: &x,
-            xdot: &v,
-            z: &z,
-            i: Some(&i),
-            u: &u,
-        };
+        let sig = sines(n, 3.0, [0.11, 0.07, 0.013, 0.05, 0.031]);
+        let s = signals(&sig);
         let adds: Vec<EffectSpec> = [
             "coulomb",
             "stribeck:vs=3",
@@ -340,19 +344,9 @@ mod tests {
     #[test]
     fn blockwise_normal_equations_equal_the_full_matrix() {
         let n = 10_000; // more than two blocks
-        let f = |c: f64| {
-            (0..n)
-                .map(|k| (k as f64 * c).sin() * 2.0)
-                .collect::<Vec<f64>>()
-        };
-        let (x, v, z, i, u) = (f(0.011), f(0.007), f(0.0013), f(0.005), f(0.0031));
-        let s = Signals {
-            x: &x,
-            xdot: &v,
-            z: &z,
-            i: Some(&i),
-            u: &u,
-        };
+        let sig = sines(n, 2.0, [0.011, 0.007, 0.0013, 0.005, 0.0031]);
+        let s = signals(&sig);
+        let (v, z, u) = (&sig[1], &sig[2], &sig[4]);
         let lib = Library::paper(Plant::Voltage, 5.0, 1.0);
         let y: Vec<f64> = (0..n)
             .map(|k| 3.0 * v[k] - 0.5 * u[k] + z[k] * u[k])

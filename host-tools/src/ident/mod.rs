@@ -189,12 +189,7 @@ fn guard_added_effects(req: &FitRequest, with: Model) -> Result<Model> {
                 with.parameters
                     .iter()
                     .filter(|p| p.name.contains('.'))
-                    .cloned()
-                    .map(|mut p| {
-                        p.value = 0.0;
-                        p.std_err = None;
-                        p
-                    }),
+                    .cloned(),
             );
             base.parameters = params;
             best = (s, base, true);
@@ -207,9 +202,17 @@ fn guard_added_effects(req: &FitRequest, with: Model) -> Result<Model> {
              validation fit was worse ({score_with:.1} %)",
             model.data.method
         );
+        let effects = model.effects.clone();
         for p in &mut model.parameters {
-            if p.name.contains('.') && p.name != "cogging.harmonic" {
-                p.note = "set to zero: the validation data did not support it".into();
+            let Some((name, key)) = p.name.split_once('.') else {
+                continue;
+            };
+            if let Some(e) = effects.iter().find(|e| e.kind().name() == name) {
+                p.value = EffectSpec::from_effect(e).get(key);
+            }
+            if key != "harmonic" {
+                p.std_err = None;
+                p.note = "magnitude set to zero: the validation data did not support it".into();
             }
         }
     }

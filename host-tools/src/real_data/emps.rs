@@ -13,6 +13,7 @@
 //! `../shared/data/README.md`.
 use super::butterworth::LowPass;
 use super::regression::{ols, Ols};
+use super::static_curve::sgn;
 use crate::log::{ColumnMap, MotorLog, Plant};
 use anyhow::{bail, Result};
 use std::path::Path;
@@ -144,15 +145,6 @@ pub fn observation(log: &MotorLog, gain: f64, asym: bool) -> (Vec<Vec<f64>>, Vec
     let dt = log.sample_period();
     let (_, dq, ddq) = filtered_states(&log.theta, dt);
     let force: Vec<f64> = log.u.iter().map(|u| gain * u).collect();
-    let sgn = |v: f64| {
-        if v > 0.0 {
-            1.0
-        } else if v < 0.0 {
-            -1.0
-        } else {
-            0.0
-        }
-    };
     let mut cols: Vec<Vec<f64>> = vec![ddq.clone()];
     if asym {
         cols.push(dq.iter().map(|&v| v.max(0.0)).collect());
@@ -169,7 +161,7 @@ pub fn observation(log: &MotorLog, gain: f64, asym: bool) -> (Vec<Vec<f64>>, Vec
         );
     } else {
         cols.push(dq.clone());
-        cols.push(dq.iter().map(|&v| sgn(v)).collect());
+        cols.push(dq.iter().copied().map(sgn).collect());
         cols.push(vec![1.0; dq.len()]);
     }
     let fs = 1.0 / dt;

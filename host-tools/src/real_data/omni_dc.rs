@@ -6,7 +6,7 @@
 //! The current column is unsigned; as the authors' pre-processing does, it takes the sign of
 //! the velocity.
 use super::static_curve::{self, Curve, Selection, Term};
-use super::table_csv::{mean_sd, Table};
+use super::table_csv::{mean_sd, plateaus, Table};
 use anyhow::{bail, Result};
 use std::path::{Path, PathBuf};
 
@@ -48,24 +48,18 @@ pub fn read_points(path: &Path, m: usize) -> Result<Vec<Point>> {
     let w = t.col(&format!("m{m}vel_rad_per_s"), path)?;
     let cur = t.col(&format!("m{m}cur_A"), path)?;
     let mut out = Vec::new();
-    let mut start = 0;
-    for k in 1..=sp.len() {
-        if k == sp.len() || sp[k] != sp[start] {
-            let n = k - start;
-            let s = start + (SKIP_FRACTION * n as f64).round() as usize;
-            // Only samples moving in the commanded direction (dropouts read 0 rad/s).
-            let idx: Vec<usize> = (s..k).filter(|&j| w[j] * sp[start] > 0.0).collect();
-            if sp[start] != 0.0 && idx.len() >= 5 {
-                let v: Vec<f64> = idx.iter().map(|&j| w[j]).collect();
-                let tq: Vec<f64> = idx.iter().map(|&j| KT * cur[j] * w[j].signum()).collect();
-                out.push(Point {
-                    setpoint: sp[start],
-                    v: mean_sd(&v).0,
-                    torque: mean_sd(&tq).0,
-                    samples: idx.len(),
-                });
-            }
-            start = k;
+    for (set, range) in plateaus(sp, SKIP_FRACTION) {
+        // Only samples moving in the commanded direction (dropouts read 0 rad/s).
+        let idx: Vec<usize> = range.filter(|&j| w[j] * set > 0.0).collect();
+        if set != 0.0 && idx.len() >= 5 {
+            let v: Vec<f64> = idx.iter().map(|&j| w[j]).collect();
+            let tq: Vec<f64> = idx.iter().map(|&j| KT * cur[j] * w[j].signum()).collect();
+            out.push(Point {
+                setpoint: set,
+                v: mean_sd(&v).0,
+                torque: mean_sd(&tq).0,
+                samples: idx.len(),
+            });
         }
     }
     if out.len() < 4 {

@@ -6,7 +6,7 @@
 //! The solve is a thin SVD from faer; the covariance is `σ²·V·S⁻²·Vᵀ` with
 //! `σ² = ‖y − Xθ‖² / (n − p)`.
 use anyhow::{bail, Result};
-use faer::Mat;
+use faer::{Col, Mat};
 
 /// The result of one least-squares fit `y ≈ X·θ`.
 #[derive(Debug, Clone)]
@@ -75,22 +75,13 @@ pub fn ols(cols: &[Vec<f64>], y: &[f64]) -> Result<Ols> {
     if smin <= smax * 1e-13 {
         bail!("least squares: the regressors are linearly dependent (rank deficient)");
     }
-    let u = svd.U();
     let v = svd.V();
     // θ = V·S⁻¹·Uᵀ·y
-    let mut uty = vec![0.0; p];
-    for (k, c) in uty.iter_mut().enumerate() {
-        *c = (0..n).map(|i| u[(i, k)] * y[i]).sum::<f64>() / s[k];
-    }
-    let theta: Vec<f64> = (0..p)
-        .map(|j| (0..p).map(|k| v[(j, k)] * uty[k]).sum())
-        .collect();
-    let rss: f64 = (0..n)
-        .map(|i| {
-            let r = y[i] - (0..p).map(|j| cols[j][i] * theta[j]).sum::<f64>();
-            r * r
-        })
-        .sum();
+    let yv = Col::<f64>::from_fn(n, |i| y[i]);
+    let uty = svd.U().transpose() * &yv;
+    let theta_col = v * Col::<f64>::from_fn(p, |k| uty[k] / s[k]);
+    let theta: Vec<f64> = (0..p).map(|j| theta_col[j]).collect();
+    let rss = (&yv - &x * &theta_col).squared_norm_l2();
     let s2 = rss / (n - p) as f64;
     let sigma = (0..p)
         .map(|j| {
@@ -105,7 +96,7 @@ pub fn ols(cols: &[Vec<f64>], y: &[f64]) -> Result<Ols> {
         n,
         p,
         cond: smax / smin,
-        y_norm: y.iter().map(|v| v * v).sum::<f64>().sqrt(),
+        y_norm: yv.norm_l2(),
     })
 }
 

@@ -3,7 +3,7 @@
 //! set-point gives one steady-state (velocity, motor torque) point of the static friction
 //! curve; [`super::static_curve`] fits and tests the curve.
 use super::static_curve::{self, Selection};
-use super::table_csv::{mean_sd, Table};
+use super::table_csv::{mean_sd, plateaus, Table};
 use anyhow::Result;
 use std::path::{Path, PathBuf};
 
@@ -41,22 +41,16 @@ pub fn read_points(path: &Path) -> Result<Vec<Point>> {
     let v = t.col("velocity_rad_s", path)?;
     let tau = t.col("torque_Nm", path)?;
     let mut out = Vec::new();
-    let mut start = 0;
-    for k in 1..=sp.len() {
-        if k == sp.len() || sp[k] != sp[start] {
-            let n = k - start;
-            let s = start + (SKIP_FRACTION * n as f64).round() as usize;
-            let (vm, _) = mean_sd(&v[s..k]);
-            let (tm, tsd) = mean_sd(&tau[s..k]);
-            out.push(Point {
-                setpoint_rpm: sp[start],
-                v: vm,
-                tau: tm,
-                tau_sd: tsd,
-                samples: k - s,
-            });
-            start = k;
-        }
+    for (set, range) in plateaus(sp, SKIP_FRACTION) {
+        let (vm, _) = mean_sd(&v[range.clone()]);
+        let (tm, tsd) = mean_sd(&tau[range.clone()]);
+        out.push(Point {
+            setpoint_rpm: set,
+            v: vm,
+            tau: tm,
+            tau_sd: tsd,
+            samples: range.len(),
+        });
     }
     Ok(out)
 }

@@ -96,7 +96,8 @@ impl Curve {
     }
 }
 
-fn sgn(v: f64) -> f64 {
+/// The sign of `v`, with `sgn 0 = 0` (unlike `f64::signum`), as the friction laws use it.
+pub fn sgn(v: f64) -> f64 {
     if v > 0.0 {
         1.0
     } else if v < 0.0 {

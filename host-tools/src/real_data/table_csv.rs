@@ -72,6 +72,21 @@ impl Table {
     }
 }
 
+/// The runs of equal set-point in `sp`, each as (set-point, the sample range kept): the first
+/// `skip_fraction` of every run (rounded) is dropped as the controller's transient.
+pub fn plateaus(sp: &[f64], skip_fraction: f64) -> Vec<(f64, std::ops::Range<usize>)> {
+    let mut out = Vec::new();
+    let mut start = 0;
+    for k in 1..=sp.len() {
+        if k == sp.len() || sp[k] != sp[start] {
+            let s = start + (skip_fraction * (k - start) as f64).round() as usize;
+            out.push((sp[start], s..k));
+            start = k;
+        }
+    }
+    out
+}
+
 /// Mean and standard deviation.
 pub fn mean_sd(x: &[f64]) -> (f64, f64) {
     let n = x.len().max(1) as f64;
