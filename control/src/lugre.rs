@@ -295,6 +295,30 @@ mod tests {
     }
 
     #[test]
+    fn compensation_torque_has_no_reversal_pulse() {
+        // After a settled step at +2 rad/s, reverse to −2 rad/s: the full model's σ1·(mean ż)
+        // gives a one-sample pulse far above static friction; the compensation torque stays
+        // within s_max + α2·|v| and equals the full torque once ż has settled.
+        let p = LugreParams::<f64>::paper();
+        let (mut full, mut comp) = (LugreObserver::new(p), LugreObserver::new(p));
+        for _ in 0..50 {
+            full.step(2.0, 0.012);
+            comp.step_compensation(2.0, 0.012);
+        }
+        let f_full = full.step(-2.0, 0.012);
+        let f_comp = comp.step_compensation(-2.0, 0.012);
+        assert_eq!(full.z, comp.z);
+        assert!(f_full.abs() > 10.0 * p.s_max(), "full {f_full}");
+        assert!(f_comp.abs() <= p.s_max() + p.alpha2 * 2.0, "comp {f_comp}");
+        assert!(
+            (f_comp - p.steady_friction(-2.0)).abs() < 1e-9,
+            "comp {f_comp}"
+        );
+        let (f_full, f_comp) = (full.step(-2.0, 0.012), comp.step_compensation(-2.0, 0.012));
+        assert!((f_full - f_comp).abs() < 1e-9, "{f_full} vs {f_comp}");
+    }
+
+    #[test]
     fn from_effects_maps_fields() {
         let e = [
             Effect::Coulomb { fc: 0.08 },
@@ -343,6 +367,17 @@ mod tests {
                 } else {
                     prop_assert_eq!(obs.z, 0.0);
                 }
+            }
+        }
+
+        #[test]
+        fn compensation_torque_bounded(vs in proptest::collection::vec(-1e3f64..1e3, 1..200)) {
+            // |σ0·z + α2·v| ≤ s_max + |α2·v| from rest, whatever the velocity sequence.
+            let p = LugreParams::<f64>::paper();
+            let mut obs = LugreObserver::new(p);
+            for v in vs {
+                let f = obs.step_compensation(v, 0.012);
+                prop_assert!(f.abs() <= p.s_max() * (1.0 + 1e-12) + (p.alpha2 * v).abs(), "f={} v={}", f, v);
             }
         }
 

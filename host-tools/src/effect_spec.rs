@@ -111,14 +111,19 @@ pub fn keys(kind: EffectKind) -> &'static [Key] {
             K
         }
         EffectKind::Thermal => {
+            // Defaults: copper's resistance rises 0.393 %/K; k = 0.02/A² is +8 % (≈ +20 K of
+            // winding) at 2 A steady and +2 % at 1 A, what a small BLDC motor with a few K/W
+            // winding-to-ambient reaches at the paper's currents (0.002/A² was a +0.8 % rise,
+            // too small to see in a 60–90 s log). tau = 30 s: a small motor's winding thermal
+            // time constant (the case takes minutes).
             const K: &[Key] = &[
                 k(
                     "k",
                     "1/A²",
-                    0.002,
+                    0.02,
                     "relative resistance rise per A² of steady current",
                 ),
-                k("tau", "s", 20.0, "thermal time constant"),
+                k("tau", "s", 30.0, "thermal time constant"),
             ];
             K
         }

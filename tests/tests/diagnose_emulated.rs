@@ -166,3 +166,77 @@ fn direction_dependent_friction_is_named_asymmetry() {
     let top = d.effects.first().expect("nothing found");
     assert_eq!(top.name, EffectKind::Asymmetry.name(), "{:?}", names(&d));
 }
+
+#[test]
+fn thermal_at_its_default_size_is_ranked_first() {
+    // The default (k = 0.02/A², tau = 30 s, see effect_spec.rs) must show in 60 s of data.
+    let k = EffectSpec::bare(EffectKind::Thermal).get("k");
+    ranked_first("thermal", "k", k, 0.5 * k);
+}
+
+/// The same LuGre data diagnosed against a reduced model: viscous friction only (what
+/// `fit --model linear` has). The emulator's Coulomb friction must be named first.
+#[test]
+fn linear_model_lacks_coulomb() {
+    let p = control::lugre::LugreParams::<f64>::paper();
+    let linear = Structure::with_effects(Plant::Voltage, vec![Effect::Viscous { b: p.alpha2 }]);
+    for seed in [1, 2] {
+        let log = simulate_signal(&hidden(&[], seed), SignalKind::A, 60.0)
+            .unwrap()
+            .log;
+        let d = diagnose(&log, &linear, &Options::default());
+        let top = d
+            .effects
+            .first()
+            .unwrap_or_else(|| panic!("seed {seed}: nothing found"));
+        assert_eq!(top.name, "coulomb", "seed {seed}: {:?}", names(&d));
+        let fc = EffectSpec::parse(&top.spec).unwrap().get("fc");
+        assert!(
+            fc > 0.5 * p.alpha0 && fc < 2.0 * (p.alpha0 + p.alpha1),
+            "seed {seed}: fc = {fc} (true {} + Stribeck {})",
+            p.alpha0,
+            p.alpha1
+        );
+        // Nothing outside the friction law is claimed.
+        for f in &d.effects {
+            assert!(
+                ["coulomb", "stribeck", "presliding", "viscous"].contains(&f.name.as_str()),
+                "seed {seed}: false claim {:?}",
+                names(&d)
+            );
+        }
+    }
+}
+
+/// Presliding (bristle deflection, a few milliradians) acts below one Hall step (0.095 rad):
+/// a static-friction model of LuGre data may or may not be told it lacks presliding, but it
+/// must never be told something false instead.
+#[test]
+fn presliding_below_the_hall_step_makes_no_false_claim() {
+    let p = control::lugre::LugreParams::<f64>::paper();
+    let static_friction = Structure::with_effects(
+        Plant::Voltage,
+        vec![
+            Effect::Coulomb { fc: p.alpha0 },
+            Effect::Stribeck {
+                fs: p.alpha1,
+                vs: p.v0,
+            },
+            Effect::Viscous { b: p.alpha2 },
+        ],
+    );
+    for seed in [1, 2] {
+        let log = simulate_signal(&hidden(&[], seed), SignalKind::A, 60.0)
+            .unwrap()
+            .log;
+        let d = diagnose(&log, &static_friction, &Options::default());
+        for f in &d.effects {
+            assert_eq!(
+                f.name,
+                "presliding",
+                "seed {seed}: false claim {:?}",
+                names(&d)
+            );
+        }
+    }
+}

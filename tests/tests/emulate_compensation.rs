@@ -67,6 +67,49 @@ fn pi_tracks_and_compensation_changes_the_loop() {
     assert!(lugre["rms_low"].as_f64().unwrap().is_finite());
 }
 
+/// LuGre compensation must cut the low-speed tracking error on the sine reference. The
+/// model here is the emulator's TRUE LuGre (the paper's parameters, `LUGRE` above), not a
+/// fitted one: fitting takes too long for a test; `scripts/compensation-table.sh` runs the
+/// same experiment with fitted models.
+#[test]
+fn lugre_compensation_cuts_low_speed_error_on_sine_true_parameters() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("l.toml"), LUGRE).unwrap();
+    let run = |comp: &str| {
+        json(&motorid(
+            d,
+            &[
+                "emulate",
+                "--reference",
+                "sine",
+                "--compensation",
+                comp,
+                "--model",
+                "l.toml",
+                "--json",
+            ],
+        ))
+    };
+    let (none, lugre) = (run("none"), run("lugre"));
+    let low = |v: &serde_json::Value| v["rms_low"].as_f64().unwrap();
+    let all = |v: &serde_json::Value| v["rms"].as_f64().unwrap();
+    assert!(none["low_speed_samples"].as_u64().unwrap() > 100);
+    // At least a 25 % cut at low speed, and no loss overall.
+    assert!(
+        low(&lugre) < 0.75 * low(&none),
+        "low-speed RMS: lugre {} vs none {}",
+        low(&lugre),
+        low(&none)
+    );
+    assert!(
+        all(&lugre) < all(&none),
+        "overall RMS: lugre {} vs none {}",
+        all(&lugre),
+        all(&none)
+    );
+}
+
 #[test]
 fn compensation_without_its_model_is_an_error() {
     let dir = tempfile::tempdir().unwrap();

@@ -67,6 +67,49 @@ pub struct Signals {
     pub kt: f64,
     /// Angle quantisation step [rad], when the log says it.
     pub hall_resolution: Option<f64>,
+    /// Velocity scale of the log relative to the rotary motor the velocity constants were
+    /// chosen for ([`velocity_scale`]): 1 for the paper's motor, ≈0.003 for a linear axis in m/s.
+    pub vscale: f64,
+    /// Half-width (samples) of the velocity estimate: [`VELOCITY_HALF_S`] in samples.
+    pub velocity_half: usize,
+}
+
+/// Half-width of the velocity estimate in seconds: ±4 samples at the paper's 12 ms.
+pub const VELOCITY_HALF_S: f64 = 0.048;
+
+/// Speed [rad/s] the velocity constants (stick speed, smooth-sign width, Stribeck grid) were
+/// chosen for: rotary logs whose 99th-percentile speed reaches at least this (the paper's
+/// signal a reaches about 125 rad/s). Slower logs (a linear axis in m/s, a slow test) scale
+/// those constants down by `q99(|ω|)/REFERENCE_SPEED`.
+pub const REFERENCE_SPEED: f64 = 50.0;
+
+/// Samples closest to `seconds` at period `dt` (at least 1).
+pub fn samples_for(seconds: f64, dt: f64) -> usize {
+    if dt > 0.0 && dt.is_finite() {
+        ((seconds / dt).round() as usize).max(1)
+    } else {
+        1
+    }
+}
+
+/// `min(1, q99(|ω|)/REFERENCE_SPEED)`: 1 for logs as fast as the paper's motor (so emulated
+/// results keep the documented constants), smaller for slow logs or other units.
+pub fn velocity_scale(omega: &[f64]) -> f64 {
+    let mut a: Vec<f64> = omega
+        .iter()
+        .map(|w| w.abs())
+        .filter(|w| w.is_finite())
+        .collect();
+    if a.is_empty() {
+        return 1.0;
+    }
+    a.sort_by(|x, y| x.total_cmp(y));
+    let q = a[((a.len() - 1) as f64 * 0.99) as usize];
+    if q > 0.0 {
+        (q / REFERENCE_SPEED).min(1.0)
+    } else {
+        1.0
+    }
 }
 
 /// Half-width (samples) of the velocity estimate: ±4 × 12 ms. The slope over 9 samples of a
@@ -77,7 +120,9 @@ impl Signals {
     /// Derive the signals from a log. `kt` is the model's torque constant.
     pub fn from_log(log: &MotorLog, plant: Plant, kt: f64) -> Signals {
         let dt = log.sample_period();
-        let omega = super::weakform::smoothed_derivative(&log.theta, dt, VELOCITY_HALF);
+        let velocity_half = samples_for(VELOCITY_HALF_S, dt);
+        let omega = super::weakform::smoothed_derivative(&log.theta, dt, velocity_half);
+        let vscale = velocity_scale(&omega);
         let theta_s = super::weakform::moving_average(&log.theta, 2);
         // The input u[k] is held over [t_k, t_k+1) while angle and current are sampled at t_k.
         // The winding settles within L/R ≈ 1.4 ms, so the current sampled at t_k is the
@@ -110,6 +155,8 @@ impl Signals {
             plant,
             kt,
             hall_resolution: log.meta_f64("hall_resolution_rad"),
+            vscale,
+            velocity_half,
         }
     }
 
@@ -124,10 +171,18 @@ impl Signals {
     }
 
     fn sgn_omega(&self) -> Vec<f64> {
-        self.omega
-            .iter()
-            .map(|w| smooth_sign(*w, VELOCITY_EPS))
-            .collect()
+        let eps = self.velocity_eps();
+        self.omega.iter().map(|w| smooth_sign(*w, eps)).collect()
+    }
+
+    /// Width of the smooth sign: the control crate's `VELOCITY_EPS` times [`Self::vscale`].
+    pub fn velocity_eps(&self) -> f64 {
+        VELOCITY_EPS * self.vscale
+    }
+
+    /// Speed below which the rotor counts as stuck: [`STICK_SPEED`] times [`Self::vscale`].
+    pub fn stick_speed(&self) -> f64 {
+        STICK_SPEED * self.vscale
     }
 
     /// Sample-level angle harmonic pair for `h` periods per revolution, attenuated where the
@@ -204,7 +259,8 @@ pub const STICK_SPEED: f64 = 1.0;
 impl Signals {
     /// `1` where the rotor is stuck (|ω| < [`STICK_SPEED`]), else `0`.
     pub fn stuck(&self) -> Vec<bool> {
-        self.omega.iter().map(|w| w.abs() < STICK_SPEED).collect()
+        let v = self.stick_speed();
+        self.omega.iter().map(|w| w.abs() < v).collect()
     }
 
     /// Load-dependent friction `|drive|·sgn(ω)` with the modelled drive, zero while stuck.
@@ -213,10 +269,10 @@ impl Signals {
             .iter()
             .zip(&self.omega)
             .map(|(d, w)| {
-                if w.abs() < STICK_SPEED {
+                if w.abs() < self.stick_speed() {
                     0.0
                 } else {
-                    d.abs() * smooth_sign(*w, VELOCITY_EPS)
+                    d.abs() * smooth_sign(*w, self.velocity_eps())
                 }
             })
             .collect()
@@ -278,7 +334,7 @@ pub struct Variant {
     pub columns: Vec<Vec<f64>>,
 }
 
-/// Grid of Stribeck velocities [rad/s]: around the paper's v0 = 3.7 rad/s, from the
+/// Grid of Stribeck velocities [rad/s] (times [`Signals::vscale`]): around the paper's v0 = 3.7 rad/s, from the
 /// velocity resolution (≈1 rad/s) up to where Stribeck merges with viscous friction.
 pub const STRIBECK_GRID: [f64; 6] = [1.0, 2.0, 3.5, 5.0, 8.0, 12.0];
 /// Grid of thermal time constants [s]: small motors heat in 5 s (winding) to minutes (case).
@@ -307,7 +363,8 @@ pub fn variants(kind: EffectKind, s: &Signals, coulomb_guess: f64) -> Vec<Varian
         EffectKind::Viscous => vec![one(mech, vec![], vec![s.omega.clone()])],
         EffectKind::Stribeck => STRIBECK_GRID
             .iter()
-            .map(|&vs| {
+            .map(|&vs0| {
+                let vs = vs0 * s.vscale;
                 let col = s
                     .omega
                     .iter()

@@ -77,7 +77,8 @@ impl Structure {
 pub struct Options {
     pub alpha: f64,
     pub min_explained: f64,
-    /// Weak-form window half-width in samples.
+    /// Weak-form window half-width in samples; 0 (the default): [`weakform::HALF_WIDTH_S`]
+    /// seconds in the log's samples (8 samples at the paper's 12 ms).
     pub half_width: usize,
 }
 
@@ -86,7 +87,7 @@ impl Default for Options {
         Options {
             alpha: FAMILY_ALPHA,
             min_explained: MIN_EXPLAINED,
-            half_width: weakform::HALF_WIDTH,
+            half_width: 0,
         }
     }
 }
@@ -171,7 +172,12 @@ struct EqData {
 pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
     let mut s = Signals::from_log(log, st.plant, st.kt);
     s.drive_model = modelled_drive(&s, st);
-    let h = opts.half_width.max(2);
+    let h = if opts.half_width == 0 {
+        candidates::samples_for(weakform::HALF_WIDTH_S, s.dt)
+    } else {
+        opts.half_width
+    }
+    .max(2);
     let wf = weakform::WeakForm::new(s.len(), s.dt, h, h);
     let voltage = s.plant == Plant::Voltage && s.i.is_some();
 
@@ -316,7 +322,7 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
                 .map(|&c| {
                     s.omega[c.saturating_sub(h)..(c + h + 1).min(s.len())]
                         .iter()
-                        .all(|w| w.abs() >= candidates::STICK_SPEED)
+                        .all(|w| w.abs() >= s.stick_speed())
                 })
                 .collect();
             mech.y = select_rows(&mech.y, &keep);
@@ -356,7 +362,7 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
 /// by sample: a least-squares fit of the measured drive on inertia (smoothed acceleration)
 /// and the structure's friction columns, evaluated while moving.
 fn modelled_drive(s: &Signals, st: &Structure) -> Vec<f64> {
-    let acc = weakform::smoothed_derivative(&s.omega, s.dt, candidates::VELOCITY_HALF);
+    let acc = weakform::smoothed_derivative(&s.omega, s.dt, s.velocity_half);
     let mut cols = vec![acc];
     for e in &st.effects {
         if e.kind() == EffectKind::LoadFriction {
@@ -372,7 +378,7 @@ fn modelled_drive(s: &Signals, st: &Structure) -> Vec<f64> {
         cols.push(
             s.omega
                 .iter()
-                .map(|w| control::effects::smooth_sign(*w, control::effects::VELOCITY_EPS))
+                .map(|w| control::effects::smooth_sign(*w, s.velocity_eps()))
                 .collect(),
         );
     }
@@ -380,7 +386,7 @@ fn modelled_drive(s: &Signals, st: &Structure) -> Vec<f64> {
         cols.push(s.omega.clone());
     }
     let moving: Vec<usize> = (0..s.len())
-        .filter(|&k| s.omega[k].abs() >= candidates::STICK_SPEED)
+        .filter(|&k| s.omega[k].abs() >= s.stick_speed())
         .collect();
     let y: Vec<f64> = moving.iter().map(|&k| s.drive[k]).collect();
     let sub: Vec<Vec<f64>> = cols

@@ -12,6 +12,8 @@
 /// Default half-width of a window in samples: 8 × 12 ms ≈ 0.1 s, short against the
 /// excitations (≤ 1 Hz) and long against the Hall quantisation (one step per 12 ms at 8 rad/s).
 pub const HALF_WIDTH: usize = 8;
+/// The same half-width in seconds (8 × 12 ms), used for logs at other sample rates.
+pub const HALF_WIDTH_S: f64 = 0.096;
 
 /// Weak-form operator on a uniformly sampled log.
 #[derive(Debug, Clone)]
