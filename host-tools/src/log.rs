@@ -166,7 +166,7 @@ impl MotorLog {
             .has_headers(true)
             .trim(csv::Trim::All)
             .comment(Some(b'#'))
-            .from_reader(text[body_start..].as_bytes());
+            .from_reader(&text.as_bytes()[body_start..]);
         let headers: Vec<String> = rdr
             .headers()
             .map_err(|e| anyhow!("{p}:{header_line}: cannot read the header row: {e}"))?

@@ -220,8 +220,10 @@ pub fn run_loop(
     Ok(outcome)
 }
 
-pub fn run(args: Args) -> Result<()> {
-    let hidden: Vec<EffectSpec> = if args.effect.is_empty() {
+/// The effects to hide: `--effect`s, else one drawn from the seed (`--random`), else
+/// [`DEFAULT_EFFECT`], each at its default size.
+pub fn hidden_effects(args: &Args) -> Result<Vec<EffectSpec>> {
+    Ok(if args.effect.is_empty() {
         use rand::{Rng, SeedableRng};
         let k = if args.random {
             let mut rng = rand::rngs::StdRng::seed_from_u64(args.seed);
@@ -239,7 +241,11 @@ pub fn run(args: Args) -> Result<()> {
             .iter()
             .map(|s| EffectSpec::parse(s).with_context(|| format!("--effect '{s}'")))
             .collect::<Result<_>>()?
-    };
+    })
+}
+
+pub fn run(args: Args) -> Result<()> {
+    let hidden = hidden_effects(&args)?;
     if !(args.duration.is_finite() && args.duration >= 10.0) {
         anyhow::bail!(
             "--duration: give at least 10 seconds (got {})",
@@ -280,4 +286,37 @@ pub fn run(args: Args) -> Result<()> {
         println!("report: {}", p.display());
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn args(effect: &[&str], random: bool, seed: u64) -> Args {
+        Args {
+            effect: effect.iter().map(|s| s.to_string()).collect(),
+            random,
+            seed,
+            report: PathBuf::from("unused"),
+            duration: DURATION,
+        }
+    }
+
+    #[test]
+    fn bare_demo_hides_the_default_effect_whatever_the_seed() {
+        for seed in [1, 7] {
+            let h = hidden_effects(&args(&[], false, seed)).unwrap();
+            assert_eq!(h.len(), 1);
+            assert_eq!(h[0].kind, DEFAULT_EFFECT);
+            assert_eq!(h[0], EffectSpec::parse(DEFAULT_EFFECT.name()).unwrap());
+        }
+    }
+
+    #[test]
+    fn random_draws_from_the_list_and_effect_wins() {
+        let h = hidden_effects(&args(&[], true, 1)).unwrap();
+        assert!(RANDOM_EFFECTS.contains(&h[0].kind));
+        let h = hidden_effects(&args(&["offset:t0=0.01"], true, 1)).unwrap();
+        assert_eq!(h[0].kind, EffectKind::Offset);
+    }
 }

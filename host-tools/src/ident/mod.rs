@@ -2,6 +2,7 @@
 //!
 //! | module | what it is |
 //! |---|---|
+//! | [`effect_residual`] | added effects estimated on a fitted model's residual |
 //! | [`fitpct`] | the paper's fit percentage |
 //! | [`freerun`] | free-run simulation of a model with a log's input |
 //! | [`sensor_chain`] | Hall quantisation and the firmware's velocity estimator |
@@ -12,6 +13,7 @@
 //! | [`hankel`], [`stlsq`], [`library`], [`sindyc`] | SINDYc (the colleague's files) |
 //!
 //! Entry points: [`fit`] and [`score`].
+pub mod effect_residual;
 pub mod fitpct;
 pub mod free_params;
 pub mod freerun;
@@ -179,8 +181,56 @@ fn guard_added_effects(req: &FitRequest, with: Model) -> Result<Model> {
     if s > best.0 {
         best = (s, zeroed, true);
     }
+    // The added effects estimated by weak form on what a fitted model leaves unexplained:
+    // on the full fit, and on the base structure fitted afresh.
+    let with_params: Vec<_> = with
+        .parameters
+        .iter()
+        .filter(|p| p.name.contains('.'))
+        .cloned()
+        .collect();
+    let residual_candidate = |from: &Model| {
+        let mut m = effect_residual::estimate(from, &with, req.logs);
+        let mut params: Vec<_> = from
+            .parameters
+            .iter()
+            .filter(|p| !p.name.contains('.'))
+            .cloned()
+            .collect();
+        for mut p in with_params.iter().cloned() {
+            if let Some((name, key)) = p.name.split_once('.') {
+                if let Some(e) = m.effects.iter().find(|e| e.kind().name() == name) {
+                    p.value = EffectSpec::from_effect(e).get(key);
+                }
+                if key != "harmonic" {
+                    p.std_err = None;
+                    p.note = "weak form on the fitted model's residual".into();
+                }
+            }
+            params.push(p);
+        }
+        m.parameters = params;
+        m.data.method = format!(
+            "{}; added effects by weak form on the fitted model's residual",
+            from.data.method
+        );
+        m
+    };
+    let mut residual_best: Option<(f64, Model)> = None;
+    {
+        let cand = residual_candidate(&with);
+        let s = validation_score(&cand, req.validate);
+        if s > best.0 {
+            residual_best = Some((s, cand));
+        }
+    }
     let base_req = FitRequest { adds: &[], ..*req };
     if let Ok(mut base) = fit_kind(&base_req) {
+        let cand = residual_candidate(&base);
+        let s = validation_score(&cand, req.validate);
+        if s > best.0 && residual_best.as_ref().map_or(true, |(r, _)| s > *r) {
+            residual_best = Some((s, cand));
+        }
         base.effects = sim_error::scale_effect_magnitudes(&with, 0.0).effects;
         let s = validation_score(&base, req.validate);
         if s > best.0 {
@@ -193,6 +243,14 @@ fn guard_added_effects(req: &FitRequest, with: Model) -> Result<Model> {
             );
             base.parameters = params;
             best = (s, base, true);
+        }
+    }
+    if let Some((s, m)) = residual_best {
+        if s > best.0 {
+            if std::env::var_os("MOTORID_DEBUG").is_some() {
+                eprintln!("residual estimate of the added effects: {:?}", m.effects);
+            }
+            return Ok(m);
         }
     }
     let (_, mut model, rejected) = best;

@@ -1,0 +1,186 @@
+//! Weak-form estimate of added effects on the residual of a fitted model (`fit --add`).
+//!
+//! Once the base model (motor constants and friction law) is known, the linear parameters of
+//! the added effects are regressed on what that model leaves unexplained in the equation each
+//! effect acts in, window by window (see [`super::weak_form`]):
+//!
+//! - electrical (voltage plant): `∫φ·u − R·∫φ·I − L·(−∫φ'·I) − K_b·(−∫φ'·θ)` on
+//!   `v_d·∫φ·sgn(I − i0)` (deadtime) and `−R·i0·∫φ` (current offset: `i_meas = i + i0`);
+//! - mechanical: `K_t·∫φ·(I − i0) − J·∫φ''·θ − ∫φ·F(ω)`, with F the model's steady friction
+//!   (LuGre Stribeck curve + α2·ω, or viscous b·ω), on `∫φ·sin(kθ)`, `∫φ·cos(kθ)` (cogging,
+//!   position_load) and `∫φ` (offset).
+//!
+//! Only the added effects' magnitudes change; the base model's parameters are kept.
+use super::weak_form::{self, least_squares};
+use crate::log::{MotorLog, Plant};
+use crate::model::Model;
+use control::effects::{smooth_sign, Effect, CURRENT_EPS};
+
+/// `base` with the effects of `with` (structure) re-estimated on `base`'s residuals in `logs`.
+/// Effects this regression does not cover keep the values they have in `with`.
+pub fn estimate(base: &Model, with: &Model, logs: &[MotorLog]) -> Model {
+    let mut m = base.clone();
+    m.effects = with.effects.clone();
+    if m.plant == Plant::Voltage {
+        // Two passes: the sign of the current depends on the offset estimate.
+        for _ in 0..2 {
+            electrical(&mut m, logs);
+        }
+    }
+    mechanical(&mut m, logs);
+    m
+}
+
+fn electrical(m: &mut Model, logs: &[MotorLog]) {
+    let idx: Vec<usize> = (0..m.effects.len())
+        .filter(|&k| {
+            matches!(
+                m.effects[k],
+                Effect::Deadtime { .. } | Effect::CurrentOffset { .. }
+            )
+        })
+        .collect();
+    if idx.is_empty() {
+        return;
+    }
+    let i0 = control::effects::total_sensor_offset(&m.effects);
+    let (r, l, kb) = (m.motor.r, m.motor.l, m.motor.kb);
+    let mut cols: Vec<Vec<f64>> = vec![Vec::new(); idx.len()];
+    let mut y = Vec::new();
+    for log in logs {
+        let Some(i) = &log.i else { continue };
+        let sgn: Vec<f64> = i
+            .iter()
+            .map(|&c| smooth_sign(c - i0, CURRENT_EPS))
+            .collect();
+        let ones = vec![1.0; log.len()];
+        for w in weak_form::windows(&log.t, weak_form::WINDOW, weak_form::HOP) {
+            y.push(
+                w.int_zoh(&log.t, &log.u) - r * w.int(i)
+                    + l * w.int_d(i)
+                    + kb * w.int_d(&log.theta),
+            );
+            for (c, &k) in idx.iter().enumerate() {
+                cols[c].push(match m.effects[k] {
+                    Effect::Deadtime { .. } => w.int(&sgn),
+                    _ => w.int(&ones),
+                });
+            }
+        }
+    }
+    if y.len() <= cols.len() {
+        return;
+    }
+    let (x, _) = least_squares(&cols, &y);
+    for (c, &k) in idx.iter().enumerate() {
+        if !x[c].is_finite() {
+            continue;
+        }
+        m.effects[k] = match m.effects[k] {
+            Effect::Deadtime { .. } => Effect::Deadtime { vd: x[c].max(0.0) },
+            // The column ∫φ carries −R·i0.
+            _ if r > 0.0 => Effect::CurrentOffset { i0: -x[c] / r },
+            e => e,
+        };
+    }
+}
+
+fn mechanical(m: &mut Model, logs: &[MotorLog]) {
+    let idx: Vec<usize> = (0..m.effects.len())
+        .filter(|&k| {
+            matches!(
+                m.effects[k],
+                Effect::Cogging { .. } | Effect::PositionLoad { .. } | Effect::Offset { .. }
+            )
+        })
+        .collect();
+    if idx.is_empty() {
+        return;
+    }
+    let voltage = m.plant == Plant::Voltage;
+    let i0 = control::effects::total_sensor_offset(&m.effects);
+    let mut ncols = 0;
+    for &k in &idx {
+        ncols += if matches!(m.effects[k], Effect::Offset { .. }) {
+            1
+        } else {
+            2
+        };
+    }
+    let mut cols: Vec<Vec<f64>> = vec![Vec::new(); ncols];
+    let mut y = Vec::new();
+    for log in logs {
+        let cur: Vec<f64> = match (voltage, &log.i) {
+            (true, Some(i)) => i.iter().map(|c| c - i0).collect(),
+            (true, None) => continue,
+            (false, _) => log.u.clone(),
+        };
+        let ws = weak_form::smooth_velocity(log, 5);
+        let fric: Vec<f64> = ws
+            .iter()
+            .map(|&w| match &m.lugre {
+                Some(l) => l.steady_friction(w),
+                None => m.viscous * w,
+            })
+            .collect();
+        let mut g: Vec<Vec<f64>> = Vec::new();
+        for &k in &idx {
+            match m.effects[k] {
+                Effect::Cogging { harmonic, .. } => {
+                    let h = harmonic as f64;
+                    g.push(log.theta.iter().map(|t| (h * t).sin()).collect());
+                    g.push(log.theta.iter().map(|t| (h * t).cos()).collect());
+                }
+                Effect::PositionLoad { .. } => {
+                    g.push(log.theta.iter().map(|t| t.sin()).collect());
+                    g.push(log.theta.iter().map(|t| t.cos()).collect());
+                }
+                _ => g.push(vec![1.0; log.len()]),
+            }
+        }
+        for w in weak_form::windows(&log.t, weak_form::WINDOW, weak_form::HOP) {
+            let drive = if voltage {
+                m.motor.kt * w.int(&cur)
+            } else {
+                w.int_zoh(&log.t, &cur)
+            };
+            y.push(drive - m.motor.j * w.int_dd(&log.theta) - w.int(&fric));
+            for (c, gv) in g.iter().enumerate() {
+                cols[c].push(w.int(gv));
+            }
+        }
+    }
+    if y.len() <= cols.len() {
+        return;
+    }
+    let (x, _) = least_squares(&cols, &y);
+    if x.iter().any(|v| !v.is_finite()) {
+        return;
+    }
+    let mut c = 0;
+    for &k in &idx {
+        m.effects[k] = match m.effects[k] {
+            Effect::Cogging { harmonic, .. } => {
+                let (a, b) = (x[c], x[c + 1]);
+                c += 2;
+                Effect::Cogging {
+                    harmonic,
+                    amp: a.hypot(b),
+                    phase: b.atan2(a),
+                }
+            }
+            Effect::PositionLoad { .. } => {
+                let (a, b) = (x[c], x[c + 1]);
+                c += 2;
+                Effect::PositionLoad {
+                    amp: a.hypot(b),
+                    phase: b.atan2(a),
+                }
+            }
+            _ => {
+                c += 1;
+                Effect::Offset { t0: x[c - 1] }
+            }
+        };
+    }
+}
