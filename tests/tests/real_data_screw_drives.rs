@@ -26,7 +26,7 @@ fn stribeck_where_the_authors_have_it_and_not_on_drive_2() {
     assert!(!d2.selection.has(Term::Stribeck));
     for o in &d2.one_sided {
         assert!(
-            o.p.map_or(true, |p| p > 0.01),
+            o.p.is_none_or(|p| p > 0.01),
             "drive 2, direction {}: p = {:?}",
             o.sign,
             o.p

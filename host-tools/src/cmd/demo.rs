@@ -308,7 +308,7 @@ mod tests {
             let h = hidden_effects(&args(&[], false, seed)).unwrap();
             assert_eq!(h.len(), 1);
             assert_eq!(h[0].kind, DEFAULT_EFFECT);
-            assert_eq!(h[0], EffectSpec::parse(DEFAULT_EFFECT.name()).unwrap());
+            assert_eq!(h[0].get("amp"), EffectSpec::bare(DEFAULT_EFFECT).get("amp"));
         }
     }
 

@@ -197,6 +197,34 @@ fn guard_added_effects(req: &FitRequest, with: Model) -> Result<Model> {
             .filter(|p| !p.name.contains('.'))
             .cloned()
             .collect();
+        // The electrical regression re-estimates the motor constants (and rescales the
+        // mechanical ones with K_t): show the values the model now has.
+        for p in &mut params {
+            use free_params::Slot;
+            let slot = match p.name.as_str() {
+                "R" => Some(Slot::R),
+                "L" => Some(Slot::L),
+                "Kb" => Some(Slot::Kb),
+                "J" => Some(Slot::J),
+                "b" => Some(Slot::Viscous),
+                "alpha0" => Some(Slot::Lugre("alpha0")),
+                "alpha1" => Some(Slot::Lugre("alpha1")),
+                "alpha2" => Some(Slot::Lugre("alpha2")),
+                "sigma0" => Some(Slot::Lugre("sigma0")),
+                "sigma1" => Some(Slot::Lugre("sigma1")),
+                _ => None,
+            };
+            let v = match (slot, p.name.as_str()) {
+                (Some(sl), _) => sl.get(&m),
+                (None, "Kt") => m.motor.kt,
+                _ => continue,
+            };
+            if (v - p.value).abs() > 1e-9 * p.value.abs() {
+                p.value = v;
+                p.std_err = None;
+                p.note = "re-estimated by weak form jointly with the added effects".into();
+            }
+        }
         for mut p in with_params.iter().cloned() {
             if let Some((name, key)) = p.name.split_once('.') {
                 if let Some(e) = m.effects.iter().find(|e| e.kind().name() == name) {
@@ -204,6 +232,7 @@ fn guard_added_effects(req: &FitRequest, with: Model) -> Result<Model> {
                 }
                 if key != "harmonic" {
                     p.std_err = None;
+                    p.identifiable = true;
                     p.note = "weak form on the fitted model's residual".into();
                 }
             }
@@ -228,7 +257,10 @@ fn guard_added_effects(req: &FitRequest, with: Model) -> Result<Model> {
     if let Ok(mut base) = fit_kind(&base_req) {
         let cand = residual_candidate(&base);
         let s = validation_score(&cand, req.validate);
-        if s > best.0 && residual_best.as_ref().map_or(true, |(r, _)| s > *r) {
+        if std::env::var_os("MOTORID_DEBUG").is_some() {
+            eprintln!("guard: with {score_with:.2}, residual estimate on the base fit {s:.2}");
+        }
+        if s > best.0 && residual_best.as_ref().is_none_or(|(r, _)| s > *r) {
             residual_best = Some((s, cand));
         }
         base.effects = sim_error::scale_effect_magnitudes(&with, 0.0).effects;
