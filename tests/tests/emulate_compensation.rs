@@ -1,26 +1,7 @@
 //! `motorid emulate`: the compensation experiment on the emulated board.
 use tests::motorid;
 
-const LUGRE: &str = r#"
-kind = "lugre"
-plant = "voltage"
-sample_period = 0.012
-
-[motor]
-r = 0.2162
-l = 0.0003
-kt = 0.07126
-kb = 0.07126
-j = 0.0003
-
-[lugre]
-alpha0 = 0.08
-alpha1 = 0.0175
-alpha2 = 0.0016
-v0 = 3.676
-sigma0 = 317.225
-sigma1 = 22.2464
-"#;
+const LUGRE: &str = tests::PAPER_LUGRE_MODEL;
 
 fn json(out: &std::process::Output) -> serde_json::Value {
     assert!(
