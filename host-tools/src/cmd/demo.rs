@@ -14,18 +14,10 @@ use control::effects::EffectKind;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::PathBuf;
 
-/// Effects the demo hides when none is given: those a LuGre model lacks (its own friction
-/// law already has coulomb, viscous, stribeck and presliding).
-pub const RANDOM_EFFECTS: [EffectKind; 8] = [
-    EffectKind::Cogging,
-    EffectKind::PositionLoad,
-    EffectKind::Offset,
-    EffectKind::Asymmetry,
-    EffectKind::Deadtime,
-    EffectKind::CurrentOffset,
-    EffectKind::Thermal,
-    EffectKind::LoadFriction,
-];
+/// Effects the demo may hide (`--random`): those a LuGre model lacks, i.e. every effect after
+/// the four of its own friction law (coulomb, viscous, stribeck, presliding) in the contract's
+/// order.
+pub const RANDOM_EFFECTS: &[EffectKind] = EffectKind::ALL.split_at(4).1;
 
 /// Effect the demo hides when neither `--effect` nor `--random` is given: a constant load
 /// torque (`offset`, 0.03 N·m, a third of the motor's Coulomb friction). Chosen because the
