@@ -149,8 +149,12 @@ fn lugre_fit_recovers_the_static_curve_and_validates_like_the_truth() {
     );
 }
 
+/// Issue 3's "must show" for SINDYc: fitted on signal a alone (the one-by-one thresholding
+/// and the simulation-error refinement judged on a), its validation fit on signal b through
+/// the sensor chain is within 3 points of the emulator's own model scored by the same
+/// function, and the linear model is clearly below. (Measured when written: truth 99.5,
+/// SINDYc 97.8, linear 89.7 on `paper-table`'s signals.)
 #[test]
-#[ignore = "SINDYc validation fit is 88 vs the truth's 99.6 on b (23:20 build): un-ignore when the SINDYc fit reaches it"]
 fn sindyc_fit_validates_like_the_truth() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
@@ -160,11 +164,23 @@ fn sindyc_fit_validates_like_the_truth() {
         d,
         &["fit", "--model", "sindyc", "-o", "sindyc.toml", "a.csv"],
     );
+    run_ok(
+        d,
+        &["fit", "--model", "linear", "-o", "linear.toml", "a.csv"],
+    );
     let truth = xdot_sensor(d, "truth.toml", "b.csv");
     let sindyc = xdot_sensor(d, "sindyc.toml", "b.csv");
-    eprintln!("validation on b, fit_sensor xdot: truth {truth:.2}, sindyc {sindyc:.2}");
+    let linear = xdot_sensor(d, "linear.toml", "b.csv");
+    eprintln!(
+        "validation on b, fit_sensor xdot: truth {truth:.2}, sindyc {sindyc:.2}, linear {linear:.2}"
+    );
+    assert!(truth > 90.0, "the emulator's own model scores only {truth}");
     assert!(
-        (sindyc - truth).abs() < 5.0,
+        (sindyc - truth).abs() < 3.0,
         "sindyc {sindyc} vs truth {truth}"
+    );
+    assert!(
+        linear < sindyc - 3.0,
+        "linear {linear} is not clearly below sindyc {sindyc}"
     );
 }

@@ -8,6 +8,19 @@
 //!
 //! The bump is `φ(s) = (1 − s²)⁴` on `s ∈ [−1, 1]`, `s = (t − t_c)/T`: its value and first two
 //! derivatives vanish at `s = ±1`, which is what the integrations by parts need.
+//!
+//! # Discrete integration by parts
+//! The derivative weights are the bump's central differences, not its sampled analytic
+//! derivatives: `Σφ_k·(x_{k+1} − x_{k−1})/2 = −Σ x_k·(φ_{k+1} − φ_{k−1})/2` and
+//! `Σφ_k·(x_{k+1} − 2x_k + x_{k−1}) = Σ x_k·(φ_{k+1} − 2φ_k + φ_{k−1})` hold *exactly* for a
+//! sequence φ that vanishes at the window's ends. So the weak derivatives annihilate constants
+//! (and the second one linear ramps) to the last bit. The sampled analytic φ'' does not: on 17
+//! points its weights sum to −0.35/s² of `∫φ`, so `J·∫φ''θ` leaked `1.0e-4 N·m` per radian of
+//! *absolute* angle into the torque equation: a systematic residual of ~0.005 N·m on a log
+//! whose angle drifts by tens of radians (measured with `examples/weakform_truth.rs`), which
+//! `diagnose` then offered to `offset`, `asymmetry` and `load_friction`. The central
+//! differences cost nothing in accuracy at these rates: their relative error on a 1 Hz
+//! signal is `(2π·1 Hz·12 ms)²/12 ≈ 5e-4`.
 
 /// Default half-width of a window in samples: 8 × 12 ms ≈ 0.1 s, short against the
 /// excitations (≤ 1 Hz) and long against the Hall quantisation (one step per 12 ms at 8 rad/s).
@@ -21,7 +34,8 @@ pub struct WeakForm {
     /// Sample index of each window centre.
     pub centres: Vec<usize>,
     half: usize,
-    /// `φ`, `φ'`, `φ''` at offsets `−half..=half`, times `dt` (quadrature weights).
+    /// `φ` and its central first and second differences (standing for `φ'`, `φ''`) at
+    /// offsets `−half..=half`, times `dt` (quadrature weights).
     w0: Vec<f64>,
     w1: Vec<f64>,
     w2: Vec<f64>,
@@ -31,17 +45,26 @@ impl WeakForm {
     /// Windows of half-width `half` samples over `n` samples of period `dt`, one every `stride`.
     pub fn new(n: usize, dt: f64, half: usize, stride: usize) -> WeakForm {
         let half = half.max(2);
-        let big_t = half as f64 * dt;
-        let mut w0 = Vec::with_capacity(2 * half + 1);
-        let mut w1 = Vec::with_capacity(2 * half + 1);
-        let mut w2 = Vec::with_capacity(2 * half + 1);
-        for k in -(half as isize)..=(half as isize) {
-            let s = k as f64 / half as f64;
-            let q = 1.0 - s * s;
-            w0.push(q.powi(4) * dt);
-            w1.push(-8.0 * s * q.powi(3) / big_t * dt);
-            w2.push((-8.0 * q.powi(3) + 48.0 * s * s * q.powi(2)) / (big_t * big_t) * dt);
-        }
+        // φ at offsets −half−1 ..= half+1 (zero at and beyond ±half).
+        let phi: Vec<f64> = (-(half as isize) - 1..=(half as isize) + 1)
+            .map(|k| {
+                let s = k as f64 / half as f64;
+                let q = 1.0 - s * s;
+                if q > 0.0 {
+                    q.powi(4)
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        // Offset k of the window is phi[k + 1]; see the module doc for why differences.
+        let w0: Vec<f64> = (1..=2 * half + 1).map(|j| phi[j] * dt).collect();
+        let w1: Vec<f64> = (1..=2 * half + 1)
+            .map(|j| (phi[j + 1] - phi[j - 1]) / (2.0 * dt) * dt)
+            .collect();
+        let w2: Vec<f64> = (1..=2 * half + 1)
+            .map(|j| (phi[j + 1] - 2.0 * phi[j] + phi[j - 1]) / (dt * dt) * dt)
+            .collect();
         let centres = if n > 2 * half {
             (half..n - half).step_by(stride.max(1)).collect()
         } else {
@@ -172,20 +195,52 @@ mod tests {
         let b = wf.integral(&dx);
         let c = wf.second_derivative(&x);
         let d = wf.integral(&ddx);
-        // The weak second derivative carries a quadrature scale error (17 points for φ''),
-        // the same on every row: a fitted inertia absorbs it. Check that it is a pure scale.
-        let scale = c.iter().zip(&d).map(|(x, y)| x * y).sum::<f64>()
-            / d.iter().map(|y| y * y).sum::<f64>();
-        assert!((scale - 1.0).abs() < 0.3, "scale {scale}");
         for r in 0..wf.rows() {
             assert!(
-                (a[r] - b[r]).abs() < 1e-4 * (1.0 + b[r].abs()),
+                (a[r] - b[r]).abs() < 1e-3 * (1.0 + b[r].abs()),
                 "{} {}",
                 a[r],
                 b[r]
             );
-            let e = (c[r] - scale * d[r]).abs();
-            assert!(e < 1e-3 * (1.0 + d[r].abs()), "{} {}", c[r], d[r]);
+            // No scale error: the weak second derivative matches ∫φ·ẍ to the differences'
+            // (2π·f·dt)²/12 relative error.
+            assert!(
+                (c[r] - d[r]).abs() < 2e-3 * (0.01 + d[r].abs()),
+                "{} {}",
+                c[r],
+                d[r]
+            );
+        }
+    }
+
+    /// The weak derivatives of a constant angle are exactly zero, and of a ramp exactly its
+    /// slope times `∫φ`, whatever the angle's size: an absolute angle of hundreds of radians
+    /// (a drifting log) must not leak into the torque equation.
+    #[test]
+    fn weak_derivatives_annihilate_offsets_and_ramps() {
+        let dt = 0.012;
+        let n = 200;
+        let wf = WeakForm::new(n, dt, 8, 8);
+        let ones = vec![1.0; n];
+        let norm = wf.integral(&ones);
+        for (offset, slope) in [(0.0, 0.0), (300.0, 0.0), (-512.25, 3.5), (1e4, -40.0)] {
+            let x: Vec<f64> = (0..n).map(|k| offset + slope * k as f64 * dt).collect();
+            let d1 = wf.derivative(&x);
+            let d2 = wf.second_derivative(&x);
+            for r in 0..wf.rows() {
+                let tol = 1e-12 * (offset.abs() + slope.abs() * n as f64 * dt + 1.0);
+                assert!(
+                    (d1[r] - slope * norm[r]).abs() < tol,
+                    "{} {}",
+                    d1[r],
+                    slope * norm[r]
+                );
+                assert!(
+                    d2[r].abs() < tol / dt,
+                    "second derivative {} of a ramp",
+                    d2[r]
+                );
+            }
         }
     }
 
@@ -197,5 +252,90 @@ mod tests {
         }
         let m = moving_average(&x, 2);
         assert!((m[10] - x[10]).abs() < 1e-12);
+    }
+
+    fn corr(a: &[f64], b: &[f64]) -> f64 {
+        let n = a.len() as f64;
+        let (ma, mb) = (a.iter().sum::<f64>() / n, b.iter().sum::<f64>() / n);
+        let (mut ab, mut aa, mut bb) = (0.0, 0.0, 0.0);
+        for (x, y) in a.iter().zip(b) {
+            ab += (x - ma) * (y - mb);
+            aa += (x - ma) * (x - ma);
+            bb += (y - mb) * (y - mb);
+        }
+        ab / (aa * bb).sqrt().max(1e-300)
+    }
+
+    /// The torque equation of the emulator's own motor, in weak form on its emulated log
+    /// (Hall angle, measured current, held voltage), with the TRUE constants and the steady
+    /// LuGre curve at the smoothed velocity, on windows where the rotor moves: what is left
+    /// must be small and carry no systematic part an effect could take for itself.
+    /// Before the discrete integration by parts its mean was +0.0047 N·m (6% of α0, as big
+    /// as a hidden `offset`) and it followed the absolute angle (corr 0.8).
+    #[test]
+    fn true_model_leaves_no_systematic_torque_residual() {
+        use crate::emulator::{simulate_signal, EmulatorConfig, SignalKind};
+        let cfg = EmulatorConfig::paper();
+        let (m, lg) = (cfg.motor, cfg.lugre);
+        let log = simulate_signal(&cfg, SignalKind::A, 60.0).unwrap().log;
+        let dt = log.sample_period();
+        let n = log.len();
+        let i = log.i.clone().unwrap();
+        let omega = smoothed_derivative(&log.theta, dt, 4);
+        let wf = WeakForm::new(n, dt, HALF_WIDTH, HALF_WIDTH);
+        let q = m.kt / m.r;
+        let (u, w, di) = (
+            wf.integral_zoh(&log.u),
+            wf.derivative(&log.theta),
+            wf.derivative(&i),
+        );
+        let acc = wf.second_derivative(&log.theta);
+        let fric = wf.integral(
+            &omega
+                .iter()
+                .map(|v| lg.steady_friction(*v))
+                .collect::<Vec<_>>(),
+        );
+        let norm = wf.integral(&vec![1.0; n]);
+        let sgn: Vec<f64> = omega.iter().map(|v| v.signum()).collect();
+        let regs = [
+            ("sgn(ω)", wf.integral(&sgn)),
+            ("ω", wf.integral(&omega)),
+            (
+                "|K_t·I|·sgn(ω)",
+                wf.integral(
+                    &i.iter()
+                        .zip(&sgn)
+                        .map(|(c, s)| (m.kt * c).abs() * s)
+                        .collect::<Vec<_>>(),
+                ),
+            ),
+            ("θ", wf.integral(&log.theta)),
+        ];
+        let rows: Vec<usize> = (0..wf.rows())
+            .filter(|&r| {
+                let c = wf.centres[r];
+                omega[c - HALF_WIDTH..=c + HALF_WIDTH]
+                    .iter()
+                    .all(|v| v.abs() >= 1.0)
+            })
+            .collect();
+        assert!(rows.len() > 200, "only {} moving windows", rows.len());
+        let res: Vec<f64> = rows
+            .iter()
+            .map(|&r| (q * (u[r] - m.kb * w[r] - m.l * di[r]) - m.j * acc[r] - fric[r]) / norm[r])
+            .collect();
+        let nr = res.len() as f64;
+        let mean = res.iter().sum::<f64>() / nr;
+        let rms = (res.iter().map(|v| v * v).sum::<f64>() / nr).sqrt();
+        // Scale: the Coulomb friction α0 = 0.08 N·m. The rest is Hall quantisation noise in
+        // the back-EMF and inertia terms (≈0.005 N·m rms on 0.19 s windows), zero-mean.
+        assert!(mean.abs() < 0.01 * lg.alpha0, "mean residual {mean} N·m");
+        assert!(rms < 0.1 * lg.alpha0, "rms residual {rms} N·m");
+        for (name, g) in &regs {
+            let g: Vec<f64> = rows.iter().map(|&r| g[r] / norm[r]).collect();
+            let c = corr(&res, &g);
+            assert!(c.abs() < 0.2, "residual correlates with {name}: {c}");
+        }
     }
 }

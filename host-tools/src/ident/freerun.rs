@@ -229,17 +229,73 @@ pub fn simulate_with(model: &Model, log: &MotorLog, substeps: usize) -> Result<P
     if model.kind == ModelKind::Sindyc {
         return super::sindyc_simulate(model, log);
     }
-    let n = log.len();
-    if n == 0 {
+    if log.is_empty() {
         bail!("{}: the log has no samples", log.source.display());
     }
+    simulate_range(model, log, 0, log.len(), substeps)
+}
+
+/// Velocity at sample `k` from the data alone: the `omega` column, else the slope of θ over
+/// ±5 samples (the first samples: over the next 10, as [`initial_omega`]).
+fn omega_at(log: &MotorLog, k: usize) -> f64 {
+    if let Some(w) = &log.omega {
+        return w[k];
+    }
+    if k == 0 {
+        return initial_omega(log);
+    }
+    let a = k.saturating_sub(5);
+    let b = (k + 5).min(log.len() - 1);
+    if b > a {
+        (log.theta[b] - log.theta[a]) / (log.t[b] - log.t[a])
+    } else {
+        0.0
+    }
+}
+
+/// The heat state of the model's thermal effects at sample `k`, from the measured current
+/// (the winding heats with the current it carries, whatever the model predicts).
+fn heat_at(model: &Model, log: &MotorLog, k: usize) -> f64 {
+    let offset = effects::total_sensor_offset(&model.effects);
+    let mut h = 0.0;
+    if !model
+        .effects
+        .iter()
+        .any(|e| matches!(e, effects::Effect::Thermal { .. }))
+    {
+        return h;
+    }
+    let Some(i) = &log.i else { return h };
+    for j in 0..k {
+        for e in &model.effects {
+            h = e.heat_step(h, i[j] - offset, log.t[j + 1] - log.t[j]);
+        }
+    }
+    h
+}
+
+/// Simulation of samples `start..end` of `log` from the measured state at `start` (angle,
+/// velocity, current, the heat the measured current has put into the winding): one
+/// segment of a multiple-shooting fit. `start = 0, end = len` is the free run.
+pub fn simulate_range(
+    model: &Model,
+    log: &MotorLog,
+    start: usize,
+    end: usize,
+    substeps: usize,
+) -> Result<Prediction> {
+    let end = end.min(log.len());
+    if start >= end {
+        bail!("{}: empty sample range {start}..{end}", log.source.display());
+    }
+    let n = end - start;
     let dyn_ = Dynamics { model };
     let offset = effects::total_sensor_offset(&model.effects);
-    let omega0 = initial_omega(log);
+    let omega0 = omega_at(log, start);
     let i0 = match (model.plant, &log.i) {
-        (Plant::Voltage, Some(i)) => i[0] - offset,
+        (Plant::Voltage, Some(i)) => i[start] - offset,
         (Plant::Voltage, None) => 0.0,
-        (Plant::Torque, _) => log.u[0],
+        (Plant::Torque, _) => log.u[start],
     };
     let z0 = match (&model.lugre, model.kind) {
         // Sliding: the bristles sit on the Stribeck curve; at rest: no deflection known.
@@ -248,11 +304,11 @@ pub fn simulate_with(model: &Model, log: &MotorLog, substeps: usize) -> Result<P
         }
         _ => 0.0,
     };
-    let mut x = [log.theta[0], omega0, i0, z0];
-    let mut h = 0.0;
+    let mut x = [log.theta[start], omega0, i0, z0];
+    let mut h = heat_at(model, log, start);
     let mut w_prev = omega0;
     let mut out = Prediction {
-        t: log.t.clone(),
+        t: log.t[start..end].to_vec(),
         theta: Vec::with_capacity(n),
         omega: Vec::with_capacity(n),
         i: (model.plant == Plant::Voltage).then(|| Vec::with_capacity(n)),
@@ -271,6 +327,7 @@ pub fn simulate_with(model: &Model, log: &MotorLog, substeps: usize) -> Result<P
         if k + 1 == n {
             break;
         }
+        let k = start + k;
         let u = log.u[k];
         if model.plant == Plant::Torque {
             x[2] = u;

@@ -36,7 +36,18 @@ struct Target<'a> {
 pub struct Residuals<'a> {
     targets: Vec<Target<'a>>,
     window: usize,
+    /// Multiple shooting: segment length [samples], each segment simulated from the measured
+    /// state at its start; `None`: one free run per log.
+    segment: Option<usize>,
 }
+
+/// Segment length of the multiple-shooting residual [s]. A free run's angle drifts by the
+/// integral of every velocity error, and a position-dependent torque (cogging, an
+/// unbalanced load) evaluated at a drifted angle is noise: the cost then has a local minimum
+/// per period of the effect. Restarting from the measured angle every 2 s keeps the drift
+/// well below a cogging period (2π/7 ≈ 0.9 rad) while a segment still spans many mechanical
+/// time constants (J·R/(K_t·K_b) ≈ 13 ms) and Hall steps.
+pub const SEGMENT_S: f64 = 2.0;
 
 impl<'a> Residuals<'a> {
     pub fn new(logs: &'a [MotorLog], window: usize) -> Residuals<'a> {
@@ -53,11 +64,26 @@ impl<'a> Residuals<'a> {
                 }
             })
             .collect();
-        Residuals { targets, window }
+        Residuals {
+            targets,
+            window,
+            segment: None,
+        }
+    }
+
+    /// Multiple-shooting residuals: segments of [`SEGMENT_S`] seconds.
+    pub fn segmented(logs: &'a [MotorLog], window: usize) -> Residuals<'a> {
+        let mut r = Residuals::new(logs, window);
+        let dt = logs.first().map(|l| l.sample_period()).unwrap_or(0.012);
+        r.segment = Some(((SEGMENT_S / dt.max(1e-6)).round() as usize).max(4 * window.max(1)));
+        r
     }
 
     /// Residuals of a model (errors if its simulation diverges).
     pub fn eval(&self, model: &Model) -> Result<Vec<f64>> {
+        if let Some(seg) = self.segment {
+            return self.eval_segmented(model, seg);
+        }
         let mut r = Vec::new();
         for tg in &self.targets {
             let p = freerun::simulate(model, tg.log)?;
@@ -72,6 +98,48 @@ impl<'a> Residuals<'a> {
                     .zip(&tg.log.theta)
                     .map(|(a, b)| ANGLE_WEIGHT * (a - b) / tg.s_theta),
             );
+        }
+        Ok(r)
+    }
+}
+
+impl Residuals<'_> {
+    /// Segments start every `seg` samples; each is simulated from `window` samples before
+    /// its start (so that the velocity estimator has its history) and scored on its own
+    /// samples only.
+    fn eval_segmented(&self, model: &Model, seg: usize) -> Result<Vec<f64>> {
+        let mut r = Vec::new();
+        for tg in &self.targets {
+            let n = tg.log.len();
+            let mut s = 0;
+            while s < n {
+                let e = (s + seg).min(n);
+                let a = s.saturating_sub(self.window);
+                let p = freerun::simulate_range(model, tg.log, a, e, freerun::SUBSTEPS)?;
+                let w = sensor_chain::velocity_estimate(&p.t, &p.theta, self.window);
+                let off = s - a;
+                r.extend(
+                    w[off..]
+                        .iter()
+                        .zip(&tg.omega[s..e])
+                        .map(|(a, b)| (a - b) / tg.s_omega),
+                );
+                if let (Some(im), Some(ip)) = (&tg.log.i, &p.i) {
+                    r.extend(
+                        im[s..e]
+                            .iter()
+                            .zip(&ip[off..])
+                            .map(|(a, b)| (b - a) / tg.s_i),
+                    );
+                }
+                r.extend(
+                    p.theta[off..]
+                        .iter()
+                        .zip(&tg.log.theta[s..e])
+                        .map(|(a, b)| ANGLE_WEIGHT * (a - b) / tg.s_theta),
+                );
+                s = e;
+            }
         }
         Ok(r)
     }
@@ -111,18 +179,17 @@ pub fn scale_effect_magnitudes(model: &Model, f: f64) -> Model {
 }
 
 /// Line search along the weak-form estimate of the effects: start from the magnitude factor
-/// (0, ¼, ½, ¾, 1, 1¼) with the lowest simulation error. The weak form gets phases right but
-/// its magnitudes can be off (Hall quantisation of θ inside sin(hθ)), and a free run with a
-/// wrong position-dependent torque drifts; factor 0 ("without the effect") is a candidate,
-/// so adding an effect never starts worse than not adding it.
-pub fn better_effect_start(model: &mut Model, logs: &[MotorLog]) {
+/// (0, ¼, ½, ¾, 1, 1¼) with the lowest simulation error on `res`. The weak form gets phases
+/// right but its magnitudes can be off (Hall quantisation of θ inside sin(hθ)); factor 0
+/// ("without the effect") is a candidate, so adding an effect never starts worse than not
+/// adding it.
+pub fn better_effect_start(model: &mut Model, res: &Residuals) {
     if model.effects.is_empty() {
         return;
     }
-    let res = Residuals::new(logs, model.sensor.velocity_window);
     let mut best = (f64::INFINITY, 1.0);
     for f in [0.0, 0.25, 0.5, 0.75, 1.0, 1.25] {
-        let c = cost(&res, &scale_effect_magnitudes(model, f));
+        let c = cost(res, &scale_effect_magnitudes(model, f));
         if std::env::var_os("MOTORID_DEBUG_IDENT").is_some() {
             eprintln!("effects {:?} x {f}: cost {c:.4e}", model.effects);
         }
@@ -133,8 +200,8 @@ pub fn better_effect_start(model: &mut Model, logs: &[MotorLog]) {
     *model = scale_effect_magnitudes(model, best.1);
 }
 
-/// Refine the free parameters of `model` on `logs`. Returns the parameter rows with
-/// standard errors. `progress(iteration, cost)` reports progress.
+/// Refine the free parameters of `model` on `logs` (free-run residuals). Returns the
+/// parameter rows with standard errors. `progress(iteration, cost)` reports progress.
 pub fn refine(
     model: &mut Model,
     free: &[Free],
@@ -143,6 +210,17 @@ pub fn refine(
     progress: &mut dyn FnMut(usize, f64),
 ) -> Result<Vec<Parameter>> {
     let res = Residuals::new(logs, model.sensor.velocity_window);
+    refine_on(model, free, &res, opts, progress)
+}
+
+/// [`refine`] on given residuals (free run or multiple shooting).
+pub fn refine_on(
+    model: &mut Model,
+    free: &[Free],
+    res: &Residuals,
+    opts: nlsq::Options,
+    progress: &mut dyn FnMut(usize, f64),
+) -> Result<Vec<Parameter>> {
     let x0: Vec<f64> = free.iter().map(|f| f.slot.get(model)).collect();
     let lo: Vec<f64> = free.iter().map(|f| f.lo).collect();
     let hi: Vec<f64> = free.iter().map(|f| f.hi).collect();
@@ -168,10 +246,11 @@ pub fn refine(
 }
 
 /// Refine in two stages when the model has effects: first the base model (effects at zero
-/// magnitude) on `base_free`, then the effects from their weak-form estimate (line search
-/// along it, [`better_effect_start`]) with everything free. A position-dependent torque
-/// that is slightly wrong makes a free run stick or drift, so the base model must be right
-/// before the effects are searched.
+/// magnitude) on `base_free` in free run, then everything together with the effects started
+/// from their weak-form estimate (line search along it, [`better_effect_start`]) on the
+/// multiple-shooting residual ([`Residuals::segmented`]): a base model fitted without a
+/// position-dependent torque drifts in angle, and in free run the effect's phase then has a
+/// local minimum per period.
 pub fn refine_with_effects(
     model: &mut Model,
     base_free: &[Free],
@@ -185,10 +264,11 @@ pub fn refine_with_effects(
     let mut base = scale_effect_magnitudes(model, 0.0);
     refine(&mut base, base_free, logs, opts, &mut |_, _| {})?;
     base.effects = weak;
-    better_effect_start(&mut base, logs);
+    let seg = Residuals::segmented(logs, model.sensor.velocity_window);
+    better_effect_start(&mut base, &seg);
     let mut free = base_free.to_vec();
     free.extend(super::linear::effect_free(&base));
-    let rows = refine(&mut base, &free, logs, opts, &mut |_, _| {})?;
+    let rows = refine_on(&mut base, &free, &seg, opts, &mut |_, _| {})?;
     *model = base;
     Ok(rows)
 }

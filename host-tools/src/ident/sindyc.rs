@@ -14,18 +14,34 @@
 //!    on all fitting logs, scaled to unit RMS (the paper normalises `z` too; its scale is
 //!    arbitrary and absorbed by the coefficients). Every STLSQ start is also tried without
 //!    the z terms: on emulated LuGre data the extracted z is nearly uncorrelated with the
-//!    bristle state (see the test `hankel_state_on_lugre_data`) and the z-free model wins.
+//!    bristle state (r ≈ 0.05, see the test `hankel_state_on_lugre_data`: the LuGre z is
+//!    almost a static function of ẋ, so it lives in the high-energy part the paper's method
+//!    discards) and the z-free model wins (`paper-table`, signal a: STLSQ with z 96.7–96.8 %,
+//!    without z 97.4 %, refined without z 98.3 %). The paper's method stays the default and
+//!    is reported as measured; the z terms only enter a model when they predict better.
 //! 3. **Weak form.** No derivative of quantised data is taken: each equation is multiplied
 //!    by the hub's smooth test functions ([`super::weak_form`], 40-sample windows, hop 20)
 //!    and integrated by parts: `∫φ·dẋ/dt = ∫φ''·x`, `∫φ·dz/dt = −∫φ'·z`,
 //!    `∫φ·dI/dt = −∫φ'·I`; the library columns become `∫φ·θ_j`.
+//!    Uniformly sampled logs take a fast path ([`weak_rows_uniform`]: each library value
+//!    computed once, windows assembled from hop-long segments).
 //! 4. **STLSQ** on the normal equations of those rows for several thresholds; the start is
-//!    the candidate with the best validation fit that does not diverge.
+//!    the candidate with the best validation fit that does not diverge. The validation fit
+//!    is [`validation_fit`]: the free run's angle through the board's sensor chain (Hall
+//!    quantisation, moving-average velocity), against the measured velocity, as `compare`'s
+//!    `fit_sensor`.
 //! 5. **One-by-one thresholding** (the paper's): try removing terms from the smallest
 //!    contribution up, refitting that equation on its support and simulating the validation
 //!    logs in free run; keep the first removal whose validation fit on `ẋ` stays within
 //!    `tolerance` points of the best seen; stop when no removal qualifies. Every step is a
 //!    row of the Pareto table (number of terms vs validation fit).
+//! 6. **Refinement on the simulation error** (as the LuGre model's dynamic step): the
+//!    nonzero coefficients and the tanh gain `a` of the thresholded model, and of the STLSQ
+//!    start, are refined by bounded Levenberg–Marquardt ([`super::nlsq`]) on the free-run
+//!    error of the fitting logs (velocity, current, angle); a refined model replaces the
+//!    result only if its validation fit is higher. Effect on the emulated paper motor
+//!    (`paper-table`, fitted on a, fit_sensor x/ẋ on b): 91.6/96.1 % before, 97.4/97.9 %
+//!    after; the emulator's own model scores 99.98/99.53 %, LuGre 99.75/98.17 %.
 //!
 //! # Free run
 //! States `(x, ẋ, z, I)`, `u` held between samples. Steps are exponential Rosenbrock–Euler
@@ -37,7 +53,7 @@ use super::freerun::{self, Prediction};
 use super::hankel::{HankelEmbedding, Selection, DEFAULT_DELAYS, DEFAULT_ENERGY};
 use super::library::{Library, Signals, ACCEL, EQUATION_NAMES, IDOT, ZDOT};
 use super::stlsq::{Normal, StlsqOptions};
-use super::{fitpct, sensor_chain, weak_form};
+use super::{fitpct, nlsq, sensor_chain, weak_form};
 use crate::effect_spec::EffectSpec;
 use crate::log::{MotorLog, Plant};
 use anyhow::{anyhow, bail, Context, Result};
@@ -174,7 +190,112 @@ pub fn correlation(a: &[f64], b: &[f64]) -> f64 {
 /// The regression rows of the weak form for one log: library integrals `∫φ·θ_j`
 /// (`rows × p`), targets (`rows × 3`: `∫φ·dẋ/dt`, `∫φ·dz/dt`, `∫φ·u`) and the column
 /// `∫φ·dI/dt` (`rows × 1`, zero without a current) of the current equation's inverse form.
+///
+/// Uniformly sampled logs (every log the board or the emulator writes) take the fast path
+/// [`weak_rows_uniform`]; others the window-by-window [`weak_rows_generic`]. Both give the
+/// same rows (to rounding; a test checks 1e-10 relative).
 pub fn weak_rows(lib: &Library, t: &[f64], s: &Signals) -> (Mat<f64>, Mat<f64>, Mat<f64>) {
+    if is_uniform(t) && weak_form::WINDOW % weak_form::HOP == 0 {
+        weak_rows_uniform(lib, t, s)
+    } else {
+        weak_rows_generic(lib, t, s)
+    }
+}
+
+/// True when the sample period is constant (to 1e-9 relative).
+fn is_uniform(t: &[f64]) -> bool {
+    if t.len() < 2 {
+        return false;
+    }
+    let h = t[1] - t[0];
+    h > 0.0 && t.windows(2).all(|w| ((w[1] - w[0]) - h).abs() <= 1e-9 * h)
+}
+
+/// [`weak_rows`] for a uniformly sampled log. With a constant sample period every window
+/// has the same test-function weights, and a window of `WINDOW = q·HOP` samples is `q`
+/// consecutive hop-long segments. So each library column is evaluated once per sample (not
+/// once per window it belongs to, twice at half overlap), blockwise into a cache-sized
+/// buffer, and each segment's `q` partial integrals (one per piece of the test function) are
+/// computed once; a window's integral is the sum of its segments' pieces.
+pub fn weak_rows_uniform(lib: &Library, t: &[f64], s: &Signals) -> (Mat<f64>, Mat<f64>, Mat<f64>) {
+    const LEN: usize = weak_form::WINDOW;
+    const HOP: usize = weak_form::HOP;
+    const Q: usize = LEN / HOP;
+    let n = s.len().min(t.len());
+    let p = lib.len();
+    if n < LEN {
+        return (Mat::zeros(0, p), Mat::zeros(0, 3), Mat::zeros(0, 1));
+    }
+    let rows = (n - LEN) / HOP + 1;
+    // Segments used by the windows: rows + Q − 1.
+    let segs = rows + Q - 1;
+    // The kernels of the first window (all windows share them): φ·w, φ'·w, φ''·w.
+    let w0 = &weak_form::windows(&t[..LEN], LEN, HOP)[0];
+    let kern = |f: &[f64]| -> Vec<f64> { f.iter().zip(&w0.w).map(|(a, b)| a * b).collect() };
+    let (k0, k1, k2) = (kern(&w0.phi), kern(&w0.dphi), kern(&w0.ddphi));
+    // Partial integrals of one signal: part[g·Q + q] = Σ_i k[q·HOP + i]·v[g·HOP + i].
+    let pieces = |k: &[f64], v: &[f64], out: &mut [f64]| {
+        for (g, chunk) in v.chunks_exact(HOP).enumerate() {
+            for q in 0..Q {
+                out[g * Q + q] = k[q * HOP..(q + 1) * HOP]
+                    .iter()
+                    .zip(chunk)
+                    .map(|(a, b)| a * b)
+                    .sum();
+            }
+        }
+    };
+    // A window's integral from the pieces of its Q segments.
+    let assemble = |part: &[f64], r: usize| -> f64 { (0..Q).map(|q| part[(r + q) * Q + q]).sum() };
+
+    let mut a = Mat::<f64>::zeros(rows, p);
+    // Library, blockwise: BLOCK samples = whole segments, about 0.5 MB of 17 columns.
+    const BLOCK_SEGS: usize = 200;
+    let mut buf = Mat::<f64>::zeros(BLOCK_SEGS * HOP, p);
+    let mut part = vec![0.0; segs * Q];
+    let mut col_parts: Vec<Vec<f64>> = vec![vec![0.0; segs * Q]; p];
+    let mut g0 = 0;
+    while g0 < segs {
+        let g1 = (g0 + BLOCK_SEGS).min(segs);
+        let (start, end) = (g0 * HOP, g1 * HOP);
+        lib.matrix_into(&s.slice(start, end), &mut buf);
+        for (j, cp) in col_parts.iter_mut().enumerate() {
+            let col = &buf.col_as_slice(j)[..end - start];
+            pieces(&k0, col, &mut cp[g0 * Q..g1 * Q]);
+        }
+        g0 = g1;
+    }
+    for (j, cp) in col_parts.iter().enumerate() {
+        for r in 0..rows {
+            a[(r, j)] = assemble(cp, r);
+        }
+    }
+    let mut y = Mat::<f64>::zeros(rows, 3);
+    let end = segs * HOP;
+    pieces(&k2, &s.x[..end], &mut part);
+    for r in 0..rows {
+        y[(r, ACCEL)] = assemble(&part, r);
+    }
+    pieces(&k1, &s.z[..end], &mut part);
+    for r in 0..rows {
+        y[(r, ZDOT)] = -assemble(&part, r);
+    }
+    pieces(&k0, &s.u[..end], &mut part);
+    for r in 0..rows {
+        y[(r, IDOT)] = assemble(&part, r);
+    }
+    let mut d = Mat::<f64>::zeros(rows, 1);
+    if let Some(i) = s.i {
+        pieces(&k1, &i[..end], &mut part);
+        for r in 0..rows {
+            d[(r, 0)] = -assemble(&part, r);
+        }
+    }
+    (a, y, d)
+}
+
+/// [`weak_rows`] window by window (any sampling).
+pub fn weak_rows_generic(lib: &Library, t: &[f64], s: &Signals) -> (Mat<f64>, Mat<f64>, Mat<f64>) {
     let wins = weak_form::windows(t, weak_form::WINDOW, weak_form::HOP);
     let p = lib.len();
     // The library is evaluated window by window into a small reused buffer (never the
@@ -326,6 +447,194 @@ fn rosenbrock_step(
     out
 }
 
+/// Mean validation fit on ẋ of a model's free run **through the sensor chain** (the
+/// `fit_sensor` of `compare`: the model's angle Hall-quantised with the log's resolution and
+/// differentiated by the firmware's moving average, against the measured velocity
+/// `omegas[k]` of `logs[k]`); `None` when the model diverges on any log.
+pub fn validation_fit(
+    m: &SindyModel<f64>,
+    plant: Plant,
+    logs: &[MotorLog],
+    omegas: &[Vec<f64>],
+    window: usize,
+    limits: Limits,
+) -> Option<f64> {
+    let mut total = 0.0;
+    for (log, w) in logs.iter().zip(omegas) {
+        let pred = simulate(m, plant, log, limits).ok()?;
+        let res = sensor_chain::hall_resolution(log);
+        let (_, wq) = sensor_chain::through_sensor(&pred.t, &pred.theta, res, window);
+        total += fitpct::fit_percent(w, &wq).ok()?;
+    }
+    Some(total / logs.len().max(1) as f64)
+}
+
+/// Weight of the angle residual of the refinement relative to velocity and current (as the
+/// grey-box refinement's, `sim_error.rs`: the free-run angle integrates every velocity error,
+/// so it only steers the low frequencies).
+const REFINE_ANGLE_WEIGHT: f64 = 0.3;
+/// Weight of the current residual of the refinement relative to velocity. Lower than the
+/// grey-box refinement's 1: the models are judged on x and ẋ, and at 12 ms the current is
+/// quasi-static (it follows `u` within a sample), so at full weight the current's fit pulls
+/// the electrical coefficients against the velocity fit. Measured on the emulated paper
+/// motor (`paper-table`, fitted on signal a, scored on b, fit_sensor x/ẋ): weight 1 gives
+/// 91.6/96.1 (the refinement was rejected), 0.3 gives 97.5/97.9, 0 gives 96.6/97.8.
+const REFINE_CURRENT_WEIGHT: f64 = 0.3;
+/// Iteration limit of the refinement (one Jacobian = one free run per coefficient each).
+const REFINE_ITER: usize = 25;
+/// Range of the tanh gain `a` [s/rad] the refinement may move to: from a soft sign
+/// (0.5 s/rad, step complete at 5 rad/s) to one sharper than a sample of the paper's
+/// velocity resolution can resolve (100 s/rad).
+const REFINE_A_RANGE: (f64, f64) = (0.5, 100.0);
+
+fn spread(v: &[f64]) -> f64 {
+    let n = v.len().max(1) as f64;
+    let mean = v.iter().sum::<f64>() / n;
+    (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n)
+        .sqrt()
+        .max(1e-12)
+}
+
+/// Free-run residuals of a SINDYc model on the fitting logs, defined as the grey-box
+/// refinement's (`sim_error.rs`): velocity (the model's angle through the firmware's moving
+/// average, not quantised so the cost stays smooth in the coefficients), current and angle
+/// (weights [`REFINE_CURRENT_WEIGHT`], [`REFINE_ANGLE_WEIGHT`]), each normalised by the spread of the measured signal.
+struct SimResiduals<'a> {
+    logs: &'a [MotorLog],
+    omega: Vec<Vec<f64>>,
+    spreads: Vec<(f64, f64, f64)>,
+    plant: Plant,
+    window: usize,
+    limits: Limits,
+}
+
+impl<'a> SimResiduals<'a> {
+    fn new(logs: &'a [MotorLog], plant: Plant, window: usize, limits: Limits) -> Self {
+        let omega: Vec<Vec<f64>> = logs
+            .iter()
+            .map(|l| sensor_chain::measured_velocity(l, window))
+            .collect();
+        let spreads = logs
+            .iter()
+            .zip(&omega)
+            .map(|(l, w)| {
+                (
+                    spread(w),
+                    l.i.as_deref().map(spread).unwrap_or(1.0),
+                    spread(&l.theta),
+                )
+            })
+            .collect();
+        SimResiduals {
+            logs,
+            omega,
+            spreads,
+            plant,
+            window,
+            limits,
+        }
+    }
+
+    fn eval(&self, m: &SindyModel<f64>) -> Result<Vec<f64>> {
+        let mut r = Vec::new();
+        for ((log, w), (sw, si, sx)) in self.logs.iter().zip(&self.omega).zip(&self.spreads) {
+            let p = simulate(m, self.plant, log, self.limits)?;
+            let wp = sensor_chain::velocity_estimate(&p.t, &p.theta, self.window);
+            r.extend(wp.iter().zip(w).map(|(a, b)| (a - b) / sw));
+            if let (Some(im), Some(ip)) = (&log.i, &p.i) {
+                r.extend(
+                    ip.iter()
+                        .zip(im)
+                        .map(|(a, b)| REFINE_CURRENT_WEIGHT * (a - b) / si),
+                );
+            }
+            r.extend(
+                p.theta
+                    .iter()
+                    .zip(&log.theta)
+                    .map(|(a, b)| REFINE_ANGLE_WEIGHT * (a - b) / sx),
+            );
+        }
+        Ok(r)
+    }
+}
+
+/// Which numbers of a model the refinement moves: every coefficient (equation, position in
+/// its term list) and, when a term uses it, the tanh gain `a`.
+fn refine_slots(m: &SindyModel<f64>) -> (Vec<(usize, usize)>, bool) {
+    let mut slots = Vec::new();
+    let mut uses_a = false;
+    for (e, eq) in [&m.accel, &m.zdot, &m.idot].into_iter().enumerate() {
+        for (k, (t, _)) in eq.terms.iter().enumerate() {
+            slots.push((e, k));
+            uses_a |= matches!(t, Term::TanhXdot | Term::TanhZ);
+        }
+    }
+    (slots, uses_a)
+}
+
+fn with_values(
+    base: &SindyModel<f64>,
+    slots: &[(usize, usize)],
+    uses_a: bool,
+    x: &[f64],
+) -> SindyModel<f64> {
+    let mut m = base.clone();
+    for (&(e, k), v) in slots.iter().zip(x) {
+        let eq = match e {
+            0 => &mut m.accel,
+            1 => &mut m.zdot,
+            _ => &mut m.idot,
+        };
+        eq.terms[k].1 = *v;
+    }
+    if uses_a {
+        m.a = x[slots.len()];
+    }
+    m
+}
+
+/// Refine the coefficients of a model's sparse structure (and the tanh gain) by bounded
+/// Levenberg–Marquardt ([`super::nlsq`]) on the free-run simulation error of the fitting
+/// logs, as the LuGre model's dynamic step does. The weak form gets the structure and a
+/// start; the simulation error then corrects what the weak form cannot see (the lag of a
+/// quasi-static current, the bias of the sign-like terms on Hall-quantised data). Each
+/// coefficient may move within ±10 times its magnitude around the start (so it can change
+/// sign but cannot run off); a trial that diverges is rejected like one that raises the
+/// cost. Errors when the start itself diverges on the fitting logs.
+fn refine_model(
+    m: &SindyModel<f64>,
+    res: &SimResiduals,
+    max_iter: usize,
+) -> Result<SindyModel<f64>> {
+    let (slots, uses_a) = refine_slots(m);
+    let eqs = [&m.accel, &m.zdot, &m.idot];
+    let mut x0: Vec<f64> = slots.iter().map(|&(e, k)| eqs[e].terms[k].1).collect();
+    let mut lo: Vec<f64> = x0.iter().map(|c| c - 10.0 * c.abs()).collect();
+    let mut hi: Vec<f64> = x0.iter().map(|c| c + 10.0 * c.abs()).collect();
+    let mut scale: Vec<f64> = x0.iter().map(|c| c.abs().max(1e-12)).collect();
+    if uses_a {
+        x0.push(m.a.clamp(REFINE_A_RANGE.0, REFINE_A_RANGE.1));
+        lo.push(REFINE_A_RANGE.0);
+        hi.push(REFINE_A_RANGE.1);
+        scale.push(m.a.abs().max(1.0));
+    }
+    if x0.is_empty() {
+        return Ok(m.clone());
+    }
+    let mut f = |x: &[f64]| res.eval(&with_values(m, &slots, uses_a, x));
+    let opts = nlsq::Options {
+        max_iter,
+        ..nlsq::Options::default()
+    };
+    let sol = nlsq::solve(&mut f, &x0, &lo, &hi, &scale, opts, &mut |it, cost| {
+        if std::env::var_os("MOTORID_DEBUG").is_some() {
+            eprintln!("SINDYc refinement: iteration {it}, cost {cost:.6e}");
+        }
+    })?;
+    Ok(with_values(m, &slots, uses_a, &sol.x))
+}
+
 /// Prepared signals of one log.
 struct Prepared {
     xdot: Vec<f64>,
@@ -357,6 +666,8 @@ struct Search<'a> {
     plant: Plant,
     val: &'a [MotorLog],
     val_omega: Vec<Vec<f64>>,
+    /// Velocity-estimator window of the sensor chain.
+    window: usize,
     limits: Limits,
     z_max: f64,
     sims: usize,
@@ -420,14 +731,21 @@ impl Search<'_> {
 
     /// Mean validation fit on ẋ, None when the model diverges on any log.
     fn score(&mut self, c: &Candidate) -> Option<f64> {
-        self.sims += 1;
         let m = self.model(c);
-        let mut total = 0.0;
-        for (log, w) in self.val.iter().zip(&self.val_omega) {
-            let pred = simulate(&m, self.plant, log, self.limits).ok()?;
-            total += fitpct::fit_percent(w, &pred.omega).ok()?;
-        }
-        Some(total / self.val.len() as f64)
+        self.score_model(&m)
+    }
+
+    /// [`Search::score`] of a model.
+    fn score_model(&mut self, m: &SindyModel<f64>) -> Option<f64> {
+        self.sims += 1;
+        validation_fit(
+            m,
+            self.plant,
+            self.val,
+            &self.val_omega,
+            self.window,
+            self.limits,
+        )
     }
 
     /// Remove term `j` from equation `e` and refit that equation.
@@ -590,6 +908,7 @@ pub fn identify(
         plant: opts.plant,
         val,
         val_omega,
+        window: opts.velocity_window,
         limits: Limits {
             omega: 10.0 * wmax + 10.0,
             current: 10.0 * imax + 10.0,
@@ -687,6 +1006,7 @@ pub fn identify(
         }
     }
     let (mut cur, mut cur_fit) = best.expect("the ladder is not empty");
+    let start = cur.clone();
     if let Some(row) = pareto
         .iter_mut()
         .find(|r| r.fit == cur_fit && r.terms == cur.terms())
@@ -773,7 +1093,32 @@ pub fn identify(
              try more data, other --add effects, or the lugre model"
         );
     };
-    let model = search.model(&cur);
+    // 6: refinement on the simulation error of the fitting logs, from the thresholded model
+    // and from the STLSQ start (more terms, more freedom); kept only when the validation
+    // fit improves, so it can never make the result worse.
+    let mut model = search.model(&cur);
+    let mut validation_fit = validation_fit;
+    let res = SimResiduals::new(fit_logs, opts.plant, opts.velocity_window, search.limits);
+    let mut starts = vec![("the thresholded model", model.clone())];
+    if start.terms() != cur.terms() {
+        starts.push(("the STLSQ start", search.model(&start)));
+    }
+    for (name, m0) in starts {
+        let terms = m0.accel.terms.len() + m0.zdot.terms.len() + m0.idot.terms.len();
+        let refined = refine_model(&m0, &res, REFINE_ITER);
+        let fit = refined.as_ref().ok().and_then(|r| search.score_model(r));
+        let better = fit.is_some_and(|f| f > validation_fit);
+        pareto.push(ParetoRow {
+            terms,
+            fit,
+            step: format!("{name} refined on the free-run simulation error"),
+            accepted: better,
+        });
+        if let (true, Ok(r), Some(f)) = (better, refined, fit) {
+            model = r;
+            validation_fit = f;
+        }
+    }
     let equations_text = equations_text(&model, opts.plant);
     let pareto_text = pareto_text(&pareto);
     Ok(SindycResult {
@@ -1010,6 +1355,60 @@ mod tests {
     }
 
     #[test]
+    fn uniform_weak_rows_equal_the_window_by_window_rows() {
+        let a = emulated(SignalKind::A, 3);
+        let v = centred_velocity(&a.t, &a.theta, VELOCITY_HALF);
+        let z: Vec<f64> = v.iter().map(|w| (0.3 * w).sin()).collect();
+        let lib = Library::paper(Plant::Voltage, DEFAULT_A, 1.0);
+        // 17 extra samples: the last partial hop is not part of any window.
+        let n = 1000 + 17;
+        let s = Signals {
+            x: &a.theta[..n],
+            xdot: &v[..n],
+            z: &z[..n],
+            i: a.i.as_deref().map(|i| &i[..n]),
+            u: &a.u[..n],
+        };
+        assert!(is_uniform(&a.t[..n]));
+        let fast = weak_rows_uniform(&lib, &a.t[..n], &s);
+        let slow = weak_rows_generic(&lib, &a.t[..n], &s);
+        for (f, g) in [(&fast.0, &slow.0), (&fast.1, &slow.1), (&fast.2, &slow.2)] {
+            assert_eq!((f.nrows(), f.ncols()), (g.nrows(), g.ncols()));
+            for j in 0..g.ncols() {
+                let scale = (0..g.nrows())
+                    .map(|r| g[(r, j)].abs())
+                    .fold(1e-300, f64::max);
+                for r in 0..g.nrows() {
+                    assert!(
+                        (f[(r, j)] - g[(r, j)]).abs() <= 1e-10 * scale,
+                        "row {r} column {j}: {} vs {}",
+                        f[(r, j)],
+                        g[(r, j)]
+                    );
+                }
+            }
+        }
+        // A non-uniform time axis takes the generic path.
+        let mut t = a.t[..n].to_vec();
+        t[500] += 0.003;
+        assert!(!is_uniform(&t));
+    }
+
+    fn truth_model() -> crate::model::Model {
+        use crate::model::{Model, ModelKind};
+        let cfg = EmulatorConfig::paper();
+        let mut m = Model::new(
+            ModelKind::Lugre,
+            Plant::Voltage,
+            crate::emulator::SAMPLE_PERIOD,
+        );
+        m.motor = cfg.motor;
+        m.lugre = Some(cfg.lugre);
+        m.sensor.hall_resolution_rad = cfg.hall_resolution();
+        m
+    }
+
+    #[test]
     fn lugre_data_gives_a_stable_model_close_to_the_truth() {
         let a = emulated(SignalKind::A, 1);
         let b = emulated(SignalKind::B, 2);
@@ -1023,10 +1422,21 @@ mod tests {
         eprintln!("{}\n{}", res.equations_text, res.pareto_text);
         eprintln!("z correlation {:?}", res.z_correlation);
         let wb = sensor_chain::measured_velocity(&b, 10);
-        let truth = fitpct::fit_percent(&wb, b.extra("omega_true").unwrap()).unwrap();
-        let pred = simulate(&res.model, Plant::Voltage, &b, Limits::default()).unwrap();
-        let ours = fitpct::fit_percent(&wb, &pred.omega).unwrap();
-        eprintln!("validation b: SINDYc {ours:.2} %, true states {truth:.2} %");
+        // The emulator's own model scored by the same function (through the sensor chain).
+        let truth = crate::ident::score(&truth_model(), &b)
+            .unwrap()
+            .fit_sensor
+            .xdot;
+        let ours = validation_fit(
+            &res.model,
+            Plant::Voltage,
+            std::slice::from_ref(&b),
+            std::slice::from_ref(&wb),
+            10,
+            Limits::default(),
+        )
+        .unwrap();
+        eprintln!("validation b: SINDYc {ours:.2} %, true model {truth:.2} %");
         assert!((ours - res.validation_fit).abs() < 1e-9);
         assert!(ours > truth - 5.0, "{ours} vs {truth}");
         // Every returned model is finite in free run on the other signals too.
@@ -1054,6 +1464,42 @@ mod tests {
             (res.model.a, res.model.vs, res.model.z_max)
         );
         assert_eq!(h, res.hankel);
+    }
+
+    #[test]
+    #[ignore = "experiment harness"]
+    fn h1_experiment() {
+        let mut cfg = EmulatorConfig::paper();
+        cfg.seed = 1;
+        let logs: Vec<MotorLog> = [SignalKind::A, SignalKind::B, SignalKind::C, SignalKind::D]
+            .into_iter()
+            .map(|k| {
+                let mut l = simulate_signal(&cfg, k, 60.0).unwrap().log;
+                l.source = format!("signal-{}", k.name()).into();
+                l
+            })
+            .collect();
+        let t0 = std::time::Instant::now();
+        let res = identify(&logs[..1], &[], &[], &SindycOptions::default()).unwrap();
+        eprintln!("{}\n{}", res.equations_text, res.pareto_text);
+        eprintln!("identify {:.1} s", t0.elapsed().as_secs_f64());
+        let mut model = crate::model::Model::new(
+            crate::model::ModelKind::Sindyc,
+            Plant::Voltage,
+            crate::emulator::SAMPLE_PERIOD,
+        );
+        model.sindy = Some(to_table(&res.model, &res.hankel));
+        for l in &logs {
+            match crate::ident::score(&model, l) {
+                Ok(s) => eprintln!(
+                    "{}: fit_sensor x {:.2} xdot {:.2}",
+                    l.source.display(),
+                    s.fit_sensor.x,
+                    s.fit_sensor.xdot
+                ),
+                Err(e) => eprintln!("{e:#}"),
+            }
+        }
     }
 
     /// The paper's hidden state on emulated LuGre data. Finding (reported, not hidden): with

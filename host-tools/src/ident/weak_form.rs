@@ -65,6 +65,31 @@ impl Window {
         s
     }
 
+    /// `∫φ·I dt` for a winding current `i` sampled at the sample times while the voltage `u`
+    /// is held over `[t_k, t_k+1)` (zero-order hold), for a winding of resistance `r` and
+    /// inductance `l`.
+    ///
+    /// The current reaches its new quasi-static value within `τ = L/R` (1.4 ms for the paper's
+    /// motor) of each voltage step, so over an interval it is nearly flat at the value sampled
+    /// at its *end*; the trapezoid rule instead ramps it from the old value. Adding each
+    /// step's share `φ(t_k)·(Δt/2 − τ)·(u_k − u_k−1)/R` makes the integral exact for that
+    /// first-order response. Measured on the emulator (`examples/weakform_truth.rs`, signal
+    /// a, windows where the rotor moves): the plain trapezoid of the true current misses
+    /// `K_t·∫φI` by 0.0100 N·m rms; with the correction, 0.0006 N·m.
+    pub fn int_current(&self, t: &[f64], i: &[f64], u: &[f64], r: f64, l: f64) -> f64 {
+        let mut s = self.int(i);
+        if !(r > 0.0 && l >= 0.0) {
+            return s;
+        }
+        let tau = l / r;
+        for k in self.start.max(1)..self.end - 1 {
+            let j = k - self.start;
+            let half = 0.5 * (t[k + 1] - t[k]);
+            s += self.phi[j] * (half - tau) * (u[k] - u[k - 1]) / r;
+        }
+        s
+    }
+
     fn sum(&self, f: &[f64], g: &[f64]) -> f64 {
         f.iter()
             .zip(&self.w)

@@ -354,7 +354,7 @@ pub fn write_demo_report(
         })
         .collect();
     page.table(&["model", "x %", "xdot %", "i %", "then added"], &rows);
-    let labels: Vec<String> = (0..iterations.len()).map(|k| format!("step {k}")).collect();
+    let labels: Vec<String> = iterations.iter().map(|it| it.label.clone()).collect();
     let gap: Vec<f64> = iterations
         .iter()
         .map(|it| (100.0 - it.validation.xdot).max(0.0))

@@ -109,21 +109,23 @@ pub fn bar_chart(title: &str, y_label: &str, labels: &[String], values: &[f64]) 
             .filter(|v| v.is_finite())
             .fold(0.0, f64::max);
         let top = if top > 0.0 { top * 1.1 } else { 1.0 };
+        // One segment per bar, labelled at its centre (plotters' segmented axis: a float
+        // axis would put "nice" ticks between the bars and repeat the first label).
         let mut chart = ChartBuilder::on(&root)
             .caption(title, ("sans-serif", 18))
             .margin(10)
             .x_label_area_size(60)
             .y_label_area_size(70)
-            .build_cartesian_2d(0.0..n as f64, 0.0..top)
+            .build_cartesian_2d((0..n).into_segmented(), 0.0..top)
             .map_err(|e| anyhow!("chart: {e}"))?;
         let labels_owned: Vec<String> = labels.to_vec();
         chart
             .configure_mesh()
             .disable_x_mesh()
-            .x_labels(n)
-            .x_label_formatter(&|x| {
-                let k = x.floor() as usize;
-                labels_owned.get(k).cloned().unwrap_or_default()
+            .x_labels(n + 1)
+            .x_label_formatter(&|x| match x {
+                SegmentValue::CenterOf(k) => labels_owned.get(*k).cloned().unwrap_or_default(),
+                _ => String::new(),
             })
             .y_desc(y_label)
             .draw()
@@ -131,10 +133,12 @@ pub fn bar_chart(title: &str, y_label: &str, labels: &[String], values: &[f64]) 
         chart
             .draw_series(values.iter().enumerate().map(|(k, v)| {
                 let v = if v.is_finite() { *v } else { 0.0 };
-                Rectangle::new(
-                    [(k as f64 + 0.15, 0.0), (k as f64 + 0.85, v)],
+                let mut bar = Rectangle::new(
+                    [(SegmentValue::Exact(k), 0.0), (SegmentValue::Exact(k + 1), v)],
                     colour(0).filled(),
-                )
+                );
+                bar.set_margin(0, 0, 12, 12);
+                bar
             }))
             .map_err(|e| anyhow!("chart: {e}"))?;
         root.present().map_err(|e| anyhow!("chart: {e}"))?;
@@ -199,6 +203,17 @@ mod tests {
         assert!(s.starts_with("<svg") && s.contains("Velocity") && s.contains("polyline"));
         let b = bar_chart("Error", "rms", &["a".into(), "b".into()], &[1.0, 2.0]).unwrap();
         assert!(b.contains("<rect"));
+        // Every bar is labelled once with its own label (not the first label repeated).
+        let b = bar_chart(
+            "Error",
+            "rms",
+            &["LuGre".into(), "+offset".into(), "+cogging".into()],
+            &[3.0, 2.0, 1.0],
+        )
+        .unwrap();
+        for l in ["LuGre", "+offset", "+cogging"] {
+            assert_eq!(b.matches(&format!(">{l}<")).count(), 1, "label {l} in {b}");
+        }
         let c = correlation_chart("acf", &[1.0, 2.0], &[0.5, -0.1], 0.05).unwrap();
         assert!(c.contains("<svg"));
     }
