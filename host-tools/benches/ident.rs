@@ -5,7 +5,9 @@
 //! Benchmarks (group `ident_1e6`): `hankel_extract` (Gram matrix + eigen-decomposition +
 //! FIR extraction of z, m = 60), `sindyc_library` (the 17 columns), `sindyc_regression`
 //! (library + normal equations + STLSQ for 3 pointwise targets: the problem pysindy solves),
-//! `sindyc_weak_regression` (library + weak-form integrals + STLSQ: what `fit` does).
+//! `sindyc_weak_regression` (library + weak-form integrals + STLSQ: what `fit` does; the
+//! uniform-sampling fast path), `sindyc_weak_regression_generic` (the same rows window by
+//! window, the path of non-uniformly sampled logs).
 //!
 //! The data is a deterministic motor-like record (multisine voltage, first-order velocity
 //! with tanh friction, Hall-quantised angle, current from the quasi-static electrical
@@ -19,7 +21,7 @@ use criterion::{criterion_group, criterion_main, Criterion};
 use faer::Mat;
 use motorid::ident::hankel::{HankelEmbedding, Selection, DEFAULT_DELAYS};
 use motorid::ident::library::{Library, Signals};
-use motorid::ident::sindyc::weak_rows;
+use motorid::ident::sindyc::{weak_rows, weak_rows_generic};
 use motorid::ident::stlsq::{Normal, StlsqOptions};
 use motorid::log::Plant;
 use std::hint::black_box;
@@ -169,6 +171,16 @@ fn benches(c: &mut Criterion) {
     g.bench_function("sindyc_weak_regression", |b| {
         b.iter(|| {
             let (a, y, _) = weak_rows(&lib, &d.t, &sig);
+            let ne = Normal::new(a.as_ref(), y.as_ref());
+            let opts = StlsqOptions::default();
+            black_box((0..3).map(|k| ne.stlsq(k, &opts)).collect::<Vec<_>>())
+        })
+    });
+    // The window-by-window path (taken by non-uniformly sampled logs), for comparison with
+    // the uniform fast path above under the same machine load.
+    g.bench_function("sindyc_weak_regression_generic", |b| {
+        b.iter(|| {
+            let (a, y, _) = weak_rows_generic(&lib, &d.t, &sig);
             let ne = Normal::new(a.as_ref(), y.as_ref());
             let opts = StlsqOptions::default();
             black_box((0..3).map(|k| ne.stlsq(k, &opts)).collect::<Vec<_>>())

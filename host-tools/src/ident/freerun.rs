@@ -266,9 +266,9 @@ fn heat_at(model: &Model, log: &MotorLog, k: usize) -> f64 {
         return h;
     }
     let Some(i) = &log.i else { return h };
-    for j in 0..k {
+    for (j, &c) in i.iter().enumerate().take(k) {
         for e in &model.effects {
-            h = e.heat_step(h, i[j] - offset, log.t[j + 1] - log.t[j]);
+            h = e.heat_step(h, c - offset, log.t[j + 1] - log.t[j]);
         }
     }
     h
