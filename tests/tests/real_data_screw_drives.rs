@@ -38,6 +38,24 @@ fn stribeck_where_the_authors_have_it_and_not_on_drive_2() {
     let pos = &d3.one_sided[0];
     assert!(pos.p.unwrap() < 1e-4, "drive 3 v>0: p = {:?}", pos.p);
     assert!(pos.vs.unwrap() < 2.0, "drive 3 v>0: vs = {:?}", pos.vs);
+    // In the other direction (v < 0 as recorded) friction does not fall with speed: the
+    // authors' symmetric Stribeck term (one strbVelocity for both directions) is not in the
+    // data there.
+    let neg = &d3.one_sided[1];
+    assert!(
+        neg.p.is_none_or(|p| p > 0.01),
+        "drive 3 v<0: p = {:?}",
+        neg.p
+    );
+    // Drive 1 (authors: 6.4 rad/s) has it in both directions.
+    for o in &d1.one_sided {
+        assert!(
+            o.p.is_some_and(|p| p < 1e-4),
+            "drive 1, direction {}: p = {:?}",
+            o.sign,
+            o.p
+        );
+    }
     // Every drive has Coulomb friction far above its viscous part at 1 rad/s.
     for d in [&d1, &d2, &d3] {
         let c = &d.selection.chosen;

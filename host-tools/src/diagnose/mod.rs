@@ -13,7 +13,8 @@
 //!    effective one ([`stats::effective_n`]) so that coloured noise is not taken for evidence.
 //!    It is kept when it is **significant** (p below [`FAMILY_ALPHA`] divided by the number of
 //!    candidate variants tested, Bonferroni, and a lower BIC) **and relevant** (it explains at
-//!    least [`MIN_EXPLAINED`] of the residual sum of squares); it then joins the base and the
+//!    least [`MIN_EXPLAINED`] of the model's own residual sum of squares, and its torque is at
+//!    least [`MIN_TORQUE_FRACTION`] of the Coulomb friction); it then joins the base and the
 //!    next one is tested, until none passes.
 //! 4. Each finding's coefficients become a spec (`cogging:harmonic=7,amp=0.03,phase=0.2`) that
 //!    `fit --add` accepts; its score is the fraction of the base residual it explains.
@@ -165,6 +166,9 @@ struct EqData {
     base_sample: Vec<Vec<f64>>,
     /// Smallest torque [N·m] (RMS of the effect's term) worth reporting.
     min_torque: f64,
+    /// Base column of the model's Coulomb friction (`sgn ω`) when the model states no positive
+    /// value for it: the threshold then follows the refitted Coulomb friction ([`min_torque`]).
+    coulomb_col: Option<usize>,
     cand: Vec<(Variant, Vec<Vec<f64>>)>,
 }
 
@@ -189,6 +193,7 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
         base_cols: vec![],
         base_sample: vec![],
         min_torque: 0.0,
+        coulomb_col: None,
         cand: vec![],
     };
     if voltage {
@@ -210,9 +215,13 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
         base_cols: vec![wf.second_derivative(&s.theta)],
         base_sample: vec![],
         min_torque: min_torque(st, &s),
+        coulomb_col: None,
         cand: vec![],
     };
     for e in &st.effects {
+        if matches!(e, Effect::Coulomb { fc } if *fc <= 0.0) {
+            mech.coulomb_col = Some(mech.base_cols.len());
+        }
         for (eq, col) in candidates::present_columns(e, &s) {
             if eq == Equation::Mechanical {
                 mech.base_cols.push(wf.integral(&col));
@@ -434,6 +443,15 @@ fn forward_select(
     };
     let base_resid = resid_of(&base, &beta0);
     let n_eff_base = stats::effective_n(&base_resid);
+    // Relevance threshold: from the model's Coulomb friction when it states one, else from the
+    // Coulomb friction refitted here (a model whose fit left fc at 0 still has one) or, once
+    // Coulomb friction is found, from the one found (see `MIN_TORQUE_FRACTION`).
+    let mut min_torque = data.min_torque;
+    if let Some(fc) = data.coulomb_col.and_then(|j| beta0.get(j)) {
+        if *fc > 0.0 {
+            min_torque = MIN_TORQUE_FRACTION * fc * units.mech_scale;
+        }
+    }
 
     // Best variant per effect kind, tested against the current base.
     let mut chosen_kinds: Vec<EffectKind> = Vec::new();
@@ -503,12 +521,15 @@ fn forward_select(
         };
         let Some(&(ci, rss1, t)) = best_by_kind
             .iter()
-            .filter(|(ci, _, t)| {
+            .filter(|(ci, rss1, t)| {
+                // Relevance is measured against the model's own residual (rss0): an effect
+                // that removes 2 % of what is left after larger findings may still change the
+                // model's fit by a fraction of a percent.
                 t.p_value < alpha_per_test
-                    && t.explained >= opts.min_explained
+                    && (rss_cur - rss1) >= opts.min_explained * rss0
                     && t.delta_bic < 0.0
                     && plausible(&spec_for(*ci))
-                    && (data.eq != Equation::Mechanical || size_of(*ci) >= data.min_torque)
+                    && (data.eq != Equation::Mechanical || size_of(*ci) >= min_torque)
             })
             .max_by(|a, b| b.1.total_cmp(&a.1))
         else {
@@ -538,6 +559,12 @@ fn forward_select(
         if let Some(x) = first_round.iter_mut().find(|x| x.name == v.kind.name()) {
             x.kept = true;
         }
+        if v.kind == EffectKind::Coulomb && data.eq == Equation::Mechanical {
+            let fc = spec.get("fc");
+            if fc > 0.0 {
+                min_torque = MIN_TORQUE_FRACTION * fc;
+            }
+        }
         chosen_kinds.push(v.kind);
         base = subset;
         rss_cur = rss1;
@@ -566,9 +593,14 @@ fn select_rows(v: &[f64], keep: &[bool]) -> Vec<f64> {
 }
 
 /// Smallest torque worth reporting, as a fraction of the model's Coulomb friction (or of the
-/// RMS drive torque when the model has none): 10 %. The weak-form torque balance carries
-/// systematic errors of a few percent of the friction (Hall quantisation at reversals, the
-/// sampled current standing for its interval); an effect below this would not change a fit.
+/// RMS drive torque when the model has none): 10 %. When the model has Coulomb friction
+/// without a positive value, the one refitted in the base is used; when `diagnose` finds
+/// Coulomb friction, the one found is used for the effects tested after it (a closed-loop
+/// positioning axis spends its drive on inertia: its RMS drive can be several times its
+/// friction, so that smaller effects would never count while Coulomb is unknown).
+/// The weak-form torque balance carries systematic errors of a few percent of the friction
+/// (Hall quantisation at reversals, the sampled current standing for its interval); an effect
+/// below this would not change a fit.
 pub const MIN_TORQUE_FRACTION: f64 = 0.10;
 
 fn min_torque(st: &Structure, s: &Signals) -> f64 {

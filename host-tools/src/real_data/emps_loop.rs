@@ -136,6 +136,9 @@ pub struct Round {
     pub sim_test: Vec<f64>,
     /// Diagnosis of this model on the training log.
     pub diagnosis: Diagnosis,
+    /// False when this refit made the free-run position fit on the training log worse than
+    /// the round before: the loop then stops and keeps the previous model (see [`run`]).
+    pub kept: bool,
 }
 
 /// Fit the linear model with `adds` on a prepared training log, diagnose it, score it.
@@ -158,7 +161,34 @@ fn fit_round(train: &MotorLog, test: &MotorLog, adds: &[EffectSpec]) -> Result<R
         rmse_test_mm,
         sim_test,
         diagnosis,
+        kept: true,
     })
+}
+
+/// The last kept round of [`run`].
+pub fn final_round(rounds: &[Round]) -> Option<&Round> {
+    rounds.iter().rev().find(|r| r.kept)
+}
+
+/// What `diagnose` says about the linear model once Coulomb friction (at the value the first
+/// diagnosis found, `fc` in volts of `vir`) is in it: every remaining candidate's test, so
+/// that the offset and the asymmetry can be compared (on this trajectory they explain the
+/// same residual; see docs/real-data.md).
+pub fn after_coulomb(train: &MotorLog, linear: &Model, fc: f64) -> Diagnosis {
+    let train = prepare(train, DECIMATION);
+    let mut st = structure_of(linear);
+    st.effects.push(Effect::Coulomb { fc });
+    diagnose::diagnose(&train, &st, &diagnose::Options::default())
+}
+
+/// Friction per direction of a generic model in newtons (the authors' asymmetric
+/// parametrisation, doc §4.2): (Fv+, Fc+, Fv−, Fc−) from `b ± dv` and `fc ± dc`; the offset,
+/// if any, shifts Fc+ up and Fc− down.
+pub fn per_direction(p: &Physical) -> (f64, f64, f64, f64) {
+    let (dv, dc) = p.asym.unwrap_or((0.0, 0.0));
+    let fc = p.fc.unwrap_or(0.0);
+    let of = p.offset.unwrap_or(0.0);
+    (p.fv + dv, fc + dc + of, p.fv - dv, fc - dc - of)
 }
 
 /// The generic linear model with the authors' structures added by name (`fit --add coulomb
@@ -174,8 +204,10 @@ pub fn authors_structures(train: &MotorLog, test: &MotorLog) -> Result<Vec<Round
     ])
 }
 
-/// Fit linear → diagnose → add what was found → refit, until nothing is found or
-/// [`MAX_ROUNDS`] refits. `progress` is called with a line per step.
+/// Fit linear → diagnose → add what was found → refit, until nothing is found, a refit makes
+/// the free-run position fit on the training log worse (that round is marked not kept and the
+/// loop stops: what a user validating each refit would do), or [`MAX_ROUNDS`] refits.
+/// `progress` is called with a line per step.
 pub fn run(
     train: &MotorLog,
     test: &MotorLog,
@@ -194,7 +226,14 @@ pub fn run(
                 format!(" --add {}", labels.join(" --add "))
             }
         ));
-        let r = fit_round(train, test, &adds)?;
+        let mut r = fit_round(train, test, &adds)?;
+        if let Some(prev) = rounds.iter().rev().find(|p: &&Round| p.kept) {
+            if r.train.fit.x < prev.train.fit.x {
+                r.kept = false;
+                rounds.push(r);
+                break;
+            }
+        }
         let found: Vec<EffectSpec> = r
             .diagnosis
             .effects

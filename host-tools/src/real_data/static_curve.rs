@@ -344,7 +344,9 @@ mod tests {
 /// Stribeck tested in one direction of motion only (points with `sign·v > 0`): a straight
 /// line `c + Fv·v` against the line plus `Fs·exp(−(v/vs)²)·sgn v` with Fs > 0. Friction that
 /// falls with speed in one direction but not in the other shows here while a symmetric
-/// Stribeck term averages it away.
+/// Stribeck term averages it away. Each direction then gets its own curve (its own Coulomb
+/// level `c`, viscous slope and, where the test selects it, Stribeck term): the static curve
+/// per direction, as the authors of the EMPS benchmark fit their asymmetric model.
 #[derive(Debug, Clone)]
 pub struct OneSided {
     /// +1 or −1.
@@ -354,6 +356,18 @@ pub struct OneSided {
     pub p: Option<f64>,
     pub fs: Option<f64>,
     pub vs: Option<f64>,
+    /// The curve of this direction the test selects: the line plus Stribeck when `p <`
+    /// [`ALPHA`] with Fs > 0, else the line (None when even the line cannot be fitted).
+    pub curve: Option<Curve>,
+}
+
+impl OneSided {
+    /// True when this direction's curve has a Stribeck term.
+    pub fn has_stribeck(&self) -> bool {
+        self.curve
+            .as_ref()
+            .is_some_and(|c| c.terms.contains(&Term::Stribeck))
+    }
 }
 
 /// [`OneSided`] tests for both directions.
@@ -372,20 +386,24 @@ pub fn one_sided_stribeck(v: &[f64], tau: &[f64]) -> Vec<OneSided> {
             match (base, with) {
                 (Ok(b), Ok(w)) => {
                     let (_, p) = f_test(b.rss, w.rss, 2, vv.len(), w.dof());
+                    let fs = w.get(Term::Stribeck);
+                    let stribeck = p < ALPHA && fs.is_some_and(|f| f > 0.0);
                     OneSided {
                         sign,
                         points: vv.len(),
                         p: Some(p),
-                        fs: w.get(Term::Stribeck),
+                        fs,
                         vs: w.vs,
+                        curve: Some(if stribeck { w } else { b }),
                     }
                 }
-                _ => OneSided {
+                (b, _) => OneSided {
                     sign,
                     points: vv.len(),
                     p: None,
                     fs: None,
                     vs: None,
+                    curve: b.ok(),
                 },
             }
         })
