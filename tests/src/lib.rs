@@ -13,18 +13,29 @@ pub fn root() -> PathBuf {
 }
 
 /// Path of the `motorid` binary, built once with the same (optimised) profile as the tests.
+///
+/// `MOTORID_BUILD_ARGS` (space-separated) replaces the default target selection `--bin motorid`
+/// of that nested `cargo build`. scripts/test.sh sets it to `-p host-tools --bin motorid
+/// --tests` after the workspace-wide `cargo test` build: with resolver 2 the dev-dependencies'
+/// features (proptest, criterion: `either/use_std`, `getrandom/std`, `zerocopy/derive`, ...) are
+/// unified only when a test target is part of the build, so a bare `--bin motorid` would
+/// compile rand, rayon, faer and their dependents a second time (about 3 minutes on 2 cores).
+/// The default suits `cargo test -p tests ...`, which resolves without dev-dependencies too.
 pub fn motorid_bin() -> &'static Path {
     static BIN: OnceLock<PathBuf> = OnceLock::new();
     BIN.get_or_init(|| {
         let target = std::env::var_os("CARGO_TARGET_DIR")
             .map(PathBuf::from)
             .unwrap_or_else(|| root().join("target"));
+        let select =
+            std::env::var("MOTORID_BUILD_ARGS").unwrap_or_else(|_| "--bin motorid".to_string());
         let status = Command::new(env!("CARGO"))
-            .args(["build", "-q", "--bin", "motorid"])
+            .args(["build", "-q"])
+            .args(select.split_whitespace())
             .current_dir(root())
             .status()
             .expect("cannot run cargo to build motorid");
-        assert!(status.success(), "cargo build --bin motorid failed");
+        assert!(status.success(), "cargo build {select} failed");
         target.join("debug").join("motorid")
     })
 }

@@ -286,7 +286,10 @@ pub fn simulate_range(
 ) -> Result<Prediction> {
     let end = end.min(log.len());
     if start >= end {
-        bail!("{}: empty sample range {start}..{end}", log.source.display());
+        bail!(
+            "{}: empty sample range {start}..{end}",
+            log.source.display()
+        );
     }
     let n = end - start;
     let dyn_ = Dynamics { model };

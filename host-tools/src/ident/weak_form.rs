@@ -247,4 +247,45 @@ mod tests {
         );
         assert!(se[0].unwrap() < 1e-6);
     }
+
+    /// A winding current sampled under a held voltage (steps settle within L/R ≪ Δt):
+    /// `int_current` matches the exact `∫φ·I`, the plain trapezoid does not.
+    #[test]
+    fn int_current_integrates_a_settling_winding_current() {
+        let (r, l, dt) = (0.216, 0.3e-3, 0.012);
+        let tau = l / r;
+        let n = 120;
+        let u: Vec<f64> = (0..n).map(|k| 4.0 * ((k * 37 % 11) as f64 - 5.0)).collect();
+        let t: Vec<f64> = (0..n).map(|k| k as f64 * dt).collect();
+        // Sampled current: I(t_k) with u[k−1] held before t_k, from rest.
+        let mut i = vec![0.0; n];
+        for k in 1..n {
+            let ss = u[k - 1] / r;
+            i[k] = ss + (i[k - 1] - ss) * (-dt / tau).exp();
+        }
+        let w = &windows(&t, WINDOW, HOP)[2];
+        // Exact ∫φ·I by a fine sum over each interval's exponential response.
+        let span = t[w.end - 1] - t[w.start];
+        let fine = 2000;
+        let mut exact = 0.0;
+        for k in w.start..w.end - 1 {
+            let ss = u[k] / r;
+            for m in 0..fine {
+                let tt = (m as f64 + 0.5) * dt / fine as f64;
+                let cur = ss + (i[k] - ss) * (-tt / tau).exp();
+                exact += phi((t[k] + tt - t[w.start]) / span).0 * cur * dt / fine as f64;
+            }
+        }
+        let trapezoid = w.int(&i);
+        let corrected = w.int_current(&t, &i, &u, r, l);
+        let scale = w.int(&i.iter().map(|c| c.abs()).collect::<Vec<_>>());
+        assert!(
+            (corrected - exact).abs() < 1e-3 * scale,
+            "corrected {corrected} exact {exact}"
+        );
+        assert!(
+            (trapezoid - exact).abs() > 10.0 * (corrected - exact).abs(),
+            "trapezoid {trapezoid} corrected {corrected} exact {exact}"
+        );
+    }
 }

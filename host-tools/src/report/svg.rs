@@ -134,7 +134,10 @@ pub fn bar_chart(title: &str, y_label: &str, labels: &[String], values: &[f64]) 
             .draw_series(values.iter().enumerate().map(|(k, v)| {
                 let v = if v.is_finite() { *v } else { 0.0 };
                 let mut bar = Rectangle::new(
-                    [(SegmentValue::Exact(k), 0.0), (SegmentValue::Exact(k + 1), v)],
+                    [
+                        (SegmentValue::Exact(k), 0.0),
+                        (SegmentValue::Exact(k + 1), v),
+                    ],
                     colour(0).filled(),
                 );
                 bar.set_margin(0, 0, 12, 12);
