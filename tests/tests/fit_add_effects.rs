@@ -98,7 +98,7 @@ fn case(effect: EffectKind) -> Row {
 }
 
 #[test]
-#[ignore = "slow: about 10 min in release (30 fits); run with `cargo test --release -p tests \
+#[ignore = "slow: about 25 min on 2 cores (20 fits); run with `cargo test --release -p tests \
             --test fit_add_effects -- --ignored --nocapture`"]
 fn fit_add_closes_half_the_gap_to_the_truth_for_every_effect() {
     // Presliding only moves σ0/σ1 of the LuGre law, and viscous only α2: the base LuGre
@@ -107,6 +107,18 @@ fn fit_add_closes_half_the_gap_to_the_truth_for_every_effect() {
         .into_iter()
         .filter(|k| !matches!(k, EffectKind::Presliding | EffectKind::Viscous))
         .collect();
+    check(effects);
+}
+
+/// The part of the table above that the test command runs every time: one effect in the
+/// electrical equation (estimated jointly with R and K_b) and one position-dependent torque
+/// (refined on multiple-shooting segments).
+#[test]
+fn fit_add_closes_half_the_gap_for_deadtime_and_position_load() {
+    check(vec![EffectKind::Deadtime, EffectKind::PositionLoad]);
+}
+
+fn check(effects: Vec<EffectKind>) {
     // Two worker threads (the effects are independent fits).
     let queue = std::sync::Mutex::new(effects.clone());
     let rows = std::sync::Mutex::new(Vec::new());
