@@ -8,26 +8,11 @@
 //!
 //! `cargo run --release -p host-tools --example weakform_truth -- [a|b|steady] [seconds]`
 use control::lugre::LugreParams;
+use motorid::diagnose::stats::rms;
 use motorid::emulator::{signal, EmulatorConfig, Plant, SignalKind, SAMPLE_PERIOD};
+use motorid::ident::sindyc::correlation as corr;
 use motorid::ident::weak_form::{smooth_velocity, windows, Window, HOP, WINDOW};
 use motorid::log::MotorLog;
-
-fn corr(a: &[f64], b: &[f64]) -> f64 {
-    let n = a.len() as f64;
-    let ma = a.iter().sum::<f64>() / n;
-    let mb = b.iter().sum::<f64>() / n;
-    let (mut sab, mut saa, mut sbb) = (0.0, 0.0, 0.0);
-    for (x, y) in a.iter().zip(b) {
-        sab += (x - ma) * (y - mb);
-        saa += (x - ma) * (x - ma);
-        sbb += (y - mb) * (y - mb);
-    }
-    sab / (saa * sbb).sqrt().max(1e-300)
-}
-
-fn rms(a: &[f64]) -> f64 {
-    (a.iter().map(|v| v * v).sum::<f64>() / a.len() as f64).sqrt()
-}
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
@@ -452,36 +437,20 @@ fn main() {
         let pexw = pick(ex_w.clone());
         let pexdi = pick(ex_di.clone());
         let nr = rows.len();
-        rep(
-            "samples u zoh (else exact)",
+        // The torque balance with the exact inertia and friction terms and one (u, ω, İ) choice.
+        let with_drive = |u: &[f64], w: &[f64], di: &[f64]| -> Vec<f64> {
             (0..nr)
-                .map(|r| q * (pu[r] - m.kb * pexw[r] - m.l * pexdi[r]) - exth[r] - exf[r])
-                .collect(),
-        );
+                .map(|r| q * (u[r] - m.kb * w[r] - m.l * di[r]) - exth[r] - exf[r])
+                .collect()
+        };
+        rep("samples u zoh (else exact)", with_drive(&pu, &pexw, &pexdi));
         rep(
             "∫ω from θ_Hall (else exact)",
-            (0..nr)
-                .map(|r| q * (pu[r] - m.kb * pw_h[r] - m.l * pexdi[r]) - exth[r] - exf[r])
-                .collect(),
+            with_drive(&pu, &pw_h, &pexdi),
         );
-        rep(
-            "∫ω from ω_true samples",
-            (0..nr)
-                .map(|r| q * (pu[r] - m.kb * pw_t[r] - m.l * pexdi[r]) - exth[r] - exf[r])
-                .collect(),
-        );
-        rep(
-            "L∫İ from I_true samples",
-            (0..nr)
-                .map(|r| q * (pu[r] - m.kb * pexw[r] - m.l * pdi_t[r]) - exth[r] - exf[r])
-                .collect(),
-        );
-        rep(
-            "L∫İ from I_meas samples",
-            (0..nr)
-                .map(|r| q * (pu[r] - m.kb * pexw[r] - m.l * pdi[r]) - exth[r] - exf[r])
-                .collect(),
-        );
+        rep("∫ω from ω_true samples", with_drive(&pu, &pw_t, &pexdi));
+        rep("L∫İ from I_true samples", with_drive(&pu, &pexw, &pdi_t));
+        rep("L∫İ from I_meas samples", with_drive(&pu, &pexw, &pdi));
         let pth_h = pick(wc.second_derivative(&log.theta));
         let pth_t = pick(wc.second_derivative(&tru.0));
         rep(

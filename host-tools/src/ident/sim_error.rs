@@ -15,7 +15,8 @@ use anyhow::Result;
 /// (it integrates every velocity error), so it only steers the low frequencies.
 const ANGLE_WEIGHT: f64 = 0.3;
 
-fn spread(v: &[f64]) -> f64 {
+/// Standard deviation of a signal (at least 1e-12): the scale each residual is divided by.
+pub(crate) fn spread(v: &[f64]) -> f64 {
     let n = v.len().max(1) as f64;
     let mean = v.iter().sum::<f64>() / n;
     (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n)

@@ -506,14 +506,6 @@ const REFINE_MAX_TERMS: usize = 16;
 /// velocity resolution can resolve (100 s/rad).
 const REFINE_A_RANGE: (f64, f64) = (0.5, 100.0);
 
-fn spread(v: &[f64]) -> f64 {
-    let n = v.len().max(1) as f64;
-    let mean = v.iter().sum::<f64>() / n;
-    (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n)
-        .sqrt()
-        .max(1e-12)
-}
-
 /// Free-run residuals of a SINDYc model on the fitting logs, defined as the grey-box
 /// refinement's (`sim_error.rs`): velocity (the model's angle through the firmware's moving
 /// average, not quantised so the cost stays smooth in the coefficients), current and angle
@@ -538,9 +530,9 @@ impl<'a> SimResiduals<'a> {
             .zip(&omega)
             .map(|(l, w)| {
                 (
-                    spread(w),
-                    l.i.as_deref().map(spread).unwrap_or(1.0),
-                    spread(&l.theta),
+                    super::sim_error::spread(w),
+                    l.i.as_deref().map(super::sim_error::spread).unwrap_or(1.0),
+                    super::sim_error::spread(&l.theta),
                 )
             })
             .collect();
