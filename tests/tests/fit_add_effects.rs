@@ -12,7 +12,8 @@
 //!
 //! Coulomb and Stribeck are part of the LuGre law, so they are added to a linear base.
 //! Prints the table of before / after / truth fits (`cargo test -p tests --test
-//! fit_add_effects -- --nocapture`).
+//! fit_add_effects -- --nocapture`; the ignored full table takes `FIT_ADD_EFFECTS=cogging,deadtime`
+//! to run only some rows).
 use control::effects::EffectKind;
 use motorid::effect_spec::EffectSpec;
 use motorid::emulator::{simulate_signal, EmulatorConfig, SignalKind};
@@ -89,10 +90,16 @@ fn case(effect: EffectKind) -> Row {
         .unwrap();
         scores(&rep.model, &val[0], &omega_true)
     };
+    // The base and the added fit are independent: run them side by side (2 cores).
+    let (base, added) = std::thread::scope(|s| {
+        let base = s.spawn(|| fit(&[]));
+        let added = fit(std::slice::from_ref(&spec));
+        (base.join().unwrap(), added)
+    });
     Row {
         effect: effect.name(),
-        base: fit(&[]),
-        added: fit(std::slice::from_ref(&spec)),
+        base,
+        added,
         truth: scores(&truth_model(&cfg), &val[0], &omega_true),
     }
 }
@@ -103,9 +110,15 @@ fn case(effect: EffectKind) -> Row {
 fn fit_add_closes_half_the_gap_to_the_truth_for_every_effect() {
     // Presliding only moves σ0/σ1 of the LuGre law, and viscous only α2: the base LuGre
     // model already has both terms, so there is no gap to close for them.
+    // FIT_ADD_EFFECTS=cogging,deadtime runs only those rows.
+    let only = std::env::var("FIT_ADD_EFFECTS").ok();
     let effects: Vec<EffectKind> = EffectKind::ALL
         .into_iter()
         .filter(|k| !matches!(k, EffectKind::Presliding | EffectKind::Viscous))
+        .filter(|k| {
+            only.as_deref()
+                .is_none_or(|o| o.split(',').any(|n| n == k.name()))
+        })
         .collect();
     check(effects);
 }

@@ -506,7 +506,12 @@ fn forward_select(
             let mut subset = base.clone();
             subset.extend(&cand_idx[ci]);
             let (beta, _) = gram.fit(&subset);
-            let cols = &data.cand[ci].0.columns;
+            let v = &data.cand[ci].0;
+            // Load friction's column is only its braking part: its size is its whole torque.
+            let cols = v
+                .torque
+                .as_ref()
+                .map_or(&v.columns[..], std::slice::from_ref);
             let n = cols.first().map_or(0, |c| c.len());
             let mut ss = 0.0;
             for k in 0..n {

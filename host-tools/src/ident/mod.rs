@@ -194,6 +194,12 @@ fn guard_added_effects(req: &FitRequest, with: Model) -> Result<Model> {
     let zeroed = sim_error::scale_effect_magnitudes(&with, 0.0);
     let mut best = (score_with, with.clone(), false);
     let s = validation_score(&zeroed, req.validate);
+    if std::env::var_os("MOTORID_DEBUG").is_some() {
+        eprintln!(
+            "guard: with {score_with:.2} ({:?}), zeroed {s:.2}",
+            with.effects
+        );
+    }
     if s > best.0 {
         best = (s, zeroed, true);
     }
@@ -281,6 +287,9 @@ fn guard_added_effects(req: &FitRequest, with: Model) -> Result<Model> {
         }
         base.effects = sim_error::scale_effect_magnitudes(&with, 0.0).effects;
         let s = validation_score(&base, req.validate);
+        if std::env::var_os("MOTORID_DEBUG").is_some() {
+            eprintln!("guard: base fitted afresh {s:.2}");
+        }
         if s > best.0 {
             let mut params = base.parameters.clone();
             params.extend(
