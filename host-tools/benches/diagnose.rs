@@ -16,22 +16,7 @@ fn bench(c: &mut Criterion) {
     let log = simulate_signal(&cfg, SignalKind::A, 100_000.0 * SAMPLE_PERIOD)
         .expect("emulator")
         .log;
-    let p = control::lugre::LugreParams::<f64>::paper();
-    let st = Structure::with_effects(
-        Plant::Voltage,
-        vec![
-            Effect::Coulomb { fc: p.alpha0 },
-            Effect::Stribeck {
-                fs: p.alpha1,
-                vs: p.v0,
-            },
-            Effect::Viscous { b: p.alpha2 },
-            Effect::Presliding {
-                sigma0: p.sigma0,
-                sigma1: p.sigma1,
-            },
-        ],
-    );
+    let st = Structure::lugre_paper(Plant::Voltage);
     let mut g = c.benchmark_group("diagnose");
     g.sample_size(10);
     g.bench_function("1e5_samples_lugre", |b| {

@@ -547,24 +547,8 @@ fn main() {
 /// `diagnose` with the emulator's own LuGre structure on a simulated log: what the base
 /// residual of the torque equation looks like and what the candidates explain.
 fn diagnose_true(kind: SignalKind, dur: f64) {
-    use control::effects::Effect;
     use motorid::diagnose::{diagnose, Options, Structure};
-    let p = LugreParams::<f64>::paper();
-    let st = Structure::with_effects(
-        motorid::log::Plant::Voltage,
-        vec![
-            Effect::Coulomb { fc: p.alpha0 },
-            Effect::Stribeck {
-                fs: p.alpha1,
-                vs: p.v0,
-            },
-            Effect::Viscous { b: p.alpha2 },
-            Effect::Presliding {
-                sigma0: p.sigma0,
-                sigma1: p.sigma1,
-            },
-        ],
-    );
+    let st = Structure::lugre_paper(motorid::log::Plant::Voltage);
     let mut cfg = EmulatorConfig::paper();
     // HIDDEN=spec;spec hides effects (the structure stays the true LuGre one).
     if let Ok(h) = std::env::var("HIDDEN") {

@@ -11,22 +11,7 @@ use motorid::emulator::{simulate_signal, EmulatorConfig, SignalKind};
 use motorid::log::Plant;
 
 fn lugre() -> Structure {
-    let p = control::lugre::LugreParams::<f64>::paper();
-    Structure::with_effects(
-        Plant::Voltage,
-        vec![
-            Effect::Coulomb { fc: p.alpha0 },
-            Effect::Stribeck {
-                fs: p.alpha1,
-                vs: p.v0,
-            },
-            Effect::Viscous { b: p.alpha2 },
-            Effect::Presliding {
-                sigma0: p.sigma0,
-                sigma1: p.sigma1,
-            },
-        ],
-    )
+    Structure::lugre_paper(Plant::Voltage)
 }
 
 fn run(cfg: &EmulatorConfig) -> Diagnosis {

@@ -720,7 +720,31 @@ pub fn explain(spec: &EffectSpec, score: f64, eq: Equation) -> String {
     )
 }
 
+/// A LuGre law as effects: Coulomb (α0), Stribeck (α1, v0), viscous (α2), presliding (σ0, σ1).
+pub fn lugre_effects(l: &control::lugre::LugreParams<f64>) -> Vec<Effect<f64>> {
+    vec![
+        Effect::Coulomb { fc: l.alpha0 },
+        Effect::Stribeck {
+            fs: l.alpha1,
+            vs: l.v0,
+        },
+        Effect::Viscous { b: l.alpha2 },
+        Effect::Presliding {
+            sigma0: l.sigma0,
+            sigma1: l.sigma1,
+        },
+    ]
+}
+
 impl Structure {
+    /// The paper motor's LuGre law (the emulator's own friction) with its K_t.
+    pub fn lugre_paper(plant: Plant) -> Structure {
+        Structure::with_effects(
+            plant,
+            lugre_effects(&control::lugre::LugreParams::<f64>::paper()),
+        )
+    }
+
     /// The structure of an identified model: its friction law as effects (linear: viscous;
     /// LuGre: Coulomb, Stribeck, viscous, presliding; SINDYc: Coulomb and viscous, the terms
     /// its library always offers) plus its added effects.
@@ -728,18 +752,7 @@ impl Structure {
         use crate::model::ModelKind;
         let mut effects = Vec::new();
         match (m.kind, &m.lugre) {
-            (ModelKind::Lugre, Some(l)) => {
-                effects.push(Effect::Coulomb { fc: l.alpha0 });
-                effects.push(Effect::Stribeck {
-                    fs: l.alpha1,
-                    vs: l.v0,
-                });
-                effects.push(Effect::Viscous { b: l.alpha2 });
-                effects.push(Effect::Presliding {
-                    sigma0: l.sigma0,
-                    sigma1: l.sigma1,
-                });
-            }
+            (ModelKind::Lugre, Some(l)) => effects = lugre_effects(l),
             (ModelKind::Sindyc, _) => {
                 effects.push(Effect::Coulomb { fc: 0.0 });
                 effects.push(Effect::Viscous { b: 0.0 });
