@@ -91,6 +91,80 @@ pub fn sample_average_gain(harmonic: f64, omega: f64, dt: f64) -> f64 {
     }
 }
 
+/// Leave-one-out (PRESS) residual sum of squares of the least-squares fit of `y` on `cols`:
+/// `Σ (e_r / (1 − h_r))²`, each row's residual as predicted by the fit *without* that row
+/// (`h_r` its leverage). Columns are scaled to unit RMS first; all-zero columns and directions
+/// below 1e-10 of the largest singular value are dropped.
+///
+/// Why the harmonic search compares its candidates by this and not by the in-sample residual:
+/// the weak form's window integral of `sin(h·θ)` is the bump's spectrum at `h·ω`, so a high
+/// harmonic's column is non-zero only in the few windows where the rotor runs slowly, those
+/// that start from or pass near a standstill. There the Hall angle steps only every few
+/// samples and whatever the model misses near a standstill is largest, and a harmonic's two
+/// columns can fit one such window's error: on 60 s of signal a (seed 1), with exact weak-form
+/// weights and an earlier version of `diagnose`'s base columns, one window starting at
+/// 1.5 rad/s held a 10σ residual of the *correct* model, and harmonics fitting it
+/// "explained" 4 % (h = 16) to 14 % (h = 23) of the residual, as much as a hidden
+/// `cogging:harmonic=7,amp=0.03` (9.9 % for h = 16 against 9.5 % for the true 7th).
+/// Left out in turn, that window is predicted no better: h = 16's gain fell to 4.9 %, the true
+/// 7th's stayed at 7.0 %. The test `a_glitch_in_one_slow_window_is_not_a_high_harmonic` keeps
+/// this mechanism honest.
+pub fn leave_one_out_rss(cols: &[&[f64]], y: &[f64]) -> f64 {
+    let n = y.len();
+    let scaled: Vec<Vec<f64>> = cols
+        .iter()
+        .filter_map(|c| {
+            let ms = c.iter().take(n).map(|v| v * v).sum::<f64>() / n.max(1) as f64;
+            (ms > 0.0 && ms.is_finite()).then(|| c.iter().take(n).map(|v| v / ms.sqrt()).collect())
+        })
+        .collect();
+    let p = scaled.len();
+    if p == 0 || n <= p {
+        return y.iter().map(|v| v * v).sum();
+    }
+    let a = faer::Mat::<f64>::from_fn(n, p, |i, j| scaled[j][i]);
+    let Ok(svd) = a.thin_svd() else {
+        return f64::INFINITY;
+    };
+    let s = svd.S().column_vector();
+    let smax = (0..p).map(|k| s[k]).fold(0.0, f64::max);
+    let u = svd.U();
+    let keep: Vec<usize> = (0..p).filter(|&k| s[k] > 1e-10 * smax).collect();
+    // Fitted values and leverages from the orthonormal basis U of the column space.
+    let uy: Vec<f64> = keep
+        .iter()
+        .map(|&k| (0..n).map(|i| u[(i, k)] * y[i]).sum())
+        .collect();
+    (0..n)
+        .map(|i| {
+            let (mut fit, mut lev) = (0.0, 0.0);
+            for (&k, c) in keep.iter().zip(&uy) {
+                fit += u[(i, k)] * c;
+                lev += u[(i, k)] * u[(i, k)];
+            }
+            let e = if lev < MAX_LEVERAGE {
+                (y[i] - fit) / (1.0 - lev)
+            } else {
+                // A row the fit can follow on its own: refit without it.
+                let others: Vec<usize> = (0..n).filter(|&r| r != i).collect();
+                let sub: Vec<Vec<f64>> = cols
+                    .iter()
+                    .map(|c| others.iter().map(|&r| c[r]).collect())
+                    .collect();
+                let refs: Vec<&[f64]> = sub.iter().map(|c| c.as_slice()).collect();
+                let ys: Vec<f64> = others.iter().map(|&r| y[r]).collect();
+                let f = lstsq(&refs, &ys);
+                y[i] - cols.iter().zip(&f.beta).map(|(c, b)| b * c[i]).sum::<f64>()
+            };
+            e * e
+        })
+        .sum()
+}
+
+/// Leverage above which [`leave_one_out_rss`] refits without the row instead of dividing by
+/// `1 − h` (which loses its digits as `h → 1`).
+const MAX_LEVERAGE: f64 = 0.99;
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -114,6 +188,144 @@ mod tests {
         assert!((d.phase - 0.4).abs() < 0.1, "{d:?}");
         assert!(d.explained > 0.5);
         assert!(lines[2].explained < 0.05);
+    }
+
+    /// A regressor that is non-zero in one row only fits that row exactly: in-sample it
+    /// explains the row's whole error, left out it predicts nothing. A harmonic spread over
+    /// every row keeps its gain.
+    #[test]
+    fn leave_one_out_discounts_a_fit_carried_by_one_row() {
+        let n = 200;
+        let noise: Vec<f64> = (0..n)
+            .map(|k| 0.01 * (((k * 7919) % 101) as f64 / 50.0 - 1.0))
+            .collect();
+        let spread: Vec<f64> = (0..n).map(|k| (0.3 * k as f64).sin()).collect();
+        let mut y: Vec<f64> = noise
+            .iter()
+            .zip(&spread)
+            .map(|(e, s)| e + 0.01 * s)
+            .collect();
+        y[50] += 0.2; // one outlier row
+        let spike: Vec<f64> = (0..n).map(|k| if k == 50 { 1.0 } else { 0.0 }).collect();
+        let ones = vec![1.0; n];
+        let rss = |cols: &[&[f64]]| {
+            let f = lstsq(cols, &y);
+            f.rss
+        };
+        let (r0, l0) = (rss(&[&ones]), leave_one_out_rss(&[&ones], &y));
+        let (rs, ls) = (
+            rss(&[&ones, &spike]),
+            leave_one_out_rss(&[&ones, &spike], &y),
+        );
+        let (rh, lh) = (
+            rss(&[&ones, &spread]),
+            leave_one_out_rss(&[&ones, &spread], &y),
+        );
+        // In-sample, the spike wins by far; left out, only the spread harmonic gains.
+        assert!(r0 - rs > 3.0 * (r0 - rh), "{r0} {rs} {rh}");
+        assert!(
+            l0 - ls < 0.05 * (l0 - l0.min(lh)).max(1e-12),
+            "{l0} {ls} {lh}"
+        );
+        assert!(lh < l0, "{l0} {lh}");
+        // With no column left (all zero), the sum of squares of y.
+        let zero = vec![0.0; n];
+        let yy: f64 = y.iter().map(|v| v * v).sum();
+        assert!((leave_one_out_rss(&[&zero], &y) - yy).abs() < 1e-12 * yy);
+    }
+
+    /// On emulated logs (60 s of signal a, seeds 1–3) the harmonic search names the hidden
+    /// `cogging:harmonic=7,amp=0.03` with its harmonic and amplitude, and on the correct
+    /// model no harmonic (the slow-window harmonics 16–23 included) claims a relevant share
+    /// of the torque residual.
+    #[test]
+    fn harmonic_search_picks_the_hidden_harmonic_and_no_artefact() {
+        use crate::diagnose::{diagnose, Options, Structure, MIN_EXPLAINED};
+        use crate::effect_spec::EffectSpec;
+        use crate::emulator::{simulate_signal, EmulatorConfig, SignalKind};
+        use crate::log::Plant;
+        for seed in [1, 2, 3] {
+            for hidden in [true, false] {
+                let mut cfg = EmulatorConfig::paper();
+                cfg.seed = seed;
+                if hidden {
+                    cfg.effects = vec![EffectSpec::parse("cogging:harmonic=7,amp=0.03")
+                        .unwrap()
+                        .to_effect()];
+                }
+                let log = simulate_signal(&cfg, SignalKind::A, 60.0).unwrap().log;
+                let d = diagnose(
+                    &log,
+                    &Structure::lugre_paper(Plant::Voltage),
+                    &Options::default(),
+                );
+                let t = d
+                    .tested
+                    .iter()
+                    .find(|t| t.name == "cogging")
+                    .expect("cogging tested");
+                let spec = EffectSpec::parse(&t.spec).unwrap();
+                if hidden {
+                    assert_eq!(spec.get("harmonic"), 7.0, "seed {seed}: {}", t.spec);
+                    assert!(t.kept, "seed {seed}: {t:?}");
+                    assert!(
+                        (spec.get("amp") - 0.03).abs() < 0.01,
+                        "seed {seed}: {}",
+                        t.spec
+                    );
+                } else {
+                    assert!(
+                        t.explained < MIN_EXPLAINED && !t.kept,
+                        "seed {seed}: correct model, {} explains {:.3}",
+                        t.spec,
+                        t.explained
+                    );
+                }
+            }
+        }
+    }
+
+    /// One disturbance the model cannot explain, in one window where the rotor runs slowly
+    /// (a 1 V glitch over 7 samples at 1.4–3 rad/s: a knock, a stick-slip event, a log
+    /// error), must not turn the search to a high harmonic, whose column lives in such
+    /// windows. Ranked by in-sample residual, the search picked harmonic 15 (amp 0.064 N·m,
+    /// seed 1) and 12 (0.073 N·m, seed 3) here and kept them; by leave-one-out it names 7.
+    #[test]
+    fn a_glitch_in_one_slow_window_is_not_a_high_harmonic() {
+        use crate::diagnose::{diagnose, Options, Structure};
+        use crate::effect_spec::EffectSpec;
+        use crate::emulator::{simulate_signal, EmulatorConfig, SignalKind};
+        use crate::log::Plant;
+        for (seed, k) in [(1u64, 4179usize), (3, 3129)] {
+            let mut cfg = EmulatorConfig::paper();
+            cfg.seed = seed;
+            cfg.effects = vec![EffectSpec::parse("cogging:harmonic=7,amp=0.03")
+                .unwrap()
+                .to_effect()];
+            let r = simulate_signal(&cfg, SignalKind::A, 60.0).unwrap();
+            let w = &r.truth.omega;
+            assert!(
+                (k - 8..=k + 8).all(|j| w[j].abs() > 1.2 && w[j].abs() < 4.0),
+                "seed {seed}: the rotor is not slow around sample {k}"
+            );
+            let mut log = r.log;
+            for j in k - 3..=k + 3 {
+                log.u[j] += w[k].signum();
+            }
+            let d = diagnose(
+                &log,
+                &Structure::lugre_paper(Plant::Voltage),
+                &Options::default(),
+            );
+            let t = d.tested.iter().find(|t| t.name == "cogging").unwrap();
+            let spec = EffectSpec::parse(&t.spec).unwrap();
+            assert_eq!(spec.get("harmonic"), 7.0, "seed {seed}: {}", t.spec);
+            assert!(
+                (spec.get("amp") - 0.03).abs() < 0.01,
+                "seed {seed}: {}",
+                t.spec
+            );
+        }
     }
 
     #[test]
