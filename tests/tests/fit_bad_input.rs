@@ -74,6 +74,22 @@ fn bad_logs_and_models_are_one_clear_error_and_no_output() {
         &["fit", "--model", "linear", "-o", "m.toml", "flat.csv"],
         &["flat.csv", "'u'", "constant"],
     );
+    // Presliding is the LuGre model's state: a linear model is told where to find it.
+    std::fs::write(d.join("ok.csv"), ramp_log(200, |k| (k as f64 * 0.1).sin())).unwrap();
+    fails_with(
+        d,
+        &[
+            "fit",
+            "--model",
+            "linear",
+            "--add",
+            "presliding",
+            "-o",
+            "m.toml",
+            "ok.csv",
+        ],
+        &["--add presliding", "--model lugre"],
+    );
     assert!(!d.join("m.toml").exists(), "an output file was written");
     // A broken model: the line and the field are named.
     std::fs::write(

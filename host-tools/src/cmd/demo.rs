@@ -23,7 +23,7 @@ pub const RANDOM_EFFECTS: &[EffectKind] = EffectKind::ALL.split_at(4).1;
 /// torque (`offset`, 0.03 N·m, a third of the motor's Coulomb friction). Chosen because the
 /// diagnosis finds it on every seed tried and `fit --add` estimates it well, so `motorid demo`
 /// with no argument shows the whole loop working, the error falling included. (Cogging is
-/// found as reliably, but `fit --add cogging` does not yet improve the free-run fit.)
+/// found as reliably, but `fit --add cogging` closes less of the gap: 63 %.)
 pub const DEFAULT_EFFECT: EffectKind = EffectKind::Offset;
 
 /// Most diagnose → add → refit rounds.
@@ -39,8 +39,9 @@ pub const DURATION: f64 = 90.0;
     after_help = "Without --effect, the hidden effect is offset (a constant load torque) at its default size and the seed \
     is 1, so a bare `motorid demo` always runs the same case. With --random, one effect is \
     drawn (from the seed) among: cogging, position_load, offset, asymmetry, deadtime, \
-    current_offset, thermal, load_friction, with its default size; load_friction \
-    (mu = 0.05) is too small at its default size to show in a short log and may be NOT FOUND. \
+    current_offset, thermal, load_friction, with its default size. load_friction shows only where the drive brakes \
+    the moving rotor, which signal a never does: the demo reports it NOT FOUND (fit and \
+    diagnose a `motorid simulate --signal d` log, a braking experiment, to find it). \
     Give --effect more than once to hide several.\n\n\
     Each round: fit a LuGre model (with the effects added so far) on signal a, score it on \
     signal b (fit %, the paper's eq. 48), diagnose it on signal a, add the top finding. \

@@ -21,10 +21,11 @@ use std::path::PathBuf;
     Velocity thresholds (standstill, the smooth sign's width, the Stribeck grid) scale with the \
     log's speed (its 99th-percentile |velocity| against 50 rad/s) and the windows are in seconds, \
     so a linear axis in metres at 1 kHz is diagnosed like a rotary motor at 12 ms.\n\n\
-    Limits: presliding (bristle deflection of a few milliradians before sliding) acts below one \
-    Hall step (0.095 rad) and is practically undetectable in Hall-quantised logs; the diagnosis \
-    then names nothing rather than something false. Load-dependent friction at a few per cent \
-    of the transmitted torque is below the 2% relevance rule in a 60-90 s log.\n\n\
+    Limits: presliding is found only when the bristles deflect about two or more Hall steps \
+    before breakaway (a geared axis seen at the rotor); stiffer bristles act inside one Hall \
+    step (0.095 rad) and are not reported, rather than something false. Load-dependent \
+    friction shows only where the drive brakes the moving rotor (after fast voltage drops); \
+    on smooth signals it is a slightly lower torque constant and cannot be told apart.\n\n\
     Each finding's `spec` carries the estimated parameters and is accepted by \
     `motorid fit --add SPEC`. --json prints {\"effects\": [{\"name\", \"spec\", \"score\", \
     \"explanation\"}, ...]}, most important first; score = fraction of the residual explained."

@@ -845,7 +845,7 @@ pub fn explain(spec: &EffectSpec, score: f64, eq: Equation) -> String {
             g("vs")
         ),
         EffectKind::Presliding => format!(
-            "friction builds up over a deflection after each reversal and breakaway instead of switching at once (presliding, the LuGre bristle state, stiffness about {:.3} N·m/rad)",
+            "friction builds up over a deflection after each reversal and breakaway instead of switching at once (presliding, the LuGre bristle state, stiffness about {:.3} N·m/rad: `fit --model lugre` has it)",
             g("sigma0")
         ),
         EffectKind::Cogging => format!(

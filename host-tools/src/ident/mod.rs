@@ -32,6 +32,7 @@ use crate::effect_spec::EffectSpec;
 use crate::log::{MotorLog, Plant};
 use crate::model::{Model, ModelKind};
 use anyhow::{bail, Result};
+use control::effects::EffectKind;
 pub use freerun::Prediction;
 use serde::Serialize;
 
@@ -118,6 +119,15 @@ pub fn fit(req: &FitRequest) -> Result<FitReport> {
     }
     for log in req.logs {
         check_log(log, req.plant)?;
+    }
+    // Presliding is a state (the bristle deflection), not a term a linear model can carry:
+    // the LuGre model is the static friction law with that state.
+    if req.kind == ModelKind::Linear && req.adds.iter().any(|s| s.kind == EffectKind::Presliding) {
+        bail!(
+            "--add presliding: a linear model has no friction state to deflect; fit \
+             `--model lugre` instead (Coulomb, Stribeck and viscous friction with the \
+             presliding bristle state) and add the other effects to it"
+        );
     }
     let mut model = fit_kind(req)?;
     if !req.adds.is_empty() && !req.validate.is_empty() && req.kind != ModelKind::Sindyc {
