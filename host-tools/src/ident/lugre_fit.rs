@@ -39,6 +39,9 @@ pub const SIGMA0_GRID: [f64; 5] = [0.3, 3.0, 30.0, 300.0, 3000.0];
 /// friction (s(0)/σ0), more than a turn of the rotor: softer is no longer a bristle. (It was
 /// 1.0; a soft bristle of 0.4 N·m/rad then stopped at the bound.)
 pub const SIGMA0_MIN: f64 = 0.01;
+/// A soft bristle start (σ0 < 30) is taken only when its simulation cost is below this
+/// fraction of the best stiff start's.
+pub const SOFT_START_RATIO: f64 = 0.7;
 
 /// A steady-state point: velocity [rad/s], friction torque [N·m].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -259,8 +262,11 @@ pub fn fit(req: &FitRequest) -> Result<Model> {
     // x 97.45 % instead of 99.94 %).
     {
         let res = sim_error::Residuals::new(req.logs, m.sensor.velocity_window);
+        // Best start among the stiff (≥ 30) and among the soft grid points, separately.
         let mut best = (f64::INFINITY, sigma0, init.sigma1);
+        let mut best_soft = (f64::INFINITY, sigma0, init.sigma1);
         for s0 in SIGMA0_GRID {
+            let best = if s0 < 30.0 { &mut best_soft } else { &mut best };
             let soft = [2.0 * (s0 * m.motor.j.max(0.0)).sqrt(), 0.1, 1.0];
             let stiff = [0.1, 1.0, 10.0, 30.0];
             for &s1 in if s0 < 30.0 { &soft[..] } else { &stiff[..] } {
@@ -272,10 +278,20 @@ pub fn fit(req: &FitRequest) -> Result<Model> {
                 if let Ok(r) = res.eval(&trial) {
                     let c: f64 = r.iter().map(|v| v * v).sum();
                     if c < best.0 {
-                        best = (c, s0, s1);
+                        *best = (c, s0, s1);
                     }
                 }
             }
+        }
+        // A soft start only when it is clearly better: with stiff bristles in the data a
+        // soft start that costs a little less at the grid led the refinement to a worse
+        // local minimum (offset hidden, 90 s of signal a, seed 1: validation i 98.6 % from
+        // the stiff start, 94.9 % from the soft one); a visible soft bristle costs far less.
+        if std::env::var_os("MOTORID_DEBUG_IDENT").is_some() {
+            eprintln!("bristle start (cost, sigma0, sigma1): stiff {best:?}, soft {best_soft:?}");
+        }
+        if best_soft.0 < SOFT_START_RATIO * best.0 {
+            best = best_soft;
         }
         if let Some(l) = m.lugre.as_mut() {
             l.sigma0 = best.1;
