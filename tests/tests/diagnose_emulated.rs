@@ -255,11 +255,7 @@ fn load_friction_is_not_claimed_where_the_drive_never_brakes() {
         assert!(d.effects.is_empty(), "seed {seed}: {:?}", names(&d));
         let correct = run(&hidden(&[], seed));
         for (what, d) in [("hidden", &d), ("correct", &correct)] {
-            let t = d
-                .tested
-                .iter()
-                .find(|t| t.name == "load_friction")
-                .unwrap_or_else(|| panic!("seed {seed}: load_friction not tested"));
+            let t = load_friction_tested(d, seed);
             assert!(
                 t.explained < motorid::diagnose::MIN_EXPLAINED,
                 "seed {seed}, {what} model: load_friction explains {:.3} ({})",
@@ -268,6 +264,14 @@ fn load_friction_is_not_claimed_where_the_drive_never_brakes() {
             );
         }
     }
+}
+
+/// The best test of the `load_friction` candidate in a diagnosis.
+fn load_friction_tested(d: &Diagnosis, seed: u64) -> &motorid::diagnose::Tested {
+    d.tested
+        .iter()
+        .find(|t| t.name == "load_friction")
+        .unwrap_or_else(|| panic!("seed {seed}: load_friction not tested"))
 }
 
 /// The paper's LuGre law as effects, without the one of `kind`.
@@ -406,11 +410,7 @@ fn load_friction_is_ranked_first_on_a_braking_signal() {
             "seed {seed}: correct model, {:?}",
             names(&d)
         );
-        let t = d
-            .tested
-            .iter()
-            .find(|t| t.name == "load_friction")
-            .unwrap_or_else(|| panic!("seed {seed}: load_friction not tested"));
+        let t = load_friction_tested(&d, seed);
         assert!(
             t.explained < motorid::diagnose::MIN_EXPLAINED,
             "seed {seed}, correct model: load_friction explains {:.3} ({})",
