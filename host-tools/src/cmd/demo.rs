@@ -32,6 +32,10 @@ pub const MAX_ROUNDS: usize = 4;
 /// validation components and a thermal time constant of 20 s, short enough that the demo
 /// runs in about a minute on two cores.
 pub const DURATION: f64 = 90.0;
+/// Length of the braking experiment (signal d, voltage steps) fitted and diagnosed beside
+/// signal a [s]: 17-25 braking transients a minute on the paper motor. (Without it, a
+/// hidden load_friction was NOT FOUND: fitted on signal a alone it is a lower K_t.)
+pub const STEP_DURATION: f64 = 30.0;
 
 /// Run the whole loop on the emulator with a hidden effect.
 #[derive(clap::Args, Debug)]
@@ -39,12 +43,11 @@ pub const DURATION: f64 = 90.0;
     after_help = "Without --effect, the hidden effect is offset (a constant load torque) at its default size and the seed \
     is 1, so a bare `motorid demo` always runs the same case. With --random, one effect is \
     drawn (from the seed) among: cogging, position_load, offset, asymmetry, deadtime, \
-    current_offset, thermal, load_friction, with its default size. load_friction shows only where the drive brakes \
-    the moving rotor, which signal a never does: the demo reports it NOT FOUND (fit and \
-    diagnose a `motorid simulate --signal d` log, a braking experiment, to find it). \
-    Give --effect more than once to hide several.\n\n\
-    Each round: fit a LuGre model (with the effects added so far) on signal a, score it on \
-    signal b (fit %, the paper's eq. 48), diagnose it on signal a, add the top finding. \
+    current_offset, thermal, load_friction, with its default size. Give --effect more than once to hide several.\n\n\
+    Each round: fit a LuGre model (with the effects added so far) on signal a plus 30 s of \
+    the step signal d (a braking experiment: load_friction shows only where the drive brakes \
+    the moving rotor, which signal a never does), score it on signal b (fit %, the paper's \
+    eq. 48), diagnose it on a and on d, add the strongest new finding. \
     Stops when nothing significant is left or after 4 rounds."
 )]
 pub struct Args {
@@ -84,8 +87,7 @@ impl Outcome {
     }
 }
 
-fn fit(log: &MotorLog, val: &MotorLog, adds: &[EffectSpec]) -> Result<Model> {
-    let logs = std::slice::from_ref(log);
+fn fit(logs: &[MotorLog], val: &MotorLog, adds: &[EffectSpec]) -> Result<Model> {
     let validate = std::slice::from_ref(val);
     let req = FitRequest {
         kind: ModelKind::Lugre,
@@ -118,9 +120,16 @@ pub fn run_loop(
     let mut cfg = EmulatorConfig::paper();
     cfg.seed = seed;
     cfg.effects = hidden.iter().map(EffectSpec::to_effect).collect();
-    bar.set_message("simulating signals a (fit) and b (validation)");
+    bar.set_message("simulating signals a and d (fit) and b (validation)");
     let mut fit_log = simulate_signal(&cfg, SignalKind::A, duration)?.log;
     fit_log.source = PathBuf::from("emulated signal a");
+    // The braking experiment: after each voltage step down the drive brakes the moving
+    // rotor, the only place where load-dependent friction differs from a lower K_t.
+    let mut step_cfg = cfg.clone();
+    step_cfg.seed = seed.wrapping_add(2000);
+    let mut step_log = simulate_signal(&step_cfg, SignalKind::D, STEP_DURATION)?.log;
+    step_log.source = PathBuf::from("emulated signal d");
+    let fit_logs = [fit_log, step_log];
     let mut val_cfg = cfg.clone();
     val_cfg.seed = seed.wrapping_add(1000);
     let mut val_log = simulate_signal(&val_cfg, SignalKind::B, duration)?.log;
@@ -131,7 +140,7 @@ pub fn run_loop(
     let mut last = None;
     for round in 0..=MAX_ROUNDS {
         bar.set_message(format!("round {round}: fitting {}", label(&adds)));
-        let model = fit(&fit_log, &val_log, &adds)?;
+        let model = fit(&fit_logs, &val_log, &adds)?;
         bar.inc(1);
         let pred = ident::freerun::simulate(&model, &val_log)?;
         let sc = ident::score_prediction(&model, &val_log, &pred)?;
@@ -146,11 +155,23 @@ pub fn run_loop(
                 .unwrap_or_else(|| "-".into())
         ));
         bar.set_message(format!("round {round}: diagnosing"));
-        let d = diagnose::diagnose(
-            &fit_log,
-            &Structure::from_model(&model),
-            &Options::default(),
-        );
+        // Each fitting experiment is diagnosed; the strongest new finding of either is added.
+        let st = Structure::from_model(&model);
+        let ds: Vec<diagnose::Diagnosis> = fit_logs
+            .iter()
+            .map(|l| diagnose::diagnose(l, &st, &Options::default()))
+            .collect();
+        let new = |f: &&diagnose::Finding| !adds.iter().any(|a| a.kind.name() == f.name);
+        let best = ds
+            .iter()
+            .enumerate()
+            .filter_map(|(k, d)| d.effects.iter().find(new).map(|f| (k, f.score)))
+            .max_by(|a, b| a.1.total_cmp(&b.1))
+            .map(|(k, _)| k);
+        let d = ds
+            .into_iter()
+            .nth(best.unwrap_or(0))
+            .context("no diagnosis")?;
         let next = d.effects.iter().find_map(|f| {
             EffectSpec::parse(&f.spec)
                 .ok()
@@ -248,8 +269,10 @@ pub fn run(args: Args) -> Result<()> {
     }
     println!(
         "Emulated motor (paper's BLDC motor, LuGre friction) with {} hidden effect(s); \
-         fitting on signal a, validating on signal b ({} s each).",
+         fitting on signals a ({} s) and d ({} s, voltage steps), validating on signal b ({} s).",
         hidden.len(),
+        args.duration,
+        STEP_DURATION,
         args.duration
     );
     let bar = ProgressBar::new((2 + MAX_ROUNDS) as u64);
