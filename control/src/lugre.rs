@@ -54,6 +54,15 @@ impl<F: Float> LugreParams<F> {
     /// `viscous` → α2, `presliding` → σ0 and σ1. Missing effects give zeros (v0 = 1 rad/s, a
     /// placeholder that matters only when α1 ≠ 0). Returns `None` without `presliding`.
     pub fn from_effects(effects: &[Effect<F>]) -> Option<Self> {
+        let has_state = effects
+            .iter()
+            .any(|e| matches!(e, Effect::Presliding { .. }));
+        has_state.then(|| Self::friction_law(effects))
+    }
+
+    /// The friction law of a list of effects as LuGre parameters, as [`Self::from_effects`]
+    /// but also without `presliding` (σ0 = σ1 = 0 then: the static law alone).
+    pub fn friction_law(effects: &[Effect<F>]) -> Self {
         let mut p = LugreParams {
             alpha0: F::zero(),
             alpha1: F::zero(),
@@ -62,7 +71,6 @@ impl<F: Float> LugreParams<F> {
             sigma0: F::zero(),
             sigma1: F::zero(),
         };
-        let mut has_state = false;
         for e in effects {
             match *e {
                 Effect::Coulomb { fc } => p.alpha0 = p.alpha0 + fc,
@@ -74,12 +82,11 @@ impl<F: Float> LugreParams<F> {
                 Effect::Presliding { sigma0, sigma1 } => {
                     p.sigma0 = sigma0;
                     p.sigma1 = sigma1;
-                    has_state = true;
                 }
                 _ => {}
             }
         }
-        has_state.then_some(p)
+        p
     }
 
     /// Stribeck curve `s(v) = α0 + α1·exp(−(v/v0)²)` [N·m].

@@ -199,17 +199,7 @@ fn linear_model_lacks_coulomb() {
 #[test]
 fn presliding_below_the_hall_step_makes_no_false_claim() {
     let p = control::lugre::LugreParams::<f64>::paper();
-    let static_friction = Structure::with_effects(
-        Plant::Voltage,
-        vec![
-            Effect::Coulomb { fc: p.alpha0 },
-            Effect::Stribeck {
-                fs: p.alpha1,
-                vs: p.v0,
-            },
-            Effect::Viscous { b: p.alpha2 },
-        ],
-    );
+    let static_friction = lugre_without(&p, EffectKind::Presliding);
     for seed in [1, 2] {
         let log = simulate_signal(&hidden(&[], seed), SignalKind::A, 60.0)
             .unwrap()

@@ -525,9 +525,8 @@ pub fn presliding_variants(
 }
 
 /// Every variant of an effect on these signals (empty when the effect cannot show in them,
-/// e.g. electrical effects on a torque plant). `coulomb_guess` is the Coulomb friction used to
-/// shape the presliding regressor.
-pub fn variants(kind: EffectKind, s: &Signals, coulomb_guess: f64) -> Vec<Variant> {
+/// e.g. electrical effects on a torque plant).
+pub fn variants(kind: EffectKind, s: &Signals) -> Vec<Variant> {
     let n = s.len();
     let one = |equation, fixed: Fixed, columns: Vec<Vec<f64>>| Variant {
         kind,
@@ -556,21 +555,9 @@ pub fn variants(kind: EffectKind, s: &Signals, coulomb_guess: f64) -> Vec<Varian
                 one(mech, vec![("vs", vs)], vec![col])
             })
             .collect(),
-        EffectKind::Presliding => {
-            // The paper motor's static law with the given Coulomb friction, and its inertia.
-            let paper = LugreParams::<f64>::paper();
-            let law = LugreParams {
-                alpha0: coulomb_guess,
-                alpha1: 0.0,
-                ..paper
-            };
-            presliding_variants(
-                s,
-                &law,
-                control::motor::MotorParams::<f64>::paper().j,
-                &PRESLIDING_DEFLECTION_GRID,
-            )
-        }
+        // Its columns depend on the model's static friction law and the refitted inertia:
+        // `diagnose` builds them itself with [`presliding_variants`].
+        EffectKind::Presliding => vec![],
         EffectKind::Cogging => {
             let hmax = harmonics::resolvable(s.hall_resolution);
             (2..=hmax)

@@ -257,7 +257,7 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
             pre_nuisance = nuisance.iter().map(|c| wf.integral(c)).collect();
             vs
         } else {
-            candidates::variants(kind, &s, 0.0)
+            candidates::variants(kind, &s)
         };
         for v in vs {
             let cols: Vec<Vec<f64>> = v.columns.iter().map(|c| wf.integral(c)).collect();
@@ -439,24 +439,11 @@ fn presliding_candidates(s: &Signals, st: &Structure) -> (Vec<Vec<f64>>, Vec<Var
         fit.beta.first().copied().unwrap_or(0.0),
         fit.beta.get(1).copied().unwrap_or(0.0),
     );
-    let mut law = control::lugre::LugreParams {
-        alpha0: 0.0,
-        alpha1: 0.0,
-        alpha2: 0.0,
-        v0: 1.0,
-        sigma0: 1.0,
-        sigma1: 0.0,
-    };
-    for e in &st.effects {
-        match *e {
-            Effect::Coulomb { fc } => law.alpha0 = fc,
-            Effect::Stribeck { fs, vs } if vs > 0.0 => {
-                law.alpha1 = fs;
-                law.v0 = vs;
-            }
-            Effect::Viscous { b } => law.alpha2 = b,
-            _ => {}
-        }
+    // The model's static law (σ0, σ1 are set per variant). A Stribeck term without a
+    // positive velocity has no curve.
+    let mut law = control::lugre::LugreParams::friction_law(&st.effects);
+    if law.v0 <= 0.0 || law.v0.is_nan() {
+        (law.alpha1, law.v0) = (0.0, 1.0);
     }
     if law.alpha0 <= 0.0 {
         law.alpha0 = fc_fit.max(0.0);
