@@ -83,3 +83,4 @@ v0 = 3.676
 sigma0 = 317.225
 sigma1 = 22.2464
 "#;
+pub mod other_plant;

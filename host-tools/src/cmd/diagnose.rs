@@ -8,27 +8,32 @@ use std::path::PathBuf;
 /// Find the physical effects a model is missing.
 #[derive(clap::Args, Debug)]
 #[command(
-    after_help = "How it decides: the log is written as two equation residuals \
-    (the torque balance and, for a voltage plant, the voltage balance) in weak form \
-    (integrated against smooth windows, so the Hall-quantised angle is never differentiated). \
-    The model's own structure is refitted in each; then every effect of the contract's list \
-    that the model lacks adds its regressors (searched over cogging harmonics 2..16, \
-    Stribeck velocities, thermal time constants...). Forward selection keeps an effect only \
-    when it is SIGNIFICANT: nested-model F-test p < 0.001 / (number of candidate variants) \
-    (Bonferroni; the sample count is shrunk to an effective one for autocorrelated \
-    residuals) and a lower BIC, AND RELEVANT: it explains at least 2% of the equation's \
-    residual sum of squares. No finding means the model explains the data down to its noise.\n\n\
+    after_help = "How it decides. First the model AS GIVEN: its own equations with its own \
+    numbers are written as weak-form residuals (the torque balance and, for a voltage plant, \
+    the voltage balance, integrated against smooth windows so the Hall-quantised angle is never \
+    differentiated). PARAMETERS: when a refit of the same structure removes at least half of \
+    that residual (F-test), the parameters are off and the refitted constants are printed: \
+    refit first. WHITENESS: the residual must not be predictable from its own past \
+    (Breusch-Godfrey on disjoint windows). INPUT: it must not be explained by the input of the \
+    last windows. Then what is MISSING: every effect of the list that the model lacks adds its \
+    regressors (searched over cogging harmonics, Stribeck velocities, thermal time constants...) \
+    and forward selection keeps an effect when it is significant (nested F-test p < 0.001 / \
+    number of candidate variants, Bonferroni, with an effective sample size for autocorrelated \
+    residuals, and a lower BIC) and relevant (it explains at least 2% of the residual). What \
+    no effect explains is ranked by the VARIABLE that carries it (theta, omega, acceleration, \
+    current, time, reversal, frequency), each a smooth function tested the same way. The \
+    model is ADEQUATE only when every check passes at the 1% family level and both lists are \
+    empty; only then does diagnose say the model explains the data.\n\n\
     Velocity thresholds (standstill, the smooth sign's width, the Stribeck grid) scale with the \
-    log's speed (its 99th-percentile |velocity| against 50 rad/s) and the windows are in seconds, \
-    so a linear axis in metres at 1 kHz is diagnosed like a rotary motor at 12 ms.\n\n\
+    log's speed and the windows are in seconds.\n\n\
     Limits: presliding is found only when the bristles deflect about two or more Hall steps \
-    before breakaway (a geared axis seen at the rotor); stiffer bristles act inside one Hall \
-    step (0.095 rad) and are not reported, rather than something false. Load-dependent \
-    friction shows only where the drive brakes the moving rotor (after fast voltage drops); \
-    on smooth signals it is a slightly lower torque constant and cannot be told apart.\n\n\
+    before breakaway. Load-dependent friction shows only where the drive brakes the moving \
+    rotor. SINDYc models get no parameter check (their equations are not motor constants).\n\n\
     Each finding's `spec` carries the estimated parameters and is accepted by \
-    `motorid fit --add SPEC`. --json prints {\"effects\": [{\"name\", \"spec\", \"score\", \
-    \"explanation\"}, ...]}, most important first; score = fraction of the residual explained."
+    `motorid fit --add SPEC`. --json prints {\"adequate\": BOOL, \"effects\": [{\"name\", \
+    \"spec\", \"score\", \"explanation\"}, ...], \"unexplained\": [{\"variable\", \"share\", \
+    \"explanation\"}, ...], \"checks\": [...], \"refit\": [...]}, most important first; \
+    score and share = fraction of the residual explained."
 )]
 pub struct Args {
     /// The model (written by `motorid fit`).
@@ -46,6 +51,16 @@ pub struct Args {
     /// Column names of the log: STD=NAME[,STD=NAME...].
     #[arg(long, value_name = "M")]
     pub map: Option<String>,
+}
+
+#[derive(serde::Serialize)]
+struct JsonUnexplained<'a> {
+    variable: &'a str,
+    share: f64,
+    explanation: &'a str,
+    p_value: f64,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    hz: Option<f64>,
 }
 
 #[derive(serde::Serialize)]
@@ -87,15 +102,72 @@ pub fn run(args: Args) -> Result<()> {
                 explanation: &f.explanation,
             })
             .collect();
-        println!("{}", serde_json::json!({ "effects": effects }));
+        let unexplained: Vec<JsonUnexplained> = d
+            .verdict
+            .unexplained
+            .iter()
+            .map(|u| JsonUnexplained {
+                variable: u.variable,
+                share: u.share,
+                explanation: &u.explanation,
+                p_value: u.p_value,
+                hz: u.hz,
+            })
+            .collect();
+        let refit: Vec<serde_json::Value> = d
+            .verdict
+            .refit
+            .iter()
+            .map(|(n, v, u)| serde_json::json!({"name": n, "value": v, "unit": u}))
+            .collect();
+        println!(
+            "{}",
+            serde_json::json!({
+                "adequate": d.verdict.adequate,
+                "effects": effects,
+                "unexplained": unexplained,
+                "checks": d.verdict.checks,
+                "refit": refit,
+                "level": d.verdict.level,
+            })
+        );
         return Ok(());
     }
-    if d.effects.is_empty() {
+    print_text(&model, &args, &d);
+    Ok(())
+}
+
+fn print_text(model: &Model, args: &Args, d: &diagnose::Diagnosis) {
+    let v = &d.verdict;
+    let failed: Vec<&diagnose::verdict::Check> = v.checks.iter().filter(|c| !c.passed).collect();
+    if v.adequate {
         println!(
-            "No missing effect is significant: the {} model explains {} down to its noise.",
+            "Adequate: the {} model explains {} down to its noise (every check passes at the {:.0}% level; no effect of the list is missing).",
             model.kind.name(),
-            args.data.display()
+            args.data.display(),
+            100.0 * v.level
         );
+        return;
+    }
+    println!(
+        "Not adequate: the {} model leaves structure in {} (checks at the {:.0}% family level).",
+        model.kind.name(),
+        args.data.display(),
+        100.0 * v.level
+    );
+    for c in &failed {
+        println!("  FAILED {:<10} {}", c.name, c.detail);
+    }
+    if !v.refit.is_empty() {
+        let vals: Vec<String> = v
+            .refit
+            .iter()
+            .map(|(n, x, u)| format!("{n} = {x:.4e} {u}"))
+            .collect();
+        println!("  refitted: {}", vals.join(", "));
+    }
+    if d.effects.is_empty() {
+        println!("No effect of the list explains it significantly.");
     } else {
         println!("Missing effects, most important first (add with `motorid fit --add SPEC`):");
         for f in &d.effects {
@@ -103,5 +175,14 @@ pub fn run(args: Args) -> Result<()> {
             println!("      {}", f.explanation);
         }
     }
-    Ok(())
+    if !v.unexplained.is_empty() {
+        println!("Unexplained structure, by the variable that carries it:");
+        for u in &v.unexplained {
+            println!(
+                "  {:<13} share {:.3}  p {:.1e}",
+                u.variable, u.share, u.p_value
+            );
+            println!("      {}", u.explanation);
+        }
+    }
 }

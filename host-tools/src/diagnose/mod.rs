@@ -22,9 +22,11 @@
 //! 4. Each finding's coefficients become a spec (`cogging:harmonic=7,amp=0.03,phase=0.2`) that
 //!    `fit --add` accepts; its score is the fraction of the base residual it explains.
 pub mod candidates;
+pub mod carriers;
 pub mod harmonics;
 pub mod regions;
 pub mod stats;
+pub mod verdict;
 pub mod weakform;
 
 use crate::effect_spec::EffectSpec;
@@ -54,6 +56,9 @@ pub struct Structure {
     pub effects: Vec<Effect<f64>>,
     /// Torque constant K_t [N·m/A] (ignored for a torque plant).
     pub kt: f64,
+    /// The model's constants as given, for the verdict on its parameters; `None` when the
+    /// model's equations are not a motor with these constants (SINDYc).
+    pub motor: Option<MotorParams<f64>>,
 }
 
 impl Structure {
@@ -63,6 +68,7 @@ impl Structure {
             plant,
             effects,
             kt: MotorParams::<f64>::paper().kt,
+            motor: Some(MotorParams::paper()),
         }
     }
 
@@ -159,6 +165,24 @@ pub struct Diagnosis {
     /// Per-test level after Bonferroni.
     pub alpha_per_test: f64,
     pub min_explained: f64,
+    /// The verdict on the model as given.
+    pub verdict: Verdict,
+}
+
+/// The verdict on the model as given ([`verdict`]).
+#[derive(Debug, Clone, Serialize, Default)]
+pub struct Verdict {
+    /// True only when every check passes, no effect is missing and nothing is unexplained.
+    pub adequate: bool,
+    /// Family-wise level of the checks and the per-test level after Bonferroni.
+    pub level: f64,
+    pub level_per_test: f64,
+    /// Parameter, whiteness and input checks, per equation.
+    pub checks: Vec<verdict::Check>,
+    /// Variables that carry structure no effect explains, most important first.
+    pub unexplained: Vec<carriers::Carrier>,
+    /// The refitted constants, when the parameter check failed.
+    pub refit: Vec<(String, f64, String)>,
 }
 
 struct EqData {
@@ -187,6 +211,11 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
     .max(2);
     let wf = weakform::WeakForm::new(s.len(), s.dt, h, h);
     let voltage = s.plant == Plant::Voltage && s.i.is_some();
+    // The model's own equations with its own numbers, for the verdict.
+    let given = st
+        .motor
+        .map(|m| verdict::given_residuals(&s, &wf, &st.effects, &m));
+    let mut judged: Vec<Judged> = Vec::new();
 
     // Electrical equation (voltage plant): V = R·I + L·İ + K_b·ω + losses, on the sample grid
     // (the current sampled at t_k answers the input held just before).
@@ -318,6 +347,16 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
             }
         }
         equations.push(push_eq(Equation::Electrical, &out, "V·s", None));
+        judged.push(Judged {
+            eq: Equation::Electrical,
+            keep: vec![true; wf.rows()],
+            given: given.as_ref().and_then(|g| g.1.clone()),
+            base: out.2.clone(),
+            after: out.3.clone(),
+            beta: out.5.clone(),
+            p: elec.base_cols.len(),
+            input: wf.integral(&s.u),
+        });
         findings.extend(out.0);
         tested.extend(out.1);
     }
@@ -389,6 +428,17 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
             if voltage { "V·s" } else { "u·s" },
             mech_keep.as_deref(),
         ));
+        let keep = mech_keep.clone().unwrap_or_else(|| vec![true; wf.rows()]);
+        judged.push(Judged {
+            eq: Equation::Mechanical,
+            given: given.as_ref().map(|g| select_rows(&g.0, &keep)),
+            input: select_rows(&wf.integral(&s.u), &keep),
+            keep,
+            base: out.2.clone(),
+            after: out.3.clone(),
+            beta: out.5.clone(),
+            p: mech.base_cols.len(),
+        });
         if !pre_cand.is_empty() {
             let pre = presliding_pass(&mech, &out.0, all_rows, pre_cand, &wf);
             let pout = forward_select(&pre, opts, alpha_per_test, &mut units);
@@ -401,13 +451,135 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
     resolve_offsets(&mut findings, st.kt);
     findings.sort_by(|a, b| b.score.total_cmp(&a.score));
     findings.truncate(MAX_FINDINGS);
+    let verdict = judge(&s, &wf, st, &judged, &findings, opts);
     Diagnosis {
         effects: findings,
         tested,
         equations,
         alpha_per_test,
         min_explained: opts.min_explained,
+        verdict,
     }
+}
+
+/// One equation's residuals for the verdict.
+struct Judged {
+    eq: Equation,
+    /// Which windows the equation kept.
+    keep: Vec<bool>,
+    /// The model's residual with its own numbers (kept rows), when it has motor constants.
+    given: Option<Vec<f64>>,
+    /// The refit of the model's structure (kept rows).
+    base: Vec<f64>,
+    /// After the findings.
+    after: Vec<f64>,
+    /// The refit's coefficients.
+    beta: Vec<f64>,
+    /// Number of refitted coefficients.
+    p: usize,
+    /// The input at each kept window's centre.
+    input: Vec<f64>,
+}
+
+/// The verdict on the model as given ([`verdict`], [`carriers`]).
+fn judge(
+    s: &Signals,
+    wf: &weakform::WeakForm,
+    st: &Structure,
+    judged: &[Judged],
+    findings: &[Finding],
+    opts: &Options,
+) -> Verdict {
+    let per_eq = 3 + carriers::test_count(s, wf);
+    let level = verdict::ADEQUACY_ALPHA;
+    let level_per_test = level / (per_eq * judged.len()).max(1) as f64;
+    let mut checks = Vec::new();
+    let mut unexplained: Vec<carriers::Carrier> = Vec::new();
+    let mut refit = Vec::new();
+    for j in judged {
+        if j.base.len() < 8 {
+            continue;
+        }
+        if let Some(g) = &j.given {
+            let mut c = verdict::parameter_check(g, &j.base, j.p, level_per_test);
+            c.detail = format!("{} equation: {}", j.eq.label(), c.detail);
+            if !c.passed {
+                let r_refit = judged
+                    .iter()
+                    .find(|e| e.eq == Equation::Electrical)
+                    .and_then(|e| e.beta.first().copied());
+                refit.extend(refitted_constants(j, st, r_refit));
+            }
+            checks.push(c);
+        }
+        let mut w = verdict::whiteness_check(&j.after, level_per_test);
+        w.detail = format!("{} equation: {}", j.eq.label(), w.detail);
+        checks.push(w);
+        let mut x = verdict::input_check(&j.after, &j.input, level_per_test);
+        x.detail = format!("{} equation: {}", j.eq.label(), x.detail);
+        checks.push(x);
+        let rows = carriers::Rows {
+            wf,
+            keep: &j.keep,
+            resid: &j.after,
+            label: j.eq.label(),
+        };
+        for c in carriers::carriers(s, &rows, level_per_test, opts.min_explained) {
+            match unexplained.iter_mut().find(|u| u.variable == c.variable) {
+                Some(u) if u.share >= c.share => {}
+                Some(u) => *u = c,
+                None => unexplained.push(c),
+            }
+        }
+    }
+    unexplained.sort_by(|a, b| b.share.total_cmp(&a.share));
+    let adequate = findings.is_empty() && unexplained.is_empty() && checks.iter().all(|c| c.passed);
+    Verdict {
+        adequate,
+        level,
+        level_per_test,
+        checks,
+        unexplained,
+        refit,
+    }
+}
+
+/// The constants a refit of the structure gives (name, value, unit), from one equation's
+/// base coefficients.
+fn refitted_constants(
+    j: &Judged,
+    st: &Structure,
+    r_refit: Option<f64>,
+) -> Vec<(String, f64, String)> {
+    let mut v = Vec::new();
+    let m = st.motor.unwrap_or(MotorParams::paper());
+    match j.eq {
+        Equation::Electrical => {
+            if let (Some(r), Some(kb)) = (j.beta.first(), j.beta.get(2)) {
+                v.push(("R".to_string(), *r, "Ω".to_string()));
+                v.push(("K_b".to_string(), *kb, "V·s/rad".to_string()));
+            }
+        }
+        Equation::Mechanical => {
+            if let Some(b) = j.beta.first() {
+                // The torque equation is written in volts: its inertia column carries J·R/K_t,
+                // with R the refitted one when the voltage equation gave it.
+                let r = r_refit.filter(|r| *r > 0.0).unwrap_or(m.r);
+                let scale = if st.plant == Plant::Voltage && r > 0.0 {
+                    m.kt / r
+                } else {
+                    1.0
+                };
+                let unit = if st.plant == Plant::Voltage {
+                    "kg·m²"
+                } else {
+                    "u per rad/s²"
+                };
+                v.push(("J".to_string(), b * scale, unit.to_string()));
+            }
+        }
+    }
+    v
 }
 
 /// Presliding candidates: only on top of a static friction law (a model without Coulomb or
@@ -927,6 +1099,7 @@ impl Structure {
             plant: m.plant,
             effects,
             kt: if m.motor.kt > 0.0 { m.motor.kt } else { 1.0 },
+            motor: (m.kind != ModelKind::Sindyc).then_some(m.motor),
         }
     }
 }

@@ -41,7 +41,8 @@ pub const HALF_WIDTH_S: f64 = 0.096;
 pub struct WeakForm {
     /// Sample index of each window centre.
     pub centres: Vec<usize>,
-    half: usize,
+    /// Half-width of a window [samples].
+    pub half: usize,
     /// `φ` and its central first and second differences (standing for `φ'`, `φ''`) at
     /// offsets `−half..=half`, times `dt` (quadrature weights).
     w0: Vec<f64>,

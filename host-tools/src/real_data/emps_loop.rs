@@ -60,6 +60,7 @@ pub fn structure_of(m: &Model) -> Structure {
         plant: m.plant,
         effects,
         kt: m.motor.kt,
+        motor: Some(m.motor),
     }
 }
 

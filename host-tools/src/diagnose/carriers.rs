@@ -1,0 +1,425 @@
+//! What carries the rest: which measured variable the unexplained residual depends on.
+//!
+//! When the residual is structured and no effect of the list explains it, the physics is
+//! still somewhere. Each variable gets a smooth nonparametric function (a basis of hat
+//! functions on its quantiles, a Fourier series for the angle over one revolution, a band of
+//! sinusoids for a spectral peak), integrated against the same weak-form windows as the
+//! equation, and an F-test against a constant with the residual's effective sample size
+//! ([`stats::effective_n`]). A variable *carries* structure when the test is significant at
+//! the family level split over every test of the run (Bonferroni) and the function explains at
+//! least the same share of the residual an effect must ([`super::MIN_EXPLAINED`]).
+//!
+//! | variable | its function | physics that leaves this signature |
+//! |---|---|---|
+//! | `theta` | Fourier series over one revolution (or hats over a linear axis' travel) | cogging of another shape, a position-dependent load, a misplaced Hall sensor |
+//! | `omega` | hats over speed | a friction curve of another shape, windage |
+//! | `acceleration` | hats over acceleration | a wrong inertia, a second inertia on a compliant coupling |
+//! | `current` | hats over current (torque command on a torque plant) | magnetic saturation, load-dependent friction |
+//! | `time` | hats over the run | heating, wear, lubrication warming up, a sagging supply |
+//! | `reversal` | hats over the time since the last reversal, signed by the direction | backlash, presliding |
+//! | `frequency` | a band of sinusoids around the best peak | a compliant coupling, a structural resonance |
+use super::candidates::Signals;
+use super::stats;
+use super::weakform::WeakForm;
+use serde::Serialize;
+
+/// Hat functions per variable: 8 knots, a smooth curve with 7 free shapes beyond a constant.
+pub const KNOTS: usize = 8;
+/// Harmonics of the angle's Fourier series: 6 (12 columns).
+pub const ANGLE_HARMONICS: usize = 6;
+/// Relative half-width of the frequency band: ±10 % around its centre (5 sinusoid pairs),
+/// wide enough for a lightly damped resonance excited by steps.
+pub const BAND: f64 = 0.10;
+
+/// A variable that carries structure of the residual.
+#[derive(Debug, Clone, Serialize)]
+pub struct Carrier {
+    /// `theta`, `omega`, `acceleration`, `current`, `time`, `reversal` or `frequency`.
+    pub variable: &'static str,
+    /// Share of the residual's sum of squares its function explains (0..1).
+    pub share: f64,
+    pub p_value: f64,
+    /// Which physics leaves this signature, in words.
+    pub explanation: String,
+    /// The fitted function at its knots: (value of the variable, residual per unit of ∫φ).
+    pub shape: Vec<(f64, f64)>,
+    /// Centre of the band [Hz] (`frequency` only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub hz: Option<f64>,
+}
+
+/// One equation's residual on its weak-form windows.
+pub struct Rows<'a> {
+    pub wf: &'a WeakForm,
+    /// Which windows the residual has (in window order).
+    pub keep: &'a [bool],
+    /// The residual on the kept windows.
+    pub resid: &'a [f64],
+    /// Equation label for explanations.
+    pub label: &'a str,
+}
+
+/// Hat functions on `knots` (ascending): a partition of unity, linear between knots.
+fn hats(x: &[f64], knots: &[f64]) -> Vec<Vec<f64>> {
+    let m = knots.len();
+    let mut cols = vec![vec![0.0; x.len()]; m];
+    for (k, &v) in x.iter().enumerate() {
+        if !v.is_finite() {
+            continue;
+        }
+        if v <= knots[0] {
+            cols[0][k] = 1.0;
+            continue;
+        }
+        if v >= knots[m - 1] {
+            cols[m - 1][k] = 1.0;
+            continue;
+        }
+        let j = knots.partition_point(|&q| q <= v).clamp(1, m - 1);
+        let (a, b) = (knots[j - 1], knots[j]);
+        let w = if b > a { (v - a) / (b - a) } else { 0.0 };
+        cols[j - 1][k] = 1.0 - w;
+        cols[j][k] = w;
+    }
+    cols
+}
+
+/// `m` knots at the quantiles of `x` (only samples marked in `mask`), distinct.
+fn quantile_knots(x: &[f64], mask: &[bool], m: usize) -> Vec<f64> {
+    let mut v: Vec<f64> = x
+        .iter()
+        .zip(mask)
+        .filter(|(v, k)| **k && v.is_finite())
+        .map(|(v, _)| *v)
+        .collect();
+    if v.is_empty() {
+        return vec![];
+    }
+    v.sort_by(|a, b| a.total_cmp(b));
+    let mut knots: Vec<f64> = (0..m)
+        .map(|j| v[((v.len() - 1) as f64 * j as f64 / (m - 1) as f64).round() as usize])
+        .collect();
+    knots.dedup_by(|a, b| (*a - *b).abs() <= 1e-12 * (a.abs() + b.abs() + 1e-300));
+    knots
+}
+
+/// Samples covered by at least one kept window.
+fn sample_mask(rows: &Rows, n: usize) -> Vec<bool> {
+    let mut m = vec![false; n];
+    for (c, k) in rows.wf.centres.iter().zip(rows.keep) {
+        if *k {
+            let lo = c.saturating_sub(rows.wf.half);
+            let hi = (c + rows.wf.half + 1).min(n);
+            m[lo..hi].iter_mut().for_each(|x| *x = true);
+        }
+    }
+    m
+}
+
+struct Tested {
+    share: f64,
+    p_value: f64,
+    beta: Vec<f64>,
+}
+
+/// F-test of the residual on the weak-form integrals of sample-level columns, against a
+/// constant (∫φ). `spans_constant`: the columns sum to one (hats), so one is not free.
+fn test_columns(rows: &Rows, cols: &[Vec<f64>], spans_constant: bool, n_eff: f64) -> Tested {
+    test_rows(rows, cols, spans_constant, n_eff, 1)
+}
+
+/// As [`test_columns`] on every `step`-th kept row (`step` 2: disjoint windows, whose
+/// residuals are independent under a correct model, so the F-test needs no effective count).
+fn test_rows(
+    rows: &Rows,
+    cols: &[Vec<f64>],
+    spans_constant: bool,
+    n_eff: f64,
+    step: usize,
+) -> Tested {
+    let thin = |v: Vec<f64>| -> Vec<f64> { v.into_iter().step_by(step).collect() };
+    let resid: Vec<f64> = rows.resid.iter().step_by(step).copied().collect();
+    let ones_w: Vec<f64> = thin(select(
+        &rows.wf.integral(&vec![1.0; cols[0].len()]),
+        rows.keep,
+    ));
+    let w: Vec<Vec<f64>> = cols
+        .iter()
+        .map(|c| thin(select(&rows.wf.integral(c), rows.keep)))
+        .collect();
+    let mut refs: Vec<&[f64]> = Vec::with_capacity(w.len() + 1);
+    if !spans_constant {
+        refs.push(&ones_w);
+    }
+    refs.extend(w.iter().map(|c| c.as_slice()));
+    let full = stats::lstsq(&refs, &resid);
+    let base = stats::lstsq(&[&ones_w], &resid);
+    let q = if spans_constant {
+        cols.len().saturating_sub(1)
+    } else {
+        cols.len()
+    };
+    let t = stats::f_test(base.rss, full.rss, q.max(1), 1, n_eff);
+    let beta = if spans_constant {
+        full.beta
+    } else {
+        full.beta[1..].to_vec()
+    };
+    Tested {
+        share: t.explained,
+        p_value: t.p_value,
+        beta,
+    }
+}
+
+fn select(v: &[f64], keep: &[bool]) -> Vec<f64> {
+    v.iter()
+        .zip(keep)
+        .filter(|(_, k)| **k)
+        .map(|(x, _)| *x)
+        .collect()
+}
+
+/// Time since the last reversal of the velocity [s] at each sample (a reversal: the velocity
+/// crosses from beyond the stick speed on one side to beyond it on the other).
+fn since_reversal(s: &Signals) -> Vec<f64> {
+    let stick = s.stick_speed();
+    let mut last_sign = 0.0;
+    let mut last_t = f64::NEG_INFINITY;
+    s.omega
+        .iter()
+        .zip(&s.t)
+        .map(|(&w, &t)| {
+            if w.abs() >= stick {
+                let sg = w.signum();
+                if last_sign != 0.0 && sg != last_sign {
+                    last_t = t;
+                }
+                last_sign = sg;
+            }
+            if last_t.is_finite() {
+                t - last_t
+            } else {
+                f64::INFINITY
+            }
+        })
+        .collect()
+}
+
+/// Number of frequency-band centres [`carriers`] scans for a log (for the Bonferroni count).
+pub fn band_centres(s: &Signals, wf: &WeakForm) -> Vec<f64> {
+    let span = s.t.last().copied().unwrap_or(0.0) - s.t.first().copied().unwrap_or(0.0);
+    if span <= 0.0 || s.dt <= 0.0 {
+        return vec![];
+    }
+    // From a few periods per log to where the window's bump has attenuated a sinusoid to
+    // about a tenth (period ≈ 0.7 × the window's half-width), and below the sample Nyquist.
+    // A resonance is sought above the excitation's own band: the input's RMS frequency
+    // `rms(u̇)/(2π·rms(u − ū))` (a sinusoid's own frequency; higher for steps), times 3.
+    let f_lo = (8.0 / span).max(3.0 * rms_frequency(&s.raw_u, s.dt));
+    let half_s: f64 = wf.half as f64 * s.dt;
+    let f_hi = (1.5 / half_s).min(0.45 / s.dt);
+    let mut v = Vec::new();
+    let mut f = f_lo * (1.0 + BAND);
+    while f * (1.0 + BAND) <= f_hi && v.len() < 200 {
+        v.push(f);
+        f *= 1.0 + BAND;
+    }
+    v
+}
+
+/// RMS frequency [Hz] of a sampled signal: `rms(Δu/dt) / (2π·rms(u − ū))`.
+pub fn rms_frequency(u: &[f64], dt: f64) -> f64 {
+    if u.len() < 3 || dt <= 0.0 {
+        return 0.0;
+    }
+    let mean = u.iter().sum::<f64>() / u.len() as f64;
+    let centred: Vec<f64> = u.iter().map(|v| v - mean).collect();
+    let du: Vec<f64> = u.windows(2).map(|w| (w[1] - w[0]) / dt).collect();
+    let a = stats::rms(&centred);
+    if a > 0.0 {
+        stats::rms(&du) / (2.0 * std::f64::consts::PI * a)
+    } else {
+        0.0
+    }
+}
+
+/// Number of tests [`carriers`] runs on one equation (for the Bonferroni count).
+pub fn test_count(s: &Signals, wf: &WeakForm) -> usize {
+    6 + band_centres(s, wf).len()
+}
+
+/// Rank the variables that carry the residual's structure; `level` is the per-test level.
+pub fn carriers(s: &Signals, rows: &Rows, level: f64, min_share: f64) -> Vec<Carrier> {
+    let n = s.len();
+    if rows.resid.len() < 4 * KNOTS || n == 0 {
+        return vec![];
+    }
+    let mask = sample_mask(rows, n);
+    let n_eff = stats::effective_n(rows.resid);
+    let mut out: Vec<Carrier> = Vec::new();
+    let mut push = |variable: &'static str, t: Tested, knots: Vec<f64>, hz: Option<f64>| {
+        if t.p_value < level && t.share >= min_share {
+            let shape = if knots.len() == t.beta.len() {
+                knots.into_iter().zip(t.beta).collect()
+            } else {
+                vec![]
+            };
+            out.push(Carrier {
+                variable,
+                share: t.share,
+                p_value: t.p_value,
+                explanation: explanation(variable, t.share, hz, rows.label),
+                shape,
+                hz,
+            });
+        }
+    };
+
+    // Angle: one revolution's Fourier series for a rotor that turns, else hats over the
+    // travel of a linear axis or a rotor that never completes two turns.
+    let (lo, hi) = s
+        .theta
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
+            (a.min(x), b.max(x))
+        });
+    if hi - lo >= 4.0 * std::f64::consts::PI && s.plant == crate::log::Plant::Voltage {
+        let mut cols = Vec::new();
+        for k in 1..=ANGLE_HARMONICS {
+            let kf = k as f64;
+            cols.push(s.theta.iter().map(|x| (kf * x).sin()).collect());
+            cols.push(s.theta.iter().map(|x| (kf * x).cos()).collect());
+        }
+        push(
+            "theta",
+            test_columns(rows, &cols, false, n_eff),
+            vec![],
+            None,
+        );
+    } else {
+        let knots = quantile_knots(&s.theta, &mask, KNOTS);
+        if knots.len() >= 3 {
+            let cols = hats(&s.theta, &knots);
+            push("theta", test_columns(rows, &cols, true, n_eff), knots, None);
+        }
+    }
+    let acc = super::weakform::smoothed_derivative(&s.omega, s.dt, s.velocity_half);
+    let current: &[f64] = s.i.as_deref().unwrap_or(&s.raw_u);
+    let reversal: Vec<f64> = since_reversal(s);
+    let sgn: Vec<f64> = s.omega.iter().map(|w| w.signum()).collect();
+    // Speed, acceleration and current are signed: their hats carry odd functions. Time is
+    // not: a friction that changes over the run acts with the direction of motion, so time's
+    // hats come twice, plain and signed by the direction.
+    for (variable, x, signed) in [
+        ("omega", &s.omega[..], false),
+        ("acceleration", &acc[..], false),
+        ("current", current, false),
+        ("time", &s.t[..], true),
+    ] {
+        let knots = quantile_knots(x, &mask, KNOTS);
+        if knots.len() >= 3 {
+            let mut cols = hats(x, &knots);
+            if signed {
+                let more: Vec<Vec<f64>> = cols
+                    .iter()
+                    .map(|c| c.iter().zip(&sgn).map(|(a, b)| a * b).collect())
+                    .collect();
+                cols.extend(more);
+            }
+            let t = test_columns(rows, &cols, true, n_eff);
+            push(variable, t, if signed { vec![] } else { knots }, None);
+        }
+    }
+    {
+        // Hats over the time since the last reversal, signed by the direction of motion; the
+        // last knot also takes every sample long after a reversal.
+        let finite: Vec<f64> = reversal.iter().map(|r| r.min(1e300)).collect();
+        let knots = quantile_knots(&finite, &mask, KNOTS);
+        if knots.len() >= 3 {
+            let cols: Vec<Vec<f64>> = hats(&finite, &knots)
+                .into_iter()
+                .map(|c| c.iter().zip(&sgn).map(|(a, b)| a * b).collect())
+                .collect();
+            push(
+                "reversal",
+                test_columns(rows, &cols, false, n_eff),
+                knots,
+                None,
+            );
+        }
+    }
+    // Frequency: the best band of sinusoids.
+    let resid_disjoint_n = rows.resid.len().div_ceil(2) as f64;
+    let mut best: Option<(f64, Tested)> = None;
+    for f0 in band_centres(s, rows.wf) {
+        let mut cols = Vec::new();
+        for j in -2..=2 {
+            let f = f0 * (1.0 + BAND * j as f64 / 2.0);
+            let w = 2.0 * std::f64::consts::PI * f;
+            cols.push(s.t.iter().map(|t| (w * t).sin()).collect());
+            cols.push(s.t.iter().map(|t| (w * t).cos()).collect());
+        }
+        // A band of 10 columns searched over many centres: tested on disjoint windows, where
+        // a correct model's residuals are independent (the effective count of overlapping
+        // windows overstated the evidence near the windows' own Nyquist frequency).
+        let t = test_rows(rows, &cols, false, resid_disjoint_n, 2);
+        if best.as_ref().is_none_or(|(_, b)| t.share > b.share) {
+            best = Some((f0, t));
+        }
+    }
+    if let Some((f0, t)) = best {
+        push("frequency", t, vec![], Some(f0));
+    }
+    out.sort_by(|a, b| b.share.total_cmp(&a.share));
+    out
+}
+
+/// Which physics leaves the signature of `variable`, in one sentence.
+pub fn explanation(variable: &str, share: f64, hz: Option<f64>, label: &str) -> String {
+    let what = match variable {
+        "theta" => "the error repeats with the rotor angle or position: cogging of another shape than a sine, a position-dependent load, or a misplaced Hall sensor".to_string(),
+        "omega" => "the error is a function of speed that the model's friction curve does not follow: a friction law of another shape (a Stribeck dip, higher-order viscous or windage losses)".to_string(),
+        "acceleration" => "the error follows the acceleration: a wrong inertia, a second inertia on a compliant coupling that the motor feels only when it accelerates, or, where the current rises with the acceleration (voltage steps), magnetic saturation".to_string(),
+        "current" => "the error grows with the current: magnetic saturation (a torque constant falling at high current), friction growing with transmitted torque, or dead time".to_string(),
+        "time" => "the error drifts over the run: heating of the winding or the bearings, lubrication warming up, wear, or a sagging supply".to_string(),
+        "reversal" => "the error is concentrated after reversals of the motion: backlash in a gear or coupling, or presliding of the friction contacts".to_string(),
+        "frequency" => format!(
+            "the error has a spectral peak near {:.2} Hz: a compliant coupling or a structural resonance",
+            hz.unwrap_or(0.0)
+        ),
+        _ => variable.to_string(),
+    };
+    format!(
+        "A smooth function of {variable} explains {:.0}% of the {label} residual that no effect of the list explains; {what}.",
+        100.0 * share
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn hats_are_a_partition_of_unity_and_interpolate() {
+        let knots = [0.0, 1.0, 3.0];
+        let x = [-1.0, 0.0, 0.5, 2.0, 3.0, 9.0];
+        let h = hats(&x, &knots);
+        for k in 0..x.len() {
+            let s: f64 = h.iter().map(|c| c[k]).sum();
+            assert!((s - 1.0).abs() < 1e-12);
+        }
+        assert_eq!(h[0][2], 0.5);
+        assert_eq!(h[1][3], 0.5);
+        assert_eq!(h[2][3], 0.5);
+    }
+
+    #[test]
+    fn quantile_knots_are_distinct_and_ordered() {
+        let x: Vec<f64> = (0..100).map(|k| (k / 10) as f64).collect();
+        let k = quantile_knots(&x, &[true; 100], 8);
+        assert!(k.windows(2).all(|w| w[1] > w[0]), "{k:?}");
+        assert_eq!(k[0], 0.0);
+        assert_eq!(*k.last().unwrap(), 9.0);
+    }
+}
