@@ -675,7 +675,10 @@ impl MotorLog {
             .collect();
         // `# sample_period` is in the unit of `t`.
         if let Some((d, _)) = declared.get("t") {
-            if let Some(sp) = meta.get("sample_period").and_then(|v| v.parse::<f64>().ok()) {
+            if let Some(sp) = meta
+                .get("sample_period")
+                .and_then(|v| v.parse::<f64>().ok())
+            {
                 meta.insert("sample_period".to_string(), format!("{}", d.to_si(sp)));
             }
         }
@@ -724,11 +727,7 @@ impl MotorLog {
                 ));
             }
         }
-        let steps: Vec<f64> = self
-            .theta
-            .windows(2)
-            .map(|w| (w[1] - w[0]).abs())
-            .collect();
+        let steps: Vec<f64> = self.theta.windows(2).map(|w| (w[1] - w[0]).abs()).collect();
         if let Some(res) = self.meta_f64("hall_resolution_rad").filter(|r| *r > 0.0) {
             let moved: Vec<f64> = steps.iter().copied().filter(|d| *d > 1e-9 * res).collect();
             if let Some(m) = median(moved) {
@@ -891,7 +890,10 @@ fn check_unit(std: &str, value: &str, plant: Plant) -> Result<&'static UnitDef> 
         bail!(
             "'{}' is a unit of {}, but column '{std}' is {}: use {}{}",
             def.name(),
-            def.quantity.name().trim_start_matches("a ").trim_start_matches("an "),
+            def.quantity
+                .name()
+                .trim_start_matches("a ")
+                .trim_start_matches("an "),
             q.name(),
             q.accepted(),
             hint(Some(def))
@@ -967,16 +969,19 @@ mod tests {
     #[test]
     fn semicolon_and_tab_delimiters_are_sniffed() {
         for d in [";", "\t"] {
-            let text = "# sample_period=0.5\nt,u,i,theta\n0,1,2,3\n0.5,1.5,2.5,3.5\n"
-                .replace(',', d);
+            let text =
+                "# sample_period=0.5\nt,u,i,theta\n0,1,2,3\n0.5,1.5,2.5,3.5\n".replace(',', d);
             let log = parse(&text, Plant::Voltage).unwrap();
             assert_eq!(log.u, vec![1.0, 1.5], "delimiter {d:?}");
             assert_eq!(log.theta, vec![3.0, 3.5]);
             assert_eq!(log.sample_period(), 0.5);
         }
         // A comma inside a quoted header name does not make it comma-separated.
-        let log = parse("\"t\";u;i;theta;\"a,b\"\n0;1;2;3;4\n1;1;2;3;4\n", Plant::Voltage)
-            .unwrap();
+        let log = parse(
+            "\"t\";u;i;theta;\"a,b\"\n0;1;2;3;4\n1;1;2;3;4\n",
+            Plant::Voltage,
+        )
+        .unwrap();
         assert_eq!(log.extra("a,b"), Some(&[4.0, 4.0][..]));
     }
 
@@ -1013,7 +1018,10 @@ mod tests {
         assert_eq!(e, "x.csv:7: column 'u': 'y' is not a number");
         let text = "t,u,i,theta\n0,1,2,3\n# pause\n1,1,2,3\n1,1,2,3\n";
         let e = parse(text, Plant::Voltage).unwrap_err().to_string();
-        assert!(e.starts_with("x.csv:5: column 't': time does not increase"), "{e}");
+        assert!(
+            e.starts_with("x.csv:5: column 't': time does not increase"),
+            "{e}"
+        );
     }
 
     #[test]
@@ -1031,14 +1039,21 @@ mod tests {
         assert!((w[0] - 2.0 * PI).abs() < 1e-15 && (w[1] + PI).abs() < 1e-15);
         assert_eq!(log.units["t"], "ms");
         assert_eq!(log.units["omega"], "rpm");
-        assert!(!log.meta.contains_key("unit.t"), "converted: no unit line left");
+        assert!(
+            !log.meta.contains_key("unit.t"),
+            "converted: no unit line left"
+        );
         // Written back it is SI and reads the same without unit lines.
         let again = parse(&log.to_csv(), Plant::Voltage).unwrap();
         assert_eq!(again.t, log.t);
         assert_eq!(again.sample_period(), 0.012);
         // --units does the same (and overrides the file); a mapped name works too.
-        let log = parse_units("t,u,i,theta\n0,1,1,1\n5,1,1,1\n", "t=us,theta=rev", Plant::Voltage)
-            .unwrap();
+        let log = parse_units(
+            "t,u,i,theta\n0,1,1,1\n5,1,1,1\n",
+            "t=us,theta=rev",
+            Plant::Voltage,
+        )
+        .unwrap();
         assert_eq!(log.t, vec![0.0, 5e-6]);
         assert_eq!(log.theta[0], 2.0 * PI);
         let map = ColumnMap::parse("t=time,u=force,theta=pos").unwrap();
@@ -1061,39 +1076,67 @@ mod tests {
 
     #[test]
     fn a_unit_of_the_wrong_kind_or_unknown_is_an_error_naming_the_line() {
-        let e = parse("# a=b\n# unit.t=rpm\nt,u,i,theta\n0,1,2,3\n1,1,2,3\n", Plant::Voltage)
-            .unwrap_err()
-            .to_string();
-        assert!(e.starts_with("x.csv:2: unit.t=rpm: 'rpm' is a unit of velocity"), "{e}");
+        let e = parse(
+            "# a=b\n# unit.t=rpm\nt,u,i,theta\n0,1,2,3\n1,1,2,3\n",
+            Plant::Voltage,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.starts_with("x.csv:2: unit.t=rpm: 'rpm' is a unit of velocity"),
+            "{e}"
+        );
         assert!(e.contains("use s, ms, us"), "{e}");
-        let e = parse("# unit.theta=furlong\nt,u,i,theta\n0,1,2,3\n1,1,2,3\n", Plant::Voltage)
-            .unwrap_err()
-            .to_string();
-        assert!(e.starts_with("x.csv:1: unit.theta=furlong: unknown unit"), "{e}");
-        let e = parse("# unit.u=N·m\nt,u,i,theta\n0,1,2,3\n1,1,2,3\n", Plant::Voltage)
-            .unwrap_err()
-            .to_string();
+        let e = parse(
+            "# unit.theta=furlong\nt,u,i,theta\n0,1,2,3\n1,1,2,3\n",
+            Plant::Voltage,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.starts_with("x.csv:1: unit.theta=furlong: unknown unit"),
+            "{e}"
+        );
+        let e = parse(
+            "# unit.u=N·m\nt,u,i,theta\n0,1,2,3\n1,1,2,3\n",
+            Plant::Voltage,
+        )
+        .unwrap_err()
+        .to_string();
         assert!(e.contains("--plant torque"), "{e}");
-        let e = parse("# unit.tt=s\nt,u,i,theta\n0,1,2,3\n1,1,2,3\n", Plant::Voltage)
-            .unwrap_err()
-            .to_string();
+        let e = parse(
+            "# unit.tt=s\nt,u,i,theta\n0,1,2,3\n1,1,2,3\n",
+            Plant::Voltage,
+        )
+        .unwrap_err()
+        .to_string();
         assert!(e.starts_with("x.csv:1: unit.tt: no column 'tt'"), "{e}");
         let e = parse_units("t,u,i,theta\n0,1,2,3\n1,1,2,3\n", "i=V", Plant::Voltage)
             .unwrap_err()
             .to_string();
-        assert!(e.starts_with("--units: i=V: 'V' is a unit of voltage"), "{e}");
-        assert!(Units::parse("t=fortnight").unwrap_err().to_string().starts_with("--units"));
+        assert!(
+            e.starts_with("--units: i=V: 'V' is a unit of voltage"),
+            "{e}"
+        );
+        assert!(Units::parse("t=fortnight")
+            .unwrap_err()
+            .to_string()
+            .starts_with("--units"));
         assert!(Units::parse("t").is_err());
         // The unit of an extra column stays in the metadata.
-        let log = parse("# unit.temp=degC\nt,u,i,theta,temp\n0,1,2,3,4\n1,1,2,3,4\n", Plant::Voltage)
-            .unwrap();
+        let log = parse(
+            "# unit.temp=degC\nt,u,i,theta,temp\n0,1,2,3,4\n1,1,2,3,4\n",
+            Plant::Voltage,
+        )
+        .unwrap();
         assert_eq!(log.meta["unit.temp"], "degC");
     }
 
     #[test]
     fn sanity_warnings_catch_numbers_that_do_not_fit_the_units() {
         // t in ms without a unit line: the sample period disagrees with the steps.
-        let mut text = String::from("# sample_period=0.012\n# hall_resolution_rad=0.1\nt,u,i,theta\n");
+        let mut text =
+            String::from("# sample_period=0.012\n# hall_resolution_rad=0.1\nt,u,i,theta\n");
         for k in 0..20 {
             text.push_str(&format!("{},1,1,{}\n", 12 * k, 0.1 * (k / 2) as f64));
         }
@@ -1107,30 +1150,45 @@ mod tests {
         let w = parse(&ok, Plant::Voltage).unwrap().sanity_warnings();
         assert!(w.is_empty(), "{w:?}");
         // The angle in degrees: not a multiple of the Hall step, and too fast.
-        let mut text = String::from("# sample_period=0.001\n# hall_resolution_rad=0.1\nt,u,i,theta\n");
+        let mut text =
+            String::from("# sample_period=0.001\n# hall_resolution_rad=0.1\nt,u,i,theta\n");
         for k in 0..20 {
-            text.push_str(&format!("{},1,1,{}\n", 0.001 * k as f64, 5000.37 * k as f64));
+            text.push_str(&format!(
+                "{},1,1,{}\n",
+                0.001 * k as f64,
+                5000.37 * k as f64
+            ));
         }
         let w = parse(&text, Plant::Voltage).unwrap().sanity_warnings();
         assert_eq!(w.len(), 2, "{w:?}");
-        assert!(w[0].contains("not a multiple of hall_resolution_rad"), "{w:?}");
+        assert!(
+            w[0].contains("not a multiple of hall_resolution_rad"),
+            "{w:?}"
+        );
         assert!(w[1].contains("beyond any motor"), "{w:?}");
     }
 
     #[test]
     fn echoed_fields_are_cut_and_cleaned() {
         let long = "9".repeat(500) + "x";
-        let e = parse(&format!("t,u,i,theta\n0,1,2,3\n1,{long},2,3\n"), Plant::Voltage)
-            .unwrap_err()
-            .to_string();
+        let e = parse(
+            &format!("t,u,i,theta\n0,1,2,3\n1,{long},2,3\n"),
+            Plant::Voltage,
+        )
+        .unwrap_err()
+        .to_string();
         assert!(e.len() < 120 && e.contains('…'), "{e}");
-        let e = parse("t,u,i,theta\n0,1,2,3\n1,\u{1b}[31mred\u{7},2,3\n", Plant::Voltage)
-            .unwrap_err()
-            .to_string();
+        let e = parse(
+            "t,u,i,theta\n0,1,2,3\n1,\u{1b}[31mred\u{7},2,3\n",
+            Plant::Voltage,
+        )
+        .unwrap_err()
+        .to_string();
         assert_eq!(e, "x.csv:3: column 'u': 'red' is not a number");
         assert_eq!(echo("a\u{1b}]0;x\u{7}b"), "a0;xb");
-        let e = parse(&format!("t,u,{long}\n0,1,3\n"), Plant::Voltage).unwrap_err().to_string();
+        let e = parse(&format!("t,u,{long}\n0,1,3\n"), Plant::Voltage)
+            .unwrap_err()
+            .to_string();
         assert!(e.len() < 200, "{e}");
     }
 }
-
