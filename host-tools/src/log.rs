@@ -6,12 +6,18 @@
 //! t,u,i,theta,omega
 //! 0.000,0.0,0.0,0.0,0.0
 //! ```
-//! Optional `# key=value` metadata lines, one header row, one row per sample. Standard
-//! columns `t`, `u`, `i`, `theta`, `omega` (SI units); other names are mapped with
-//! `--map STD=NAME,...`; extra columns are kept. Every error names the file and the line
-//! (1-based, as an editor shows it) and the column at fault.
+//! Optional `# key=value` metadata lines, one header row, one row per sample. The delimiter
+//! (comma, semicolon or tab) is sniffed from the header row; numbers use a decimal point
+//! (a decimal comma is an error, not a silent misreading). A UTF-8 byte-order mark is skipped.
+//! Standard columns `t`, `u`, `i`, `theta`, `omega` are SI unless a metadata line
+//! `# unit.COLUMN=UNIT` or `--units COLUMN=UNIT,...` declares another unit ([`Units`]); they are
+//! converted to SI on read and the declared units are kept in [`MotorLog::units`]. Other names
+//! are mapped with `--map STD=NAME,...`; extra columns are kept. Every error names the file
+//! and the line (1-based, as an editor shows it) and the column at fault, and echoes at most
+//! [`ECHO_MAX`] characters of the input, control characters removed.
 use anyhow::{anyhow, bail, Context, Result};
 use std::collections::BTreeMap;
+use std::f64::consts::PI;
 use std::path::{Path, PathBuf};
 
 /// What `u` means (`--plant`).
@@ -48,12 +54,16 @@ impl ColumnMap {
         let mut m = BTreeMap::new();
         for part in spec.split(',').map(str::trim).filter(|p| !p.is_empty()) {
             let (k, v) = part.split_once('=').ok_or_else(|| {
-                anyhow!("--map: '{part}' is not of the form STD=NAME (e.g. t=time_s)")
+                anyhow!(
+                    "--map: '{}' is not of the form STD=NAME (e.g. t=time_s)",
+                    echo(part)
+                )
             })?;
             let k = k.trim();
             if !Self::STANDARD.contains(&k) {
                 bail!(
-                    "--map: '{k}' is not a standard column; use one of {}",
+                    "--map: '{}' is not a standard column; use one of {}",
+                    echo(k),
                     Self::STANDARD.join(", ")
                 );
             }
@@ -66,6 +76,247 @@ impl ColumnMap {
     pub fn name_of<'a>(&'a self, std: &'a str) -> &'a str {
         self.0.get(std).map(String::as_str).unwrap_or(std)
     }
+
+    /// The standard column a name (standard, or the file's own name mapped with `--map`)
+    /// stands for.
+    pub fn standard_of(&self, name: &str) -> Option<&'static str> {
+        Self::STANDARD
+            .iter()
+            .find(|s| self.0.get(**s).map(String::as_str) == Some(name))
+            .or_else(|| Self::STANDARD.iter().find(|s| **s == name))
+            .copied()
+    }
+}
+
+/// `--map` and `--units` of a command as given on the command line, parsed once
+/// (the commands that read logs share this).
+pub fn column_options(map: Option<&str>, units: Option<&str>) -> Result<(ColumnMap, Units)> {
+    let map = match map {
+        Some(m) => ColumnMap::parse(m)?,
+        None => ColumnMap::default(),
+    };
+    let units = match units {
+        Some(u) => Units::parse(u)?,
+        None => Units::default(),
+    };
+    Ok((map, units))
+}
+
+/// What a standard column measures (which units it accepts).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Quantity {
+    Time,
+    Angle,
+    Velocity,
+    Voltage,
+    Current,
+    /// Torque or force (`u` of a torque plant).
+    Torque,
+}
+
+impl Quantity {
+    /// What column `std` measures for this plant.
+    pub fn of_column(std: &str, plant: Plant) -> Option<Quantity> {
+        Some(match std {
+            "t" => Quantity::Time,
+            "theta" => Quantity::Angle,
+            "omega" => Quantity::Velocity,
+            "i" => Quantity::Current,
+            "u" if plant == Plant::Torque => Quantity::Torque,
+            "u" => Quantity::Voltage,
+            _ => return None,
+        })
+    }
+
+    /// Its name in messages.
+    pub fn name(self) -> &'static str {
+        match self {
+            Quantity::Time => "a time",
+            Quantity::Angle => "an angle (or a linear position)",
+            Quantity::Velocity => "a velocity",
+            Quantity::Voltage => "a voltage",
+            Quantity::Current => "a current",
+            Quantity::Torque => "a torque or force",
+        }
+    }
+
+    /// The units it accepts, canonical names, for messages.
+    pub fn accepted(self) -> String {
+        UNIT_TABLE
+            .iter()
+            .filter(|d| d.quantity == self)
+            .map(|d| d.names[0])
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
+}
+
+/// A unit a log may declare for a standard column: SI value = value · `mul` / `div`
+/// (two factors, so that 12 ms becomes exactly 12/1000 = 0.012 s).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct UnitDef {
+    /// Accepted spellings, the canonical one first.
+    pub names: &'static [&'static str],
+    pub quantity: Quantity,
+    pub mul: f64,
+    pub div: f64,
+    /// A linear axis (m, mm, m/s, mm/s) rather than a rotary one.
+    pub linear: bool,
+}
+
+impl UnitDef {
+    /// The canonical spelling.
+    pub fn name(&self) -> &'static str {
+        self.names[0]
+    }
+
+    /// A value in this unit, in SI.
+    pub fn to_si(&self, v: f64) -> f64 {
+        if self.mul == 1.0 && self.div == 1.0 {
+            v
+        } else if self.mul == 1.0 {
+            v / self.div
+        } else {
+            v * self.mul / self.div
+        }
+    }
+
+    /// Look a unit up by any of its spellings (exact first, then ignoring case).
+    pub fn lookup(name: &str) -> Option<&'static UnitDef> {
+        let name = name.trim();
+        UNIT_TABLE
+            .iter()
+            .find(|d| d.names.contains(&name))
+            .or_else(|| {
+                UNIT_TABLE
+                    .iter()
+                    .find(|d| d.names.iter().any(|n| n.eq_ignore_ascii_case(name)))
+            })
+    }
+}
+
+const fn unit(
+    names: &'static [&'static str],
+    quantity: Quantity,
+    mul: f64,
+    div: f64,
+    linear: bool,
+) -> UnitDef {
+    UnitDef {
+        names,
+        quantity,
+        mul,
+        div,
+        linear,
+    }
+}
+
+/// Every unit a log may declare (the contract's list, plus a few obvious spellings).
+pub const UNIT_TABLE: &[UnitDef] = &[
+    unit(&["s"], Quantity::Time, 1.0, 1.0, false),
+    unit(&["ms"], Quantity::Time, 1.0, 1e3, false),
+    unit(&["us", "µs", "μs"], Quantity::Time, 1.0, 1e6, false),
+    unit(&["rad"], Quantity::Angle, 1.0, 1.0, false),
+    unit(&["deg", "°"], Quantity::Angle, PI, 180.0, false),
+    unit(&["rev"], Quantity::Angle, 2.0 * PI, 1.0, false),
+    unit(&["m"], Quantity::Angle, 1.0, 1.0, true),
+    unit(&["mm"], Quantity::Angle, 1.0, 1e3, true),
+    unit(&["rad/s"], Quantity::Velocity, 1.0, 1.0, false),
+    unit(&["rpm"], Quantity::Velocity, 2.0 * PI, 60.0, false),
+    unit(&["deg/s", "°/s"], Quantity::Velocity, PI, 180.0, false),
+    unit(&["rev/s"], Quantity::Velocity, 2.0 * PI, 1.0, false),
+    unit(&["m/s"], Quantity::Velocity, 1.0, 1.0, true),
+    unit(&["mm/s"], Quantity::Velocity, 1.0, 1e3, true),
+    unit(&["V"], Quantity::Voltage, 1.0, 1.0, false),
+    unit(&["mV"], Quantity::Voltage, 1.0, 1e3, false),
+    unit(&["A"], Quantity::Current, 1.0, 1.0, false),
+    unit(&["mA"], Quantity::Current, 1.0, 1e3, false),
+    unit(
+        &["N·m", "N*m", "Nm", "N.m", "N m", "N⋅m"],
+        Quantity::Torque,
+        1.0,
+        1.0,
+        false,
+    ),
+    unit(&["N"], Quantity::Torque, 1.0, 1.0, true),
+];
+
+/// Units declared on the command line (`--units COLUMN=UNIT,...`): COLUMN is a standard
+/// column name or the file's own name mapped with `--map`. They override the file's
+/// `# unit.COLUMN=UNIT` lines.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Units(pub BTreeMap<String, String>);
+
+impl Units {
+    /// Parse `COLUMN=UNIT[,COLUMN=UNIT...]`; every unit must be known (its kind is checked
+    /// against the column when a log is read).
+    pub fn parse(spec: &str) -> Result<Units> {
+        let mut m = BTreeMap::new();
+        for part in spec.split(',').map(str::trim).filter(|p| !p.is_empty()) {
+            let (k, v) = part.split_once('=').ok_or_else(|| {
+                anyhow!(
+                    "--units: '{}' is not of the form COLUMN=UNIT (e.g. t=ms)",
+                    echo(part)
+                )
+            })?;
+            let (k, v) = (k.trim(), v.trim());
+            if UnitDef::lookup(v).is_none() {
+                bail!(
+                    "--units: {}={}: unknown unit; known units: {}",
+                    echo(k),
+                    echo(v),
+                    known_units()
+                );
+            }
+            m.insert(k.to_string(), v.to_string());
+        }
+        Ok(Units(m))
+    }
+}
+
+fn known_units() -> String {
+    UNIT_TABLE
+        .iter()
+        .map(|d| d.names[0])
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// Most characters of the input an error message echoes.
+pub const ECHO_MAX: usize = 40;
+
+/// Input text made safe to echo in a one-line message: ANSI escape sequences and other
+/// control characters removed, cut to [`ECHO_MAX`] characters with `…`.
+pub fn echo(s: &str) -> String {
+    let mut clean = String::new();
+    let mut chars = s.chars().peekable();
+    while let Some(c) = chars.next() {
+        if c == '\u{1b}' {
+            // CSI `ESC [ params final`, or a two-character escape.
+            if chars.peek() == Some(&'[') {
+                chars.next();
+                for c in chars.by_ref() {
+                    if ('\u{40}'..='\u{7e}').contains(&c) {
+                        break;
+                    }
+                }
+            } else {
+                chars.next();
+            }
+            continue;
+        }
+        if c.is_control() || c == '\u{feff}' {
+            continue;
+        }
+        clean.push(c);
+    }
+    if clean.chars().count() > ECHO_MAX {
+        let mut cut: String = clean.chars().take(ECHO_MAX - 1).collect();
+        cut.push('…');
+        cut
+    } else {
+        clean
+    }
 }
 
 /// A motor log in memory. All series have the same length.
@@ -73,7 +324,9 @@ impl ColumnMap {
 pub struct MotorLog {
     /// Where it came from (for error messages and model provenance).
     pub source: PathBuf,
-    /// `# key=value` metadata, in file order of keys (sorted).
+    /// `# key=value` metadata, in file order of keys (sorted). `sample_period` is in seconds
+    /// (converted when `# unit.t` declared another time unit); the `unit.*` lines of standard
+    /// columns are not here but in `units`.
     pub meta: BTreeMap<String, String>,
     pub t: Vec<f64>,
     pub u: Vec<f64>,
@@ -82,6 +335,19 @@ pub struct MotorLog {
     pub omega: Option<Vec<f64>>,
     /// Extra columns, kept in file order.
     pub extra: Vec<(String, Vec<f64>)>,
+    /// Units the file (`# unit.COLUMN=UNIT`) or `--units` declared for the standard columns
+    /// present, canonical spelling (`t` → `ms`), by standard name. The series above are
+    /// already converted to SI; this records what the data was in.
+    pub units: BTreeMap<String, String>,
+}
+
+/// Where a declared unit came from (for messages).
+#[derive(Debug, Clone)]
+enum UnitSource {
+    /// A `# unit.X=...` line of the file (1-based line number).
+    Line(usize),
+    /// `--units`.
+    Flag,
 }
 
 impl MotorLog {
@@ -105,12 +371,21 @@ impl MotorLog {
         if let Some(p) = self.meta_f64("sample_period") {
             return p;
         }
-        let mut d: Vec<f64> = self.t.windows(2).map(|w| w[1] - w[0]).collect();
-        if d.is_empty() {
-            return 0.0;
-        }
-        d.sort_by(|a, b| a.total_cmp(b));
-        d[d.len() / 2]
+        self.median_step()
+    }
+
+    /// The median step of the `t` column [s] (0 with fewer than two samples).
+    pub fn median_step(&self) -> f64 {
+        let d: Vec<f64> = self.t.windows(2).map(|w| w[1] - w[0]).collect();
+        median(d).unwrap_or(0.0)
+    }
+
+    /// True when the declared units make this a linear axis (theta in m or mm, omega in m/s or
+    /// mm/s, or a force input N).
+    pub fn is_linear(&self) -> bool {
+        self.units
+            .values()
+            .any(|u| UnitDef::lookup(u).is_some_and(|d| d.linear))
     }
 
     /// An extra column by name.
@@ -121,24 +396,66 @@ impl MotorLog {
             .map(|(_, v)| v.as_slice())
     }
 
-    /// Read a log. `plant` decides whether `i` is required.
+    /// Read a log in SI units or with `# unit.*` lines. `plant` decides whether `i` is
+    /// required.
     pub fn read(path: &Path, map: &ColumnMap, plant: Plant) -> Result<MotorLog> {
+        Self::read_with_units(path, map, &Units::default(), plant)
+    }
+
+    /// Read a log; `units` (from `--units`) override the file's `# unit.*` lines.
+    pub fn read_with_units(
+        path: &Path,
+        map: &ColumnMap,
+        units: &Units,
+        plant: Plant,
+    ) -> Result<MotorLog> {
         let text =
             std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
         let text = String::from_utf8(text).map_err(|e| {
+            let bytes = e.as_bytes();
+            let at = e.utf8_error().valid_up_to();
+            let line = bytes[..at].iter().filter(|b| **b == b'\n').count() + 1;
             anyhow!(
-                "{}: not UTF-8 text (byte {})",
-                path.display(),
-                e.utf8_error().valid_up_to()
+                "{}:{line}: not UTF-8 text (byte {at}); save the file as UTF-8",
+                path.display()
             )
         })?;
-        Self::parse(&text, path, map, plant)
+        Self::parse_with_units(&text, path, map, units, plant)
     }
 
-    /// Parse a log from text; `path` is used in messages only.
+    /// [`MotorLog::read_with_units`], then every [`MotorLog::sanity_warnings`] printed to
+    /// stderr as a `warning:` line: what the commands that read logs call.
+    pub fn read_and_warn(
+        path: &Path,
+        map: &ColumnMap,
+        units: &Units,
+        plant: Plant,
+    ) -> Result<MotorLog> {
+        let log = Self::read_with_units(path, map, units, plant)?;
+        for w in log.sanity_warnings() {
+            eprintln!("warning: {w}");
+        }
+        Ok(log)
+    }
+
+    /// Parse a log from text (SI units or `# unit.*` lines); `path` is used in messages only.
     pub fn parse(text: &str, path: &Path, map: &ColumnMap, plant: Plant) -> Result<MotorLog> {
+        Self::parse_with_units(text, path, map, &Units::default(), plant)
+    }
+
+    /// Parse a log from text; `units` (from `--units`) override the file's `# unit.*` lines.
+    pub fn parse_with_units(
+        text: &str,
+        path: &Path,
+        map: &ColumnMap,
+        units: &Units,
+        plant: Plant,
+    ) -> Result<MotorLog> {
         let p = path.display();
+        // A byte-order mark is not part of the first line's text (nor a line of its own).
+        let text = text.strip_prefix('\u{feff}').unwrap_or(text);
         let mut meta = BTreeMap::new();
+        let mut meta_line: BTreeMap<String, usize> = BTreeMap::new();
         let mut header_line = 0usize;
         let mut body_start = 0usize;
         let mut offset = 0usize;
@@ -147,6 +464,7 @@ impl MotorLog {
             if let Some(rest) = trimmed.strip_prefix('#') {
                 if let Some((k, v)) = rest.split_once('=') {
                     meta.insert(k.trim().to_string(), v.trim().to_string());
+                    meta_line.insert(k.trim().to_string(), n + 1);
                 }
                 offset += line.len();
                 continue;
@@ -162,8 +480,11 @@ impl MotorLog {
         if header_line == 0 {
             bail!("{p}: no header row (expected a line like 't,u,i,theta')");
         }
+        let header_text = text[body_start..].lines().next().unwrap_or("");
+        let delimiter = sniff_delimiter(header_text);
         let mut rdr = csv::ReaderBuilder::new()
             .has_headers(true)
+            .delimiter(delimiter)
             .trim(csv::Trim::All)
             .comment(Some(b'#'))
             .from_reader(&text.as_bytes()[body_start..]);
@@ -183,8 +504,9 @@ impl MotorLog {
                     String::new()
                 };
                 anyhow!(
-                    "{p}:{header_line}: missing column '{name}'{hint}; the header has: {}",
-                    headers.join(", ")
+                    "{p}:{header_line}: missing column '{}'{hint}; the header has: {}",
+                    echo(name),
+                    header_list(&headers)
                 )
             })
         };
@@ -200,7 +522,71 @@ impl MotorLog {
             .into_iter()
             .flatten()
             .collect();
+        let present = |std: &str| match std {
+            "i" => ci_i.is_some(),
+            "omega" => ci_omega.is_some(),
+            _ => true,
+        };
+
+        // Declared units: the file's `# unit.X` lines, then --units over them.
+        let mut declared: BTreeMap<&'static str, (&'static UnitDef, UnitSource)> = BTreeMap::new();
+        let unit_keys: Vec<String> = meta
+            .keys()
+            .filter(|k| k.starts_with("unit."))
+            .cloned()
+            .collect();
+        for key in unit_keys {
+            let col = &key["unit.".len()..];
+            let line = meta_line[&key];
+            let Some(std) = map.standard_of(col) else {
+                if headers.iter().any(|h| h == col) {
+                    // The unit of an extra column: kept in the metadata, not converted.
+                    continue;
+                }
+                bail!(
+                    "{p}:{line}: unit.{}: no column '{}' in the header ({})",
+                    echo(col),
+                    echo(col),
+                    header_list(&headers)
+                );
+            };
+            let value = meta.remove(&key).unwrap_or_default();
+            let def = check_unit(std, &value, plant)
+                .map_err(|e| anyhow!("{p}:{line}: unit.{}={}: {e}", echo(col), echo(&value)))?;
+            declared.insert(std, (def, UnitSource::Line(line)));
+        }
+        for (col, value) in &units.0 {
+            let std = map.standard_of(col).ok_or_else(|| {
+                anyhow!(
+                    "--units: '{}' is not a standard column (t, u, i, theta, omega) nor a \
+                     column mapped to one with --map",
+                    echo(col)
+                )
+            })?;
+            let def = check_unit(std, value, plant)
+                .map_err(|e| anyhow!("--units: {}={}: {e}", echo(col), echo(value)))?;
+            declared.insert(std, (def, UnitSource::Flag));
+        }
+        declared.retain(|std, _| present(std));
+        if let (Some((a, sa)), Some((w, sw))) = (declared.get("theta"), declared.get("omega")) {
+            if a.linear != w.linear {
+                let at = |s: &UnitSource| match s {
+                    UnitSource::Line(l) => format!("{p}:{l}"),
+                    UnitSource::Flag => "--units".to_string(),
+                };
+                bail!(
+                    "{}: unit of omega '{}' does not match unit of theta '{}' ({}): one is \
+                     rotary, the other linear",
+                    at(sw),
+                    w.name(),
+                    a.name(),
+                    at(sa)
+                );
+            }
+        }
+
         let mut cols: Vec<Vec<f64>> = vec![Vec::new(); headers.len()];
+        let mut row_lines: Vec<usize> = Vec::new();
         let mut rec = csv::StringRecord::new();
         loop {
             let more = rdr.read_record(&mut rec).map_err(|e| {
@@ -217,6 +603,7 @@ impl MotorLog {
                 .position()
                 .map(|q| q.line() as usize + header_line - 1)
                 .unwrap_or(0);
+            row_lines.push(line);
             if rec.len() != headers.len() {
                 bail!(
                     "{p}:{line}: {} fields, but the header has {}",
@@ -227,16 +614,25 @@ impl MotorLog {
             for (c, field) in rec.iter().enumerate() {
                 let v: f64 = match field.parse() {
                     Ok(v) => v,
+                    Err(_) if delimiter != b',' && looks_like_decimal_comma(field) => bail!(
+                        "{p}:{line}: column '{}': '{}' has a decimal comma; decimal commas are \
+                         not supported, write numbers with a decimal point ({})",
+                        echo(&headers[c]),
+                        echo(field),
+                        echo(&field.replace(',', "."))
+                    ),
                     Err(_) if !std_cols.contains(&c) => f64::NAN,
                     Err(_) => bail!(
-                        "{p}:{line}: column '{}': '{field}' is not a number",
-                        headers[c]
+                        "{p}:{line}: column '{}': '{}' is not a number",
+                        echo(&headers[c]),
+                        echo(field)
                     ),
                 };
                 if std_cols.contains(&c) && !v.is_finite() {
                     bail!(
-                        "{p}:{line}: column '{}': value '{field}' is not finite",
-                        headers[c]
+                        "{p}:{line}: column '{}': value '{}' is not finite",
+                        echo(&headers[c]),
+                        echo(field)
                     );
                 }
                 cols[c].push(v);
@@ -250,24 +646,45 @@ impl MotorLog {
             if cols[ci_t][k] <= cols[ci_t][k - 1] {
                 bail!(
                     "{p}:{}: column '{}': time does not increase ({} after {})",
-                    header_line + k + 1,
-                    headers[ci_t],
+                    row_lines[k],
+                    echo(&headers[ci_t]),
                     cols[ci_t][k],
                     cols[ci_t][k - 1]
                 );
             }
         }
         let take = |c: usize, cols: &mut Vec<Vec<f64>>| std::mem::take(&mut cols[c]);
-        let t = take(ci_t, &mut cols);
-        let u = take(ci_u, &mut cols);
-        let theta = take(ci_theta, &mut cols);
-        let i = ci_i.map(|c| take(c, &mut cols));
-        let omega = ci_omega.map(|c| take(c, &mut cols));
+        let convert = |std: &str, mut v: Vec<f64>| {
+            if let Some((d, _)) = declared.get(std) {
+                for x in &mut v {
+                    *x = d.to_si(*x);
+                }
+            }
+            v
+        };
+        let t = convert("t", take(ci_t, &mut cols));
+        let u = convert("u", take(ci_u, &mut cols));
+        let theta = convert("theta", take(ci_theta, &mut cols));
+        let i = ci_i.map(|c| convert("i", take(c, &mut cols)));
+        let omega = ci_omega.map(|c| convert("omega", take(c, &mut cols)));
         let extra = headers
             .iter()
             .enumerate()
             .filter(|(c, _)| !std_cols.contains(c))
             .map(|(c, h)| (h.clone(), std::mem::take(&mut cols[c])))
+            .collect();
+        // `# sample_period` is in the unit of `t`.
+        if let Some((d, _)) = declared.get("t") {
+            if let Some(sp) = meta
+                .get("sample_period")
+                .and_then(|v| v.parse::<f64>().ok())
+            {
+                meta.insert("sample_period".to_string(), format!("{}", d.to_si(sp)));
+            }
+        }
+        let units = declared
+            .iter()
+            .map(|(std, (d, _))| (std.to_string(), d.name().to_string()))
             .collect();
         Ok(MotorLog {
             source: path.to_path_buf(),
@@ -278,7 +695,77 @@ impl MotorLog {
             theta,
             omega,
             extra,
+            units,
         })
+    }
+
+    /// Numbers that do not fit the units, as readable sentences naming the file (for
+    /// `warning:` lines; not errors): `# sample_period` more than 1 % off the median step of
+    /// `t`, a median angle step that is not a multiple of `# hall_resolution_rad`, a speed
+    /// beyond any motor's (|Δθ/Δt| above [`MAX_PLAUSIBLE_SPEED`] in rad/s).
+    pub fn sanity_warnings(&self) -> Vec<String> {
+        let p = self.source.display();
+        let mut out = Vec::new();
+        if self.len() < 2 {
+            return out;
+        }
+        let declare = |col: &str, unit: &str| {
+            format!("declare it with a line '# unit.{col}={unit}' or --units {col}={unit}")
+        };
+        let dt = self.median_step();
+        if let Some(sp) = self.meta_f64("sample_period") {
+            if sp > 0.0 && dt > 0.0 && (sp / dt - 1.0).abs() > 0.01 {
+                let ratio = dt / sp;
+                let hint = [(1e3, "ms"), (1e6, "us")]
+                    .iter()
+                    .find(|(f, _)| (ratio / f - 1.0).abs() < 0.05)
+                    .map(|(_, u)| format!(": is t in {u}? {}", declare("t", u)))
+                    .unwrap_or_default();
+                out.push(format!(
+                    "{p}: sample_period={sp} s but the median step of column 't' is {dt} s \
+                     ({ratio:.4}x){hint}"
+                ));
+            }
+        }
+        let steps: Vec<f64> = self.theta.windows(2).map(|w| (w[1] - w[0]).abs()).collect();
+        if let Some(res) = self.meta_f64("hall_resolution_rad").filter(|r| *r > 0.0) {
+            let moved: Vec<f64> = steps.iter().copied().filter(|d| *d > 1e-9 * res).collect();
+            if let Some(m) = median(moved) {
+                let r = m / res;
+                if r < 0.5 || (r - r.round()).abs() > 0.1 {
+                    let deg = (r / (180.0 / PI)).round() >= 1.0
+                        && ((r / (180.0 / PI)) - (r / (180.0 / PI)).round()).abs() < 0.1;
+                    let hint = if deg {
+                        format!(": is theta in degrees? {}", declare("theta", "deg"))
+                    } else {
+                        String::new()
+                    };
+                    out.push(format!(
+                        "{p}: the median angle step {m:.6} of column 'theta' is not a multiple \
+                         of hall_resolution_rad={res} ({r:.3} steps){hint}"
+                    ));
+                }
+            }
+        }
+        let mut speeds: Vec<f64> = steps
+            .iter()
+            .zip(self.t.windows(2))
+            .map(|(d, w)| d / (w[1] - w[0]))
+            .filter(|v| v.is_finite())
+            .collect();
+        if !speeds.is_empty() {
+            speeds.sort_by(|a, b| a.total_cmp(b));
+            let q = speeds[(speeds.len() - 1) * 99 / 100];
+            if q > MAX_PLAUSIBLE_SPEED {
+                let unit = if self.is_linear() { "m/s" } else { "rad/s" };
+                out.push(format!(
+                    "{p}: column 'theta' moves at {q:.3e} {unit} (99th percentile of |Δθ/Δt|), \
+                     beyond any motor: are theta and t in SI units (rad or m, s)? Declare other \
+                     units with lines '# unit.COLUMN=UNIT' or --units COLUMN=UNIT"
+                ));
+            }
+        }
+        out
     }
 
     /// Render as contract CSV text (metadata first, standard columns, then extras).
@@ -322,6 +809,97 @@ impl MotorLog {
     pub fn write(&self, path: &Path) -> Result<()> {
         crate::atomic::write_str(path, &self.to_csv())
     }
+}
+
+/// Above this |Δθ/Δt| [rad/s] (about a million rpm) no motor turns: the units are wrong.
+pub const MAX_PLAUSIBLE_SPEED: f64 = 1e5;
+
+/// The median of some numbers (`None` when there are none).
+fn median(mut v: Vec<f64>) -> Option<f64> {
+    if v.is_empty() {
+        return None;
+    }
+    v.sort_by(|a, b| a.total_cmp(b));
+    Some(v[v.len() / 2])
+}
+
+/// The delimiter of a header row: the most frequent of comma, semicolon and tab (outside
+/// quotes); comma when there is none.
+fn sniff_delimiter(header: &str) -> u8 {
+    let mut counts = [(b',', 0usize), (b';', 0), (b'\t', 0)];
+    let mut quoted = false;
+    for b in header.bytes() {
+        if b == b'"' {
+            quoted = !quoted;
+        } else if !quoted {
+            for (d, n) in &mut counts {
+                if b == *d {
+                    *n += 1;
+                }
+            }
+        }
+    }
+    // max_by_key keeps the last maximum: scan in reverse priority so a tie picks the comma.
+    counts
+        .iter()
+        .rev()
+        .max_by_key(|(_, n)| *n)
+        .filter(|(_, n)| *n > 0)
+        .map(|(d, _)| *d)
+        .unwrap_or(b',')
+}
+
+/// A field such as `1,5` or `-0,012`: a number once its comma is a point.
+fn looks_like_decimal_comma(field: &str) -> bool {
+    field.matches(',').count() == 1
+        && field
+            .chars()
+            .all(|c| c.is_ascii_digit() || matches!(c, ',' | '-' | '+' | 'e' | 'E'))
+        && field.replace(',', ".").parse::<f64>().is_ok()
+}
+
+/// The header's column names for a message (each echoed safely, at most 12).
+fn header_list(headers: &[String]) -> String {
+    let mut s: Vec<String> = headers.iter().take(12).map(|h| echo(h)).collect();
+    if headers.len() > 12 {
+        s.push(format!("… ({} columns)", headers.len()));
+    }
+    s.join(", ")
+}
+
+/// The unit `value` declared for standard column `std`, checked against what the column
+/// measures.
+fn check_unit(std: &str, value: &str, plant: Plant) -> Result<&'static UnitDef> {
+    let Some(q) = Quantity::of_column(std, plant) else {
+        bail!("'{std}' is not a standard column");
+    };
+    let hint = |d: Option<&UnitDef>| match (std, d.map(|d| d.quantity)) {
+        ("u", Some(Quantity::Torque)) => " (a torque or force input needs --plant torque)",
+        ("u", Some(Quantity::Voltage)) => " (with --plant torque, u is a torque or force)",
+        _ => "",
+    };
+    let Some(def) = UnitDef::lookup(value) else {
+        bail!(
+            "unknown unit; column '{std}' is {}: use {}{}",
+            q.name(),
+            q.accepted(),
+            hint(None)
+        );
+    };
+    if def.quantity != q {
+        bail!(
+            "'{}' is a unit of {}, but column '{std}' is {}: use {}{}",
+            def.name(),
+            def.quantity
+                .name()
+                .trim_start_matches("a ")
+                .trim_start_matches("an "),
+            q.name(),
+            q.accepted(),
+            hint(Some(def))
+        );
+    }
+    Ok(def)
 }
 
 #[cfg(test)]
@@ -376,5 +954,241 @@ mod tests {
         assert!(log.i.is_none());
         assert_eq!(log.u, vec![1.0, 1.0]);
         assert!(ColumnMap::parse("speed=w").is_err());
+    }
+    fn parse_units(text: &str, units: &str, plant: Plant) -> Result<MotorLog> {
+        let units = Units::parse(units)?;
+        MotorLog::parse_with_units(
+            text,
+            Path::new("x.csv"),
+            &ColumnMap::default(),
+            &units,
+            plant,
+        )
+    }
+
+    #[test]
+    fn semicolon_and_tab_delimiters_are_sniffed() {
+        for d in [";", "\t"] {
+            let text =
+                "# sample_period=0.5\nt,u,i,theta\n0,1,2,3\n0.5,1.5,2.5,3.5\n".replace(',', d);
+            let log = parse(&text, Plant::Voltage).unwrap();
+            assert_eq!(log.u, vec![1.0, 1.5], "delimiter {d:?}");
+            assert_eq!(log.theta, vec![3.0, 3.5]);
+            assert_eq!(log.sample_period(), 0.5);
+        }
+        // A comma inside a quoted header name does not make it comma-separated.
+        let log = parse(
+            "\"t\";u;i;theta;\"a,b\"\n0;1;2;3;4\n1;1;2;3;4\n",
+            Plant::Voltage,
+        )
+        .unwrap();
+        assert_eq!(log.extra("a,b"), Some(&[4.0, 4.0][..]));
+    }
+
+    #[test]
+    fn decimal_commas_are_an_error_naming_line_and_column() {
+        let e = parse("t;u;i;theta\n0;1;2;3\n0,012;1,5;2;3\n", Plant::Voltage).unwrap_err();
+        let e = e.to_string();
+        assert!(e.starts_with("x.csv:3: column 't': '0,012'"), "{e}");
+        assert!(e.contains("decimal comma") && e.contains("0.012"), "{e}");
+        let e = parse("t\tu\ti\ttheta\n0\t1\t2\t3\n1\t1,5\t2\t3\n", Plant::Voltage)
+            .unwrap_err()
+            .to_string();
+        assert!(e.starts_with("x.csv:3: column 'u': '1,5'"), "{e}");
+        assert!(e.contains("decimal point"), "{e}");
+    }
+
+    #[test]
+    fn byte_order_mark_keeps_metadata_and_line_numbers() {
+        let text = "\u{feff}# sample_period=0.25\n# hall_resolution_rad=0.1\nt,u,i,theta\n0,1,2,3\n0.25,1,2,3\n0.5,x,2,3\n";
+        let e = parse(text, Plant::Voltage).unwrap_err().to_string();
+        assert_eq!(e, "x.csv:6: column 'u': 'x' is not a number");
+        let log = parse(&text.replace(",x,", ",1,"), Plant::Voltage).unwrap();
+        assert_eq!(log.sample_period(), 0.25);
+        assert_eq!(log.meta_f64("hall_resolution_rad"), Some(0.1));
+        // Without metadata the BOM sits before the header's first name.
+        let log = parse("\u{feff}t,u,i,theta\n0,1,2,3\n1,1,2,3\n", Plant::Voltage).unwrap();
+        assert_eq!(log.t, vec![0.0, 1.0]);
+    }
+
+    #[test]
+    fn line_numbers_count_comment_lines_in_the_body() {
+        let text = "# a=b\nt,u,i,theta\n0,1,2,3\n# a comment\n\n1,1,2,3\n2,y,2,3\n";
+        let e = parse(text, Plant::Voltage).unwrap_err().to_string();
+        assert_eq!(e, "x.csv:7: column 'u': 'y' is not a number");
+        let text = "t,u,i,theta\n0,1,2,3\n# pause\n1,1,2,3\n1,1,2,3\n";
+        let e = parse(text, Plant::Voltage).unwrap_err().to_string();
+        assert!(
+            e.starts_with("x.csv:5: column 't': time does not increase"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn declared_units_are_converted_to_si() {
+        let text = "# sample_period=12\n# unit.t=ms\n# unit.theta=deg\n# unit.omega=rpm\n\
+                    # unit.i=mA\n# unit.u=mV\nt,u,i,theta,omega\n0,1000,1500,180,60\n\
+                    12,2000,-500,360,-30\n";
+        let log = parse(text, Plant::Voltage).unwrap();
+        assert_eq!(log.t, vec![0.0, 0.012]);
+        assert_eq!(log.sample_period(), 0.012);
+        assert_eq!(log.u, vec![1.0, 2.0]);
+        assert_eq!(log.i, Some(vec![1.5, -0.5]));
+        assert!((log.theta[0] - PI).abs() < 1e-15 && (log.theta[1] - 2.0 * PI).abs() < 1e-15);
+        let w = log.omega.clone().unwrap();
+        assert!((w[0] - 2.0 * PI).abs() < 1e-15 && (w[1] + PI).abs() < 1e-15);
+        assert_eq!(log.units["t"], "ms");
+        assert_eq!(log.units["omega"], "rpm");
+        assert!(
+            !log.meta.contains_key("unit.t"),
+            "converted: no unit line left"
+        );
+        // Written back it is SI and reads the same without unit lines.
+        let again = parse(&log.to_csv(), Plant::Voltage).unwrap();
+        assert_eq!(again.t, log.t);
+        assert_eq!(again.sample_period(), 0.012);
+        // --units does the same (and overrides the file); a mapped name works too.
+        let log = parse_units(
+            "t,u,i,theta\n0,1,1,1\n5,1,1,1\n",
+            "t=us,theta=rev",
+            Plant::Voltage,
+        )
+        .unwrap();
+        assert_eq!(log.t, vec![0.0, 5e-6]);
+        assert_eq!(log.theta[0], 2.0 * PI);
+        let map = ColumnMap::parse("t=time,u=force,theta=pos").unwrap();
+        let log = MotorLog::parse_with_units(
+            "# unit.pos=mm\ntime,force,pos\n0,1,1\n1,1,2\n",
+            Path::new("e.csv"),
+            &map,
+            &Units::parse("force=N").unwrap(),
+            Plant::Torque,
+        )
+        .unwrap();
+        assert_eq!(log.theta, vec![0.001, 0.002]);
+        assert!(log.is_linear());
+        for spelling in ["N·m", "N*m", "Nm", "N.m"] {
+            let text = format!("# unit.u={spelling}\nt,u,theta\n0,1,1\n1,1,2\n");
+            let log = parse(&text, Plant::Torque).unwrap();
+            assert_eq!(log.units["u"], "N·m");
+        }
+    }
+
+    #[test]
+    fn a_unit_of_the_wrong_kind_or_unknown_is_an_error_naming_the_line() {
+        let e = parse(
+            "# a=b\n# unit.t=rpm\nt,u,i,theta\n0,1,2,3\n1,1,2,3\n",
+            Plant::Voltage,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.starts_with("x.csv:2: unit.t=rpm: 'rpm' is a unit of velocity"),
+            "{e}"
+        );
+        assert!(e.contains("use s, ms, us"), "{e}");
+        let e = parse(
+            "# unit.theta=furlong\nt,u,i,theta\n0,1,2,3\n1,1,2,3\n",
+            Plant::Voltage,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.starts_with("x.csv:1: unit.theta=furlong: unknown unit"),
+            "{e}"
+        );
+        let e = parse(
+            "# unit.u=N·m\nt,u,i,theta\n0,1,2,3\n1,1,2,3\n",
+            Plant::Voltage,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("--plant torque"), "{e}");
+        let e = parse(
+            "# unit.tt=s\nt,u,i,theta\n0,1,2,3\n1,1,2,3\n",
+            Plant::Voltage,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.starts_with("x.csv:1: unit.tt: no column 'tt'"), "{e}");
+        let e = parse_units("t,u,i,theta\n0,1,2,3\n1,1,2,3\n", "i=V", Plant::Voltage)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with("--units: i=V: 'V' is a unit of voltage"),
+            "{e}"
+        );
+        assert!(Units::parse("t=fortnight")
+            .unwrap_err()
+            .to_string()
+            .starts_with("--units"));
+        assert!(Units::parse("t").is_err());
+        // The unit of an extra column stays in the metadata.
+        let log = parse(
+            "# unit.temp=degC\nt,u,i,theta,temp\n0,1,2,3,4\n1,1,2,3,4\n",
+            Plant::Voltage,
+        )
+        .unwrap();
+        assert_eq!(log.meta["unit.temp"], "degC");
+    }
+
+    #[test]
+    fn sanity_warnings_catch_numbers_that_do_not_fit_the_units() {
+        // t in ms without a unit line: the sample period disagrees with the steps.
+        let mut text =
+            String::from("# sample_period=0.012\n# hall_resolution_rad=0.1\nt,u,i,theta\n");
+        for k in 0..20 {
+            text.push_str(&format!("{},1,1,{}\n", 12 * k, 0.1 * (k / 2) as f64));
+        }
+        let w = parse(&text, Plant::Voltage).unwrap().sanity_warnings();
+        assert_eq!(w.len(), 1, "{w:?}");
+        assert!(w[0].starts_with("x.csv: sample_period=0.012 s"), "{w:?}");
+        assert!(w[0].contains("unit.t=ms"), "{w:?}");
+        // Declared, all is well.
+        let ok = text.replace("# hall", "# unit.t=ms\n# sample_period=12\n# hall");
+        let ok = ok.replacen("# sample_period=0.012\n", "", 1);
+        let w = parse(&ok, Plant::Voltage).unwrap().sanity_warnings();
+        assert!(w.is_empty(), "{w:?}");
+        // The angle in degrees: not a multiple of the Hall step, and too fast.
+        let mut text =
+            String::from("# sample_period=0.001\n# hall_resolution_rad=0.1\nt,u,i,theta\n");
+        for k in 0..20 {
+            text.push_str(&format!(
+                "{},1,1,{}\n",
+                0.001 * k as f64,
+                5000.37 * k as f64
+            ));
+        }
+        let w = parse(&text, Plant::Voltage).unwrap().sanity_warnings();
+        assert_eq!(w.len(), 2, "{w:?}");
+        assert!(
+            w[0].contains("not a multiple of hall_resolution_rad"),
+            "{w:?}"
+        );
+        assert!(w[1].contains("beyond any motor"), "{w:?}");
+    }
+
+    #[test]
+    fn echoed_fields_are_cut_and_cleaned() {
+        let long = "9".repeat(500) + "x";
+        let e = parse(
+            &format!("t,u,i,theta\n0,1,2,3\n1,{long},2,3\n"),
+            Plant::Voltage,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.len() < 120 && e.contains('…'), "{e}");
+        let e = parse(
+            "t,u,i,theta\n0,1,2,3\n1,\u{1b}[31mred\u{7},2,3\n",
+            Plant::Voltage,
+        )
+        .unwrap_err()
+        .to_string();
+        assert_eq!(e, "x.csv:3: column 'u': 'red' is not a number");
+        assert_eq!(echo("a\u{1b}]0;x\u{7}b"), "a0;xb");
+        let e = parse(&format!("t,u,{long}\n0,1,3\n"), Plant::Voltage)
+            .unwrap_err()
+            .to_string();
+        assert!(e.len() < 200, "{e}");
     }
 }

@@ -116,6 +116,13 @@ pub struct Provenance {
     /// Free text: how the parameters were found.
     #[serde(default, skip_serializing_if = "String::is_empty")]
     pub method: String,
+    /// Units the logs declared for their standard columns (`# unit.COLUMN=UNIT` or
+    /// `--units`), by column (`t = "ms"`); the data were converted to SI on read, so the
+    /// model's numbers are SI all the same. Columns not listed were SI. When the logs
+    /// disagree, the value names each file's unit. Absent in models written before units
+    /// existed.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub units: BTreeMap<String, String>,
 }
 
 /// The measurement chain the data went through (needed for `fit_sensor`).
@@ -365,10 +372,21 @@ mod tests {
             phase: 0.5,
         });
         m.parameters.push(Parameter::new("R", 0.2, "Ω"));
+        m.data.units.insert("t".into(), "ms".into());
         let text = m.to_toml().unwrap();
+        assert!(text.contains("[data.units]"), "{text}");
         assert!(text.contains("name = \"cogging\""), "{text}");
         let back = Model::parse(&text, Path::new("m.toml")).unwrap();
         assert_eq!(back, m);
+    }
+
+    #[test]
+    fn models_written_before_units_still_load() {
+        let m = Model::new(ModelKind::Linear, Plant::Voltage, 0.012);
+        let text = m.to_toml().unwrap();
+        assert!(!text.contains("units"), "{text}");
+        let back = Model::parse(&text, Path::new("m.toml")).unwrap();
+        assert!(back.data.units.is_empty());
     }
 
     #[test]

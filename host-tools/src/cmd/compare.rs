@@ -1,7 +1,7 @@
 //! `motorid compare`: run a model in free run on a log and score it with the paper's fit
 //! percentage, as the model states are and through the board's sensor chain.
 use crate::ident;
-use crate::log::{ColumnMap, MotorLog};
+use crate::log::{column_options, MotorLog};
 use crate::model::Model;
 use anyhow::Result;
 use std::path::PathBuf;
@@ -33,15 +33,17 @@ pub struct Args {
     /// Column names of the log: STD=NAME[,STD=NAME...].
     #[arg(long, value_name = "M")]
     pub map: Option<String>,
+    /// Units of your files' columns where they are not SI: COLUMN=UNIT[,COLUMN=UNIT...]
+    /// (e.g. t=ms,theta=deg,omega=rpm,i=mA); overrides the files' `# unit.COLUMN=UNIT` lines.
+    /// COLUMN: t, u, i, theta, omega or a name mapped with --map.
+    #[arg(long, value_name = "U")]
+    pub units: Option<String>,
 }
 
 pub fn run(args: Args) -> Result<()> {
     let model = Model::load(&args.model)?;
-    let map = match &args.map {
-        Some(m) => ColumnMap::parse(m)?,
-        None => ColumnMap::default(),
-    };
-    let log = MotorLog::read(&args.data, &map, model.plant)?;
+    let (map, units) = column_options(args.map.as_deref(), args.units.as_deref())?;
+    let log = MotorLog::read_and_warn(&args.data, &map, &units, model.plant)?;
     let pred = ident::freerun::simulate(&model, &log)?;
     let sc = ident::score_prediction(&model, &log, &pred)?;
     if let Some(dir) = &args.report {

@@ -1,6 +1,6 @@
 //! `motorid diagnose`: which physical effects a model is missing, from its residuals.
 use crate::diagnose::{self, Options, Structure};
-use crate::log::{ColumnMap, MotorLog};
+use crate::log::{column_options, MotorLog};
 use crate::model::Model;
 use anyhow::Result;
 use std::path::PathBuf;
@@ -51,6 +51,11 @@ pub struct Args {
     /// Column names of the log: STD=NAME[,STD=NAME...].
     #[arg(long, value_name = "M")]
     pub map: Option<String>,
+    /// Units of your files' columns where they are not SI: COLUMN=UNIT[,COLUMN=UNIT...]
+    /// (e.g. t=ms,theta=deg,omega=rpm,i=mA); overrides the files' `# unit.COLUMN=UNIT` lines.
+    /// COLUMN: t, u, i, theta, omega or a name mapped with --map.
+    #[arg(long, value_name = "U")]
+    pub units: Option<String>,
 }
 
 #[derive(serde::Serialize)]
@@ -73,11 +78,8 @@ struct JsonEffect<'a> {
 
 pub fn run(args: Args) -> Result<()> {
     let model = Model::load(&args.model)?;
-    let map = match &args.map {
-        Some(m) => ColumnMap::parse(m)?,
-        None => ColumnMap::default(),
-    };
-    let log = MotorLog::read(&args.data, &map, model.plant)?;
+    let (map, units) = column_options(args.map.as_deref(), args.units.as_deref())?;
+    let log = MotorLog::read_and_warn(&args.data, &map, &units, model.plant)?;
     crate::ident::check_log(&log, model.plant)?;
     let st = Structure::from_model(&model);
     let d = diagnose::diagnose(&log, &st, &Options::default());

@@ -2,7 +2,7 @@
 //! MODEL.toml.
 use crate::effect_spec::EffectSpec;
 use crate::ident::{self, FitRequest};
-use crate::log::{ColumnMap, MotorLog, Plant};
+use crate::log::{column_options, MotorLog, Plant};
 use crate::model::ModelKind;
 use anyhow::{Context, Result};
 use std::path::PathBuf;
@@ -46,6 +46,15 @@ pub struct Args {
     /// Column names of your files: STD=NAME[,STD=NAME...] (STD: t, u, i, theta, omega).
     #[arg(long, value_name = "M")]
     pub map: Option<String>,
+    /// Units of your files' columns where they are not SI: COLUMN=UNIT[,COLUMN=UNIT...]
+    /// (e.g. t=ms,theta=deg,omega=rpm,i=mA); overrides the files' `# unit.COLUMN=UNIT` lines.
+    /// COLUMN: t, u, i, theta, omega or a name mapped with --map.
+    #[arg(long, value_name = "U")]
+    pub units: Option<String>,
+    /// Print one JSON object on stdout (model kind, plant, every parameter with its value,
+    /// unit and standard error, the fit percentages); the text summary is not printed.
+    #[arg(long)]
+    pub json: bool,
     /// Output model (TOML).
     #[arg(short, long, value_name = "MODEL.toml")]
     pub output: PathBuf,
@@ -55,25 +64,25 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> Result<()> {
-    let map = match &args.map {
-        Some(m) => ColumnMap::parse(m)?,
-        None => ColumnMap::default(),
-    };
+    let (map, units) = column_options(args.map.as_deref(), args.units.as_deref())?;
     let adds: Vec<EffectSpec> = args
         .adds
         .iter()
         .map(|s| EffectSpec::parse(s).with_context(|| format!("--add '{s}'")))
         .collect::<Result<_>>()?;
-    let logs: Vec<MotorLog> = args
-        .data
-        .iter()
-        .map(|p| MotorLog::read(p, &map, args.plant))
-        .collect::<Result<_>>()?;
-    let validate: Vec<MotorLog> = args
-        .validate
-        .iter()
-        .map(|p| MotorLog::read(p, &map, args.plant))
-        .collect::<Result<_>>()?;
+    // Warnings once per file, even when a file is both fitted and validated on.
+    let mut warned = std::collections::BTreeSet::new();
+    let mut read = |p: &PathBuf| -> Result<MotorLog> {
+        let log = MotorLog::read_with_units(p, &map, &units, args.plant)?;
+        if warned.insert(p.clone()) {
+            for w in log.sanity_warnings() {
+                eprintln!("warning: {w}");
+            }
+        }
+        Ok(log)
+    };
+    let logs: Vec<MotorLog> = args.data.iter().map(&mut read).collect::<Result<_>>()?;
+    let validate: Vec<MotorLog> = args.validate.iter().map(&mut read).collect::<Result<_>>()?;
     for log in &validate {
         ident::check_log(log, args.plant)?;
     }
@@ -90,7 +99,73 @@ pub fn run(args: Args) -> Result<()> {
     bar.finish_and_clear();
     let report = report?;
     report.model.save(&args.output)?;
-    print!("{}", report.summary_text);
-    println!("wrote {}", args.output.display());
+    if args.json {
+        println!("{}", serde_json::to_string(&json_report(&report))?);
+        eprintln!("wrote {}", args.output.display());
+    } else {
+        print!("{}", report.summary_text);
+        println!("wrote {}", args.output.display());
+    }
     Ok(())
+}
+
+/// The `--json` object: `{"model", "plant", "effects", "parameters": [{"name", "value",
+/// "unit", "std_error", "identifiable", "note"}], "fit": {"x", "xdot", "i"}, "fit_sensor",
+/// "samples", "sample_period", "units", "logs": [{"file", "role", "fit", "fit_sensor",
+/// "samples", "error"}]}`. `fit` and `fit_sensor` are the scores on the first DATA.csv (the
+/// summary's first line; `logs` has every file's); null when it could not be scored.
+pub fn json_report(report: &ident::FitReport) -> serde_json::Value {
+    use serde_json::json;
+    let m = &report.model;
+    let parameters: Vec<serde_json::Value> = m
+        .parameters
+        .iter()
+        .map(|p| {
+            json!({
+                "name": p.name,
+                "value": finite(p.value),
+                "unit": p.unit,
+                "std_error": p.std_err.and_then(finite),
+                "identifiable": p.identifiable,
+                "note": p.note,
+            })
+        })
+        .collect();
+    let fits = |f: &ident::Fits| json!({ "x": finite(f.x), "xdot": finite(f.xdot), "i": f.i.and_then(finite) });
+    let logs: Vec<serde_json::Value> = report
+        .scores
+        .iter()
+        .map(|ls| match &ls.scores {
+            Ok(sc) => json!({
+                "file": ls.file, "role": ls.role, "fit": fits(&sc.fit),
+                "fit_sensor": fits(&sc.fit_sensor), "samples": sc.samples,
+            }),
+            Err(e) => json!({
+                "file": ls.file, "role": ls.role, "fit": null, "fit_sensor": null, "error": e,
+            }),
+        })
+        .collect();
+    let first = report
+        .scores
+        .iter()
+        .find(|ls| ls.role == "fit")
+        .and_then(|ls| ls.scores.as_ref().ok());
+    let effects: Vec<String> = m.effect_specs().iter().map(|s| s.to_string()).collect();
+    json!({
+        "model": m.kind.name(),
+        "plant": m.plant,
+        "effects": effects,
+        "parameters": parameters,
+        "fit": first.map(|sc| fits(&sc.fit)),
+        "fit_sensor": first.map(|sc| fits(&sc.fit_sensor)),
+        "samples": m.data.samples,
+        "sample_period": m.sample_period,
+        "units": m.data.units,
+        "logs": logs,
+    })
+}
+
+/// JSON has no NaN or infinity: those become null.
+fn finite(v: f64) -> Option<f64> {
+    v.is_finite().then_some(v)
 }

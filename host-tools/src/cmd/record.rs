@@ -160,6 +160,7 @@ pub fn run(args: Args) -> Result<()> {
         theta: f(|s| s.theta),
         omega: Some(f(|s| s.omega)),
         extra: Vec::new(),
+        units: Default::default(),
     };
     log.write(&args.output)?;
     eprintln!(

@@ -35,6 +35,7 @@ use anyhow::{bail, Result};
 use control::effects::EffectKind;
 pub use freerun::Prediction;
 use serde::Serialize;
+use std::collections::BTreeMap;
 
 /// What to fit.
 #[derive(Debug, Clone, Copy)]
@@ -55,6 +56,19 @@ pub struct FitReport {
     pub model: Model,
     /// A readable summary: parameter table with units and standard errors, fit percentages.
     pub summary_text: String,
+    /// The fit percentages of the summary, one per log (fitted logs first, then validation).
+    pub scores: Vec<LogScores>,
+}
+
+/// The scores of the fitted model on one log, as the summary prints them.
+#[derive(Debug, Clone)]
+pub struct LogScores {
+    /// `fit` (a fitted log) or `validation`.
+    pub role: &'static str,
+    /// The log's path.
+    pub file: String,
+    /// The scores, or why the model could not be scored on this log.
+    pub scores: std::result::Result<Scores, String>,
 }
 
 /// Fit percentages of angle, velocity and current.
@@ -144,10 +158,14 @@ pub fn fit(req: &FitRequest) -> Result<FitReport> {
         .map(|l| l.source.display().to_string())
         .collect();
     model.data.samples = req.logs.iter().map(MotorLog::len).sum();
-    let summary_text = summary(&model, req)?;
+    model.data.units = declared_units(req.logs.iter().chain(req.validate));
+    relabel_units(&mut model, req.logs);
+    let scores = score_logs(&model, req);
+    let summary_text = summary_of(&model, &scores);
     Ok(FitReport {
         model,
         summary_text,
+        scores,
     })
 }
 
@@ -346,6 +364,26 @@ fn guard_added_effects(req: &FitRequest, with: Model) -> Result<Model> {
 
 /// A readable summary: parameters, then fits on the fitting and validation logs.
 pub fn summary(model: &Model, req: &FitRequest) -> Result<String> {
+    Ok(summary_of(model, &score_logs(model, req)))
+}
+
+/// Score a fitted model on the request's logs (fitted, then validation).
+pub fn score_logs(model: &Model, req: &FitRequest) -> Vec<LogScores> {
+    let mut out = Vec::new();
+    for (role, logs) in [("fit", req.logs), ("validation", req.validate)] {
+        for log in logs {
+            out.push(LogScores {
+                role,
+                file: log.source.display().to_string(),
+                scores: score(model, log).map_err(|e| format!("{e:#}")),
+            });
+        }
+    }
+    out
+}
+
+/// The summary text of a fitted model and its scores.
+pub fn summary_of(model: &Model, scores: &[LogScores]) -> String {
     use std::fmt::Write;
     let mut s = String::new();
     let _ = writeln!(
@@ -360,19 +398,100 @@ pub fn summary(model: &Model, req: &FitRequest) -> Result<String> {
         model.sample_period
     );
     s.push_str(&parameter_table(model));
-    for (what, logs) in [("fit", req.logs), ("validation", req.validate)] {
-        for log in logs {
-            match score(model, log) {
-                Ok(sc) => {
-                    let _ = writeln!(s, "{what} {}: {}", log.source.display(), fits_line(&sc));
-                }
-                Err(e) => {
-                    let _ = writeln!(s, "{what} {}: cannot score: {e:#}", log.source.display());
-                }
+    for ls in scores {
+        match &ls.scores {
+            Ok(sc) => {
+                let _ = writeln!(s, "{} {}: {}", ls.role, ls.file, fits_line(sc));
+            }
+            Err(e) => {
+                let _ = writeln!(s, "{} {}: cannot score: {e}", ls.role, ls.file);
             }
         }
     }
-    Ok(s)
+    s
+}
+
+/// The units the logs declared, by column (see [`crate::model::Provenance::units`]).
+pub fn declared_units<'a>(logs: impl Iterator<Item = &'a MotorLog>) -> BTreeMap<String, String> {
+    let logs: Vec<&MotorLog> = logs.collect();
+    let mut out = BTreeMap::new();
+    for col in crate::log::ColumnMap::STANDARD {
+        let per: Vec<(&MotorLog, &str)> = logs
+            .iter()
+            .map(|l| (*l, l.units.get(col).map(String::as_str).unwrap_or("SI")))
+            .collect();
+        if per.iter().all(|(_, u)| *u == "SI") {
+            continue;
+        }
+        let value = if per.iter().all(|(_, u)| *u == per[0].1) {
+            per[0].1.to_string()
+        } else {
+            per.iter()
+                .map(|(l, u)| format!("{u} in {}", l.source.display()))
+                .collect::<Vec<_>>()
+                .join("; ")
+        };
+        out.insert(col.to_string(), value);
+    }
+    out
+}
+
+/// Parameter units as the data make them: with `--plant torque` the input `u` is a torque or
+/// force in whatever unit the log has (its declared unit, else `u`), so `N·m` becomes that
+/// unit; on a linear axis (theta in m) `rad` becomes `m` (and, with a voltage plant, `N·m`
+/// becomes `N`).
+pub fn relabel_units(model: &mut Model, logs: &[MotorLog]) {
+    let linear = !logs.is_empty() && logs.iter().all(MotorLog::is_linear);
+    let torque = match model.plant {
+        Plant::Torque => {
+            let declared: Vec<Option<&String>> = logs.iter().map(|l| l.units.get("u")).collect();
+            match declared.first() {
+                Some(Some(u)) if declared.iter().all(|d| *d == Some(*u)) => (*u).clone(),
+                _ => "u".to_string(),
+            }
+        }
+        Plant::Voltage if linear => "N".to_string(),
+        Plant::Voltage => return,
+    };
+    for p in &mut model.parameters {
+        p.unit = relabel_unit(&p.unit, &torque, linear);
+    }
+}
+
+/// One unit string relabelled (see [`relabel_units`]): `N·m` → `torque`, the word `u` →
+/// `torque` (unless it is `u`), and, when `linear`, the word `rad` → `m`.
+pub fn relabel_unit(unit: &str, torque: &str, linear: bool) -> String {
+    const PLACEHOLDER: char = '\u{1}';
+    let unit = if linear && unit == "kg·m²" {
+        "kg"
+    } else {
+        unit
+    };
+    let s = unit.replace("N·m", &PLACEHOLDER.to_string());
+    let mut out = String::new();
+    let mut word = String::new();
+    let flush = |word: &mut String, out: &mut String| {
+        match word.as_str() {
+            "u" => out.push_str(torque),
+            "rad" if linear => out.push('m'),
+            w => out.push_str(w),
+        }
+        word.clear();
+    };
+    for c in s.chars() {
+        if c.is_alphabetic() {
+            word.push(c);
+        } else {
+            flush(&mut word, &mut out);
+            if c == PLACEHOLDER {
+                out.push_str(torque);
+            } else {
+                out.push(c);
+            }
+        }
+    }
+    flush(&mut word, &mut out);
+    out
 }
 
 /// `x 91.2 %, xdot 88.0 %, i 95.1 % (sensor chain: x ..., xdot ...)`.
@@ -462,4 +581,40 @@ fn sindyc_fit(req: &FitRequest) -> Result<Model> {
 /// SINDYc free-run simulation (the colleague's `sindyc.rs`); this is the single call site.
 pub(crate) fn sindyc_simulate(model: &Model, log: &MotorLog) -> Result<Prediction> {
     sindyc::simulate_model(model, log)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn torque_plant_units_name_the_input_not_newton_metres() {
+        assert_eq!(relabel_unit("N·m·s/rad", "u", false), "u·s/rad");
+        assert_eq!(relabel_unit("u·s²/rad", "u", false), "u·s²/rad");
+        assert_eq!(relabel_unit("N·m/rad", "N", true), "N/m");
+        assert_eq!(relabel_unit("u·s²/rad", "N", true), "N·s²/m");
+        assert_eq!(relabel_unit("rad/s", "N·m", false), "rad/s");
+        assert_eq!(relabel_unit("kg·m²", "N", true), "kg");
+        assert_eq!(relabel_unit("1/rev", "u", false), "1/rev");
+        let mut m = Model::new(ModelKind::Linear, Plant::Torque, 0.001);
+        m.parameters = vec![
+            crate::model::Parameter::new("b", 1.0, "N·m·s/rad"),
+            crate::model::Parameter::new("J", 1.0, "u·s²/rad"),
+        ];
+        let log = MotorLog {
+            units: [("u".to_string(), "N".to_string())].into(),
+            ..Default::default()
+        };
+        // A force input: a linear axis, so rad becomes m as well.
+        relabel_units(&mut m, std::slice::from_ref(&log));
+        assert_eq!(m.parameters[0].unit, "N·s/m");
+        assert_eq!(m.parameters[1].unit, "N·s²/m");
+        let mut logs = [log.clone(), log];
+        logs[1].units.insert("t".into(), "ms".into());
+        logs[0].source = "a.csv".into();
+        logs[1].source = "b.csv".into();
+        let u = declared_units(logs.iter());
+        assert_eq!(u["u"], "N");
+        assert_eq!(u["t"], "SI in a.csv; ms in b.csv");
+    }
 }

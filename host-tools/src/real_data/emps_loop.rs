@@ -47,6 +47,7 @@ pub fn prepare(log: &MotorLog, r: usize) -> MotorLog {
         theta: (0..n).map(|k| POSITION_SCALE * log.theta[k * r]).collect(),
         omega: None,
         extra: Vec::new(),
+        units: log.units.clone(),
     }
 }
 
@@ -81,6 +82,7 @@ pub fn benchmark_rmse_mm(model: &Model, log: &MotorLog) -> Result<(f64, Vec<f64>
         // Only its first value is used: the free run's initial velocity.
         omega: Some(vec![v0; log.len() - n0 + 1]),
         extra: Vec::new(),
+        units: log.units.clone(),
     };
     tail.theta[0] = q0;
     let pred = freerun::simulate(model, &tail)?;
