@@ -305,6 +305,32 @@ pub fn run(args: Args) -> Result<()> {
     Ok(())
 }
 
+/// The verdict in one line: adequate, or which checks failed and what carries the rest.
+fn verdict_line(v: &diagnose::Verdict) -> String {
+    if v.adequate {
+        return format!(
+            "adequate: no effect of the list is missing and every check passes at the {:.0}% level",
+            100.0 * v.level
+        );
+    }
+    let failed: Vec<&str> = v
+        .checks
+        .iter()
+        .filter(|c| !c.passed)
+        .map(|c| c.name)
+        .collect();
+    let carried: Vec<String> = v
+        .unexplained
+        .iter()
+        .map(|u| format!("{} ({:.0}%)", u.variable, 100.0 * u.share))
+        .collect();
+    format!(
+        "no effect of the list is left, but NOT adequate: failed checks [{}], carried by [{}]",
+        failed.join(", "),
+        carried.join(", ")
+    )
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -339,30 +365,4 @@ mod tests {
         let h = hidden_effects(&args(&["offset:t0=0.01"], true, 1)).unwrap();
         assert_eq!(h[0].kind, EffectKind::Offset);
     }
-}
-
-/// The verdict in one line: adequate, or which checks failed and what carries the rest.
-fn verdict_line(v: &diagnose::Verdict) -> String {
-    if v.adequate {
-        return format!(
-            "adequate: no effect of the list is missing and every check passes at the {:.0}% level",
-            100.0 * v.level
-        );
-    }
-    let failed: Vec<&str> = v
-        .checks
-        .iter()
-        .filter(|c| !c.passed)
-        .map(|c| c.name)
-        .collect();
-    let carried: Vec<String> = v
-        .unexplained
-        .iter()
-        .map(|u| format!("{} ({:.0}%)", u.variable, 100.0 * u.share))
-        .collect();
-    format!(
-        "no effect of the list is left, but NOT adequate: failed checks [{}], carried by [{}]",
-        failed.join(", "),
-        carried.join(", ")
-    )
 }

@@ -462,6 +462,10 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
     }
 }
 
+/// Fewest weak-form windows an equation needs for the verdict's tests: 64 (32 disjoint
+/// windows, enough for the whiteness regression on 4 lags and for the carriers' 8 knots).
+pub const MIN_VERDICT_ROWS: usize = 64;
+
 /// One equation's residuals for the verdict.
 struct Judged {
     eq: Equation,
@@ -497,7 +501,20 @@ fn judge(
     let mut unexplained: Vec<carriers::Carrier> = Vec::new();
     let mut refit = Vec::new();
     for j in judged {
-        if j.base.len() < 8 {
+        // Too few windows to test anything: the verdict cannot be "adequate".
+        if j.base.len() < MIN_VERDICT_ROWS {
+            checks.push(verdict::Check {
+                name: "data",
+                statistic: j.base.len() as f64,
+                p_value: 0.0,
+                share: 0.0,
+                passed: false,
+                detail: format!(
+                    "{} equation: only {} usable windows (at least {MIN_VERDICT_ROWS} are needed to test the residual); record a longer log with more motion",
+                    j.eq.label(),
+                    j.base.len()
+                ),
+            });
             continue;
         }
         if let Some(g) = &j.given {
@@ -533,7 +550,10 @@ fn judge(
         }
     }
     unexplained.sort_by(|a, b| b.share.total_cmp(&a.share));
-    let adequate = findings.is_empty() && unexplained.is_empty() && checks.iter().all(|c| c.passed);
+    let adequate = !judged.is_empty()
+        && findings.is_empty()
+        && unexplained.is_empty()
+        && checks.iter().all(|c| c.passed);
     Verdict {
         adequate,
         level,

@@ -151,6 +151,16 @@ pub fn input_check(resid: &[f64], input: &[f64], level: f64) -> Check {
 pub fn parameter_check(given: &[f64], refit: &[f64], p: usize, level: f64) -> Check {
     let rss_g: f64 = given.iter().map(|v| v * v).sum();
     let rss_r: f64 = refit.iter().map(|v| v * v).sum();
+    if !(rss_g.is_finite() && rss_r.is_finite()) {
+        return Check {
+            name: "parameters",
+            statistic: f64::INFINITY,
+            p_value: 0.0,
+            share: 1.0,
+            passed: false,
+            detail: "the model's own equations give a non-finite residual on this log (a zero or non-finite constant): refit first".to_string(),
+        };
+    }
     let n_eff = stats::effective_n(refit);
     let t = stats::f_test(rss_g, rss_r, p.max(1), 0, n_eff);
     let share = t.explained;
@@ -180,8 +190,8 @@ pub fn parameter_check(given: &[f64], refit: &[f64], p: usize, level: f64) -> Ch
 /// The model's own load torque [N·m] at each sample, evaluated on the measured motion: its
 /// friction law (the LuGre observer run along the velocity when the model has bristles) plus
 /// every torque effect. `current` is the true winding current (measured minus the model's
-/// sensor offset; the command for a torque plant).
-pub fn model_torque(effects: &[Effect<f64>], s: &Signals, current: &[f64]) -> Vec<f64> {
+/// sensor offset; the command for a torque plant); `kt` the torque per unit of it.
+pub fn model_torque(effects: &[Effect<f64>], s: &Signals, current: &[f64], kt: f64) -> Vec<f64> {
     let mut observer = LugreParams::from_effects(effects)
         .filter(|p| p.is_valid())
         .map(LugreObserver::new);
@@ -197,7 +207,7 @@ pub fn model_torque(effects: &[Effect<f64>], s: &Signals, current: &[f64]) -> Ve
                 theta: s.theta[k],
                 omega: s.omega[k],
                 current: current[k],
-                kt: s.kt,
+                kt,
             };
             let law = match observer.as_mut() {
                 Some(o) => o.step(s.omega[k], s.dt),
@@ -223,13 +233,12 @@ pub fn given_residuals(
     effects: &[Effect<f64>],
     m: &MotorParams<f64>,
 ) -> (Vec<f64>, Option<Vec<f64>>) {
-    let n = s.len();
     let d2 = wf.second_derivative(&s.theta);
     match (&s.i, s.plant) {
         (Some(i_meas), Plant::Voltage) => {
             let i0 = total_sensor_offset(effects);
             let i: Vec<f64> = i_meas.iter().map(|v| v - i0).collect();
-            let torque = model_torque(effects, s, &i);
+            let torque = model_torque(effects, s, &i, m.kt);
             let loss: Vec<f64> = i.iter().map(|c| total_voltage_loss(effects, *c)).collect();
             // Heat state of the winding along the measured current.
             let mut h = 0.0;
@@ -248,13 +257,20 @@ pub fn given_residuals(
             let di = wf.derivative(&i);
             let lw = wf.integral(&loss);
             let ratio = m.r / m.kt;
-            let mech = (0..wf.rows())
-                .map(|r| {
-                    zoh[r] - m.kb * d1[r] - ratio * (m.j * d2[r] + tq[r]) - m.l * di[r] - lw[r]
-                })
-                .collect();
             let u = wf.integral(&s.u);
             let ri = wf.integral(&heated);
+            let i_w = wf.integral(&i);
+            // The winding's heating adds R·h·I to the voltage the torque equation is written in.
+            let mech = (0..wf.rows())
+                .map(|r| {
+                    zoh[r]
+                        - m.kb * d1[r]
+                        - ratio * (m.j * d2[r] + tq[r])
+                        - m.l * di[r]
+                        - lw[r]
+                        - m.r * (ri[r] - i_w[r])
+                })
+                .collect();
             let lq = if m.r > 0.0 { m.l * m.kb / m.r } else { 0.0 };
             let elec = (0..wf.rows())
                 .map(|r| u[r] - m.r * ri[r] + lq * d2[r] - m.kb * d1[r] - lw[r])
@@ -262,13 +278,13 @@ pub fn given_residuals(
             (mech, Some(elec))
         }
         _ => {
-            let cmd: Vec<f64> = s.raw_u.iter().map(|u| u * s.kt).collect();
-            let torque = model_torque(effects, s, &cmd);
+            // The model's input gain K_t (1 when `u` is the torque itself); load friction sees
+            // the transmitted torque K_t·u, so the "current" handed to it is u.
+            let torque = model_torque(effects, s, &s.raw_u, m.kt);
             let zoh = wf.integral_zoh(&s.raw_u);
             let tq = wf.integral(&torque);
-            let _ = n;
             let mech = (0..wf.rows())
-                .map(|r| s.kt * zoh[r] - m.j * d2[r] - tq[r])
+                .map(|r| m.kt * zoh[r] - m.j * d2[r] - tq[r])
                 .collect();
             (mech, None)
         }
