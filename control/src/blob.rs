@@ -227,6 +227,7 @@ fn effect_finite(e: &Effect<f32>) -> bool {
         Effect::CurrentOffset { i0 } => finite(&[i0]),
         Effect::Thermal { k, tau } => finite(&[k, tau]) && tau > 0.0,
         Effect::LoadFriction { mu } => finite(&[mu]),
+        Effect::Saturation { k } => finite(&[k]) && k >= 0.0,
     }
 }
 

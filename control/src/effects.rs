@@ -55,11 +55,12 @@ pub enum EffectKind {
     CurrentOffset,
     Thermal,
     LoadFriction,
+    Saturation,
 }
 
 impl EffectKind {
     /// Every effect, in the contract's order.
-    pub const ALL: [EffectKind; 12] = [
+    pub const ALL: [EffectKind; 13] = [
         EffectKind::Coulomb,
         EffectKind::Viscous,
         EffectKind::Stribeck,
@@ -72,6 +73,7 @@ impl EffectKind {
         EffectKind::CurrentOffset,
         EffectKind::Thermal,
         EffectKind::LoadFriction,
+        EffectKind::Saturation,
     ];
 
     /// The contract's name (`position_load`, ...).
@@ -89,6 +91,7 @@ impl EffectKind {
             EffectKind::CurrentOffset => "current_offset",
             EffectKind::Thermal => "thermal",
             EffectKind::LoadFriction => "load_friction",
+            EffectKind::Saturation => "saturation",
         }
     }
 
@@ -154,6 +157,10 @@ pub enum Effect<F> {
     Thermal { k: F, tau: F },
     /// Friction growing with transmitted torque: `mu·|K_t·I|·sgn(ω)` (gears, screws).
     LoadFriction { mu: F },
+    /// Magnetic saturation: the torque constant falls with the current,
+    /// `K_t(I) = K_t/(1 + k·I²)`, k in 1/A²; as a load torque, the torque the motor no longer
+    /// makes, `K_t·I·k·I²/(1 + k·I²)`.
+    Saturation { k: F },
 }
 
 impl<F: Float> Effect<F> {
@@ -172,6 +179,7 @@ impl<F: Float> Effect<F> {
             Effect::CurrentOffset { .. } => EffectKind::CurrentOffset,
             Effect::Thermal { .. } => EffectKind::Thermal,
             Effect::LoadFriction { .. } => EffectKind::LoadFriction,
+            Effect::Saturation { .. } => EffectKind::Saturation,
         }
     }
 
@@ -195,6 +203,10 @@ impl<F: Float> Effect<F> {
             Effect::Offset { t0 } => t0,
             Effect::Asymmetry { dv, dc } => dv * x.omega.abs() + dc * sgn.abs(),
             Effect::LoadFriction { mu } => mu * (x.kt * x.current).abs() * sgn,
+            Effect::Saturation { k } => {
+                let q = k * x.current * x.current;
+                x.kt * x.current * q / (F::one() + q)
+            }
             Effect::Presliding { .. }
             | Effect::Deadtime { .. }
             | Effect::CurrentOffset { .. }
@@ -261,6 +273,22 @@ mod tests {
             current,
             kt: 0.07,
         }
+    }
+
+    #[test]
+    fn saturation_takes_the_torque_a_falling_kt_no_longer_makes() {
+        let e = Effect::Saturation { k: 2e-4 };
+        for i in [-40.0, -5.0, 0.0, 10.0, 40.0] {
+            // K_t·I − torque = K_t(I)·I with K_t(I) = K_t/(1 + k·I²).
+            let made = 0.07 * i - e.torque(&at(0.0, 3.0, i));
+            let expected = 0.07 / (1.0 + 2e-4 * i * i) * i;
+            assert!((made - expected).abs() < 1e-12, "I = {i}");
+        }
+        // Odd in the current, independent of the motion.
+        assert_eq!(
+            e.torque(&at(1.0, -3.0, 20.0)),
+            -e.torque(&at(0.0, 3.0, -20.0))
+        );
     }
 
     #[test]

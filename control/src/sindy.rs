@@ -95,6 +95,8 @@ pub enum Term {
     AbsISgnXdot,
     /// I² (heating).
     ISquared,
+    /// I³ (magnetic saturation: the torque a falling K_t loses, to first order).
+    ICubed,
 }
 
 /// What a term may depend on at one instant.
@@ -139,7 +141,7 @@ impl Term {
 
     /// Every term without a parameter (all but `SinTheta`/`CosTheta`): the paper's library,
     /// then the added terms.
-    pub const FIXED: [Term; 25] = {
+    pub const FIXED: [Term; 26] = {
         let added = [
             Term::One,
             Term::SgnXdot,
@@ -149,9 +151,10 @@ impl Term {
             Term::SgnI,
             Term::AbsISgnXdot,
             Term::ISquared,
+            Term::ICubed,
         ];
         let paper = Term::PAPER_LIBRARY;
-        let mut all = [Term::One; 25];
+        let mut all = [Term::One; 26];
         assert!(paper.len() + added.len() == all.len());
         let mut k = 0;
         while k < all.len() {
@@ -193,6 +196,7 @@ impl Term {
             Term::SgnI => "sgn(i)",
             Term::AbsISgnXdot => "|i|*sgn(xdot)",
             Term::ISquared => "i^2",
+            Term::ICubed => "i^3",
             Term::SinTheta(_) | Term::CosTheta(_) => return None,
         })
     }
@@ -232,7 +236,7 @@ impl Term {
     pub fn has_current(self) -> bool {
         matches!(
             self,
-            Term::I | Term::SgnI | Term::AbsISgnXdot | Term::ISquared
+            Term::I | Term::SgnI | Term::AbsISgnXdot | Term::ISquared | Term::ICubed
         )
     }
 
@@ -284,6 +288,7 @@ impl Term {
             Term::ZU2 => u * u,
             Term::AbsXdot => xd.abs(),
             Term::ISquared => i * i,
+            Term::ICubed => i * i * i,
             _ => self.transcendental_factor(p, a, vs),
         }
     }

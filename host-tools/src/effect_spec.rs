@@ -146,6 +146,18 @@ pub fn keys(kind: EffectKind) -> &'static [Key] {
             const K: &[Key] = &[k("mu", "1", 0.2, "friction per N·m of transmitted torque")];
             K
         }
+        EffectKind::Saturation => {
+            // Default k = 2e-4/A²: K_t down 2 % at 10 A and 24 % at 40 A, the board's peak
+            // rating; small BLDC motors lose 10-30 % of K_t at two to three times their
+            // continuous current.
+            const K: &[Key] = &[k(
+                "k",
+                "1/A²",
+                2e-4,
+                "torque constant falls as K_t/(1 + k·I²)",
+            )];
+            K
+        }
     }
 }
 
@@ -268,6 +280,7 @@ impl EffectSpec {
                 tau: g("tau"),
             },
             EffectKind::LoadFriction => Effect::LoadFriction { mu: g("mu") },
+            EffectKind::Saturation => Effect::Saturation { k: g("k") },
         }
     }
 
@@ -313,6 +326,7 @@ impl EffectSpec {
                 put("tau", tau)
             }
             Effect::LoadFriction { mu } => put("mu", mu),
+            Effect::Saturation { k } => put("k", k),
         }
         EffectSpec {
             kind: e.kind(),

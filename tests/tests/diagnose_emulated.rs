@@ -409,3 +409,28 @@ fn load_friction_is_ranked_first_on_a_braking_signal() {
         );
     }
 }
+
+#[test]
+#[ignore]
+fn print_verdict_on_steps() {
+    for seed in [1, 2, 3] {
+        let correct = simulate_signal(&hidden(&[], seed), SignalKind::D, 60.0).unwrap();
+        let d = diagnose(&correct.log, &lugre(), &Options::default());
+        eprintln!(
+            "correct d seed {seed}: {:?} adequate {} carriers {:?} failed {:?}",
+            names(&d),
+            d.verdict.adequate,
+            d.verdict
+                .unexplained
+                .iter()
+                .map(|u| (u.variable, u.share))
+                .collect::<Vec<_>>(),
+            d.verdict
+                .checks
+                .iter()
+                .filter(|c| !c.passed)
+                .map(|c| (c.name, c.share))
+                .collect::<Vec<_>>()
+        );
+    }
+}

@@ -1,8 +1,9 @@
 //! The verdict on a model as given, on data from a plant our emulator did not make
 //! (`tests::other_plant`): a correct model is adequate at about the stated level, a model with
 //! wrong parameters is told to refit, and physics outside the effect list (a compliant
-//! coupling, a gap, a falling torque constant, creeping friction) is never "adequate" and
-//! names the variable that carries it.
+//! coupling, a gap, creeping friction) is never "adequate" and names the variable that
+//! carries it. (A falling torque constant shows only on voltage steps, where the correct
+//! model is not adequate either: see docs/diagnose-verdict.md.)
 use control::effects::Effect;
 use control::motor::MotorParams;
 use motorid::diagnose::{diagnose, Diagnosis, Options, Structure};
@@ -167,17 +168,6 @@ fn a_gap_is_carried_by_reversals() {
 }
 
 #[test]
-fn a_falling_torque_constant_is_carried_by_acceleration_or_current() {
-    // On steps (currents up to 50 A, where the tabulated K_t has fallen by a quarter); the
-    // fitting signal a rarely leaves 10 A, where it has fallen by 3 %.
-    not_adequate_and_carried(
-        Extra::FallingKt,
-        SignalKind::D,
-        &["current", "acceleration"],
-    );
-}
-
-#[test]
 fn creeping_friction_is_carried_by_time() {
     not_adequate_and_carried(
         Extra::CreepingCoulomb { per_minute: 1.0 },
@@ -193,8 +183,9 @@ fn creeping_friction_is_carried_by_time() {
 #[ignore]
 fn write_verdict_table() {
     use std::fmt::Write;
-    let cases: [(&str, Extra, SignalKind); 6] = [
+    let cases: [(&str, Extra, SignalKind); 7] = [
         ("correct model", Extra::None, SignalKind::A),
+        ("correct model", Extra::None, SignalKind::D),
         (
             "compliant coupling, 5 Hz, load 2× rotor",
             Extra::Coupling {
@@ -269,7 +260,12 @@ fn write_verdict_table() {
         }
     }
     md.push_str(
-        "\nLimits seen here: a torque constant that falls 3 % by 10 A goes unseen on the \
+        "\nLimits seen here: on voltage steps (signal d) even the correct model is not \
+         adequate: the rotor's mechanical time constant is about one sample, and the weak form \
+         of a sampled log cannot follow the current's fall inside the interval after a step, \
+         so the residual follows the acceleration (the emulator's own correct LuGre model on d \
+         shows the same, acceleration 6-14 %). Judge a model on smooth signals (a, b, c); on \
+         steps, read the carriers against that floor. A torque constant that falls 3 % by 10 A goes unseen on the \
          fitting signal a, whose current rarely leaves that range (on voltage steps it is \
          carried by acceleration and current, which rise together). A compliant coupling \
          shows at reversals, where the load winds the spring up, rather than as a spectral \

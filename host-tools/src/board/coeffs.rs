@@ -78,6 +78,7 @@ pub fn map_effect<A: Copy, B>(e: &Effect<A>, c: impl Fn(A) -> B) -> Effect<B> {
             tau: c(tau),
         },
         Effect::LoadFriction { mu } => Effect::LoadFriction { mu: c(mu) },
+        Effect::Saturation { k } => Effect::Saturation { k: c(k) },
     }
 }
 

@@ -383,10 +383,19 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
         if st.has(EffectKind::LoadFriction) {
             mech.base_cols.push(wf.integral_zoh(&lf_col));
         }
+        // Saturation likewise per interval (its I³ weighs the step transients).
+        let sat_col = s.saturation_intervals(units.r);
+        if st.has(EffectKind::Saturation) && voltage {
+            mech.base_cols.push(wf.integral_zoh(&sat_col));
+        }
         for (v, cols) in mech.cand.iter_mut() {
             if v.kind == EffectKind::LoadFriction {
                 *cols = vec![wf.integral_zoh(&lf_col)];
                 v.torque = Some(lf_torque.clone());
+            }
+            if v.kind == EffectKind::Saturation {
+                *cols = vec![wf.integral_zoh(&sat_col)];
+                v.torque = Some(sat_col.clone());
             }
         }
         // Every window, for presliding (with its nuisance term, see `presliding_pass`).
@@ -981,6 +990,7 @@ pub fn plausible(spec: &EffectSpec) -> bool {
         EffectKind::Deadtime => g("vd") > 0.0,
         EffectKind::Thermal => g("k") > 0.0,
         EffectKind::LoadFriction => (0.0..=MAX_LOAD_FRICTION).contains(&g("mu")),
+        EffectKind::Saturation => g("k") > 0.0,
         EffectKind::Presliding => true,
         _ => true,
     }
@@ -1060,6 +1070,11 @@ pub fn explain(spec: &EffectSpec, score: f64, eq: Equation) -> String {
         EffectKind::LoadFriction => format!(
             "friction grows with the transmitted torque, {:.3} N·m per N·m (gears, screws)",
             g("mu")
+        ),
+        EffectKind::Saturation => format!(
+            "the torque constant falls at high current (magnetic saturation, K_t/(1 + k·I²) with k = {:.2e}/A², {:.0}% lower at 20 A)",
+            g("k"),
+            100.0 * (1.0 - 1.0 / (1.0 + g("k") * 400.0))
         ),
     };
     format!(

@@ -135,6 +135,8 @@ pub fn effect_keys(kind: EffectKind) -> Vec<(&'static str, f64, f64)> {
         EffectKind::CurrentOffset => vec![("i0", -50.0, 50.0)],
         EffectKind::Thermal => vec![("k", 0.0, 1.0), ("tau", 0.5, 1e4)],
         EffectKind::LoadFriction => vec![("mu", 0.0, 2.0)],
+        // Up to K_t halved at 1 A: far beyond any real motor, a bound only against runaway.
+        EffectKind::Saturation => vec![("k", 0.0, 1.0)],
     }
 }
 

@@ -155,6 +155,7 @@ impl Library {
                 EffectKind::Deadtime => lib.add(Term::SgnI, CUR, plant),
                 EffectKind::CurrentOffset => lib.add(Term::One, CUR, plant),
                 EffectKind::Thermal => lib.add(Term::ISquared, CUR, plant),
+                EffectKind::Saturation => lib.add(Term::ICubed, ACC, plant),
             }
         }
         Ok(lib)

@@ -118,6 +118,7 @@ pub fn weak_estimate(m: &mut Model, logs: &[MotorLog], coulomb: bool) -> (f64, f
             Effect::Stribeck { .. } => map.push(EffCols::One(k, "fs")),
             Effect::Offset { .. } => map.push(EffCols::One(k, "t0")),
             Effect::LoadFriction { .. } => map.push(EffCols::One(k, "mu")),
+            Effect::Saturation { .. } => map.push(EffCols::One(k, "k")),
             Effect::Viscous { .. } => map.push(EffCols::One(k, "b")),
             Effect::Asymmetry { .. } => {
                 map.push(EffCols::One(k, "dv"));
@@ -159,6 +160,10 @@ pub fn weak_estimate(m: &mut Model, logs: &[MotorLog], coulomb: bool) -> (f64, f
                         .zip(&sgn)
                         .map(|(c, s)| (m.motor.kt * c).abs() * s)
                         .collect(),
+                    // The torque a falling K_t loses, to first order in k: K_t·k·I³.
+                    (Effect::Saturation { .. }, _) => {
+                        cur.iter().map(|c| m.motor.kt * c * c * c).collect()
+                    }
                     (Effect::Viscous { .. }, _) => ws.clone(),
                     (Effect::Asymmetry { .. }, "dv") => ws.iter().map(|w| w.abs()).collect(),
                     (Effect::Asymmetry { .. }, _) => sgn.iter().map(|s| s.abs()).collect(),

@@ -173,6 +173,7 @@ pub fn scale_effect_magnitudes(model: &Model, f: f64) -> Model {
             Effect::CurrentOffset { i0 } => *i0 *= f,
             Effect::Thermal { k, .. } => *k *= f,
             Effect::LoadFriction { mu } => *mu *= f,
+            Effect::Saturation { k } => *k *= f,
             Effect::Presliding { .. } => {}
         }
     }
