@@ -30,6 +30,12 @@ pub enum Extra {
     CreepingCoulomb {
         per_minute: f64,
     },
+    /// Friction that differs by direction: Coulomb `fc + dfc` forward and `fc − dfc`
+    /// backward, viscous `b + db` forward and `b − db` backward.
+    Directional {
+        dfc: f64,
+        db: f64,
+    },
 }
 
 /// The plant's constants (SI).
@@ -118,7 +124,11 @@ impl OtherPlant {
         let friction = if w.abs() < self.v_eps {
             (drive - coupling + self.j * w / 1e-3).clamp(-fc, fc)
         } else {
-            fc * w.signum() + self.b * w
+            let (dfc, db) = match self.extra {
+                Extra::Directional { dfc, db } => (dfc, db),
+                _ => (0.0, 0.0),
+            };
+            (fc + dfc * w.signum()) * w.signum() + (self.b + db * w.signum()) * w
         };
         [
             w,

@@ -434,3 +434,67 @@ fn print_verdict_on_steps() {
         );
     }
 }
+
+#[test]
+#[ignore]
+fn print_verdict_on_b_and_c() {
+    for kind in [SignalKind::B, SignalKind::C] {
+        for seed in [1, 2, 3, 4] {
+            let correct = simulate_signal(&hidden(&[], seed), kind, 60.0).unwrap();
+            let d = diagnose(&correct.log, &lugre(), &Options::default());
+            eprintln!(
+                "correct {} seed {seed}: {:?} adequate {} carriers {:?} failed {:?}",
+                kind.name(),
+                names(&d),
+                d.verdict.adequate,
+                d.verdict
+                    .unexplained
+                    .iter()
+                    .map(|u| (u.variable, u.share))
+                    .collect::<Vec<_>>(),
+                d.verdict
+                    .checks
+                    .iter()
+                    .filter(|c| !c.passed)
+                    .map(|c| (c.name, c.share, c.p_value))
+                    .collect::<Vec<_>>()
+            );
+        }
+    }
+}
+
+#[test]
+#[ignore]
+fn print_look_alikes() {
+    for spec in [
+        "offset:t0=0.03",
+        "asymmetry",
+        "deadtime",
+        "current_offset",
+        "position_load:amp=0.05",
+        "cogging:harmonic=7,amp=0.03",
+        "thermal",
+    ] {
+        let d = run(&hidden(&[spec], 1));
+        eprintln!(
+            "{spec}: {:?} look-alikes {:?}",
+            names(&d),
+            d.verdict
+                .look_alikes
+                .iter()
+                .map(|l| (&l.names, l.shares))
+                .collect::<Vec<_>>()
+        );
+    }
+    let r = simulate_signal(&hidden(&["load_friction"], 1), SignalKind::D, 60.0).unwrap();
+    let d = diagnose(&r.log, &lugre(), &Options::default());
+    eprintln!(
+        "load_friction on d: {:?} {:?}",
+        names(&d),
+        d.verdict
+            .look_alikes
+            .iter()
+            .map(|l| (&l.names, l.shares))
+            .collect::<Vec<_>>()
+    );
+}

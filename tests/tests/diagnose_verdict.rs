@@ -176,6 +176,32 @@ fn creeping_friction_is_carried_by_time() {
     );
 }
 
+/// A friction that differs by direction (Coulomb higher forward) is, on moving windows, the
+/// same column as a constant load: `diagnose` names the offset, says that an asymmetry looks
+/// alike, and names the experiment that separates them (a hold at standstill).
+#[test]
+fn directional_friction_is_reported_with_its_look_alike() {
+    for seed in [1, 2] {
+        let p = OtherPlant::new(Extra::Directional { dfc: 0.02, db: 0.0 });
+        let d = run(&p, &correct_structure(&p), SignalKind::A, 60.0, seed);
+        assert!(!d.verdict.adequate);
+        let names: Vec<&str> = d.effects.iter().map(|f| f.name.as_str()).collect();
+        assert!(
+            names.contains(&"offset") || names.contains(&"asymmetry"),
+            "seed {seed}: {}",
+            summary(&d)
+        );
+        let l = d
+            .verdict
+            .look_alikes
+            .iter()
+            .find(|l| l.names.contains(&"offset".to_string()))
+            .unwrap_or_else(|| panic!("seed {seed}: no look-alike: {}", summary(&d)));
+        assert!(l.names.contains(&"asymmetry".to_string()));
+        assert!(l.experiment.contains("standstill"), "{}", l.experiment);
+    }
+}
+
 /// Regenerates `docs/diagnose-verdict.md`: what `diagnose` says on each case, 60 s of the
 /// fitting signal (steps for the falling torque constant), seeds 1-3.
 /// `cargo test -p tests --test diagnose_verdict -- --ignored`
@@ -275,6 +301,26 @@ fn write_verdict_table() {
     let path = tests::root().join("docs").join("diagnose-verdict.md");
     std::fs::write(&path, md).unwrap();
     eprintln!("wrote {}", path.display());
+}
+
+#[test]
+#[ignore]
+fn print_directional() {
+    for (dfc, db) in [(0.02, 0.0), (0.0, 4e-4), (0.01, 2e-4)] {
+        for seed in 1..=2 {
+            let p = OtherPlant::new(Extra::Directional { dfc, db });
+            let d = run(&p, &correct_structure(&p), SignalKind::A, 60.0, seed);
+            eprintln!(
+                "dfc {dfc} db {db} seed {seed}: {} look-alikes {:?}",
+                summary(&d),
+                d.verdict
+                    .look_alikes
+                    .iter()
+                    .map(|l| (&l.names, l.shares))
+                    .collect::<Vec<_>>()
+            );
+        }
+    }
 }
 
 #[test]

@@ -130,6 +130,7 @@ pub fn run(args: Args) -> Result<()> {
                 "unexplained": unexplained,
                 "checks": d.verdict.checks,
                 "refit": refit,
+                "look_alikes": d.verdict.look_alikes,
                 "level": d.verdict.level,
             })
         );
@@ -141,6 +142,21 @@ pub fn run(args: Args) -> Result<()> {
 
 fn print_text(model: &Model, args: &Args, d: &diagnose::Diagnosis) {
     let v = &d.verdict;
+    print_verdict(model, args, d);
+    for l in &v.look_alikes {
+        println!(
+            "Look-alikes: {} ({:.0}%) and {} ({:.0}%) explain the residual about equally on this log. To tell them apart: {}.",
+            l.names[0],
+            100.0 * l.shares[0],
+            l.names[1],
+            100.0 * l.shares[1],
+            l.experiment
+        );
+    }
+}
+
+fn print_verdict(model: &Model, args: &Args, d: &diagnose::Diagnosis) {
+    let v = &d.verdict;
     let failed: Vec<&diagnose::verdict::Check> = v.checks.iter().filter(|c| !c.passed).collect();
     if v.adequate {
         println!(
@@ -151,12 +167,24 @@ fn print_text(model: &Model, args: &Args, d: &diagnose::Diagnosis) {
         );
         return;
     }
-    println!(
-        "Not adequate: the {} model leaves structure in {} (checks at the {:.0}% family level).",
-        model.kind.name(),
-        args.data.display(),
-        100.0 * v.level
-    );
+    let only_data = !failed.is_empty()
+        && failed.iter().all(|c| c.name == "data")
+        && d.effects.is_empty()
+        && v.unexplained.is_empty();
+    if only_data {
+        println!(
+            "Cannot judge: {} has too little motion to test the {} model (not adequate until a log can show it).",
+            args.data.display(),
+            model.kind.name()
+        );
+    } else {
+        println!(
+            "Not adequate: the {} model leaves structure in {} (checks at the {:.0}% family level).",
+            model.kind.name(),
+            args.data.display(),
+            100.0 * v.level
+        );
+    }
     for c in &failed {
         println!("  FAILED {:<10} {}", c.name, c.detail);
     }

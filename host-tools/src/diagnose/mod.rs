@@ -24,6 +24,7 @@
 pub mod candidates;
 pub mod carriers;
 pub mod harmonics;
+pub mod lookalikes;
 pub mod regions;
 pub mod stats;
 pub mod verdict;
@@ -183,6 +184,8 @@ pub struct Verdict {
     pub unexplained: Vec<carriers::Carrier>,
     /// The refitted constants, when the parameter check failed.
     pub refit: Vec<(String, f64, String)>,
+    /// Explanations the data supports about equally, with the experiment that separates them.
+    pub look_alikes: Vec<lookalikes::LookAlike>,
 }
 
 struct EqData {
@@ -460,7 +463,9 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
     resolve_offsets(&mut findings, st.kt);
     findings.sort_by(|a, b| b.score.total_cmp(&a.score));
     findings.truncate(MAX_FINDINGS);
-    let verdict = judge(&s, &wf, st, &judged, &findings, opts);
+    let mut verdict = judge(&s, &wf, st, &judged, &findings, opts);
+    verdict.look_alikes =
+        lookalikes::find(&findings, &tested, &verdict.unexplained, alpha_per_test);
     Diagnosis {
         effects: findings,
         tested,
@@ -528,7 +533,7 @@ fn judge(
         }
         if let Some(g) = &j.given {
             let mut c = verdict::parameter_check(g, &j.base, j.p, level_per_test);
-            c.detail = format!("{} equation: {}", j.eq.label(), c.detail);
+            c.detail = format!("{}: {}", j.eq.label(), c.detail);
             if !c.passed {
                 let r_refit = judged
                     .iter()
@@ -539,10 +544,10 @@ fn judge(
             checks.push(c);
         }
         let mut w = verdict::whiteness_check(&j.after, level_per_test);
-        w.detail = format!("{} equation: {}", j.eq.label(), w.detail);
+        w.detail = format!("{}: {}", j.eq.label(), w.detail);
         checks.push(w);
         let mut x = verdict::input_check(&j.after, &j.input, level_per_test);
-        x.detail = format!("{} equation: {}", j.eq.label(), x.detail);
+        x.detail = format!("{}: {}", j.eq.label(), x.detail);
         checks.push(x);
         let rows = carriers::Rows {
             wf,
@@ -570,6 +575,7 @@ fn judge(
         checks,
         unexplained,
         refit,
+        look_alikes: Vec::new(),
     }
 }
 

@@ -1,0 +1,138 @@
+//! Look-alikes: two explanations the data supports about equally, and the experiment that
+//! tells them apart.
+//!
+//! Some effects leave nearly the same residual on a given log: a constant load and a friction
+//! that differs by direction on a run at equal speeds both ways, load friction and dead time
+//! on a run that never brakes. Forward selection keeps the one that explains more, but when
+//! the other was also significant and explained at least [`CLOSE`] of as much, `diagnose`
+//! says so and names an experiment in which they differ.
+use super::{carriers::Carrier, Finding, Tested};
+use serde::Serialize;
+
+/// Ratio of explained shares above which two significant explanations count as look-alikes:
+/// the runner-up explains at least two thirds of what the leader explains.
+pub const CLOSE: f64 = 2.0 / 3.0;
+
+/// Two explanations the data cannot tell apart, and how to tell them apart.
+#[derive(Debug, Clone, Serialize)]
+pub struct LookAlike {
+    /// The kept explanation first, then the look-alike (effect names or carrier variables).
+    pub names: [String; 2],
+    /// Shares of the residual each explains on its own.
+    pub shares: [f64; 2],
+    /// An experiment (a log to record or simulate) in which the two differ.
+    pub experiment: String,
+}
+
+/// The experiment that separates two effects or carriers (order does not matter).
+pub fn experiment(a: &str, b: &str) -> String {
+    let pair = |x: &str, y: &str| (a == x && b == y) || (a == y && b == x);
+    let text = if pair("offset", "asymmetry") {
+        "hold the rotor near standstill with a small voltage in each direction, and run steady speeds both ways: a constant load pulls the same way at rest, a direction-dependent friction acts only while moving (`motorid simulate --signal steady`, or record it)"
+    } else if pair("load_friction", "deadtime") || pair("load_friction", "saturation") {
+        "voltage steps down while the rotor turns fast (signal d): load-dependent friction acts only while the drive brakes the rotor, dead time follows the sign of the current whether braking or not"
+    } else if pair("cogging", "position_load") || pair("cogging", "theta") {
+        "a slow run at constant speed over several revolutions: count the periods of the error per revolution (one: a position load; the number of magnet/slot periods: cogging)"
+    } else if pair("stribeck", "presliding") || pair("presliding", "reversal") {
+        "slow reversals of small amplitude (a fraction of a revolution) against steady low speeds: presliding shows as a deflection before breakaway at each reversal, a Stribeck dip as a function of speed"
+    } else if pair("coulomb", "stribeck")
+        || pair("coulomb", "viscous")
+        || pair("viscous", "stribeck")
+        || pair("stribeck", "omega")
+    {
+        "steady speeds at several levels, low ones included (`motorid simulate --signal steady`): the static friction curve separates a constant, a dip at low speed and a slope"
+    } else if pair("current_offset", "offset") || pair("current_offset", "deadtime") {
+        "a run at zero voltage with the rotor still: a current-sensor offset reads a current where there is none"
+    } else if pair("thermal", "time") || a == "thermal" || b == "thermal" {
+        "a long run at high current followed by a rest with the same excitation: heating grows and decays with its time constant, wear or a supply sag does not"
+    } else if pair("reversal", "frequency") {
+        "steps in one direction only, without reversals: a resonance still rings after each step, backlash does not show"
+    } else if pair("acceleration", "current") || pair("saturation", "acceleration") {
+        "slow ramps at high current (a locked or heavily loaded rotor): a falling torque constant shows at high current without acceleration, an inertia error only with acceleration"
+    } else if pair("viscous", "asymmetry") {
+        "steady speeds in both directions: the friction curve of each direction on its own"
+    } else {
+        "a log that excites one and not the other: steady speeds, slow reversals and braking steps, each on its own"
+    };
+    text.to_string()
+}
+
+/// Look-alikes of the kept findings among the effects tested beside them (first round),
+/// and among the carriers.
+pub fn find(
+    findings: &[Finding],
+    tested: &[Tested],
+    carriers: &[Carrier],
+    alpha_per_test: f64,
+) -> Vec<LookAlike> {
+    let mut out = Vec::new();
+    for f in findings {
+        let Some(first) = tested.iter().find(|t| t.name == f.name && t.kept) else {
+            continue;
+        };
+        for t in tested {
+            if t.kept
+                || t.name == f.name
+                || t.equation != first.equation
+                || t.p_value >= alpha_per_test
+                || t.explained < CLOSE * first.explained
+            {
+                continue;
+            }
+            if out
+                .iter()
+                .any(|l: &LookAlike| l.names.contains(&t.name) && l.names.contains(&f.name))
+            {
+                continue;
+            }
+            out.push(LookAlike {
+                names: [f.name.clone(), t.name.clone()],
+                shares: [first.explained, t.explained],
+                experiment: experiment(&f.name, &t.name),
+            });
+        }
+    }
+    // On the moving windows the torque equation keeps, a Coulomb friction that differs by
+    // direction (`dc·|sgn ω|`) is the constant column itself: an offset found there is always
+    // also that asymmetry, whatever the shares say.
+    if let Some(f) = findings.iter().find(|f| f.name == "offset") {
+        if !out.iter().any(|l| {
+            l.names.iter().any(|n| n == "asymmetry") && l.names.iter().any(|n| n == "offset")
+        }) {
+            out.push(LookAlike {
+                names: ["offset".to_string(), "asymmetry".to_string()],
+                shares: [f.score, f.score],
+                experiment: experiment("offset", "asymmetry"),
+            });
+        }
+    }
+    if let [a, b, ..] = carriers {
+        if b.share >= CLOSE * a.share {
+            out.push(LookAlike {
+                names: [a.variable.to_string(), b.variable.to_string()],
+                shares: [a.share, b.share],
+                experiment: experiment(a.variable, b.variable),
+            });
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_named_pair_has_its_own_experiment_in_either_order() {
+        for (a, b) in [
+            ("offset", "asymmetry"),
+            ("load_friction", "deadtime"),
+            ("reversal", "frequency"),
+            ("acceleration", "current"),
+        ] {
+            assert_eq!(experiment(a, b), experiment(b, a));
+            assert!(!experiment(a, b).starts_with("a log that excites"));
+        }
+        assert!(experiment("cogging", "offset").starts_with("a log that excites"));
+    }
+}
