@@ -228,6 +228,7 @@ fn effect_finite(e: &Effect<f32>) -> bool {
         Effect::Thermal { k, tau } => finite(&[k, tau]) && tau > 0.0,
         Effect::LoadFriction { mu } => finite(&[mu]),
         Effect::Saturation { k } => finite(&[k]) && k >= 0.0,
+        Effect::Compliance { j2, k, c } => finite(&[j2, k, c]) && j2 > 0.0 && k > 0.0 && c >= 0.0,
     }
 }
 

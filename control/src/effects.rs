@@ -56,11 +56,12 @@ pub enum EffectKind {
     Thermal,
     LoadFriction,
     Saturation,
+    Compliance,
 }
 
 impl EffectKind {
     /// Every effect, in the contract's order.
-    pub const ALL: [EffectKind; 13] = [
+    pub const ALL: [EffectKind; 14] = [
         EffectKind::Coulomb,
         EffectKind::Viscous,
         EffectKind::Stribeck,
@@ -74,6 +75,7 @@ impl EffectKind {
         EffectKind::Thermal,
         EffectKind::LoadFriction,
         EffectKind::Saturation,
+        EffectKind::Compliance,
     ];
 
     /// The contract's name (`position_load`, ...).
@@ -92,6 +94,7 @@ impl EffectKind {
             EffectKind::Thermal => "thermal",
             EffectKind::LoadFriction => "load_friction",
             EffectKind::Saturation => "saturation",
+            EffectKind::Compliance => "compliance",
         }
     }
 
@@ -103,7 +106,7 @@ impl EffectKind {
     /// Where the effect acts.
     pub fn site(self) -> Site {
         match self {
-            EffectKind::Presliding => Site::State,
+            EffectKind::Presliding | EffectKind::Compliance => Site::State,
             EffectKind::Deadtime => Site::Voltage,
             EffectKind::CurrentOffset => Site::Sensor,
             EffectKind::Thermal => Site::Resistance,
@@ -161,6 +164,10 @@ pub enum Effect<F> {
     /// `K_t(I) = K_t/(1 + k·I²)`, k in 1/A²; as a load torque, the torque the motor no longer
     /// makes, `K_t·I·k·I²/(1 + k·I²)`.
     Saturation { k: F },
+    /// A second inertia `j2` [kg·m²] on a spring `k` [N·m/rad] and damper `c` [N·m·s/rad]
+    /// (a compliant coupling or shaft; the angle is measured on the motor side). Its state,
+    /// the load's angle and speed, is integrated by the plant; its torque here is zero.
+    Compliance { j2: F, k: F, c: F },
 }
 
 impl<F: Float> Effect<F> {
@@ -180,6 +187,7 @@ impl<F: Float> Effect<F> {
             Effect::Thermal { .. } => EffectKind::Thermal,
             Effect::LoadFriction { .. } => EffectKind::LoadFriction,
             Effect::Saturation { .. } => EffectKind::Saturation,
+            Effect::Compliance { .. } => EffectKind::Compliance,
         }
     }
 
@@ -208,6 +216,7 @@ impl<F: Float> Effect<F> {
                 x.kt * x.current * q / (F::one() + q)
             }
             Effect::Presliding { .. }
+            | Effect::Compliance { .. }
             | Effect::Deadtime { .. }
             | Effect::CurrentOffset { .. }
             | Effect::Thermal { .. } => F::zero(),

@@ -146,6 +146,21 @@ pub fn keys(kind: EffectKind) -> &'static [Key] {
             const K: &[Key] = &[k("mu", "1", 0.2, "friction per N·m of transmitted torque")];
             K
         }
+        EffectKind::Compliance => {
+            // Default: a load twice the paper rotor's inertia on a coupling that resonates
+            // near 5 Hz, lightly damped (ζ ≈ 0.05), as a flexible coupling or a long shaft.
+            const K: &[Key] = &[
+                k(
+                    "j2",
+                    "kg·m²",
+                    6e-4,
+                    "inertia of the load behind the coupling",
+                ),
+                k("k", "N·m/rad", 0.2, "stiffness of the coupling"),
+                k("c", "N·m·s/rad", 6e-4, "damping of the coupling"),
+            ];
+            K
+        }
         EffectKind::Saturation => {
             // Default k = 2e-4/A²: K_t down 2 % at 10 A and 24 % at 40 A, the board's peak
             // rating; small BLDC motors lose 10-30 % of K_t at two to three times their
@@ -281,6 +296,11 @@ impl EffectSpec {
             },
             EffectKind::LoadFriction => Effect::LoadFriction { mu: g("mu") },
             EffectKind::Saturation => Effect::Saturation { k: g("k") },
+            EffectKind::Compliance => Effect::Compliance {
+                j2: g("j2"),
+                k: g("k"),
+                c: g("c"),
+            },
         }
     }
 
@@ -327,6 +347,11 @@ impl EffectSpec {
             }
             Effect::LoadFriction { mu } => put("mu", mu),
             Effect::Saturation { k } => put("k", k),
+            Effect::Compliance { j2, k, c } => {
+                put("j2", j2);
+                put("k", k);
+                put("c", c)
+            }
         }
         EffectSpec {
             kind: e.kind(),

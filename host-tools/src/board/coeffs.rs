@@ -79,6 +79,11 @@ pub fn map_effect<A: Copy, B>(e: &Effect<A>, c: impl Fn(A) -> B) -> Effect<B> {
         },
         Effect::LoadFriction { mu } => Effect::LoadFriction { mu: c(mu) },
         Effect::Saturation { k } => Effect::Saturation { k: c(k) },
+        Effect::Compliance { j2, k, c: d } => Effect::Compliance {
+            j2: c(j2),
+            k: c(k),
+            c: c(d),
+        },
     }
 }
 

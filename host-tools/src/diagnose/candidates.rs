@@ -402,6 +402,47 @@ impl Signals {
         col
     }
 
+    /// Acceleration θ̈2 of a load on a spring-damper coupling driven by the measured rotor
+    /// (natural frequency `fn_hz` against a fixed rotor, damping ratio `zeta`):
+    /// `θ̈2 = ω_n²(θ1 − θ2) + 2ζω_n(ω1 − ω2)`. The coupling's torque on the rotor is
+    /// `J2·θ̈2`, so this is the compliance's column per unit J2. Integrated with the
+    /// trapezoidal rule on 16 substeps per sample (A-stable for any stiffness), the rotor's
+    /// angle and speed linear between samples.
+    pub fn load_acceleration(&self, fn_hz: f64, zeta: f64) -> Vec<f64> {
+        let n = self.len();
+        let wn = 2.0 * std::f64::consts::PI * fn_hz;
+        let (a0, a1) = (wn * wn, 2.0 * zeta * wn);
+        let mut out = vec![0.0; n];
+        if n == 0 || !(wn.is_finite() && wn > 0.0 && self.dt > 0.0) {
+            return out;
+        }
+        const SUB: usize = 16;
+        let h = self.dt / SUB as f64;
+        // State (θ2, ω2), starting at rest with the rotor.
+        let (mut th2, mut w2) = (self.theta_s[0], self.omega[0]);
+        let acc = |th1: f64, w1: f64, th2: f64, w2: f64| a0 * (th1 - th2) + a1 * (w1 - w2);
+        out[0] = acc(self.theta_s[0], self.omega[0], th2, w2);
+        for k in 0..n - 1 {
+            for j in 0..SUB {
+                let f0 = j as f64 / SUB as f64;
+                let f1 = (j + 1) as f64 / SUB as f64;
+                let lerp = |x: &[f64], f: f64| x[k] + (x[k + 1] - x[k]) * f;
+                let (t0, v0) = (lerp(&self.theta_s, f0), lerp(&self.omega, f0));
+                let (t1, v1) = (lerp(&self.theta_s, f1), lerp(&self.omega, f1));
+                // Trapezoid: x1 = x0 + h/2·(f(x0) + f(x1)), linear in (θ2, ω2): solve 2×2.
+                let g0 = acc(t0, v0, th2, w2);
+                // θ2' = θ2 + h/2 (ω2 + ω2'), ω2' = ω2 + h/2 (g0 + a0(t1 − θ2') + a1(v1 − ω2')).
+                let hh = h / 2.0;
+                let rhs = w2 + hh * (g0 + a0 * (t1 - th2 - hh * w2) + a1 * v1);
+                let w2n = rhs / (1.0 + hh * a1 + hh * hh * a0);
+                th2 += hh * (w2 + w2n);
+                w2 = w2n;
+            }
+            out[k + 1] = acc(self.theta_s[k + 1], self.omega[k + 1], th2, w2);
+        }
+        out
+    }
+
     /// The load-dependent friction's whole torque per unit `μ`, `|drive|·sgn(ω)` (modelled
     /// drive, zero while stuck): what its size is measured on.
     pub fn load_friction_torque(&self) -> Vec<f64> {
@@ -513,6 +554,37 @@ pub const PRESLIDING_DEFLECTION_GRID: [f64; 3] = [2.0, 4.0, 8.0];
 /// Breakaway deflection [angle steps] of the nuisance term in the presliding test's base.
 pub const PRESLIDING_NUISANCE_STEPS: f64 = 0.5;
 
+/// Damping ratios of a missing compliance: a lightly damped coupling (a flexible coupling,
+/// a long shaft: ζ ≈ 0.05) and a well damped one (an elastomer coupling, a belt: ζ ≈ 0.3).
+pub const COMPLIANCE_ZETA: [f64; 2] = [0.05, 0.3];
+
+/// Natural frequencies [Hz] of a missing compliance, a factor 1.4 apart (the resonance's
+/// half-power width at ζ = 0.3): from 8 periods per log up to ten times the input's RMS
+/// frequency ([`super::carriers::rms_frequency`]), the weak-form window's reach
+/// (1.5/half-width) and 0.45 of the sample rate, whichever is lowest. A coupling far above
+/// the excitation's band moves with the rotor: its column differs from the inertia's by
+/// (f/f_n)², and fitting that difference would fit the sensor chain's lag instead.
+pub fn compliance_grid(s: &Signals) -> Vec<f64> {
+    let span = s.t.last().copied().unwrap_or(0.0) - s.t.first().copied().unwrap_or(0.0);
+    if span <= 0.0 || s.dt <= 0.0 {
+        return vec![];
+    }
+    let half_s = super::weakform::HALF_WIDTH_S.max(2.0 * s.dt);
+    let f_u = super::carriers::rms_frequency(&s.raw_u, s.dt);
+    let lo = 8.0 / span;
+    let hi =
+        (0.45 / s.dt)
+            .min(1.5 / half_s)
+            .min(if f_u > 0.0 { 10.0 * f_u } else { f64::INFINITY });
+    let mut v = Vec::new();
+    let mut f = lo;
+    while f <= hi && v.len() < 40 {
+        v.push(f);
+        f *= 1.4;
+    }
+    v
+}
+
 /// Variants of a missing presliding on top of a static friction law `law` (its α0, α1, v0,
 /// α2; σ0 and σ1 are set here): one per breakaway deflection of
 /// [`PRESLIDING_DEFLECTION_GRID`], σ0 = s(0)/deflection, σ1 = 2·√(σ0·J) (critical damping
@@ -615,6 +687,19 @@ pub fn variants(kind: EffectKind, s: &Signals) -> Vec<Variant> {
         // it collide with load friction. A falling K_t is reported through the `current` and
         // `acceleration` carriers (`carriers.rs`) and fitted by `fit --add saturation`.
         EffectKind::Saturation => vec![],
+        // A load on a coupling, over natural frequencies from a few periods per log to the
+        // sample rate's reach, each lightly or well damped ([`COMPLIANCE_ZETA`]).
+        EffectKind::Compliance => compliance_grid(s)
+            .into_iter()
+            .flat_map(|f| COMPLIANCE_ZETA.iter().map(move |&z| (f, z)))
+            .map(|(f, z)| {
+                one(
+                    mech,
+                    vec![("fn", f), ("zeta", z)],
+                    vec![s.load_acceleration(f, z)],
+                )
+            })
+            .collect(),
         EffectKind::Deadtime if voltage => {
             let i = s.i.as_ref().unwrap();
             vec![one(
@@ -682,6 +767,12 @@ pub fn present_columns(e: &Effect<f64>, s: &Signals) -> Vec<(Equation, Vec<f64>)
         // Its column needs the fitted K_b and R: `diagnose` adds it to the torque equation's
         // base itself (`Signals::saturation_intervals`).
         Effect::Saturation { .. } => vec![],
+        Effect::Compliance { j2, k, c } if j2 > 0.0 && k > 0.0 => {
+            let wn = (k / j2).sqrt();
+            let f = wn / (2.0 * std::f64::consts::PI);
+            let z = c / (2.0 * (k * j2).sqrt());
+            vec![(mech, s.load_acceleration(f, z))]
+        }
         Effect::Deadtime { .. } if voltage => {
             let i = s.i.as_ref().unwrap();
             vec![(
@@ -748,6 +839,14 @@ pub fn spec_of(v: &Variant, beta: &[f64], units: Units) -> EffectSpec {
         EffectKind::CurrentOffset => put("i0", -b0 / units.r),
         EffectKind::Thermal => put("k", b0 / units.r),
         EffectKind::Saturation => put("k", b0),
+        EffectKind::Compliance => {
+            let f = values.remove("fn").unwrap_or(0.0);
+            let z = values.remove("zeta").unwrap_or(0.0);
+            let wn = 2.0 * std::f64::consts::PI * f;
+            values.insert("j2".into(), b0);
+            values.insert("k".into(), b0 * wn * wn);
+            values.insert("c".into(), 2.0 * z * wn * b0);
+        }
     }
     EffectSpec {
         kind: v.kind,

@@ -997,6 +997,7 @@ pub fn plausible(spec: &EffectSpec) -> bool {
         EffectKind::Thermal => g("k") > 0.0,
         EffectKind::LoadFriction => (0.0..=MAX_LOAD_FRICTION).contains(&g("mu")),
         EffectKind::Saturation => g("k") > 0.0,
+        EffectKind::Compliance => g("j2") > 0.0,
         EffectKind::Presliding => true,
         _ => true,
     }
@@ -1076,6 +1077,11 @@ pub fn explain(spec: &EffectSpec, score: f64, eq: Equation) -> String {
         EffectKind::LoadFriction => format!(
             "friction grows with the transmitted torque, {:.3} N·m per N·m (gears, screws)",
             g("mu")
+        ),
+        EffectKind::Compliance => format!(
+            "a second inertia of {:.2e} kg·m² follows the rotor through a compliant coupling resonating near {:.2} Hz against a fixed rotor (a flexible coupling, a long shaft, a belt)",
+            g("j2"),
+            (g("k") / g("j2")).sqrt() / (2.0 * std::f64::consts::PI)
         ),
         EffectKind::Saturation => format!(
             "the torque constant falls at high current (magnetic saturation, K_t/(1 + k·I²) with k = {:.2e}/A², {:.0}% lower at 20 A)",

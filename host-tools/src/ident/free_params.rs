@@ -137,6 +137,8 @@ pub fn effect_keys(kind: EffectKind) -> Vec<(&'static str, f64, f64)> {
         EffectKind::LoadFriction => vec![("mu", 0.0, 2.0)],
         // Up to K_t halved at 1 A: far beyond any real motor, a bound only against runaway.
         EffectKind::Saturation => vec![("k", 0.0, 1.0)],
+        // A load from a hundredth to a hundred times a small rotor, couplings from 0.5 Hz up.
+        EffectKind::Compliance => vec![("j2", 1e-6, 1.0), ("k", 1e-4, 1e4), ("c", 0.0, 10.0)],
     }
 }
 

@@ -174,6 +174,7 @@ pub fn scale_effect_magnitudes(model: &Model, f: f64) -> Model {
             Effect::Thermal { k, .. } => *k *= f,
             Effect::LoadFriction { mu } => *mu *= f,
             Effect::Saturation { k } => *k *= f,
+            Effect::Compliance { j2, .. } => *j2 *= f,
             Effect::Presliding { .. } => {}
         }
     }
