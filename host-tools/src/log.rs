@@ -643,6 +643,19 @@ impl MotorLog {
             bail!("{p}: only {n} data rows; a log needs at least 2");
         }
         for k in 1..n {
+            let step = cols[ci_t][k] - cols[ci_t][k - 1];
+            if step > crate::validate::MAX_TIME_STEP {
+                bail!(
+                    "{p}:{}: column '{}': time jumps by {} s (from {} to {}); a step longer \
+                     than {} s is not a recording's",
+                    row_lines[k],
+                    echo(&headers[ci_t]),
+                    crate::validate::show(step),
+                    crate::validate::show(cols[ci_t][k - 1]),
+                    crate::validate::show(cols[ci_t][k]),
+                    crate::validate::show(crate::validate::MAX_TIME_STEP)
+                );
+            }
             if cols[ci_t][k] <= cols[ci_t][k - 1] {
                 bail!(
                     "{p}:{}: column '{}': time does not increase ({} after {})",

@@ -16,11 +16,16 @@
 pub const MIN_SAMPLE_PERIOD: f64 = 1e-6;
 /// Longest sample period (or median time step) a log may have [s].
 pub const MAX_SAMPLE_PERIOD: f64 = 10.0;
+/// Longest single step of a log's time column [s] (a pause in a recording, about 11 days):
+/// beyond, the time column is not a recording's.
+pub const MAX_TIME_STEP: f64 = 1e6;
 
-/// `v` as a message fragment: `NaN`, `inf`, `-inf` or the number.
-fn show(v: f64) -> String {
+/// `v` as a message fragment (public for messages elsewhere): `NaN`, `inf`, `-inf` or the number.
+pub fn show(v: f64) -> String {
     if v.is_nan() {
         "NaN".to_string()
+    } else if v != 0.0 && v.is_finite() && !(1e-4..1e6).contains(&v.abs()) {
+        format!("{v:e}")
     } else {
         format!("{v}")
     }

@@ -79,7 +79,16 @@ pub fn run(args: Args) -> Result<()> {
         ..EmulatorConfig::paper()
     };
     cfg.check().context("emulator settings")?;
-    let res = emulator::simulate_signal(&cfg, args.signal, duration)?;
+    let res = emulator::simulate_signal(&cfg, args.signal, duration).map_err(|e| {
+        if args.effects.is_empty() {
+            e
+        } else {
+            anyhow::anyhow!(
+                "--effect {}: {e:#}",
+                crate::log::echo(&args.effects.join(" "))
+            )
+        }
+    })?;
     let mut log = if args.truth {
         res.log_with_truth()
     } else {
