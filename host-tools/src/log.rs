@@ -696,28 +696,35 @@ impl MotorLog {
             }
         }
         // The sample period sizes every window and loop downstream: it must be physical.
+        // Too long and undeclared: perhaps t is in ms or us.
+        let hint = |dt: f64| {
+            if declared.contains_key("t") || dt <= crate::validate::MAX_SAMPLE_PERIOD {
+                return String::new();
+            }
+            [(1e3, "ms"), (1e6, "us")]
+                .iter()
+                .find(|(f, _)| crate::validate::sample_period(dt / f).is_ok())
+                .map(|(_, u)| {
+                    format!(
+                        " (is t in {u}? declare it with a line '# unit.t={u}' or --units t={u})"
+                    )
+                })
+                .unwrap_or_default()
+        };
         if let Some(v) = meta.get("sample_period") {
             let line = meta_line.get("sample_period").copied().unwrap_or(0);
             let sp: f64 = v
                 .parse()
                 .map_err(|_| anyhow!("{p}:{line}: sample_period: '{}' is not a number", echo(v)))?;
             crate::validate::sample_period(sp)
-                .map_err(|e| anyhow!("{p}:{line}: sample_period: {e}"))?;
+                .map_err(|e| anyhow!("{p}:{line}: sample_period: {e}{}", hint(sp)))?;
         }
         let dt = median(t.windows(2).map(|w| w[1] - w[0]).collect()).unwrap_or(0.0);
         if let Err(e) = crate::validate::sample_period(dt) {
-            let hint = if declared.contains_key("t") {
-                String::new()
-            } else {
-                [(1e3, "ms"), (1e6, "us")]
-                    .iter()
-                    .find(|(f, _)| crate::validate::sample_period(dt / f).is_ok() && dt > 1.0)
-                    .map(|(_, u)| format!(" (is t in {u}? declare it with a line '# unit.t={u}')"))
-                    .unwrap_or_default()
-            };
             bail!(
-                "{p}: column '{}': median time step: {e}{hint}",
-                echo(&headers[ci_t])
+                "{p}: column '{}': median time step: {e}{}",
+                echo(&headers[ci_t]),
+                hint(dt)
             );
         }
         let units = declared
