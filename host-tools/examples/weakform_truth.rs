@@ -568,8 +568,11 @@ fn diagnose_true(kind: SignalKind, dur: f64) {
     let d = diagnose(&log, &st, &Options::default());
     let m = cfg.motor;
     let dt = SAMPLE_PERIOD;
-    let h =
-        motorid::diagnose::candidates::samples_for(motorid::diagnose::weakform::HALF_WIDTH_S, dt);
+    let h = motorid::diagnose::candidates::samples_for(
+        motorid::diagnose::weakform::HALF_WIDTH_S,
+        dt,
+        log.len() / 2,
+    );
     let wfm = motorid::diagnose::weakform::WeakForm::new(log.len(), dt, h, h);
     let phi_int = wfm.integral(&vec![1.0; log.len()])[0];
     for e in &d.equations {

@@ -1,37 +1,350 @@
-//! Atomic output files: a file is either written whole or not at all.
-use anyhow::{Context, Result};
+//! Output files: one policy for every command that writes a file.
+//!
+//! * **Never an input.** [`check_outputs`] refuses an output path that is one of the
+//!   command's inputs (compared after resolving `.`/`..` and symbolic links, and by inode
+//!   for hard links) or that two outputs share. Commands call it before any work.
+//! * **Whole or not at all.** [`write`] writes a temporary file beside the destination,
+//!   flushes and syncs it, then renames it over the destination. On an error the temporary
+//!   file is removed (a drop guard) and the destination is untouched; on Ctrl-C (SIGINT),
+//!   SIGTERM or SIGHUP the handler that `main` installs with [`install_interrupt_cleanup`]
+//!   removes every temporary file still being written, prints `error: interrupted` and exits
+//!   with 128 + the signal number.
+//! * **Permissions kept.** Replacing an existing file keeps its permission bits; a new file is
+//!   created 0644.
+//! * **Symbolic links are written through.** When the destination is a symbolic link, the
+//!   file it points to is replaced (the temporary file sits beside that target) and the link
+//!   stays a link; a link to a missing file is refused.
+//! * **Missing parent folders are created**, and a `note: created directory DIR` line on
+//!   stderr says so once the file is written; when the write fails, the folders it created are
+//!   removed again.
+use anyhow::{anyhow, bail, Context, Result};
 use std::io::Write;
-use std::path::Path;
+use std::path::{Component, Path, PathBuf};
 
-/// Write `bytes` to `path` atomically: into a temporary file in the same directory, flushed
-/// and synced, then renamed over `path`. On any error `path` is untouched.
-pub fn write(path: &Path, bytes: &[u8]) -> Result<()> {
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
+/// `path` made absolute and resolved as far as it exists: symbolic links and `..` of the
+/// existing part are resolved (`canonicalize`), the missing rest is appended as given.
+fn resolve(path: &Path) -> PathBuf {
+    if let Ok(p) = std::fs::canonicalize(path) {
+        return p;
+    }
+    let abs = if path.is_absolute() {
+        path.to_path_buf()
+    } else {
+        std::env::current_dir()
+            .unwrap_or_else(|_| PathBuf::from("/"))
+            .join(path)
     };
-    std::fs::create_dir_all(dir)
-        .with_context(|| format!("cannot create directory {}", dir.display()))?;
-    let mut tmp = tempfile::NamedTempFile::new_in(dir)
-        .with_context(|| format!("cannot write in directory {}", dir.display()))?;
-    // Temporary files are created 0600; an output file gets the usual 0644.
+    // Canonicalise the longest existing ancestor, then append the rest lexically.
+    let mut rest = Vec::new();
+    let mut base = abs.as_path();
+    loop {
+        if let Ok(c) = std::fs::canonicalize(base) {
+            let mut out = c;
+            for part in rest.iter().rev() {
+                match part {
+                    Component::ParentDir => {
+                        out.pop();
+                    }
+                    Component::CurDir => {}
+                    c => out.push(c.as_os_str()),
+                }
+            }
+            return out;
+        }
+        match (base.parent(), base.components().next_back()) {
+            (Some(parent), Some(last)) => {
+                rest.push(last);
+                base = parent;
+            }
+            _ => return abs,
+        }
+    }
+}
+
+/// True when `a` and `b` name the same file (same resolved path, or same inode).
+fn same_file(a: &Path, b: &Path) -> bool {
+    if resolve(a) == resolve(b) {
+        return true;
+    }
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        if let (Ok(ma), Ok(mb)) = (std::fs::metadata(a), std::fs::metadata(b)) {
+            return ma.dev() == mb.dev() && ma.ino() == mb.ino();
+        }
+    }
+    false
+}
+
+/// Refuse an output path that is also one of the command's inputs, or that two outputs
+/// share; call before any work. The message names the path.
+pub fn check_outputs(outputs: &[&Path], inputs: &[&Path]) -> Result<()> {
+    for (k, out) in outputs.iter().enumerate() {
+        if let Some(inp) = inputs.iter().find(|i| same_file(out, i)) {
+            bail!(
+                "{}: the output file is also an input ({}) and would be overwritten; choose \
+                 another output path",
+                out.display(),
+                inp.display()
+            );
+        }
+        if let Some(other) = outputs[..k].iter().find(|o| same_file(out, o)) {
+            bail!(
+                "{}: two outputs of this command are the same file ({}); give each its own path",
+                out.display(),
+                other.display()
+            );
+        }
+        if out.is_dir() {
+            bail!(
+                "{}: is a directory; give a file name for the output",
+                out.display()
+            );
+        }
+    }
+    Ok(())
+}
+
+/// The directories `create_dir_all(dir)` would create, outermost first.
+fn missing_dirs(dir: &Path) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    let mut d = Some(dir);
+    while let Some(p) = d {
+        if p.as_os_str().is_empty() || p.exists() {
+            break;
+        }
+        out.push(p.to_path_buf());
+        d = p.parent();
+    }
+    out.reverse();
+    out
+}
+
+/// Write `bytes` to `path` atomically (the module's policy: temporary file beside the
+/// destination, then rename; permissions kept; symbolic links written through; missing
+/// folders created and announced). On any error `path` is untouched and nothing is left
+/// behind.
+pub fn write(path: &Path, bytes: &[u8]) -> Result<()> {
+    let p = path.display();
+    // A symbolic link: write through to its target.
+    let target = match std::fs::symlink_metadata(path) {
+        Ok(m) if m.file_type().is_symlink() => std::fs::canonicalize(path).map_err(|_| {
+            anyhow!("{p}: is a symbolic link to a missing file; refusing to write through it")
+        })?,
+        _ => path.to_path_buf(),
+    };
+    let existing = std::fs::metadata(&target).ok();
+    if existing.as_ref().is_some_and(|m| m.is_dir()) {
+        bail!("{p}: is a directory; give a file name for the output");
+    }
+    let dir = match target.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    let created = missing_dirs(&dir);
+    if !created.is_empty() {
+        std::fs::create_dir_all(&dir)
+            .with_context(|| format!("{p}: cannot create directory {}", dir.display()))?;
+    }
+    let result = write_in(&dir, &target, existing.as_ref(), bytes);
+    match result {
+        Ok(()) => {
+            if let Some(first) = created.first() {
+                eprintln!("note: created directory {}", first.display());
+            }
+            Ok(())
+        }
+        Err(e) => {
+            for d in created.iter().rev() {
+                let _ = std::fs::remove_dir(d);
+            }
+            Err(e.context(format!("{p}: cannot write")))
+        }
+    }
+}
+
+fn write_in(
+    dir: &Path,
+    target: &Path,
+    existing: Option<&std::fs::Metadata>,
+    bytes: &[u8],
+) -> Result<()> {
+    let mut tmp = tempfile::Builder::new()
+        .prefix(".motorid-")
+        .suffix(".tmp")
+        .tempfile_in(dir)
+        .with_context(|| format!("cannot create a file in {}", dir.display()))?;
+    // Removed by the handler on Ctrl-C; by `tmp`'s own drop on an error.
+    let _guard = interrupt::register(tmp.path());
+    // Temporary files are created 0600: keep the replaced file's bits, else the usual 0644.
     #[cfg(unix)]
     {
         use std::os::unix::fs::PermissionsExt;
-        let _ = tmp
-            .as_file()
-            .set_permissions(std::fs::Permissions::from_mode(0o644));
+        let perms = match existing {
+            Some(m) => m.permissions(),
+            None => std::fs::Permissions::from_mode(0o644),
+        };
+        tmp.as_file().set_permissions(perms)?;
     }
-    tmp.write_all(bytes)
-        .and_then(|_| tmp.as_file().sync_all())
-        .with_context(|| format!("cannot write {}", path.display()))?;
-    tmp.persist(path)
-        .map_err(|e| e.error)
-        .with_context(|| format!("cannot write {}", path.display()))?;
+    #[cfg(not(unix))]
+    let _ = existing;
+    tmp.write_all(bytes)?;
+    tmp.as_file().sync_all()?;
+    tmp.persist(target).map_err(|e| e.error)?;
     Ok(())
 }
 
 /// Write a text file atomically.
 pub fn write_str(path: &Path, text: &str) -> Result<()> {
     write(path, text.as_bytes())
+}
+
+/// Install the SIGINT/SIGTERM/SIGHUP handler that removes the temporary files of writes in
+/// progress, prints `error: interrupted` and exits (128 + signal). Called once by `main`.
+pub fn install_interrupt_cleanup() {
+    interrupt::install();
+}
+
+#[cfg(unix)]
+mod interrupt {
+    //! The handler only uses async-signal-safe calls (`unlink`, `write`, `_exit`) on paths
+    //! kept as C strings in a fixed table of atomic pointers.
+    use std::ffi::CString;
+    use std::os::unix::ffi::OsStrExt;
+    use std::path::Path;
+    use std::ptr::null_mut;
+    use std::sync::atomic::{AtomicPtr, Ordering};
+
+    const SLOTS: usize = 32;
+    static TEMPS: [AtomicPtr<libc::c_char>; SLOTS] = [const { AtomicPtr::new(null_mut()) }; SLOTS];
+
+    extern "C" fn on_signal(sig: libc::c_int) {
+        for slot in &TEMPS {
+            let p = slot.swap(null_mut(), Ordering::SeqCst);
+            if !p.is_null() {
+                // SAFETY: `p` came from `CString::into_raw` and nobody else owns it now.
+                unsafe {
+                    libc::unlink(p);
+                }
+            }
+        }
+        let msg = b"error: interrupted\n";
+        // SAFETY: write(2) and _exit(2) are async-signal-safe.
+        unsafe {
+            libc::write(2, msg.as_ptr().cast(), msg.len());
+            libc::_exit(128 + sig);
+        }
+    }
+
+    pub fn install() {
+        let handler = on_signal as extern "C" fn(libc::c_int);
+        for sig in [libc::SIGINT, libc::SIGTERM, libc::SIGHUP] {
+            // SAFETY: installing a handler that only makes async-signal-safe calls.
+            unsafe {
+                libc::signal(sig, handler as libc::sighandler_t);
+            }
+        }
+    }
+
+    /// A temporary path registered for removal on a signal; unregistered on drop.
+    pub struct Registered(Option<usize>);
+
+    pub fn register(path: &Path) -> Registered {
+        let Ok(c) = CString::new(path.as_os_str().as_bytes()) else {
+            return Registered(None);
+        };
+        let raw = c.into_raw();
+        for (k, slot) in TEMPS.iter().enumerate() {
+            if slot
+                .compare_exchange(null_mut(), raw, Ordering::SeqCst, Ordering::SeqCst)
+                .is_ok()
+            {
+                return Registered(Some(k));
+            }
+        }
+        // SAFETY: `raw` was not stored anywhere.
+        drop(unsafe { CString::from_raw(raw) });
+        Registered(None)
+    }
+
+    impl Drop for Registered {
+        fn drop(&mut self) {
+            if let Some(k) = self.0 {
+                let p = TEMPS[k].swap(null_mut(), Ordering::SeqCst);
+                if !p.is_null() {
+                    // SAFETY: from `CString::into_raw` in `register`; the handler did not take it.
+                    drop(unsafe { CString::from_raw(p) });
+                }
+            }
+        }
+    }
+}
+
+#[cfg(not(unix))]
+mod interrupt {
+    pub fn install() {}
+    pub struct Registered;
+    pub fn register(_: &std::path::Path) -> Registered {
+        Registered
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn outputs_that_are_inputs_are_refused() {
+        let d = tempfile::tempdir().unwrap();
+        let a = d.path().join("a.csv");
+        std::fs::write(&a, "x").unwrap();
+        let dotted = d.path().join("sub").join("..").join("a.csv");
+        let e = check_outputs(&[&dotted], &[&a]).unwrap_err().to_string();
+        assert!(e.contains("also an input"), "{e}");
+        let b = d.path().join("b.csv");
+        assert!(check_outputs(&[&b], &[&a]).is_ok());
+        assert!(check_outputs(&[&b, &b], &[&a]).is_err());
+        #[cfg(unix)]
+        {
+            let l = d.path().join("link.csv");
+            std::os::unix::fs::symlink(&a, &l).unwrap();
+            assert!(check_outputs(&[&l], &[&a]).is_err());
+            let h = d.path().join("hard.csv");
+            std::fs::hard_link(&a, &h).unwrap();
+            assert!(check_outputs(&[&h], &[&a]).is_err());
+        }
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn permissions_kept_symlinks_written_through_nothing_left_behind() {
+        use std::os::unix::fs::PermissionsExt;
+        let d = tempfile::tempdir().unwrap();
+        let f = d.path().join("f.txt");
+        std::fs::write(&f, "old").unwrap();
+        std::fs::set_permissions(&f, std::fs::Permissions::from_mode(0o600)).unwrap();
+        write_str(&f, "new").unwrap();
+        assert_eq!(std::fs::read_to_string(&f).unwrap(), "new");
+        let mode = std::fs::metadata(&f).unwrap().permissions().mode() & 0o777;
+        assert_eq!(mode, 0o600);
+        let l = d.path().join("l.txt");
+        std::os::unix::fs::symlink(&f, &l).unwrap();
+        write_str(&l, "through").unwrap();
+        assert!(std::fs::symlink_metadata(&l)
+            .unwrap()
+            .file_type()
+            .is_symlink());
+        assert_eq!(std::fs::read_to_string(&f).unwrap(), "through");
+        let dangling = d.path().join("dangling");
+        std::os::unix::fs::symlink(d.path().join("missing"), &dangling).unwrap();
+        assert!(write_str(&dangling, "x").is_err());
+        write_str(&d.path().join("new/sub/x.txt"), "x").unwrap();
+        assert!(d.path().join("new/sub/x.txt").is_file());
+        assert!(write_str(d.path(), "x").is_err());
+        let names: Vec<String> = std::fs::read_dir(d.path())
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        assert!(!names.iter().any(|n| n.ends_with(".tmp")), "{names:?}");
+    }
 }

@@ -16,6 +16,26 @@ pub struct Key {
     pub meaning: &'static str,
 }
 
+impl Key {
+    /// The values this key accepts (inclusive), by its unit: wide enough for any motor or
+    /// linear axis (torques and forces up to 10⁴ N·m or N), narrow enough that a simulation
+    /// stays finite and quick. Signs are free where a fit may estimate either sign; a time
+    /// constant or a velocity scale must be positive.
+    pub fn range(&self) -> (f64, f64) {
+        match self.unit {
+            "N·m" | "N·m·s/rad" | "V" | "A" => (-1e4, 1e4),
+            "N·m/rad" => (-1e9, 1e9),
+            "rad" => (-1e3, 1e3),
+            "rad/s" => (1e-6, 1e5),
+            "1/rev" => (2.0, 1000.0),
+            "1/A²" => (-1e3, 1e3),
+            "s" => (1e-3, 1e7),
+            "1" => (-1.0, 1.0),
+            _ => (-1e9, 1e9),
+        }
+    }
+}
+
 /// The keys of an effect, in the order the spec prints them. Defaults are sized for the
 /// reference paper's motor (Coulomb friction 0.08 N·m, K_t = 0.071 N·m/A): clearly visible
 /// in the data, but smaller than the friction the base model already has.
@@ -199,7 +219,7 @@ impl EffectSpec {
         let kind = EffectKind::from_name(name.trim()).ok_or_else(|| {
             anyhow!(
                 "unknown effect '{}'; known effects: {}",
-                name.trim(),
+                crate::log::echo(name.trim()),
                 EffectKind::ALL
                     .iter()
                     .map(|k| k.name())
@@ -210,14 +230,19 @@ impl EffectSpec {
         let known = keys(kind);
         let mut values = BTreeMap::new();
         for part in rest.split(',').map(str::trim).filter(|p| !p.is_empty()) {
-            let (k, v) = part
-                .split_once('=')
-                .ok_or_else(|| anyhow!("effect '{}': '{part}' is not key=value", kind.name()))?;
+            let (k, v) = part.split_once('=').ok_or_else(|| {
+                anyhow!(
+                    "effect '{}': '{}' is not key=value",
+                    kind.name(),
+                    crate::log::echo(part)
+                )
+            })?;
             let k = k.trim();
             if !known.iter().any(|key| key.name == k) {
                 bail!(
-                    "effect '{}': unknown key '{k}'; its keys are: {}",
+                    "effect '{}': unknown key '{}'; its keys are: {}",
                     kind.name(),
+                    crate::log::echo(k),
                     known
                         .iter()
                         .map(|key| key.name)
@@ -225,28 +250,48 @@ impl EffectSpec {
                         .join(", ")
                 );
             }
-            let v: f64 = v
-                .trim()
-                .parse()
-                .ok()
-                .filter(|v: &f64| v.is_finite())
-                .ok_or_else(|| {
-                    anyhow!(
-                        "effect '{}': key '{k}': '{}' is not a number",
-                        kind.name(),
-                        v.trim()
-                    )
-                })?;
+            let v: f64 = v.trim().parse().map_err(|_| {
+                anyhow!(
+                    "effect '{}': key '{k}': '{}' is not a number",
+                    kind.name(),
+                    crate::log::echo(v.trim())
+                )
+            })?;
             values.insert(k.to_string(), v);
         }
-        if kind == EffectKind::Cogging {
-            if let Some(h) = values.get("harmonic") {
+        let spec = EffectSpec { kind, values };
+        spec.check_values()?;
+        Ok(spec)
+    }
+
+    /// [`EffectSpec::parse`] of a command-line flag's value: the error names the flag and
+    /// echoes the spec safely (control characters removed, cut short), e.g.
+    /// `--effect 'offset:t0=nan': effect 'offset': key 't0' [N·m]: NaN is not a finite number`.
+    pub fn parse_flag(flag: &str, spec: &str) -> Result<EffectSpec> {
+        Self::parse(spec).map_err(|e| anyhow!("{flag} '{}': {e:#}", crate::log::echo(spec)))
+    }
+
+    /// Every value given is finite and within its key's [`Key::range`] (cogging's harmonic a
+    /// whole number): the one check of effect parameters, used by [`EffectSpec::parse`], by
+    /// MODEL.toml's `[[effects]]` and by the emulator. The message names the effect and key.
+    pub fn check_values(&self) -> Result<()> {
+        let name = self.kind.name();
+        for key in keys(self.kind) {
+            let Some(&v) = self.values.get(key.name) else {
+                continue;
+            };
+            let (lo, hi) = key.range();
+            crate::validate::in_range(v, lo, hi)
+                .map_err(|e| anyhow!("effect '{name}': key '{}' [{}]: {e}", key.name, key.unit))?;
+        }
+        if self.kind == EffectKind::Cogging {
+            if let Some(h) = self.values.get("harmonic") {
                 if *h < 2.0 || h.fract() != 0.0 || *h > 1000.0 {
                     bail!("effect 'cogging': harmonic must be a whole number of 2 or more (got {h}); one period per revolution is 'position_load'");
                 }
             }
         }
-        Ok(EffectSpec { kind, values })
+        Ok(())
     }
 
     /// The value of a key: the user's, or the default.
@@ -449,6 +494,34 @@ mod tests {
             .to_string()
             .contains("not a number"));
         assert!(EffectSpec::parse("offset:t0=NaN").is_err());
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(500))]
+
+        /// Any string: an error or a spec, never a panic; a spec that parses has values in
+        /// range and survives printing and parsing again.
+        #[test]
+        fn random_specs_never_panic(spec in "\\PC{0,60}") {
+            if let Ok(s) = EffectSpec::parse(&spec) {
+                proptest::prop_assert!(s.check_values().is_ok());
+                let _ = s.to_effect();
+            }
+        }
+
+        #[test]
+        fn spec_shaped_strings_never_panic(
+            spec in "(coulomb|offset|cogging|thermal|stribeck|table|x)(:((fc|t0|harmonic|amp|tau|vs|k)=[-+0-9.eEnaif]{0,10},?){0,4})?"
+        ) {
+            if let Ok(s) = EffectSpec::parse(&spec) {
+                for (k, v) in &s.values {
+                    proptest::prop_assert!(v.is_finite(), "{} = {}", k, v);
+                }
+                let again = EffectSpec::parse(&s.to_string());
+                proptest::prop_assert!(again.is_ok(), "{} -> {}", spec, s);
+                let _ = s.to_effect();
+            }
+        }
     }
 
     #[test]

@@ -11,6 +11,7 @@
 //! | [`diagnose`] | the model-error workbench: missing effects (F-test), error by region |
 //! | [`report`] | self-contained HTML reports with inline SVG plots (compare, diagnose, demo) |
 //! | [`emulator`] | the built-in motor emulator: the paper's motor, effects, sensors, signals |
+//! | [`validate`] | finite, physical numbers: sample periods, ranges, clap value parsers |
 pub mod atomic;
 pub mod board;
 pub mod closed_loop;
@@ -23,3 +24,4 @@ pub mod log;
 pub mod model;
 pub mod real_data;
 pub mod report;
+pub mod validate;

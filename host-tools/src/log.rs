@@ -643,6 +643,19 @@ impl MotorLog {
             bail!("{p}: only {n} data rows; a log needs at least 2");
         }
         for k in 1..n {
+            let step = cols[ci_t][k] - cols[ci_t][k - 1];
+            if step > crate::validate::MAX_TIME_STEP {
+                bail!(
+                    "{p}:{}: column '{}': time jumps by {} s (from {} to {}); a step longer \
+                     than {} s is not a recording's",
+                    row_lines[k],
+                    echo(&headers[ci_t]),
+                    crate::validate::show(step),
+                    crate::validate::show(cols[ci_t][k - 1]),
+                    crate::validate::show(cols[ci_t][k]),
+                    crate::validate::show(crate::validate::MAX_TIME_STEP)
+                );
+            }
             if cols[ci_t][k] <= cols[ci_t][k - 1] {
                 bail!(
                     "{p}:{}: column '{}': time does not increase ({} after {})",
@@ -681,6 +694,38 @@ impl MotorLog {
             {
                 meta.insert("sample_period".to_string(), format!("{}", d.to_si(sp)));
             }
+        }
+        // The sample period sizes every window and loop downstream: it must be physical.
+        // Too long and undeclared: perhaps t is in ms or us.
+        let hint = |dt: f64| {
+            if declared.contains_key("t") || dt <= crate::validate::MAX_SAMPLE_PERIOD {
+                return String::new();
+            }
+            [(1e3, "ms"), (1e6, "us")]
+                .iter()
+                .find(|(f, _)| crate::validate::sample_period(dt / f).is_ok())
+                .map(|(_, u)| {
+                    format!(
+                        " (is t in {u}? declare it with a line '# unit.t={u}' or --units t={u})"
+                    )
+                })
+                .unwrap_or_default()
+        };
+        if let Some(v) = meta.get("sample_period") {
+            let line = meta_line.get("sample_period").copied().unwrap_or(0);
+            let sp: f64 = v
+                .parse()
+                .map_err(|_| anyhow!("{p}:{line}: sample_period: '{}' is not a number", echo(v)))?;
+            crate::validate::sample_period(sp)
+                .map_err(|e| anyhow!("{p}:{line}: sample_period: {e}{}", hint(sp)))?;
+        }
+        let dt = median(t.windows(2).map(|w| w[1] - w[0]).collect()).unwrap_or(0.0);
+        if let Err(e) = crate::validate::sample_period(dt) {
+            bail!(
+                "{p}: column '{}': median time step: {e}{}",
+                echo(&headers[ci_t]),
+                hint(dt)
+            );
         }
         let units = declared
             .iter()
@@ -1136,17 +1181,17 @@ mod tests {
     fn sanity_warnings_catch_numbers_that_do_not_fit_the_units() {
         // t in ms without a unit line: the sample period disagrees with the steps.
         let mut text =
-            String::from("# sample_period=0.012\n# hall_resolution_rad=0.1\nt,u,i,theta\n");
+            String::from("# sample_period=0.001\n# hall_resolution_rad=0.1\nt,u,i,theta\n");
         for k in 0..20 {
-            text.push_str(&format!("{},1,1,{}\n", 12 * k, 0.1 * (k / 2) as f64));
+            text.push_str(&format!("{},1,1,{}\n", k, 0.1 * (k / 2) as f64));
         }
         let w = parse(&text, Plant::Voltage).unwrap().sanity_warnings();
         assert_eq!(w.len(), 1, "{w:?}");
-        assert!(w[0].starts_with("x.csv: sample_period=0.012 s"), "{w:?}");
+        assert!(w[0].starts_with("x.csv: sample_period=0.001 s"), "{w:?}");
         assert!(w[0].contains("unit.t=ms"), "{w:?}");
         // Declared, all is well.
-        let ok = text.replace("# hall", "# unit.t=ms\n# sample_period=12\n# hall");
-        let ok = ok.replacen("# sample_period=0.012\n", "", 1);
+        let ok = text.replace("# hall", "# unit.t=ms\n# sample_period=1\n# hall");
+        let ok = ok.replacen("# sample_period=0.001\n", "", 1);
         let w = parse(&ok, Plant::Voltage).unwrap().sanity_warnings();
         assert!(w.is_empty(), "{w:?}");
         // The angle in degrees: not a multiple of the Hall step, and too fast.
@@ -1166,6 +1211,36 @@ mod tests {
             "{w:?}"
         );
         assert!(w[1].contains("beyond any motor"), "{w:?}");
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(400))]
+
+        /// Any bytes: an error or a log, never a panic.
+        #[test]
+        fn random_bytes_never_panic(bytes in proptest::collection::vec(proptest::num::u8::ANY, 0..600)) {
+            let text = String::from_utf8_lossy(&bytes);
+            for plant in [Plant::Voltage, Plant::Torque] {
+                let _ = parse(&text, plant);
+            }
+        }
+
+        /// Text shaped like a log (metadata, delimiters, numbers, junk): never a panic, and
+        /// a log that reads has a physical sample period and finite standard columns.
+        #[test]
+        fn log_like_text_never_panics(
+            text in "\u{feff}?(# ?(sample_period|unit\\.t|unit\\.theta|hall_resolution_rad|x)=[-0-9.eEnaifmsrdgv]{0,8}\n){0,4}(t|u|i|theta|omega|x|\"t,u\")([,;\t](t|u|i|theta|omega|x)){0,6}\n([-+0-9.eEnaif]{0,12}([,;\t\"][-+0-9.eEnaif]{0,12}){0,6}\n){0,12}"
+        ) {
+            for plant in [Plant::Voltage, Plant::Torque] {
+                if let Ok(log) = parse(&text, plant) {
+                    let dt = log.sample_period();
+                    proptest::prop_assert!((crate::validate::MIN_SAMPLE_PERIOD..=crate::validate::MAX_SAMPLE_PERIOD).contains(&dt), "dt {}", dt);
+                    proptest::prop_assert!(log.t.iter().chain(&log.u).chain(&log.theta).all(|v| v.is_finite()));
+                    let _ = log.sanity_warnings();
+                    let _ = log.to_csv();
+                }
+            }
+        }
     }
 
     #[test]

@@ -52,6 +52,41 @@ enum Command {
     RealData(cmd::real_data::Args),
 }
 
+/// A command-line error as one `error:` line (clap's own text, its usage and tips left out);
+/// `--help` and `--version` print as usual and exit 0.
+fn clap_error(e: clap::Error) -> ExitCode {
+    use clap::error::ErrorKind;
+    match e.kind() {
+        ErrorKind::DisplayHelp
+        | ErrorKind::DisplayVersion
+        | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand => e.exit(),
+        _ => {}
+    }
+    eprintln!("{}", one_line(&e.render().to_string()));
+    ExitCode::from(u8::try_from(e.exit_code()).unwrap_or(2))
+}
+
+/// clap's message up to its first blank line (the usage and tips follow it), on one line.
+fn one_line(text: &str) -> String {
+    let mut parts = Vec::new();
+    for line in text.lines() {
+        let line = line.trim();
+        if line.is_empty() {
+            if !parts.is_empty() {
+                break;
+            }
+            continue;
+        }
+        if line.starts_with("Usage:") || line.starts_with("For more information") {
+            break;
+        }
+        parts.push(line);
+    }
+    let msg = parts.join(" ");
+    let msg = msg.strip_prefix("error:").unwrap_or(&msg).trim();
+    format!("error: {msg}")
+}
+
 fn main() -> ExitCode {
     // A panic is a bug, but the user still gets one `error:` line, not a backtrace.
     std::panic::set_hook(Box::new(|info| {
@@ -67,7 +102,11 @@ fn main() -> ExitCode {
             .unwrap_or_default();
         eprintln!("error: internal error{at}: {msg} (please report this)");
     }));
-    let cli = Cli::parse();
+    motorid::atomic::install_interrupt_cleanup();
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => return clap_error(e),
+    };
     let result = match cli.command {
         Command::Simulate(a) => cmd::simulate::run(a),
         Command::Fit(a) => cmd::fit::run(a),

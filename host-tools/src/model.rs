@@ -191,11 +191,13 @@ mod effects_serde {
                         )));
                     }
                 }
-                Ok(EffectSpec {
+                let spec = EffectSpec {
                     kind,
                     values: en.values,
-                }
-                .to_effect())
+                };
+                spec.check_values()
+                    .map_err(|e| serde::de::Error::custom(format!("{e:#}")))?;
+                Ok(spec.to_effect())
             })
             .collect()
     }
@@ -218,6 +220,26 @@ fn field_at(text: &str, start: usize) -> String {
     match table {
         Some(t) => format!(" field '{t}.{key}':"),
         None => format!(" field '{key}':"),
+    }
+}
+
+/// Every float in a TOML value is finite (`field 'sindy.accel...': NaN is not a finite
+/// number`).
+fn check_toml_numbers(path: &str, v: &toml::Value) -> Result<()> {
+    match v {
+        // The SINDYc z bound may be +inf on purpose (no bound).
+        toml::Value::Float(f) if path.ends_with(".z_max") && *f == f64::INFINITY => Ok(()),
+        toml::Value::Float(f) => crate::validate::finite(*f)
+            .map(|_| ())
+            .map_err(|e| anyhow!("field '{path}': {e}")),
+        toml::Value::Table(t) => t
+            .iter()
+            .try_for_each(|(k, v)| check_toml_numbers(&format!("{path}.{k}"), v)),
+        toml::Value::Array(a) => a
+            .iter()
+            .enumerate()
+            .try_for_each(|(i, v)| check_toml_numbers(&format!("{path}[{i}]"), v)),
+        _ => Ok(()),
     }
 }
 
@@ -298,19 +320,73 @@ impl Model {
         let text = std::fs::read_to_string(path)
             .with_context(|| format!("{}: cannot read", path.display()))?;
         let m = Self::parse(&text, path)?;
-        m.check().map_err(|e| anyhow!("{}: {e}", path.display()))?;
+        m.validate()
+            .map_err(|e| anyhow!("{}: {e}", path.display()))?;
         Ok(m)
     }
 
-    /// Sanity checks a simulation relies on (field names in the message).
+    /// Same as [`Model::validate`] (the older name).
     pub fn check(&self) -> Result<()> {
+        self.validate()
+    }
+
+    /// Every number a simulation or an export relies on is finite and physical: the one
+    /// check of a model, run by [`Model::load`] for every command that reads MODEL.toml.
+    /// The message names the field (`field 'lugre.alpha0': NaN is not a finite number`).
+    pub fn validate(&self) -> Result<()> {
+        use crate::validate::{finite, in_range};
+        let field = |name: &str, r: std::result::Result<f64, String>| -> Result<()> {
+            r.map(|_| ()).map_err(|e| anyhow!("field '{name}': {e}"))
+        };
         let pos = |name: &str, v: f64| -> Result<()> {
-            if !(v.is_finite() && v > 0.0) {
-                anyhow::bail!("field '{name}': must be a positive number (got {v})");
+            finite(v).map_err(|e| anyhow!("field '{name}': {e}"))?;
+            if !(v > 0.0 && v <= 1e12) {
+                anyhow::bail!("field '{name}': must be a positive number up to 1e12 (got {v})");
             }
             Ok(())
         };
-        pos("sample_period", self.sample_period)?;
+        field(
+            "sample_period",
+            crate::validate::sample_period(self.sample_period),
+        )?;
+        let m = &self.motor;
+        for (name, v) in [
+            ("motor.r", m.r),
+            ("motor.l", m.l),
+            ("motor.kt", m.kt),
+            ("motor.kb", m.kb),
+            ("motor.j", m.j),
+            ("viscous", self.viscous),
+        ] {
+            field(name, in_range(v, -1e12, 1e12))?;
+        }
+        let sensor = &self.sensor;
+        field(
+            "sensor.hall_resolution_rad",
+            in_range(sensor.hall_resolution_rad, 0.0, std::f64::consts::TAU),
+        )?;
+        if !(1..=10_000).contains(&sensor.velocity_window) {
+            anyhow::bail!(
+                "field 'sensor.velocity_window': must be 1 .. 10000 samples (got {})",
+                sensor.velocity_window
+            );
+        }
+        if let Some(l) = &self.lugre {
+            for (name, v) in [
+                ("lugre.alpha0", l.alpha0),
+                ("lugre.alpha1", l.alpha1),
+                ("lugre.alpha2", l.alpha2),
+                ("lugre.v0", l.v0),
+                ("lugre.sigma0", l.sigma0),
+                ("lugre.sigma1", l.sigma1),
+            ] {
+                field(name, in_range(v, -1e12, 1e12))?;
+            }
+        }
+        if let Some(t) = &self.sindy {
+            check_toml_numbers("sindy", &toml::Value::Table(t.clone()))?;
+        }
+        pos("motor.j", self.motor.j)?;
         pos("motor.j", self.motor.j)?;
         pos("motor.kt", self.motor.kt)?;
         if self.plant == Plant::Voltage {

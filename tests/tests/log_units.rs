@@ -153,13 +153,23 @@ fn a_log_in_ms_and_degrees_fits_like_the_si_log() {
         assert!((x - y).abs() <= 1e-6 * x.abs(), "fit {key}: {x} vs {y}");
     }
 
-    // The same numbers without the unit lines: read as seconds and radians, they do not fit
-    // the Hall resolution; fit says so on stderr (and still fits).
-    let (_, err) = fit_json(d, "no_units.csv");
+    // The same numbers without the unit lines: read as seconds, the sample period is 12 s,
+    // outside the physical range (issue #17); fit refuses with one line that names the
+    // metadata line and suggests the unit.
+    let out = motorid(
+        d,
+        &["fit", "--model", "linear", "-o", "n.toml", "no_units.csv"],
+    );
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{err}");
+    let lines: Vec<&str> = err.lines().collect();
+    assert_eq!(lines.len(), 1, "{err}");
+    assert!(lines[0].starts_with("error: no_units.csv:"), "{err}");
     assert!(
-        err.lines().any(|l| l.starts_with("warning: no_units.csv:")),
+        lines[0].contains("sample_period") && lines[0].contains("unit.t=ms"),
         "{err}"
     );
+    assert!(!d.join("n.toml").exists());
 }
 
 #[test]

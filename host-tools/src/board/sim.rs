@@ -272,10 +272,14 @@ impl BoardSim {
     }
 }
 
+/// Longest experiment the board runs [s]; a longer request is cut to this.
+pub const MAX_EXPERIMENT_S: f64 = 3600.0;
+
 /// The board's excitation voltage per period, from the host emulator's signal table.
 pub fn excitation(signal: Excitation, duration_s: f64, seed: u64) -> Vec<f64> {
     let ts = f64::from(control::CONTROL_PERIOD_S);
-    let n = (duration_s.max(0.0) / ts).round() as usize;
+    // The duration comes over the serial link: bounded (NaN gives 0 samples).
+    let n = (duration_s.clamp(0.0, MAX_EXPERIMENT_S) / ts).round() as usize;
     let kind = match signal {
         Excitation::A => SignalKind::A,
         Excitation::B => SignalKind::B,

@@ -22,7 +22,7 @@ pub struct Args {
     #[arg(long)]
     pub pty: bool,
     /// Time factor: 1 = real time (one 12 ms step every 12 ms), 10 = ten times faster.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, value_parser = crate::validate::parse_speed, allow_hyphen_values = true, default_value_t = 1.0)]
     pub speed: f64,
     /// Add a physical effect to the emulated motor (`NAME` or `NAME:key=value,...`, as in
     /// `motorid simulate --effect`).
@@ -46,7 +46,7 @@ pub fn run(args: Args) -> Result<()> {
     let mut plant = EmulatorConfig::paper();
     plant.seed = args.seed;
     for spec in &args.effects {
-        let s: EffectSpec = EffectSpec::parse(spec).with_context(|| format!("--effect {spec}"))?;
+        let s: EffectSpec = EffectSpec::parse_flag("--effect", spec)?;
         plant.effects.push(s.to_effect());
     }
     let mut sim = BoardSim::new(plant, RamFlash::new(args.flash.clone()))?;

@@ -255,7 +255,7 @@ pub fn hidden_effects(args: &Args) -> Result<Vec<EffectSpec>> {
     } else {
         args.effect
             .iter()
-            .map(|s| EffectSpec::parse(s).with_context(|| format!("--effect '{s}'")))
+            .map(|s| EffectSpec::parse_flag("--effect", s))
             .collect::<Result<_>>()?
     })
 }

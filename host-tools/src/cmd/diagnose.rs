@@ -77,6 +77,9 @@ struct JsonEffect<'a> {
 }
 
 pub fn run(args: Args) -> Result<()> {
+    if let Some(dir) = &args.report {
+        crate::atomic::check_outputs(&[&dir.join("index.html")], &[&args.model, &args.data])?;
+    }
     let model = Model::load(&args.model)?;
     let (map, units) = column_options(args.map.as_deref(), args.units.as_deref())?;
     let log = MotorLog::read_and_warn(&args.data, &map, &units, model.plant)?;

@@ -4,7 +4,7 @@ use crate::closed_loop::{self, Compensation, LoopRun, Reference, LOW_SPEED};
 use crate::effect_spec::EffectSpec;
 use crate::emulator::EmulatorConfig;
 use crate::model::Model;
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use serde_json::json;
 use std::path::{Path, PathBuf};
 
@@ -44,14 +44,14 @@ pub struct Args {
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// PI proportional gain [V per rad/s] (the same for every compensation).
-    #[arg(long, default_value_t = LoopSettings::default().kp)]
+    #[arg(long, value_parser = crate::validate::parse_kp, allow_hyphen_values = true, default_value_t = LoopSettings::default().kp)]
     pub kp: f32,
     /// PI integral gain [V per rad].
-    #[arg(long, default_value_t = LoopSettings::default().ki)]
+    #[arg(long, value_parser = crate::validate::parse_ki, allow_hyphen_values = true, default_value_t = LoopSettings::default().ki)]
     pub ki: f32,
     /// Velocity from Hall-edge timing (standstill after this many seconds without an edge)
     /// instead of the paper's 10-sample moving average, for every compensation.
-    #[arg(long, value_name = "TIMEOUT_S")]
+    #[arg(long, value_name = "TIMEOUT_S", value_parser = crate::validate::parse_edge_timeout, allow_hyphen_values = true)]
     pub edge_timing: Option<f32>,
     /// Write the run's time series as CSV (t, omega_ref, omega, omega_est, u, v_comp,
     /// friction, i).
@@ -66,7 +66,7 @@ fn plant(args: &Args) -> Result<EmulatorConfig> {
     let mut p = EmulatorConfig::paper();
     p.seed = args.seed;
     for spec in &args.effects {
-        let s = EffectSpec::parse(spec).with_context(|| format!("--effect {spec}"))?;
+        let s = EffectSpec::parse_flag("--effect", spec)?;
         p.effects.push(s.to_effect());
     }
     Ok(p)
@@ -156,6 +156,13 @@ pub fn write_trace(path: &Path, run: &LoopRun) -> Result<()> {
 }
 
 pub fn run(args: Args) -> Result<()> {
+    let outputs: Vec<&Path> = [&args.svg, &args.csv, &args.trace_out]
+        .into_iter()
+        .flatten()
+        .map(PathBuf::as_path)
+        .collect();
+    let inputs: Vec<&Path> = args.models.iter().map(PathBuf::as_path).collect();
+    crate::atomic::check_outputs(&outputs, &inputs)?;
     let models: Vec<(String, Model)> = args
         .models
         .iter()

@@ -18,24 +18,25 @@ pub struct Args {
     #[arg(short, long, value_name = "COEFFS.bin")]
     pub output: PathBuf,
     /// Speed-loop proportional gain [V per rad/s]. Default: 0.05, see control::step.
-    #[arg(long, default_value_t = LoopSettings::default().kp)]
+    #[arg(long, value_parser = crate::validate::parse_kp, allow_hyphen_values = true, default_value_t = LoopSettings::default().kp)]
     pub kp: f32,
     /// Speed-loop integral gain [V per rad]. Default: 0.8, see control::step.
-    #[arg(long, default_value_t = LoopSettings::default().ki)]
+    #[arg(long, value_parser = crate::validate::parse_ki, allow_hyphen_values = true, default_value_t = LoopSettings::default().ki)]
     pub ki: f32,
     /// Voltage limit of the speed loop [V].
-    #[arg(long, default_value_t = LoopSettings::default().u_max)]
+    #[arg(long, value_parser = crate::validate::parse_u_max, allow_hyphen_values = true, default_value_t = LoopSettings::default().u_max)]
     pub u_max: f32,
     /// Weight of the friction compensation voltage: 1 = full (the paper's eq. 40), 0 = off.
-    #[arg(long, default_value_t = LoopSettings::default().comp_gain)]
+    #[arg(long, value_parser = crate::validate::parse_comp_gain, allow_hyphen_values = true, default_value_t = LoopSettings::default().comp_gain)]
     pub comp_gain: f32,
     /// Estimate the velocity from Hall-edge timing (standstill after this many seconds
     /// without an edge) instead of the paper's 10-sample moving average.
-    #[arg(long, value_name = "TIMEOUT_S")]
+    #[arg(long, value_name = "TIMEOUT_S", value_parser = crate::validate::parse_edge_timeout, allow_hyphen_values = true)]
     pub edge_timing: Option<f32>,
 }
 
 pub fn run(args: Args) -> Result<()> {
+    crate::atomic::check_outputs(&[&args.output], &[&args.model])?;
     let model = Model::load(&args.model)?;
     let settings = LoopSettings {
         kp: args.kp,

@@ -4,7 +4,7 @@ use crate::effect_spec::EffectSpec;
 use crate::ident::{self, FitRequest};
 use crate::log::{column_options, MotorLog, Plant};
 use crate::model::ModelKind;
-use anyhow::{Context, Result};
+use anyhow::Result;
 use std::path::PathBuf;
 
 fn after_help() -> String {
@@ -64,11 +64,18 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> Result<()> {
+    let inputs: Vec<&std::path::Path> = args
+        .data
+        .iter()
+        .chain(&args.validate)
+        .map(PathBuf::as_path)
+        .collect();
+    crate::atomic::check_outputs(&[&args.output], &inputs)?;
     let (map, units) = column_options(args.map.as_deref(), args.units.as_deref())?;
     let adds: Vec<EffectSpec> = args
         .adds
         .iter()
-        .map(|s| EffectSpec::parse(s).with_context(|| format!("--add '{s}'")))
+        .map(|s| EffectSpec::parse_flag("--add", s))
         .collect::<Result<_>>()?;
     // Warnings once per file, even when a file is both fitted and validated on.
     let mut warned = std::collections::BTreeSet::new();

@@ -52,6 +52,9 @@ fn named(mut log: MotorLog, name: &str) -> MotorLog {
 }
 
 pub fn run(args: Args) -> Result<()> {
+    if let Some(out) = &args.out {
+        crate::atomic::check_outputs(&[out], &[])?;
+    }
     if !(args.duration.is_finite() && args.duration >= 5.0 && args.duration <= 3600.0) {
         anyhow::bail!(
             "--duration: {} is not a duration between 5 and 3600 seconds",

@@ -72,6 +72,7 @@ pub fn run(args: Args) -> Result<()> {
     if args.pole_pairs == 0 {
         bail!("--pole-pairs: must be at least 1");
     }
+    crate::atomic::check_outputs(&[&args.output], &[std::path::Path::new(&args.port)])?;
     let mut link = Link::open(&args.port)?;
     let id = link.identify()?;
     link.command(&HostMsg::Stop, "stop")?;

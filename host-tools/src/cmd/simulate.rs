@@ -2,7 +2,7 @@
 //! and write the log the board would record (contract CSV).
 use crate::effect_spec::EffectSpec;
 use crate::emulator::{self, EmulatorConfig, SignalKind};
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use std::path::PathBuf;
 
 fn after_help() -> String {
@@ -35,7 +35,7 @@ pub struct Args {
     #[arg(long, value_enum)]
     pub signal: SignalKind,
     /// Duration in seconds (default: the signal's own, see below).
-    #[arg(long, value_name = "S")]
+    #[arg(long, value_name = "S", value_parser = crate::validate::parse_duration, allow_hyphen_values = true)]
     pub duration: Option<f64>,
     /// Seed of the signal and of the sensor noise: the same seed gives the same log.
     #[arg(long, value_name = "N", default_value_t = 1)]
@@ -50,10 +50,10 @@ pub struct Args {
     #[arg(long, value_name = "P", default_value_t = emulator::DEFAULT_POLE_PAIRS)]
     pub pole_pairs: u16,
     /// Current-sensor noise, standard deviation in amperes.
-    #[arg(long, value_name = "A", default_value_t = emulator::DEFAULT_CURRENT_NOISE)]
+    #[arg(long, value_name = "A", value_parser = crate::validate::parse_noise, allow_hyphen_values = true, default_value_t = emulator::DEFAULT_CURRENT_NOISE)]
     pub noise: f64,
     /// Largest internal integration step in seconds.
-    #[arg(long, value_name = "S", default_value_t = emulator::DEFAULT_FINE_STEP)]
+    #[arg(long, value_name = "S", value_parser = crate::validate::parse_fine_step, allow_hyphen_values = true, default_value_t = emulator::DEFAULT_FINE_STEP)]
     pub fine_step: f64,
     /// Output log (CSV).
     #[arg(short, long, value_name = "OUT.csv")]
@@ -63,21 +63,13 @@ pub struct Args {
 pub fn run(args: Args) -> Result<()> {
     let mut effects = Vec::new();
     for spec in &args.effects {
-        let s = EffectSpec::parse(spec).with_context(|| format!("--effect '{spec}'"))?;
+        let s = EffectSpec::parse_flag("--effect", spec)?;
         effects.push(s.to_effect());
     }
     let duration = args
         .duration
         .unwrap_or_else(|| args.signal.default_duration());
-    if !(duration.is_finite() && duration > 0.0 && duration <= 1e5) {
-        bail!("--duration: {duration} is not a duration in seconds between 0 and 100000");
-    }
-    if !(args.noise.is_finite() && args.noise >= 0.0) {
-        bail!(
-            "--noise: {} is not a standard deviation (0 or more amperes)",
-            args.noise
-        );
-    }
+    crate::atomic::check_outputs(&[&args.output], &[])?;
     let cfg = EmulatorConfig {
         effects,
         pole_pairs: args.pole_pairs,
@@ -87,7 +79,16 @@ pub fn run(args: Args) -> Result<()> {
         ..EmulatorConfig::paper()
     };
     cfg.check().context("emulator settings")?;
-    let res = emulator::simulate_signal(&cfg, args.signal, duration)?;
+    let res = emulator::simulate_signal(&cfg, args.signal, duration).map_err(|e| {
+        if args.effects.is_empty() {
+            e
+        } else {
+            anyhow::anyhow!(
+                "--effect {}: {e:#}",
+                crate::log::echo(&args.effects.join(" "))
+            )
+        }
+    })?;
     let mut log = if args.truth {
         res.log_with_truth()
     } else {

@@ -83,13 +83,15 @@ pub const VELOCITY_HALF_S: f64 = 0.048;
 /// those constants down by `q99(|ω|)/REFERENCE_SPEED`.
 pub const REFERENCE_SPEED: f64 = 50.0;
 
-/// Samples closest to `seconds` at period `dt` (at least 1).
-pub fn samples_for(seconds: f64, dt: f64) -> usize {
-    if dt > 0.0 && dt.is_finite() {
-        ((seconds / dt).round() as usize).max(1)
+/// Samples closest to `seconds` at period `dt`, at least 1 and at most `n` (the samples the
+/// data has): a window never outgrows the data, whatever the period says.
+pub fn samples_for(seconds: f64, dt: f64, n: usize) -> usize {
+    let k = if dt > 0.0 && dt.is_finite() && seconds.is_finite() {
+        (seconds / dt).round().clamp(1.0, n.max(1) as f64) as usize
     } else {
         1
-    }
+    };
+    k.clamp(1, n.max(1))
 }
 
 /// `min(1, q99(|ω|)/REFERENCE_SPEED)`: 1 for logs as fast as the paper's motor (so emulated
@@ -120,7 +122,7 @@ impl Signals {
     /// Derive the signals from a log. `kt` is the model's torque constant.
     pub fn from_log(log: &MotorLog, plant: Plant, kt: f64) -> Signals {
         let dt = log.sample_period();
-        let velocity_half = samples_for(VELOCITY_HALF_S, dt);
+        let velocity_half = samples_for(VELOCITY_HALF_S, dt, log.len());
         let omega = super::weakform::smoothed_derivative(&log.theta, dt, velocity_half);
         let vscale = velocity_scale(&omega);
         let theta_s = super::weakform::moving_average(&log.theta, 2);
@@ -316,7 +318,7 @@ impl Signals {
     /// on a correct model and 60 s of signal a it "explained" 15–50 % of the torque residual
     /// with μ ≈ 1.3–1.4 (0.4–11 % with [`super::weakform::WeakForm::new_exact`]).
     pub fn load_friction_column(&self) -> Vec<f64> {
-        let guard = samples_for(LOAD_FRICTION_GUARD_S, self.dt);
+        let guard = samples_for(LOAD_FRICTION_GUARD_S, self.dt, self.len());
         let near = self.near_reversal(guard);
         self.drive_model
             .iter()
@@ -350,7 +352,7 @@ impl Signals {
     /// increment matches the fine-grid braking integral to 4–14 % (signal d, seeds 1–3).
     pub fn load_friction_intervals(&self, kb: f64, r: f64) -> (Vec<f64>, Vec<f64>) {
         let n = self.len();
-        let guard = samples_for(LOAD_FRICTION_GUARD_S, self.dt);
+        let guard = samples_for(LOAD_FRICTION_GUARD_S, self.dt, self.len());
         let near = self.near_reversal(guard);
         let voltage = self.i.is_some() && r > 0.0 && r.is_finite();
         let margin = if voltage {
@@ -900,7 +902,7 @@ mod tests {
             .collect();
         let s = signals(&omega, &drive);
         let col = s.load_friction_column();
-        let guard = samples_for(LOAD_FRICTION_GUARD_S, s.dt);
+        let guard = samples_for(LOAD_FRICTION_GUARD_S, s.dt, s.len());
         assert_eq!(guard, 16);
         for k in 0..n {
             let near_reversal = (100 - guard..=100 + guard).contains(&k) || k + guard >= 200;
@@ -966,7 +968,7 @@ mod tests {
         assert!(col[40] > 0.5, "hard braking forward: {}", col[40]);
         assert!((torque[40] - drive(1.0, 50.0).abs()).abs() < 1e-12);
         assert_eq!(col[60], 0.0, "braking within the velocity resolution");
-        let guard = samples_for(LOAD_FRICTION_GUARD_S, dt);
+        let guard = samples_for(LOAD_FRICTION_GUARD_S, dt, usize::MAX);
         for k in 100 - guard - 1..=100 + guard {
             assert_eq!(
                 (col[k], torque[k]),

@@ -207,7 +207,7 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
     let mut s = Signals::from_log(log, st.plant, st.kt);
     s.drive_model = modelled_drive(&s, st);
     let h = if opts.half_width == 0 {
-        candidates::samples_for(weakform::HALF_WIDTH_S, s.dt)
+        candidates::samples_for(weakform::HALF_WIDTH_S, s.dt, s.len() / 2)
     } else {
         opts.half_width
     }

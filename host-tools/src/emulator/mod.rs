@@ -177,8 +177,12 @@ impl EmulatorConfig {
                 self.current_noise
             );
         }
-        if !(self.fine_step.is_finite() && self.fine_step > 0.0 && self.fine_step <= 0.012) {
-            bail!("fine step must be in (0, 0.012] s (got {})", self.fine_step);
+        // At least 1 µs: the sub-step count per sample is sample / fine_step.
+        if let Err(e) = crate::validate::in_range(self.fine_step, 1e-6, 0.012) {
+            bail!("fine step [s]: {e}");
+        }
+        for e in &self.effects {
+            crate::effect_spec::EffectSpec::from_effect(e).check_values()?;
         }
         let p = self.effective_lugre();
         if !p.is_valid() || p.s(0.0) <= 0.0 || p.sigma1 < 0.0 || p.alpha2 < 0.0 {
@@ -229,6 +233,12 @@ impl SimResult {
     }
 }
 
+/// Above this speed [rad/s] (about 10⁶ rpm) the emulation has diverged: [`simulate`] stops
+/// with an error instead of writing numbers no motor makes.
+pub const MAX_SPEED: f64 = 1e5;
+/// Above this current [A] the emulation has diverged.
+pub const MAX_CURRENT: f64 = 1e5;
+
 /// Run the emulated motor under `input` (voltages held for `ts` each, zero-order hold) from
 /// rest. Row k of the log is what the board measures at `t = k·ts`, before `input[k]` is
 /// applied: `theta` from the Hall decoder, `i` from the current sensor, `omega` from the
@@ -270,6 +280,19 @@ pub fn simulate(cfg: &EmulatorConfig, input: &[f64], ts: f64) -> Result<SimResul
         truth.z.push(s.z);
         truth.i.push(s.i);
         plant.apply(*u, ts);
+        let s = plant.truth();
+        if ![s.theta, s.omega, s.z, s.i].iter().all(|v| v.is_finite())
+            || s.omega.abs() > MAX_SPEED
+            || s.i.abs() > MAX_CURRENT
+        {
+            bail!(
+                "the emulated motor diverged at t = {:.3} s (speed {:.3e} rad/s, current {:.3e} \
+                 A): the effects' parameters are not physical for this motor",
+                (k + 1) as f64 * ts,
+                s.omega,
+                s.i
+            );
+        }
     }
     log.i = Some(i_meas);
     log.omega = Some(omega_est);

@@ -142,7 +142,10 @@ impl Plant {
             return;
         }
         let v = if v.is_finite() { v } else { 0.0 };
-        let n = (dt / self.cfg.fine_step - 1e-9).ceil().max(1.0) as usize;
+        // Bounded whatever dt and fine_step say (a validated config needs at most 12000).
+        let n = (dt / self.cfg.fine_step - 1e-9)
+            .ceil()
+            .clamp(1.0, 100_000.0) as usize;
         let h = dt / n as f64;
         for _ in 0..n {
             self.fine_step(v, h);

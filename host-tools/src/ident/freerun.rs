@@ -153,12 +153,17 @@ impl Dynamics<'_> {
 
 /// Matrix exponential of a small dense matrix: scaling and squaring with a degree-12 Taylor
 /// polynomial after scaling the norm below 1/2 (truncation error < 1e-16 relative). Used by
-/// the SINDYc simulator for its linear part.
-pub fn expm<const N: usize>(a: &[[f64; N]; N]) -> [[f64; N]; N] {
+/// the SINDYc simulator for its linear part. `None` when the matrix is not finite or its norm
+/// is beyond [`EXPM_MAX_NORM`] (a time step far too long for the dynamics): the number of
+/// squarings is bounded, never ~2³¹.
+pub fn expm<const N: usize>(a: &[[f64; N]; N]) -> Option<[[f64; N]; N]> {
     let norm = a
         .iter()
         .map(|r| r.iter().map(|v| v.abs()).sum::<f64>())
         .fold(0.0, f64::max);
+    if !(norm.is_finite() && norm <= EXPM_MAX_NORM) {
+        return None;
+    }
     let s = if norm > 0.5 {
         (norm / 0.5).log2().ceil() as i32
     } else {
@@ -189,8 +194,12 @@ pub fn expm<const N: usize>(a: &[[f64; N]; N]) -> [[f64; N]; N] {
     for _ in 0..s {
         e = matmul(&e, &e);
     }
-    e
+    Some(e)
 }
+
+/// Largest norm of `h·A` [`expm`] accepts (at most 62 squarings); a physical model at a
+/// physical sample period is many orders of magnitude below.
+pub const EXPM_MAX_NORM: f64 = 1e18;
 
 fn matmul<const N: usize>(a: &[[f64; N]; N], b: &[[f64; N]; N]) -> [[f64; N]; N] {
     let mut c = [[0.0; N]; N];
@@ -375,7 +384,7 @@ mod tests {
 
     #[test]
     fn expm_matches_a_rotation() {
-        let e = expm(&[[0.0, -3.0], [3.0, 0.0]]);
+        let e = expm(&[[0.0, -3.0], [3.0, 0.0]]).unwrap();
         assert!((e[0][0] - 3f64.cos()).abs() < 1e-13);
         assert!((e[1][0] - 3f64.sin()).abs() < 1e-13);
     }

@@ -413,7 +413,15 @@ pub fn simulate(
         let u = log.u[k];
         let dt = (log.t[k + 1] - log.t[k]) / sub as f64;
         for _ in 0..sub {
-            s = rosenbrock_step(&rhs, &s, u, dt);
+            s = rosenbrock_step(&rhs, &s, u, dt).ok_or_else(|| {
+                anyhow!(
+                    "{}: time step {} s before sample {} is too long to simulate the SINDYc \
+                     model (its matrix exponential is out of range)",
+                    log.source.display(),
+                    log.t[k + 1] - log.t[k],
+                    k + 2
+                )
+            })?;
             s[2] = s[2].clamp(-zb, zb);
         }
         if !s.iter().all(|v| v.is_finite())
@@ -438,7 +446,7 @@ fn rosenbrock_step(
     s: &[f64; 4],
     u: f64,
     dt: f64,
-) -> [f64; 4] {
+) -> Option<[f64; 4]> {
     let f0 = rhs(s, u);
     let mut m = [[0.0; 5]; 5];
     for j in 0..4 {
@@ -455,12 +463,12 @@ fn rosenbrock_step(
     for i in 0..4 {
         m[i][4] = f0[i] * dt;
     }
-    let e = freerun::expm(&m);
+    let e = freerun::expm(&m)?;
     let mut out = *s;
     for i in 0..4 {
         out[i] += e[i][4];
     }
-    out
+    Some(out)
 }
 
 /// Mean validation fit on ẋ of a model's free run **through the sensor chain** (the
@@ -1293,8 +1301,12 @@ pub fn from_table(t: &toml::Table) -> Result<(SindyModel<f64>, HankelSettings)> 
         .and_then(|a| Some((a.first()?.as_integer()?, a.get(1)?.as_integer()?)))
         .unwrap_or((0, 0));
     let h = HankelSettings {
-        delays: num("hankel_delays").unwrap_or(0.0) as usize,
-        components: (comps.0.max(0) as usize, comps.1.max(0) as usize),
+        // From the file: bounded, it sizes a Hankel matrix.
+        delays: num("hankel_delays").unwrap_or(0.0).clamp(0.0, 1000.0) as usize,
+        components: (
+            comps.0.clamp(0, 1000) as usize,
+            comps.1.clamp(0, 1000) as usize,
+        ),
         z_scale: num("z_scale").unwrap_or(1.0),
     };
     Ok((m, h))

@@ -1,0 +1,537 @@
+//! Hostile input (issue #17): numbers that would size allocations and loops, NaN/inf/absurd
+//! parameters, outputs that are inputs, malformed flags. Every case must fail within a time
+//! cap with one `error:` line naming the file or flag, and leave the directory as it was.
+use std::collections::BTreeMap;
+use std::io::Read;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+use tests::{motorid_bin, PAPER_LUGRE_MODEL};
+
+/// Kill the child after this long: a hostile input must not make a command run away.
+const TIME_CAP: Duration = Duration::from_secs(20);
+
+struct Run {
+    code: Option<i32>,
+    stdout: String,
+    stderr: String,
+}
+
+/// Run `motorid ARGS...` in `dir`; panics if it had to be killed after [`TIME_CAP`].
+fn run(dir: &Path, args: &[&str]) -> Run {
+    let mut child = Command::new(motorid_bin())
+        .args(args)
+        .current_dir(dir)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("cannot start motorid");
+    let mut out = child.stdout.take().unwrap();
+    let mut err = child.stderr.take().unwrap();
+    let t_out = std::thread::spawn(move || {
+        let mut s = Vec::new();
+        let _ = out.read_to_end(&mut s);
+        s
+    });
+    let t_err = std::thread::spawn(move || {
+        let mut s = Vec::new();
+        let _ = err.read_to_end(&mut s);
+        s
+    });
+    let start = Instant::now();
+    let status = loop {
+        if let Some(st) = child.try_wait().unwrap() {
+            break st;
+        }
+        if start.elapsed() > TIME_CAP {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!("motorid {args:?} ran longer than {TIME_CAP:?} and was killed");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    Run {
+        code: status.code(),
+        stdout: String::from_utf8_lossy(&t_out.join().unwrap()).into_owned(),
+        stderr: String::from_utf8_lossy(&t_err.join().unwrap()).into_owned(),
+    }
+}
+
+/// Every file and link under `dir`: relative path → (contents or link target, mode bits).
+fn snapshot(dir: &Path) -> BTreeMap<PathBuf, (Vec<u8>, u32)> {
+    let mut out = BTreeMap::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap() {
+            let e = e.unwrap();
+            let p = e.path();
+            let meta = std::fs::symlink_metadata(&p).unwrap();
+            let rel = p.strip_prefix(dir).unwrap().to_path_buf();
+            #[cfg(unix)]
+            let mode = {
+                use std::os::unix::fs::PermissionsExt;
+                meta.permissions().mode()
+            };
+            #[cfg(not(unix))]
+            let mode = 0;
+            if meta.file_type().is_symlink() {
+                let t = std::fs::read_link(&p).unwrap();
+                out.insert(rel, (t.to_string_lossy().as_bytes().to_vec(), mode));
+            } else if meta.is_dir() {
+                out.insert(rel, (b"<dir>".to_vec(), mode));
+                stack.push(p);
+            } else {
+                out.insert(rel, (std::fs::read(&p).unwrap(), mode));
+            }
+        }
+    }
+    out
+}
+
+/// `motorid ARGS` in `dir` must fail within the cap, with exactly one stderr line that starts
+/// with `error:` and contains every `want`, no panic, and `dir` unchanged.
+fn refused(dir: &Path, args: &[&str], want: &[&str]) {
+    let before = snapshot(dir);
+    let r = run(dir, args);
+    let after = snapshot(dir);
+    assert_ne!(r.code, Some(0), "motorid {args:?} succeeded: {}", r.stdout);
+    assert!(r.code.is_some(), "motorid {args:?} died of a signal");
+    let lines: Vec<&str> = r.stderr.lines().filter(|l| !l.trim().is_empty()).collect();
+    assert_eq!(
+        lines.len(),
+        1,
+        "motorid {args:?}: one stderr line expected, got:\n{}",
+        r.stderr
+    );
+    assert!(lines[0].starts_with("error: "), "{args:?}: {}", r.stderr);
+    assert!(
+        !lines[0].contains('\u{1b}'),
+        "escape sequence echoed: {:?}",
+        lines[0]
+    );
+    assert!(!r.stderr.contains("panicked") && !r.stderr.contains("internal error"));
+    for w in want {
+        assert!(
+            lines[0].contains(w),
+            "{args:?}: '{w}' missing in: {}",
+            lines[0]
+        );
+    }
+    let changed: Vec<&PathBuf> = before
+        .keys()
+        .chain(after.keys())
+        .filter(|k| before.get(*k) != after.get(*k))
+        .collect();
+    assert!(
+        changed.is_empty(),
+        "motorid {args:?} changed or left files: {changed:?}"
+    );
+}
+
+/// A plausible 12 ms log with `n` rows.
+fn log_text(n: usize, dt: f64, meta: &str) -> String {
+    let mut s = String::from(meta);
+    s.push_str("t,u,i,theta\n");
+    for k in 0..n {
+        s.push_str(&format!(
+            "{:e},{},{},{}\n",
+            k as f64 * dt,
+            3.0 * (k as f64 * 0.05).sin(),
+            0.1 * (k % 7) as f64,
+            0.01 * k as f64
+        ));
+    }
+    s
+}
+
+fn setup() -> tempfile::TempDir {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(
+        d.join("data.csv"),
+        log_text(300, 0.012, "# sample_period=0.012\n"),
+    )
+    .unwrap();
+    std::fs::write(d.join("m.toml"), PAPER_LUGRE_MODEL).unwrap();
+    dir
+}
+
+#[test]
+fn sample_periods_and_steps_outside_the_physical_range_are_refused() {
+    let dir = setup();
+    let d = dir.path();
+    for (name, meta) in [
+        ("tiny.csv", "# sample_period=1e-300\n"),
+        ("nano.csv", "# a=b\n# sample_period=1e-9\n"),
+        ("nan.csv", "# sample_period=NaN\n"),
+        ("huge.csv", "# sample_period=1e307\n"),
+    ] {
+        std::fs::write(d.join(name), log_text(300, 0.012, meta)).unwrap();
+    }
+    refused(
+        d,
+        &["fit", "--model", "linear", "-o", "out.toml", "tiny.csv"],
+        &["tiny.csv:1", "sample_period", "1 µs .. 10 s"],
+    );
+    refused(
+        d,
+        &["fit", "--model", "lugre", "-o", "out.toml", "nano.csv"],
+        &["nano.csv:2", "sample_period"],
+    );
+    refused(
+        d,
+        &["fit", "--model", "sindyc", "-o", "out.toml", "nan.csv"],
+        &["nan.csv:1", "sample_period"],
+    );
+    refused(
+        d,
+        &["diagnose", "m.toml", "huge.csv"],
+        &["huge.csv:1", "sample_period"],
+    );
+    // No metadata: the time column itself.
+    std::fs::write(d.join("t_nano.csv"), log_text(300, 1e-9, "")).unwrap();
+    std::fs::write(d.join("t_far.csv"), log_text(100, 1e306, "")).unwrap();
+    std::fs::write(d.join("t_slow.csv"), log_text(100, 100.0, "")).unwrap();
+    refused(
+        d,
+        &["compare", "m.toml", "t_slow.csv"],
+        &["t_slow.csv", "column 't'", "median time step"],
+    );
+    std::fs::write(d.join("t_min.csv"), log_text(300, 1e-300, "")).unwrap();
+    refused(
+        d,
+        &["fit", "--model", "linear", "-o", "out.toml", "t_nano.csv"],
+        &["t_nano.csv", "column 't'"],
+    );
+    refused(
+        d,
+        &["compare", "m.toml", "t_far.csv"],
+        &["t_far.csv", "column 't'"],
+    );
+    refused(
+        d,
+        &["diagnose", "m.toml", "t_min.csv"],
+        &["t_min.csv", "column 't'"],
+    );
+    refused(
+        d,
+        &["compare", "m.toml", "data.csv", "--units", "t=us"],
+        &["data.csv:1", "sample_period"],
+    );
+    // One step of 1e307 s in a log of 12 ms steps: the free run must not loop on it.
+    let mut text = log_text(300, 0.012, "");
+    text.push_str("1e307,1,0.1,3\n");
+    std::fs::write(d.join("jump.csv"), text).unwrap();
+    // A single 1e307 s jump: the reader refuses it (the line), nothing loops on it.
+    refused(
+        d,
+        &["compare", "m.toml", "jump.csv"],
+        &["jump.csv:302", "column 't'", "jumps"],
+    );
+    refused(
+        d,
+        &["fit", "--model", "sindyc", "-o", "s.toml", "jump.csv"],
+        &["jump.csv:302", "column 't'"],
+    );
+}
+
+#[test]
+fn simulation_sizes_from_flags_and_effects_are_bounded() {
+    let dir = setup();
+    let d = dir.path();
+    let sim = |extra: &[&str], want: &[&str]| {
+        let mut a = vec!["simulate", "--signal", "a", "-o", "out.csv"];
+        a.extend_from_slice(extra);
+        refused(d, &a, want);
+    };
+    sim(&["--effect", "offset:t0=1e10"], &["--effect", "t0"]);
+    sim(&["--effect", "offset:t0=nan"], &["--effect", "t0", "NaN"]);
+    sim(&["--effect", "thermal:tau=-inf"], &["--effect", "tau"]);
+    sim(
+        &["--effect", "cogging:harmonic=1e300"],
+        &["--effect", "harmonic"],
+    );
+    sim(&["--fine-step", "1e-300"], &["--fine-step"]);
+    sim(&["--duration", "1e12"], &["--duration"]);
+    sim(&["--duration", "-5"], &["--duration"]);
+    sim(&["--noise", "1e308"], &["--noise"]);
+    sim(&["--noise", "inf"], &["--noise"]);
+    refused(d, &["board", "--pty", "--speed", "1e-300"], &["--speed"]);
+    refused(d, &["board", "--pty", "--speed", "nan"], &["--speed"]);
+    // In range but far beyond this motor: diverges, and says so quickly.
+    let r = run(
+        d,
+        &[
+            "simulate",
+            "--signal",
+            "a",
+            "--duration",
+            "5",
+            "--effect",
+            "offset:t0=5000",
+            "-o",
+            "big.csv",
+        ],
+    );
+    if r.code != Some(0) {
+        let lines: Vec<&str> = r.stderr.lines().collect();
+        assert_eq!(lines.len(), 1, "{}", r.stderr);
+        assert!(lines[0].starts_with("error: --effect"), "{}", r.stderr);
+        assert!(!d.join("big.csv").exists());
+    }
+}
+
+#[test]
+fn model_parameters_must_be_finite_and_physical() {
+    let dir = setup();
+    let d = dir.path();
+    let bad = |name: &str, text: String| {
+        std::fs::write(d.join(name), text).unwrap();
+    };
+    bad(
+        "alpha.toml",
+        PAPER_LUGRE_MODEL.replace("alpha0 = 0.08", "alpha0 = nan"),
+    );
+    bad(
+        "kt.toml",
+        PAPER_LUGRE_MODEL.replace("kt = 0.07126", "kt = inf"),
+    );
+    bad(
+        "sp.toml",
+        PAPER_LUGRE_MODEL.replace("sample_period = 0.012", "sample_period = 1e-300"),
+    );
+    bad(
+        "sigma.toml",
+        PAPER_LUGRE_MODEL.replace("sigma1 = 22.2464", "sigma1 = -1e300"),
+    );
+    bad(
+        "effect.toml",
+        format!("{PAPER_LUGRE_MODEL}\n[[effects]]\nname = \"offset\"\nt0 = 1e30\n"),
+    );
+    bad(
+        "window.toml",
+        format!("{PAPER_LUGRE_MODEL}\n[sensor]\nhall_resolution_rad = 0.095\nvelocity_window = 1000000000000\n"),
+    );
+    refused(
+        d,
+        &["compare", "alpha.toml", "data.csv"],
+        &["alpha.toml", "lugre.alpha0", "NaN"],
+    );
+    refused(
+        d,
+        &["export", "kt.toml", "-o", "c.bin"],
+        &["kt.toml", "motor.kt", "not a finite number"],
+    );
+    refused(
+        d,
+        &["diagnose", "sp.toml", "data.csv"],
+        &["sp.toml", "sample_period"],
+    );
+    refused(
+        d,
+        &["compare", "sigma.toml", "data.csv"],
+        &["sigma.toml", "lugre.sigma1"],
+    );
+    refused(
+        d,
+        &[
+            "emulate",
+            "--model",
+            "effect.toml",
+            "--compensation",
+            "lugre",
+        ],
+        &["effect.toml", "t0"],
+    );
+    refused(
+        d,
+        &["compare", "window.toml", "data.csv"],
+        &["window.toml", "velocity_window"],
+    );
+}
+
+#[test]
+fn numeric_flags_are_validated_by_their_parser() {
+    let dir = setup();
+    let d = dir.path();
+    refused(d, &["emulate", "--kp", "nan"], &["--kp", "NaN"]);
+    refused(d, &["emulate", "--ki", "1e40"], &["--ki"]);
+    refused(d, &["emulate", "--edge-timing", "-1"], &["--edge-timing"]);
+    refused(
+        d,
+        &["export", "m.toml", "-o", "c.bin", "--kp=-1"],
+        &["--kp"],
+    );
+    refused(
+        d,
+        &["export", "m.toml", "-o", "c.bin", "--ki=-1e30"],
+        &["--ki"],
+    );
+    refused(
+        d,
+        &["export", "m.toml", "-o", "c.bin", "--u-max", "0"],
+        &["--u-max"],
+    );
+    refused(
+        d,
+        &["export", "m.toml", "-o", "c.bin", "--comp-gain", "inf"],
+        &["--comp-gain"],
+    );
+    refused(
+        d,
+        &["export", "m.toml", "-o", "c.bin", "--edge-timing", "1e-30"],
+        &["--edge-timing"],
+    );
+}
+
+#[test]
+fn an_output_is_never_an_input() {
+    let dir = setup();
+    let d = dir.path();
+    refused(
+        d,
+        &["fit", "--model", "linear", "-o", "data.csv", "data.csv"],
+        &["data.csv", "also an input"],
+    );
+    refused(
+        d,
+        &[
+            "fit",
+            "--model",
+            "linear",
+            "-o",
+            "./x/../data.csv",
+            "data.csv",
+        ],
+        &["data.csv", "also an input"],
+    );
+    refused(
+        d,
+        &["export", "m.toml", "-o", "m.toml"],
+        &["m.toml", "also an input"],
+    );
+    #[cfg(unix)]
+    {
+        std::os::unix::fs::symlink("m.toml", d.join("link.toml")).unwrap();
+        refused(
+            d,
+            &["export", "m.toml", "-o", "link.toml"],
+            &["link.toml", "also an input"],
+        );
+    }
+    refused(
+        d,
+        &[
+            "emulate", "--model", "m.toml", "--svg", "o.svg", "--csv", "o.svg",
+        ],
+        &["o.svg", "same file"],
+    );
+    refused(
+        d,
+        &["emulate", "--model", "m.toml", "--csv", "m.toml"],
+        &["m.toml", "also an input"],
+    );
+}
+
+#[test]
+fn outputs_keep_permissions_follow_links_and_announce_new_folders() {
+    let dir = setup();
+    let d = dir.path();
+    let r = run(d, &["export", "m.toml", "-o", "new/sub/c.bin"]);
+    assert_eq!(r.code, Some(0), "{}", r.stderr);
+    assert!(
+        r.stderr.contains("note: created directory new"),
+        "{}",
+        r.stderr
+    );
+    assert!(d.join("new/sub/c.bin").is_file());
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        std::fs::write(d.join("c.bin"), b"old").unwrap();
+        std::fs::set_permissions(d.join("c.bin"), std::fs::Permissions::from_mode(0o640)).unwrap();
+        std::os::unix::fs::symlink("c.bin", d.join("l.bin")).unwrap();
+        let r = run(d, &["export", "m.toml", "-o", "l.bin"]);
+        assert_eq!(r.code, Some(0), "{}", r.stderr);
+        let meta = std::fs::symlink_metadata(d.join("l.bin")).unwrap();
+        assert!(meta.file_type().is_symlink(), "the link stays a link");
+        let target = std::fs::read(d.join("c.bin")).unwrap();
+        assert_ne!(target, b"old", "written through to the link's target");
+        let mode = std::fs::metadata(d.join("c.bin"))
+            .unwrap()
+            .permissions()
+            .mode();
+        assert_eq!(mode & 0o777, 0o640);
+        std::os::unix::fs::symlink("missing.bin", d.join("dangling.bin")).unwrap();
+        refused(
+            d,
+            &["export", "m.toml", "-o", "dangling.bin"],
+            &["dangling.bin"],
+        );
+    }
+    let leftovers: Vec<_> = snapshot(d)
+        .into_keys()
+        .filter(|p| p.to_string_lossy().ends_with(".tmp"))
+        .collect();
+    assert!(leftovers.is_empty(), "{leftovers:?}");
+}
+
+#[test]
+fn command_line_errors_are_one_line_and_help_is_not_an_error() {
+    let dir = setup();
+    let d = dir.path();
+    refused(
+        d,
+        &["simulate", "--signal", "z", "-o", "x.csv"],
+        &["--signal", "'z'"],
+    );
+    refused(d, &["simulate", "-o", "x.csv"], &["--signal"]);
+    refused(d, &["fit", "--model", "linear", "data.csv"], &["--output"]);
+    refused(d, &["frobnicate"], &["frobnicate"]);
+    refused(
+        d,
+        &["compare", "m.toml", "data.csv", "--bogus"],
+        &["--bogus"],
+    );
+    refused(
+        d,
+        &[
+            "simulate",
+            "--signal",
+            "a",
+            "--effect",
+            "\u{1b}[31mevil\u{7}",
+            "-o",
+            "x.csv",
+        ],
+        &["--effect", "evil"],
+    );
+    let long = "x".repeat(5000);
+    refused(
+        d,
+        &[
+            "simulate",
+            "--signal",
+            "a",
+            "--effect",
+            &format!("offset:t0={long}"),
+            "-o",
+            "x.csv",
+        ],
+        &["--effect", "t0"],
+    );
+    for args in [
+        &["--help"][..],
+        &["--version"],
+        &["simulate", "--help"],
+        &["fit", "-h"],
+    ] {
+        let r = run(d, args);
+        assert_eq!(r.code, Some(0), "{args:?}: {}", r.stderr);
+        assert!(r.stdout.lines().count() >= 1, "{args:?}");
+        assert!(!r.stdout.starts_with("error"), "{args:?}");
+    }
+    let r = run(d, &["simulate", "--help"]);
+    assert!(r.stdout.contains("Usage:") && r.stdout.lines().count() > 10);
+}
