@@ -153,6 +153,15 @@ impl EmulatorConfig {
 
     /// Refuse what cannot be simulated, with a message for a person.
     pub fn check(&self) -> Result<()> {
+        if self
+            .effects
+            .iter()
+            .any(|e| e.kind() == control::effects::EffectKind::Compliance)
+        {
+            bail!(
+                "effect compliance: the emulator has no load state for a second inertia yet;                  `motorid diagnose` names a compliant coupling in measured logs"
+            );
+        }
         let m = &self.motor;
         for (name, v) in [
             ("R", m.r),

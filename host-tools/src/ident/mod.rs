@@ -143,6 +143,13 @@ pub fn fit(req: &FitRequest) -> Result<FitReport> {
              presliding bristle state) and add the other effects to it"
         );
     }
+    // A compliant coupling needs the load's angle and speed as states, which the free-run
+    // models do not carry yet: `diagnose` names and sizes it (spec with j2, k, c).
+    if req.adds.iter().any(|s| s.kind == EffectKind::Compliance) {
+        bail!(
+            "--add compliance: the fitted models have no load state for a second inertia yet;              `motorid diagnose` names and sizes a compliant coupling (j2, k, c) from the log"
+        );
+    }
     let mut model = fit_kind(req)?;
     if !req.adds.is_empty() && !req.validate.is_empty() && req.kind != ModelKind::Sindyc {
         model = guard_added_effects(req, model)?;
