@@ -445,8 +445,8 @@ impl Board {
 
         // Commissioning: vectors held open loop, no speed loop.
         if let Run::Commission(c) = &mut self.run {
-            let edges = m.edges.len() as u16 + u16::from(m.edges_overflow);
-            match c.tick(m.hall, edges, m.i_vector) {
+            let edges = m.edges.iter().map(|e| e.state);
+            match c.tick(m.hall, edges, m.edges_overflow, m.i_vector) {
                 CommissionStep::Hold { step, volts } => {
                     self.last_volts = volts;
                     return Drive::Vector { step, volts };

@@ -10,9 +10,10 @@
 //!   drive the motor and the decoded angle count up for a positive voltage;
 //! - the direction: whether the learned state sequence is the default 1-3-2-6-4-5 order
 //!   forward or backward (`reversed`), or another order (a permuted Hall connector);
-//! - a pole-pair check: the Hall edges seen over one electrical revolution of the vector
-//!   (the second forward pass) must be 6, or the Hall magnet's pole count differs from the
-//!   motor's;
+//! - a pole-pair check: the net Hall edges over one electrical revolution of the vector
+//!   (the second forward pass; an edge back to the state before cancels the edge that left
+//!   it, so a rotor that overshoots and settles back counts once) must be 6, or the Hall
+//!   magnet's pole count differs from the motor's;
 //! - the current-sense sign: with a positive voltage along the held vector the current
 //!   along it is positive; a negative mean says the sense is inverted (`current_sign` −1).
 //!
@@ -111,8 +112,10 @@ pub struct Commissioner {
     period: u16,
     fwd: [u8; 6],
     bwd: [u8; 6],
-    edges: u16,
-    last_state: u8,
+    /// Hall states passed in the counted revolution, returns cancelled.
+    path: heapless::Vec<u8, 16>,
+    /// The path overflowed (far more than one revolution).
+    path_full: bool,
     i_sum: f32,
     volts: f32,
 }
@@ -134,8 +137,8 @@ impl Commissioner {
             period: 0,
             fwd: [0; 6],
             bwd: [0; 6],
-            edges: 0,
-            last_state: 0,
+            path: heapless::Vec::new(),
+            path_full: false,
             i_sum: 0.0,
             volts,
         }
@@ -150,17 +153,40 @@ impl Commissioner {
         }
     }
 
-    /// One control period: the Hall state now, the Hall edges since the last period and
-    /// the current along the held vector [A] (sign as measured).
-    pub fn tick(&mut self, hall: u8, edges: u16, i_vector: f32) -> CommissionStep {
+    /// Net Hall edges of the counted revolution.
+    fn net_edges(&self) -> u16 {
+        if self.path_full {
+            u16::MAX
+        } else {
+            self.path.len().saturating_sub(1) as u16
+        }
+    }
+
+    /// One control period: the Hall state now, the states entered at the Hall edges since
+    /// the last period (oldest first; `overflow`: more came than were captured) and the
+    /// current along the held vector [A] (sign as measured).
+    pub fn tick(
+        &mut self,
+        hall: u8,
+        edges: impl IntoIterator<Item = u8>,
+        overflow: bool,
+        i_vector: f32,
+    ) -> CommissionStep {
         if self.hold >= HOLDS {
             return CommissionStep::Done(self.result());
         }
         if (6..12).contains(&self.hold) {
-            // The second forward pass: one electrical revolution. Edges are counted from
-            // the first period of the pass (the motion into sector 0 of the second pass
-            // counts, the alignment before it does not).
-            self.edges = self.edges.saturating_add(edges);
+            // The second forward pass: one electrical revolution, from the state the first
+            // pass ended in (the motion into sector 0 of the second pass counts).
+            self.path_full |= overflow;
+            for e in edges {
+                let n = self.path.len();
+                if n >= 2 && self.path[n - 2] == e {
+                    self.path.pop();
+                } else if self.path.push(e).is_err() {
+                    self.path_full = true;
+                }
+            }
         }
         if self.period >= HOLD_PERIODS / 2 && i_vector.is_finite() {
             self.i_sum += i_vector;
@@ -170,11 +196,15 @@ impl Commissioner {
             // The hold is over: the state now is that vector's sector.
             let k = Self::step_of(self.hold) as usize;
             match self.hold {
+                5 => {
+                    // The counted revolution starts here.
+                    self.path.clear();
+                    let _ = self.path.push(hall);
+                }
                 6..=11 => self.fwd[k] = hall,
                 12.. => self.bwd[k] = hall,
                 _ => {}
             }
-            self.last_state = hall;
             self.hold += 1;
             self.period = 0;
             if self.hold >= HOLDS {
@@ -204,7 +234,7 @@ impl Commissioner {
         if self.bwd != seq {
             return Err(CommissionError::Inconsistent);
         }
-        if self.edges != 6 {
+        if self.net_edges() != 6 {
             return Err(CommissionError::PolePairs);
         }
         let rot = |s: &[u8; 6]| (0..6).any(|o| (0..6).all(|k| seq[k] == s[(k + o) % 6]));
@@ -217,7 +247,7 @@ impl Commissioner {
             reversed,
             permuted: !forward && !reversed,
             current_sign: if self.i_sum < 0.0 { -1 } else { 1 },
-            edges_per_elec_rev: self.edges.min(255) as u8,
+            edges_per_elec_rev: self.net_edges().min(255) as u8,
             volts: self.volts,
         })
     }
@@ -225,6 +255,7 @@ impl Commissioner {
 
 #[cfg(test)]
 mod tests {
+    extern crate std;
     use super::*;
 
     /// An ideal rotor that jumps into the held vector's sector; Hall states of a given
@@ -234,19 +265,26 @@ mod tests {
         let mut sector = start;
         let mut hall = seq[sector as usize];
         // Edges arrive with the next period's measurement.
-        let mut edges = 0;
+        let mut edges: std::vec::Vec<u8> = std::vec::Vec::new();
         for _ in 0..10_000 {
-            match c.tick(hall, edges, sign * 5.0) {
+            match c.tick(hall, edges.drain(..), false, sign * 5.0) {
                 CommissionStep::Done(r) => return r,
                 CommissionStep::Hold { step, .. } => {
-                    edges = 0;
-                    // The rotor turns the short way into the vector's sector.
+                    // The rotor turns the short way into the vector's sector, overshooting
+                    // by one sector and back.
+                    let start = sector;
                     while sector != step {
                         let up = (step + 6 - sector) % 6 <= 3;
                         sector = if up { (sector + 1) % 6 } else { (sector + 5) % 6 };
-                        edges += 1;
-                        hall = seq[sector as usize];
+                        edges.push(seq[sector as usize]);
                     }
+                    if start != step {
+                        let up = (step + 6 - start) % 6 <= 3;
+                        let over = if up { (step + 1) % 6 } else { (step + 5) % 6 };
+                        edges.push(seq[over as usize]);
+                        edges.push(seq[step as usize]);
+                    }
+                    hall = seq[sector as usize];
                 }
             }
         }
@@ -276,7 +314,7 @@ mod tests {
     fn a_blocked_rotor_is_no_motion() {
         let mut c = Commissioner::new(2.0);
         let r = loop {
-            if let CommissionStep::Done(r) = c.tick(1, 0, 1.0) {
+            if let CommissionStep::Done(r) = c.tick(1, [], false, 1.0) {
                 break r;
             }
         };
