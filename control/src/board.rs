@@ -152,7 +152,11 @@ impl Board {
     /// valid slot; the defaults run, and only identify and commissioning are allowed).
     /// `firmware` is what `Identify` reports; `v_bus_nominal` [V] is used while the bus is
     /// not measured.
-    pub fn new(loaded: Option<(Coefficients, u32)>, firmware: &'static str, v_bus_nominal: f32) -> Self {
+    pub fn new(
+        loaded: Option<(Coefficients, u32)>,
+        firmware: &'static str,
+        v_bus_nominal: f32,
+    ) -> Self {
         let (coeffs, seq) = loaded.unwrap_or_default();
         let mut b = Board {
             step: ControlStep::new(&coeffs.step_config(v_bus_nominal)),
@@ -345,9 +349,9 @@ impl Board {
                     Excitation::Ramp { volts_per_s } => volts_per_s.is_finite(),
                     _ => true,
                 };
-                if !(duration_s.is_finite() && duration_s > 0.0 && duration_s <= MAX_EXPERIMENT_S)
-                    || !ok_signal
-                {
+                let ok_duration =
+                    duration_s.is_finite() && duration_s > 0.0 && duration_s <= MAX_EXPERIMENT_S;
+                if !(ok_duration && ok_signal) {
                     BoardMsg::Nack(Nack::OutOfRange)
                 } else {
                     self.start(Run::Experiment { signal, duration_s });
@@ -383,7 +387,11 @@ impl Board {
         self.stop(send);
     }
 
-    fn commissioned(&mut self, r: Result<Commissioning, CommissionError>, send: &mut impl FnMut(BoardMsg)) {
+    fn commissioned(
+        &mut self,
+        r: Result<Commissioning, CommissionError>,
+        send: &mut impl FnMut(BoardMsg),
+    ) {
         self.run = Run::Idle;
         match r {
             Ok(c) => {
@@ -414,7 +422,10 @@ impl Board {
         let v_bus = self.v_bus_of(m.v_bus);
         let u_lim = self.u_limit(v_bus);
         let lim = self.coeffs.limits;
-        let sign = self.coeffs.commission.map_or(1.0, |c| f32::from(c.current_sign));
+        let sign = self
+            .coeffs
+            .commission
+            .map_or(1.0, |c| f32::from(c.current_sign));
         let dir = if self.last_volts < 0.0 { -1.0 } else { 1.0 };
         let i = m.i_vector * dir * sign;
         let active = self.run != Run::Idle;

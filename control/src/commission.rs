@@ -275,7 +275,11 @@ mod tests {
                     let start = sector;
                     while sector != step {
                         let up = (step + 6 - sector) % 6 <= 3;
-                        sector = if up { (sector + 1) % 6 } else { (sector + 5) % 6 };
+                        sector = if up {
+                            (sector + 1) % 6
+                        } else {
+                            (sector + 5) % 6
+                        };
                         edges.push(seq[sector as usize]);
                     }
                     if start != step {

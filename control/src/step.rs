@@ -444,7 +444,11 @@ impl<F: Float> ControlStep<F> {
             };
 
         // 6. PI with feed-forward, or the open-loop override, within the voltage window.
-        let lim = if self.u_max < v_bus { self.u_max } else { v_bus };
+        let lim = if self.u_max < v_bus {
+            self.u_max
+        } else {
+            v_bus
+        };
         let i_abs = current.abs();
         if i_abs > self.i_limit {
             self.derating = true;

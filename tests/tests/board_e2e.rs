@@ -222,14 +222,27 @@ fn commissioning_learns_every_hall_order_and_the_motor_then_runs() {
         // Without coefficients the board refuses to run...
         let out = motorid(
             d,
-            &["record", "--port", &board.port, "--speed-ref", "30", "--duration", "1", "-o", "x.csv"],
+            &[
+                "record",
+                "--port",
+                &board.port,
+                "--speed-ref",
+                "30",
+                "--duration",
+                "1",
+                "-o",
+                "x.csv",
+            ],
         );
         assert!(!out.status.success(), "{what}");
         let err = String::from_utf8_lossy(&out.stderr);
         assert!(err.contains("no valid coefficients"), "{what}: {err}");
 
         // ...but commissions.
-        let out = ok(&motorid(d, &["commission", "--port", &board.port, "--json"]));
+        let out = ok(&motorid(
+            d,
+            &["commission", "--port", &board.port, "--json"],
+        ));
         let v: serde_json::Value = serde_json::from_str(&out).unwrap();
         let seq: Vec<u8> = v["hall_sequence"]
             .as_array()
@@ -239,19 +252,36 @@ fn commissioning_learns_every_hall_order_and_the_motor_then_runs() {
             .collect();
         assert_eq!(seq, expected_sequence(hall, phase), "{what}: {v}");
         assert_eq!(v["edges_per_electrical_rev"], 6, "{what}: {v}");
-        assert_eq!(v["current_sign"], if invert { -1 } else { 1 }, "{what}: {v}");
+        assert_eq!(
+            v["current_sign"],
+            if invert { -1 } else { 1 },
+            "{what}: {v}"
+        );
         assert_eq!(v["stored_seq"], 1, "{what}: {v}");
         reversed_seen |= v["reversed"] == true;
 
         // The stored result reads back.
-        let again = ok(&motorid(d, &["commission", "--port", &board.port, "--read", "--json"]));
+        let again = ok(&motorid(
+            d,
+            &["commission", "--port", &board.port, "--read", "--json"],
+        ));
         let w: serde_json::Value = serde_json::from_str(&again).unwrap();
         assert_eq!(w, v, "{what}");
 
         // With the learned table the motor runs under speed control.
         ok(&motorid(
             d,
-            &["record", "--port", &board.port, "--speed-ref", "30", "--duration", "4", "-o", "s.csv"],
+            &[
+                "record",
+                "--port",
+                &board.port,
+                "--speed-ref",
+                "30",
+                "--duration",
+                "4",
+                "-o",
+                "s.csv",
+            ],
         ));
         let (_, rows, _) = read_log(&d.join("s.csv"));
         let tail: Vec<f64> = rows[rows.len() - 80..].iter().map(|r| r[4]).collect();

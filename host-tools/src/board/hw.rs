@@ -49,7 +49,10 @@ const G: [f64; 6] = [0.0, 1.0, 1.0, 0.0, -1.0, -1.0];
 pub fn parse_order(s: &str) -> Result<[u8; 3]> {
     let d: Vec<u8> = s.bytes().map(|b| b.wrapping_sub(b'1')).collect();
     let mut seen = [false; 3];
-    if d.len() != 3 || d.iter().any(|&x| x > 2 || std::mem::replace(&mut seen[x as usize], true)) {
+    if d.len() != 3
+        || d.iter()
+            .any(|&x| x > 2 || std::mem::replace(&mut seen[x as usize], true))
+    {
         bail!("'{s}' is not an order of 1, 2, 3 (e.g. 123, 213, 321)");
     }
     Ok([d[0], d[1], d[2]])
@@ -70,9 +73,7 @@ impl Wiring {
 
     /// The Hall state the board reads for the motor's own state `code`.
     pub fn hall(&self, code: u8) -> u8 {
-        (0..3).fold(0, |acc, j| {
-            acc | (((code >> self.hall_order[j]) & 1) << j)
-        })
+        (0..3).fold(0, |acc, j| acc | (((code >> self.hall_order[j]) & 1) << j))
     }
 
     /// The sector bridge step `k` holds the rotor in.

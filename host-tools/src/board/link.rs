@@ -210,7 +210,10 @@ impl Link {
         match self.request(&HostMsg::ReadCommission)? {
             BoardMsg::Commission { outcome, seq } => Ok((outcome, seq)),
             BoardMsg::Nack(n) => bail!("{}: the board refused: {}", self.name, nack_text(n)),
-            other => bail!("{}: unexpected answer to ReadCommission: {other:?}", self.name),
+            other => bail!(
+                "{}: unexpected answer to ReadCommission: {other:?}",
+                self.name
+            ),
         }
     }
 
@@ -232,7 +235,11 @@ impl Link {
                 None => break,
             }
         }
-        bail!("{}: no commissioning result within {} s", self.name, timeout.as_secs())
+        bail!(
+            "{}: no commissioning result within {} s",
+            self.name,
+            timeout.as_secs()
+        )
     }
 
     /// A request answered by a plain `Ack`.

@@ -11,7 +11,9 @@ use crate::emulator::EmulatorConfig;
 use anyhow::{anyhow, Result};
 use control::blob::{self, Coefficients};
 use control::board::{handle_upload, store_coefficients, Board};
-use control::frame::{self, BoardMsg, FrameDecoder, HostMsg, Mode, Upload, Warning, MAX_ENCODED_LEN};
+use control::frame::{
+    self, BoardMsg, FrameDecoder, HostMsg, Mode, Upload, Warning, MAX_ENCODED_LEN,
+};
 use control::slots::Slots;
 
 /// Nominal bus voltage of the emulated board [V]: a 6S LiPo at rest (the firmware's
@@ -50,7 +52,11 @@ impl BoardSim {
         let loaded = loaded.map(|(info, c)| (c, info.seq));
         let none = loaded.is_none();
         // "emu-" marks the emulated board; the version is the firmware crate's.
-        let board = Board::new(loaded, concat!("emu-", env!("CARGO_PKG_VERSION")), V_BUS_NOMINAL);
+        let board = Board::new(
+            loaded,
+            concat!("emu-", env!("CARGO_PKG_VERSION")),
+            V_BUS_NOMINAL,
+        );
         let mut sim = BoardSim {
             hw: Hardware::new(plant, wiring)?,
             board,
@@ -127,8 +133,7 @@ impl BoardSim {
         let out = &mut self.out;
         let drive = self.board.tick(&m, &mut |msg| put(out, msg));
         store_coefficients(&mut self.board, &mut self.slots, &mut |msg| put(out, msg));
-        self.hw
-            .apply(drive, f64::from(control::CONTROL_PERIOD_S));
+        self.hw.apply(drive, f64::from(control::CONTROL_PERIOD_S));
     }
 }
 
@@ -140,9 +145,7 @@ pub fn decode_blob(bytes: &[u8]) -> Result<Coefficients> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use control::frame::{
-        decode_frame, encode_frame, Excitation, Fault, Nack, Sample, CHUNK_LEN,
-    };
+    use control::frame::{decode_frame, encode_frame, Excitation, Fault, Nack, Sample, CHUNK_LEN};
 
     fn frame(msg: &HostMsg) -> Vec<u8> {
         let mut buf = [0u8; MAX_ENCODED_LEN];
@@ -169,7 +172,12 @@ mod tests {
 
     #[test]
     fn upload_with_a_retried_chunk_commits_once_and_is_refused_while_running() {
-        let mut sim = BoardSim::new(EmulatorConfig::paper(), Wiring::default(), RamFlash::new(None)).unwrap();
+        let mut sim = BoardSim::new(
+            EmulatorConfig::paper(),
+            Wiring::default(),
+            RamFlash::new(None),
+        )
+        .unwrap();
         assert_eq!(
             replies(&mut sim),
             [BoardMsg::Warning(Warning::NoCoefficients)]
@@ -240,7 +248,7 @@ mod tests {
     fn run_until_fault(sim: &mut BoardSim, n: usize) -> (Option<Fault>, Vec<Sample>) {
         let mut samples = Vec::new();
         for k in 0..n {
-            if k % 50 == 0 {
+            if k.is_multiple_of(50) {
                 // As a listening host does: a sign of life now and then.
                 sim.receive(&frame(&HostMsg::Heartbeat));
             }
@@ -293,12 +301,18 @@ mod tests {
             sim.receive(&frame(&chunk(k as u16, c)));
         }
         sim.receive(&frame(&HostMsg::UploadCommit));
-        assert_eq!(replies(&mut sim).last(), Some(&BoardMsg::Nack(Nack::BadBlob)));
+        assert_eq!(
+            replies(&mut sim).last(),
+            Some(&BoardMsg::Nack(Nack::BadBlob))
+        );
         sim.receive(&frame(&HostMsg::SetMode { mode: Mode::Speed }));
         assert_eq!(replies(&mut sim), [BoardMsg::Nack(Nack::NoCoefficients)]);
         // Identify and commissioning stay allowed.
         sim.receive(&frame(&HostMsg::Identify));
-        assert!(matches!(replies(&mut sim)[0], BoardMsg::Identity { coeff_seq: 0, .. }));
+        assert!(matches!(
+            replies(&mut sim)[0],
+            BoardMsg::Identity { coeff_seq: 0, .. }
+        ));
         sim.receive(&frame(&HostMsg::Commission));
         assert_eq!(replies(&mut sim), [BoardMsg::Ack]);
         sim.receive(&frame(&HostMsg::Stop));
@@ -433,8 +447,8 @@ mod tests {
         sim.receive(&frame(&HostMsg::SetSpeed { omega_ref: 20.0 }));
         sim.receive(&frame(&HostMsg::SetMode { mode: Mode::Speed }));
         replies(&mut sim);
-        for k in 0..400 {
-            if k % 50 == 0 {
+        for k in 0..400u32 {
+            if k.is_multiple_of(50) {
                 sim.receive(&frame(&HostMsg::Heartbeat));
             }
             sim.tick();

@@ -72,7 +72,10 @@ pub fn run(args: Args) -> Result<()> {
         link.read_commission()?
     } else {
         if !args.json {
-            eprintln!("commissioning on {}: the motor turns slowly both ways", args.port);
+            eprintln!(
+                "commissioning on {}: the motor turns slowly both ways",
+                args.port
+            );
         }
         link.commission(RESULT_TIMEOUT)?
     };
@@ -101,9 +104,16 @@ pub fn run(args: Args) -> Result<()> {
     println!(
         "Hall edges per electrical revolution: {} (pole pairs {})",
         c.edges_per_elec_rev,
-        if c.edges_per_elec_rev == 6 { "match" } else { "differ" }
+        if c.edges_per_elec_rev == 6 {
+            "match"
+        } else {
+            "differ"
+        }
     );
-    println!("vector voltage: {} V", crate::cmd::inspect::f32_shortest(c.volts));
+    println!(
+        "vector voltage: {} V",
+        crate::cmd::inspect::f32_shortest(c.volts)
+    );
     if seq == 0 {
         println!("not stored (the board's flash write failed)");
     } else {

@@ -110,7 +110,7 @@ pub fn run(args: Args) -> Result<()> {
                 bar.set_position(samples.len() as u64);
                 // The board stops a run that hears nothing (link loss): a sign of life
                 // every HEARTBEAT_SAMPLES samples, in the board's time whatever its speed.
-                if samples.len() % HEARTBEAT_SAMPLES == 0 {
+                if samples.len().is_multiple_of(HEARTBEAT_SAMPLES) {
                     link.send(&HostMsg::Heartbeat)?;
                 }
             }
