@@ -27,7 +27,7 @@
 //! | `UploadCommit` | `Committed { seq }` after the flash write, or `Nack` (`Busy` unless idle) |
 //! | `UploadAbort` | `UploadAck { index: 0xFFFF }` |
 //! | `SetSpeed { omega_ref }` | `Ack` |
-//! | `SetMode { mode }` | `Ack` (`Nack(Busy)` if the command queue is full); with a latched fault the mode is not entered and the `Fault` is repeated |
+//! | `SetMode { mode }` | `Ack`, or `Nack(Faulted)` with a latched fault, `Nack(NoCoefficients)` (see below), `Nack(Busy)` if the firmware's command queue is full |
 //! | `StartExperiment { signal, duration_s }` | `Ack`, then samples until done (`t` and `seq` restart at 0) |
 //! | `Stop` / `ClearFault` | `Ack` |
 //! | `Heartbeat` | nothing (any frame keeps a speed or experiment run alive) |
