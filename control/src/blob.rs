@@ -5,7 +5,7 @@
 //! | offset | size | field |
 //! |---|---|---|
 //! | 0 | 4 | magic `b"MIDC"` |
-//! | 4 | 2 | format version ([`VERSION`]) |
+//! | 4 | 2 | format version ([`VERSION`]; version 1, without `commission`, is still read) |
 //! | 6 | 2 | payload length `n` |
 //! | 8 | n | postcard encoding of [`Coefficients`] |
 //! | 8+n | 4 | CRC-32 (ISO-HDLC, the zip/Ethernet CRC) of bytes `0..8+n` |
@@ -22,6 +22,7 @@
 use heapless::Vec;
 use serde::{Deserialize, Serialize};
 
+use crate::commission::Commissioning;
 use crate::effects::Effect;
 use crate::hall::{HallTable, INVALID};
 use crate::lugre::LugreParams;
@@ -34,7 +35,11 @@ use crate::velocity::EstimatorConfig;
 /// First four bytes of every blob.
 pub const MAGIC: [u8; 4] = *b"MIDC";
 /// Blob format version; bump on any change of [`Coefficients`].
-pub const VERSION: u16 = 1;
+/// 2: adds [`Coefficients::commission`] at the end. Version 1 blobs are read as version 2
+/// without a commissioning result.
+pub const VERSION: u16 = 2;
+/// The oldest format version [`decode`] reads.
+pub const OLDEST_VERSION: u16 = 1;
 /// Header size: magic, version, payload length.
 pub const HEADER_LEN: usize = 8;
 /// Trailer size: CRC-32.
@@ -45,6 +50,9 @@ pub const MAX_BLOB_LEN: usize = 1024;
 pub const MAX_PAYLOAD_LEN: usize = MAX_BLOB_LEN - HEADER_LEN - CRC_LEN;
 /// Most added effects a blob carries.
 pub const MAX_EFFECTS: usize = 8;
+/// The control step derates the voltage above this fraction of `limits.i_max`; the board
+/// trips (fault, bridge off) above `i_max` itself.
+pub const DERATE_FRACTION: f32 = 0.8;
 /// Marker in a Hall table for a state that must never occur (000 and 111 on 120° sensors).
 pub const HALL_INVALID: u8 = 0xFF;
 
@@ -124,6 +132,8 @@ pub struct Coefficients {
     pub pi: PiGains,
     /// Safety limits.
     pub limits: Limits,
+    /// Hall commissioning result (format version 2); when present, `hall_table` is its table.
+    pub commission: Option<Commissioning>,
 }
 
 /// Default Hall table for 120°-spaced sensors, sequence 1-3-2-6-4-5 for positive rotation
@@ -162,6 +172,7 @@ impl Default for Coefficients {
                 vbus_min: 7.0,
                 vbus_max: 26.0,
             },
+            commission: None,
         }
     }
 }
@@ -309,6 +320,11 @@ impl Coefficients {
                 return Err(BlobError::Invalid("SINDYc coefficients must be finite"));
             }
         }
+        if let Some(c) = &self.commission {
+            if !c.is_valid() {
+                return Err(BlobError::Invalid("commissioning result is not valid"));
+            }
+        }
         match self.model {
             ModelKind::Lugre if self.lugre.is_none() => {
                 Err(BlobError::Invalid("model lugre without LuGre parameters"))
@@ -351,6 +367,8 @@ impl Coefficients {
         };
         cfg.effects = self.effects.iter().copied().collect();
         cfg.pi = PiParams::new(self.pi.kp, self.pi.ki, self.pi.u_max.min(v_bus));
+        cfg.u_max = self.pi.u_max;
+        cfg.i_limit = DERATE_FRACTION * self.limits.i_max;
         cfg.v_bus = v_bus;
         cfg.compensate = self.pi.comp_gain > 0.0 && self.model != ModelKind::None;
         cfg
@@ -398,7 +416,7 @@ pub fn check(bytes: &[u8]) -> Result<&[u8], BlobError> {
         return Err(BlobError::BadMagic);
     }
     let version = u16::from_le_bytes([bytes[4], bytes[5]]);
-    if version != VERSION {
+    if !(OLDEST_VERSION..=VERSION).contains(&version) {
         return Err(BlobError::UnsupportedVersion(version));
     }
     let n = u16::from_le_bytes([bytes[6], bytes[7]]) as usize;
@@ -422,6 +440,16 @@ pub fn check(bytes: &[u8]) -> Result<&[u8], BlobError> {
 /// Decodes and validates a blob. Never panics, whatever the bytes.
 pub fn decode(bytes: &[u8]) -> Result<Coefficients, BlobError> {
     let payload = check(bytes)?;
+    let version = u16::from_le_bytes([bytes[4], bytes[5]]);
+    // Version 1 lacks the trailing `commission` option: postcard writes `None` as one zero
+    // byte, so the payload plus that byte is the version-2 encoding.
+    let mut v1 = [0u8; MAX_PAYLOAD_LEN + 1];
+    let payload = if version == 1 {
+        v1[..payload.len()].copy_from_slice(payload);
+        &v1[..payload.len() + 1]
+    } else {
+        payload
+    };
     let (c, rest): (Coefficients, &[u8]) =
         postcard::take_from_bytes(payload).map_err(|_| BlobError::Payload)?;
     if !rest.is_empty() {
@@ -480,6 +508,14 @@ mod tests {
             c.effects.push(e).unwrap();
         }
         c.estimator = Estimator::EdgeTiming { timeout_s: 0.2 };
+        c.commission = Some(Commissioning {
+            sequence: [1, 3, 2, 6, 4, 5],
+            reversed: false,
+            permuted: false,
+            current_sign: -1,
+            edges_per_elec_rev: 6,
+            volts: 2.5,
+        });
         c
     }
 
@@ -587,8 +623,38 @@ mod tests {
         let mut buf = [0u8; MAX_BLOB_LEN];
         let blob = encode(&Coefficients::default(), &mut buf).unwrap().to_vec();
         let mut b = blob.clone();
-        b[4] = 2;
-        assert_eq!(decode(&b), Err(BlobError::UnsupportedVersion(2)));
+        b[4] = 3;
+        assert_eq!(decode(&b), Err(BlobError::UnsupportedVersion(3)));
+        b[4] = 0;
+        assert_eq!(decode(&b), Err(BlobError::UnsupportedVersion(0)));
+    }
+
+    /// A version-1 blob (no `commission` field) still decodes, as having no result.
+    #[test]
+    fn version_1_blobs_are_read() {
+        let mut buf = [0u8; MAX_BLOB_LEN];
+        let c = Coefficients {
+            model: ModelKind::Lugre,
+            lugre: Some(LugreParams::paper()),
+            ..Coefficients::default()
+        };
+        let v2 = encode(&c, &mut buf).unwrap().to_vec();
+        // Version 1: the same payload without its last byte (the `None`).
+        let n = v2.len() - HEADER_LEN - CRC_LEN - 1;
+        assert_eq!(v2[HEADER_LEN + n], 0);
+        let mut v1 = v2[..HEADER_LEN + n].to_vec();
+        v1[4..6].copy_from_slice(&1u16.to_le_bytes());
+        v1[6..8].copy_from_slice(&(n as u16).to_le_bytes());
+        let crc = CRC32.checksum(&v1);
+        v1.extend_from_slice(&crc.to_le_bytes());
+        assert_eq!(decode(&v1).unwrap(), c);
+        // A version-2 payload labelled version 1 is refused (trailing bytes).
+        let mut w = v2.clone();
+        w[4..6].copy_from_slice(&1u16.to_le_bytes());
+        let end = w.len() - CRC_LEN;
+        let crc = CRC32.checksum(&w[..end]);
+        w[end..].copy_from_slice(&crc.to_le_bytes());
+        assert_eq!(decode(&w), Err(BlobError::Payload));
     }
 
     proptest! {

@@ -27,10 +27,20 @@
 //! | `UploadCommit` | `Committed { seq }` after the flash write, or `Nack` (`Busy` unless idle) |
 //! | `UploadAbort` | `UploadAck { index: 0xFFFF }` |
 //! | `SetSpeed { omega_ref }` | `Ack` |
-//! | `SetMode { mode }` | `Ack` (`Nack(Busy)` if the command queue is full); with a latched fault the mode is not entered and the `Fault` is repeated |
+//! | `SetMode { mode }` | `Ack`, or `Nack(Faulted)` with a latched fault, `Nack(NoCoefficients)` (see below), `Nack(Busy)` if the firmware's command queue is full |
 //! | `StartExperiment { signal, duration_s }` | `Ack`, then samples until done (`t` and `seq` restart at 0) |
 //! | `Stop` / `ClearFault` | `Ack` |
+//! | `Heartbeat` | nothing (any frame keeps a speed or experiment run alive) |
+//! | `Commission` | `Ack`, then `Commission { outcome, seq }` when done |
+//! | `ReadCommission` | `Commission { outcome, seq }` (the last run, or the stored one) |
 //! | (nothing) | `Sample { .. }` every 12 ms while running, `Fault`, `Warning` |
+//!
+//! Refusals of version 2: `SetMode { Speed }` and `StartExperiment` without valid
+//! coefficients (`Nack(NoCoefficients)`); an experiment whose duration is not finite, not
+//! positive or above [`crate::board::MAX_EXPERIMENT_S`], or a steady voltage beyond `u_max`
+//! (`Nack(OutOfRange)`); any start while a fault is latched (`Nack(Faulted)`). A speed or
+//! experiment run stops (`Warning(LinkLost)`) when no frame came for
+//! [`crate::board::LINK_TIMEOUT_PERIODS`] periods: hosts send `Heartbeat` while they listen.
 //!
 //! Replays and duplicates: upload chunks carry an index. The board accepts only the next
 //! index; the same index again with the same bytes (the host retried after a lost ack) is
@@ -51,7 +61,7 @@ use serde::{Deserialize, Serialize};
 use crate::blob::{self, Coefficients, ModelKind, CRC32, MAX_BLOB_LEN};
 
 /// Protocol version reported by `Identity`.
-pub const PROTOCOL_VERSION: u16 = 1;
+pub const PROTOCOL_VERSION: u16 = 2;
 /// Largest upload chunk.
 pub const CHUNK_LEN: usize = 64;
 /// Largest body (postcard message + CRC).
@@ -70,6 +80,8 @@ pub enum Mode {
     Speed,
     /// Open-loop excitation ([`Excitation`]) while logging.
     Experiment,
+    /// Hall commissioning ([`crate::commission`]).
+    Commission,
 }
 
 /// Open-loop excitation for experiment mode: the paper's signals a-d and two simple ones.
@@ -115,6 +127,13 @@ pub enum HostMsg {
     Stop,
     /// Clear a latched fault (the bridge stays off until a mode is set).
     ClearFault,
+    /// Nothing to do: keeps a run alive (link-loss detection).
+    Heartbeat,
+    /// Run the Hall commissioning ([`crate::commission`]); the result is stored with the
+    /// coefficients.
+    Commission,
+    /// Ask for [`BoardMsg::Commission`].
+    ReadCommission,
 }
 
 /// Why a request was refused.
@@ -140,6 +159,10 @@ pub enum Nack {
     Flash,
     /// A fault is latched; clear it first.
     Faulted,
+    /// No valid coefficients are loaded (speed and experiment modes need them).
+    NoCoefficients,
+    /// A parameter is outside what the board allows (duration, voltage).
+    OutOfRange,
 }
 
 /// Latched faults: each turns the bridge off.
@@ -157,6 +180,9 @@ pub enum Fault {
     OverVoltage,
     /// The control step overran its 12 ms period.
     Overrun,
+    /// A voltage above the stall threshold and no Hall edge for
+    /// [`crate::board::STALL_PERIODS`] periods.
+    Stall,
 }
 
 /// Warnings: logged, nothing stops.
@@ -166,6 +192,8 @@ pub enum Warning {
     NoCoefficients,
     /// Received bytes that did not form a valid frame.
     BadFrame,
+    /// No frame for [`crate::board::LINK_TIMEOUT_PERIODS`] periods: the run was stopped.
+    LinkLost,
 }
 
 /// One log sample, every 12 ms while running (the contract's CSV columns).
@@ -212,6 +240,11 @@ pub enum BoardMsg {
     Fault(Fault),
     /// Something to know.
     Warning(Warning),
+    /// Hall commissioning result; `seq` is the flash slot it was stored in (0: not stored).
+    Commission {
+        outcome: crate::commission::CommissionOutcome,
+        seq: u32,
+    },
 }
 
 /// Why a frame could not be built or read.

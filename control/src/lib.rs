@@ -14,6 +14,9 @@
 //! | [`pi`] | PI speed controller with anti-windup |
 //! | [`compensation`] | friction compensation current and voltage |
 //! | [`step`] | the 12 ms control step the firmware calls |
+//! | [`board`] | the board's logic: commands, modes, limits, faults (firmware and emulator) |
+//! | [`commission`] | Hall commissioning: sector table, direction, current sign |
+//! | [`excitation`] | open-loop experiment signals, relative to the voltage limit |
 //! | [`blob`] | the coefficient blob (postcard + magic + version + CRC32) |
 //! | [`frame`] | the serial frame codec (COBS + postcard + CRC) |
 //! | [`slots`] | two-slot flash storage of coefficients, power-cut safe |
@@ -21,8 +24,11 @@
 #![forbid(unsafe_code)]
 
 pub mod blob;
+pub mod board;
+pub mod commission;
 pub mod compensation;
 pub mod effects;
+pub mod excitation;
 pub mod frame;
 pub mod hall;
 pub mod lugre;

@@ -13,8 +13,11 @@
 //!    effect of the configuration.
 //! 5. Compensation `V_c = L·dI_c/dt + R·I_c`, `I_c = F_f/K_t` (R scaled by the heat state of
 //!    a `thermal` effect), plus the voltage lost to `deadtime`.
-//! 6. `V = PI(ω_ref − ω) + V_c + V_deadtime`, saturated at ±V_bus (the PI's anti-windup sees
-//!    the saturation of the total), or the open-loop override in experiment mode.
+//! 6. `V = PI(ω_ref − ω) + V_c + V_deadtime`, saturated at ±min(u_max, V_bus) (the PI's
+//!    anti-windup sees the saturation of the total), or the open-loop override in experiment
+//!    mode, saturated the same way. While |I| exceeds the soft current limit `i_limit` the
+//!    window narrows to the steady-state current limit around the back-EMF,
+//!    `K_b·ω ± R·i_limit` (voltage derating; released below 80 % of `i_limit`).
 //!
 //! No allocation; per step the transcendental calls are those of the observer and the
 //! effects (LuGre: 2 exp; the paper's SINDYc model: a few tanh), the rest is arithmetic.
@@ -67,8 +70,13 @@ pub struct StepConfig<F> {
     /// Effects added on top of the observer (do not repeat what the observer models, e.g.
     /// Coulomb friction with a LuGre observer).
     pub effects: heapless::Vec<Effect<F>, MAX_EFFECTS>,
-    /// Speed PI gains, anti-windup; its limits are replaced by ±V_bus every step.
+    /// Speed PI gains, anti-windup; its limits are replaced by ±min(`u_max`, V_bus) every step.
     pub pi: PiParams<F>,
+    /// Voltage limit of the command [V] (the blob's `u_max`); non-finite or ≤ 0: V_bus only.
+    pub u_max: F,
+    /// Soft current limit [A]: above it the voltage is derated (see the module docs);
+    /// infinite: none.
+    pub i_limit: F,
     /// Nominal bus voltage [V], used when the measured one is missing or invalid.
     pub v_bus: F,
     /// Time constant [s] of the filtered derivative of I_c.
@@ -96,6 +104,8 @@ impl<F: Float> StepConfig<F> {
             observer: ObserverConfig::Lugre(LugreParams::paper()),
             effects: heapless::Vec::new(),
             pi: PiParams::new(c(0.05), c(0.8), c(24.0)),
+            u_max: c(24.0),
+            i_limit: F::infinity(),
             v_bus: c(24.0),
             tau_d: c(0.024),
             dt: F::from(crate::CONTROL_PERIOD_S).unwrap(),
@@ -140,10 +150,12 @@ impl Faults {
     pub const NONFINITE_INPUT: u16 = 1 << 3;
     /// The measured bus voltage was invalid; the nominal one was used.
     pub const BUS_INVALID: u16 = 1 << 4;
-    /// The voltage command is saturated at ±V_bus.
+    /// The voltage command is saturated at ±min(u_max, V_bus).
     pub const SATURATED: u16 = 1 << 5;
     /// The friction estimate was not finite; it was replaced by 0 and the observer reset.
     pub const OBSERVER_RESET: u16 = 1 << 6;
+    /// The current exceeded the soft limit: the voltage is derated.
+    pub const CURRENT_LIMIT: u16 = 1 << 7;
 
     pub fn contains(self, flag: u16) -> bool {
         self.0 & flag != 0
@@ -187,6 +199,10 @@ pub struct ControlStep<F> {
     motor: MotorParams<F>,
     dt: F,
     v_bus_nominal: F,
+    u_max: F,
+    i_limit: F,
+    /// Voltage derating active (hysteresis state of the soft current limit).
+    derating: bool,
     compensate: bool,
     decoder: HallDecoder,
     estimator: Estimator<F>,
@@ -256,6 +272,17 @@ impl<F: Float> ControlStep<F> {
             motor: cfg.motor,
             dt,
             v_bus_nominal: cfg.v_bus.abs(),
+            u_max: if cfg.u_max.is_finite() && cfg.u_max > F::zero() {
+                cfg.u_max
+            } else {
+                F::infinity()
+            },
+            i_limit: if cfg.i_limit > F::zero() {
+                cfg.i_limit
+            } else {
+                F::infinity()
+            },
+            derating: false,
             compensate: cfg.compensate,
             decoder: HallDecoder::new(cfg.hall_table, cfg.pole_pairs),
             estimator: Estimator::from_config(&cfg.estimator, step, dt),
@@ -290,6 +317,7 @@ impl<F: Float> ControlStep<F> {
         self.comp.reset();
         self.u_prev = F::zero();
         self.steps_ref = 0;
+        self.derating = false;
     }
 
     /// The Hall decoder (angle, step count, fault count).
@@ -415,15 +443,37 @@ impl<F: Float> ControlStep<F> {
                 F::zero()
             };
 
-        // 6. PI with feed-forward, or the open-loop override.
-        self.pi.set_limits(-v_bus, v_bus);
+        // 6. PI with feed-forward, or the open-loop override, within the voltage window.
+        let lim = if self.u_max < v_bus {
+            self.u_max
+        } else {
+            v_bus
+        };
+        let i_abs = current.abs();
+        if i_abs > self.i_limit {
+            self.derating = true;
+        } else if i_abs < F::from(0.8).unwrap() * self.i_limit {
+            self.derating = false;
+        }
+        let (lo, hi) = if self.derating {
+            faults.set(Faults::CURRENT_LIMIT);
+            let emf = self.motor.kb * omega;
+            let win = self.comp.params.r * self.i_limit;
+            (
+                saturate(emf - win, -lim, lim),
+                saturate(emf + win, -lim, lim),
+            )
+        } else {
+            (-lim, lim)
+        };
+        self.pi.set_limits(lo, hi);
         let err = omega_ref - omega;
         let v_cmd = match inp.v_override {
             Some(v) => {
-                let v = saturate(finite_or_zero(v, &mut faults), -v_bus, v_bus);
+                let v = saturate(finite_or_zero(v, &mut faults), lo, hi);
                 // Bumpless return to closed loop: the integral takes what the PI would need.
                 let p = self.pi.params;
-                self.pi.integral = saturate(v - p.kp * err - ff, -v_bus, v_bus);
+                self.pi.integral = saturate(v - p.kp * err - ff, lo, hi);
                 v
             }
             None => self.pi.step_ff(err, ff, dt),
@@ -436,7 +486,7 @@ impl<F: Float> ControlStep<F> {
             self.pi.reset();
             F::zero()
         };
-        if v_cmd.abs() >= v_bus {
+        if v_cmd.abs() >= lim {
             faults.set(Faults::SATURATED);
         }
         self.u_prev = v_cmd;

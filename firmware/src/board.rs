@@ -55,7 +55,7 @@ pub const PWM_HZ: u32 = 20_000;
 pub const DEAD_TIME_TICKS: u16 = 85;
 /// Largest duty cycle: 95 %, so the bootstrap capacitors of the L6387ED high-side drivers
 /// recharge every period [NuttX src/stm32_foc.c, MAX_DUTY_B16 = 0.95].
-pub const MAX_DUTY: f32 = 0.95;
+pub const MAX_DUTY: f32 = control::board::MAX_DUTY;
 
 /// ADC reference: VDDA = 3.3 V [NuttX src/stm32_foc.c, ADC_REF_VOLTAGE].
 pub const ADC_VREF: f32 = 3.3;

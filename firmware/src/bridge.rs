@@ -3,8 +3,10 @@
 //! Commutation step `k` (0..5) powers one phase pair: the "high" phase switches with duty
 //! `d` (complementary, so its low side conducts in the off time: synchronous rectification),
 //! the "low" phase has its low side on all the time (duty 0), the third phase floats (both
-//! outputs disabled). Step `k + 3` is step `k` with the polarity reversed, which is how a
-//! negative voltage is applied.
+//! outputs disabled). Step `k + 3` is step `k` with the polarity reversed. Which step drives
+//! a rotor in a Hall sector is `control::board::commutation_step` (sector + 1 forward,
+//! sector + 4 for a negative voltage), the same rule the emulated board uses; commissioning
+//! holds one step whatever the Hall state ([`Drive::hold`]).
 //!
 //! Because the low phase's low-side switch conducts during the whole period, its shunt
 //! carries the winding current in both the on and the freewheel interval: the firmware
@@ -61,6 +63,8 @@ pub struct Drive {
     pub duty: u16,
     /// Hall state → sector (the coefficients' table; negative = invalid state).
     pub table: [i8; 8],
+    /// Hold this step whatever the Hall state (commissioning).
+    pub hold: Option<u8>,
 }
 
 static DRIVE: Mutex<Cell<Drive>> = Mutex::new(Cell::new(Drive {
@@ -68,6 +72,7 @@ static DRIVE: Mutex<Cell<Drive>> = Mutex::new(Cell::new(Drive {
     reverse: false,
     duty: 0,
     table: [-1; 8],
+    hold: None,
 }));
 /// Step applied last (for the current measurement: its low phase's shunt).
 static LAST_STEP: AtomicU8 = AtomicU8::new(0);
@@ -87,14 +92,17 @@ pub fn last_step() -> u8 {
 pub fn commutate(state: u8) {
     let d = critical_section::with(|cs| DRIVE.borrow(cs).get());
     let sector = d.table[(state & 7) as usize];
-    if !d.on || sector < 0 {
-        force_off();
-        return;
-    }
-    let k = if d.reverse {
-        (sector as u8 + 3) % 6
-    } else {
-        sector as u8 % 6
+    let k = match d.hold {
+        _ if !d.on => {
+            force_off();
+            return;
+        }
+        Some(k) => k % 6,
+        None if sector < 0 => {
+            force_off();
+            return;
+        }
+        None => control::board::commutation_step(sector as u8, d.reverse),
     };
     let (hi, lo) = STEPS[k as usize];
     let t = pac::TIM1;

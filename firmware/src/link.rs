@@ -4,18 +4,21 @@
 //! documented there). Two tasks: [`rx_task`] decodes frames byte by byte, answers requests
 //! and stages/commits coefficient uploads; [`tx_task`] writes every outgoing message (answers,
 //! log samples, faults) as one frame. The control loop talks to them through [`OUTGOING`],
-//! [`COMMANDS`] and [`NEW_COEFFS`].
-use core::sync::atomic::{AtomicU32, AtomicU8, Ordering};
+//! [`COMMANDS`] and [`NEW_COEFFS`]; the upload handler is `control::board::handle_upload`,
+//! the same as the emulated board's.
+use core::cell::RefCell;
+use core::sync::atomic::{AtomicU8, Ordering};
 
-use control::blob::{Coefficients, ModelKind};
+use control::blob::Coefficients;
+use control::board::handle_upload;
 use control::frame::{
-    self, BoardMsg, ChunkOutcome, Excitation, FrameDecoder, HostMsg, Mode, Nack, Upload, Warning,
-    MAX_ENCODED_LEN, PROTOCOL_VERSION,
+    self, BoardMsg, FrameDecoder, HostMsg, Nack, Upload, Warning, MAX_ENCODED_LEN,
 };
 use control::slots::Slots;
 use embassy_stm32::flash::{Blocking, Flash};
 use embassy_stm32::usart::{BufferedUartRx, BufferedUartTx};
-use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+use embassy_sync::blocking_mutex::raw::{CriticalSectionRawMutex, ThreadModeRawMutex};
+use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::channel::Channel;
 use embassy_sync::signal::Signal;
 use embedded_io_async::{Read, Write};
@@ -26,54 +29,28 @@ pub const SLOTS_OFFSET: u32 = 0x1_F000;
 /// One slot per 2 KiB page (STM32G431 single-bank page size).
 pub const SLOT_SIZE: u32 = 2048;
 
-/// Requests the control loop acts on.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Command {
-    SetSpeed(f32),
-    SetMode(Mode),
-    Start { signal: Excitation, duration_s: f32 },
-    Stop,
-    ClearFault,
-}
+/// The coefficient flash slots.
+pub type FlashSlots = Slots<Flash<'static, Blocking>>;
 
-/// Link → control loop.
-pub static COMMANDS: Channel<CriticalSectionRawMutex, Command, 4> = Channel::new();
+/// Host messages for the board logic (`control::board::Board::handle`, in the control loop).
+pub static COMMANDS: Channel<CriticalSectionRawMutex, HostMsg, 4> = Channel::new();
 /// Control loop and link → host. Samples are dropped (the host sees the `seq` gap) when full.
 pub static OUTGOING: Channel<CriticalSectionRawMutex, BoardMsg, 8> = Channel::new();
-/// Newly committed coefficients for the control loop.
-pub static NEW_COEFFS: Signal<CriticalSectionRawMutex, Coefficients> = Signal::new();
+/// Newly committed coefficients and their slot sequence, for the control loop.
+pub static NEW_COEFFS: Signal<CriticalSectionRawMutex, (Coefficients, u32)> = Signal::new();
+/// The flash slots, shared by the link task (uploads) and the control loop (the
+/// commissioning result). Both run in thread mode on one executor, so the lock never waits
+/// and never masks interrupts during a page erase.
+pub static SLOTS: Mutex<ThreadModeRawMutex, RefCell<Option<FlashSlots>>> =
+    Mutex::new(RefCell::new(None));
 
-/// What the control loop runs, for `Identify` and for refusing commits while running.
+/// What the control loop runs, for refusing commits while running.
 pub static MODE: AtomicU8 = AtomicU8::new(MODE_IDLE);
 pub const MODE_IDLE: u8 = 0;
-pub const MODE_SPEED: u8 = 1;
-pub const MODE_EXPERIMENT: u8 = 2;
-/// Model kind of the loaded coefficients (0 none, 1 linear, 2 lugre, 3 sindyc).
-pub static MODEL: AtomicU8 = AtomicU8::new(0);
-/// Sequence number of the loaded flash slot (0: none).
-pub static COEFF_SEQ: AtomicU32 = AtomicU32::new(0);
-
-/// Encodes a model kind for [`MODEL`].
-pub fn model_code(m: ModelKind) -> u8 {
-    match m {
-        ModelKind::None => 0,
-        ModelKind::Linear => 1,
-        ModelKind::Lugre => 2,
-        ModelKind::Sindyc => 3,
-    }
-}
-
-fn model_of(code: u8) -> ModelKind {
-    match code {
-        1 => ModelKind::Linear,
-        2 => ModelKind::Lugre,
-        3 => ModelKind::Sindyc,
-        _ => ModelKind::None,
-    }
-}
+pub const MODE_RUNNING: u8 = 1;
 
 /// Loads the newest valid coefficients at boot; `None` (with a warning) when there are none.
-pub fn load_coefficients(slots: &mut Slots<Flash<'static, Blocking>>) -> Option<Coefficients> {
+pub fn load_coefficients(slots: &mut FlashSlots) -> Option<(Coefficients, u32)> {
     match slots.load() {
         Ok(Some((info, c))) => {
             defmt::info!(
@@ -82,9 +59,7 @@ pub fn load_coefficients(slots: &mut Slots<Flash<'static, Blocking>>) -> Option<
                 info.seq,
                 info.len
             );
-            COEFF_SEQ.store(info.seq, Ordering::Relaxed);
-            MODEL.store(model_code(c.model), Ordering::Relaxed);
-            Some(c)
+            Some((c, info.seq))
         }
         Ok(None) => {
             defmt::warn!("no valid coefficient slot: running without compensation");
@@ -98,22 +73,16 @@ pub fn load_coefficients(slots: &mut Slots<Flash<'static, Blocking>>) -> Option<
     }
 }
 
-fn send(msg: BoardMsg) {
+/// Queues a message for the host.
+pub fn send(msg: BoardMsg) {
     // Answers are small and rare; if the queue is full the host times out and retries.
     let _ = OUTGOING.try_send(msg);
 }
 
-fn command(c: Command) {
-    if COMMANDS.try_send(c).is_err() {
-        send(BoardMsg::Nack(Nack::Busy));
-    } else {
-        send(BoardMsg::Ack);
-    }
-}
-
-/// Receives, decodes and answers host messages.
+/// Receives and decodes host messages: uploads are handled here, the rest goes to the board
+/// logic in the control loop.
 #[embassy_executor::task]
-pub async fn rx_task(mut rx: BufferedUartRx<'static>, mut slots: Slots<Flash<'static, Blocking>>) {
+pub async fn rx_task(mut rx: BufferedUartRx<'static>) {
     // Static: the decoder and the upload stage are 1.2 KiB; keep them off the task stack.
     static UPLOAD: static_cell::StaticCell<Upload> = static_cell::StaticCell::new();
     static DECODER: static_cell::StaticCell<FrameDecoder> = static_cell::StaticCell::new();
@@ -137,72 +106,44 @@ pub async fn rx_task(mut rx: BufferedUartRx<'static>, mut slots: Slots<Flash<'st
                     defmt::debug!("bad frame");
                     send(BoardMsg::Warning(Warning::BadFrame));
                 }
-                Some(Ok(msg)) => handle(msg, upload, &mut slots),
+                Some(Ok(msg)) => handle(msg, upload),
             }
         }
     }
 }
 
-fn handle(msg: HostMsg, upload: &mut Upload, slots: &mut Slots<Flash<'static, Blocking>>) {
-    match msg {
-        HostMsg::Identify => {
-            let mut firmware = heapless::String::new();
-            let _ = firmware.push_str(env!("CARGO_PKG_VERSION"));
-            send(BoardMsg::Identity {
-                protocol: PROTOCOL_VERSION,
-                firmware,
-                model: model_of(MODEL.load(Ordering::Relaxed)),
-                coeff_seq: COEFF_SEQ.load(Ordering::Relaxed),
-            });
-        }
-        HostMsg::UploadBegin { total_len, crc } => match upload.begin(total_len, crc) {
-            Ok(()) => send(BoardMsg::UploadAck { index: 0xFFFF }),
-            Err(n) => send(BoardMsg::Nack(n)),
-        },
-        HostMsg::UploadChunk { index, data } => match upload.chunk(index, &data) {
-            Ok(ChunkOutcome::Stored) | Ok(ChunkOutcome::Duplicate) => {
-                send(BoardMsg::UploadAck { index })
+fn handle(msg: HostMsg, upload: &mut Upload) {
+    let idle = MODE.load(Ordering::Relaxed) == MODE_IDLE;
+    let done = SLOTS.lock(|s| {
+        let mut s = s.borrow_mut();
+        let slots = s.as_mut()?;
+        // Erasing a page stalls the CPU (single-bank flash): commits only with the bridge off.
+        handle_upload(&msg, upload, slots, idle)
+    });
+    match done {
+        Some((reply, new)) => {
+            if let Some((c, seq)) = new {
+                defmt::info!("coefficients committed: seq {}", seq);
+                NEW_COEFFS.signal((c, seq));
             }
-            Err(n) => send(BoardMsg::Nack(n)),
-        },
-        HostMsg::UploadAbort => {
-            upload.abort();
-            send(BoardMsg::UploadAck { index: 0xFFFF });
+            send(reply);
         }
-        HostMsg::UploadCommit => {
-            // Erasing a page stalls the CPU (single-bank flash): only with the bridge off.
-            if MODE.load(Ordering::Relaxed) != MODE_IDLE {
+        None if matches!(
+            msg,
+            HostMsg::UploadBegin { .. }
+                | HostMsg::UploadChunk { .. }
+                | HostMsg::UploadCommit
+                | HostMsg::UploadAbort
+        ) =>
+        {
+            // No flash storage.
+            send(BoardMsg::Nack(Nack::Flash))
+        }
+        None => {
+            if COMMANDS.try_send(msg).is_err() {
                 send(BoardMsg::Nack(Nack::Busy));
-                return;
-            }
-            match upload.commit() {
-                Err(n) => send(BoardMsg::Nack(n)),
-                Ok((bytes, coeffs)) => match slots.store(bytes) {
-                    Ok(info) => {
-                        defmt::info!(
-                            "coefficients committed: slot {} seq {}",
-                            info.index,
-                            info.seq
-                        );
-                        COEFF_SEQ.store(info.seq, Ordering::Relaxed);
-                        MODEL.store(model_code(coeffs.model), Ordering::Relaxed);
-                        NEW_COEFFS.signal(coeffs);
-                        send(BoardMsg::Committed { seq: info.seq });
-                    }
-                    Err(_) => {
-                        defmt::error!("flash write failed");
-                        send(BoardMsg::Nack(Nack::Flash));
-                    }
-                },
             }
         }
-        HostMsg::SetSpeed { omega_ref } => command(Command::SetSpeed(omega_ref)),
-        HostMsg::SetMode { mode } => command(Command::SetMode(mode)),
-        HostMsg::StartExperiment { signal, duration_s } => {
-            command(Command::Start { signal, duration_s })
-        }
-        HostMsg::Stop => command(Command::Stop),
-        HostMsg::ClearFault => command(Command::ClearFault),
     }
 }
 

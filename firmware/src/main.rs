@@ -6,12 +6,13 @@
 //!   interrupt commutates the bridge at every edge.
 //! - [`link`]: the serial protocol of `control::frame` on USART2 (ST-LINK virtual COM port),
 //!   coefficient uploads into the two flash slots of `control::slots`.
-//! - [`excitation`]: open-loop experiment signals a-d, steady, ramp.
-//! - this file: start-up and the 12 ms control loop (`control::step::ControlStep`), faults.
+//! - this file: start-up and the 12 ms control loop: measurements in, `control::board::Board`
+//!   (the board's logic: commands, modes, limits, faults, commissioning, shared with the
+//!   emulated board) in the middle, the bridge drive out.
 //!
-//! Safety: an invalid Hall state or impossible transition, over-current, bus under- or
-//! over-voltage turn the bridge off and latch a fault (cleared by `ClearFault`, the bridge
-//! stays off until a mode is set again). The independent watchdog resets the MCU when the
+//! Safety (in `control::board`): an invalid Hall state or impossible transition,
+//! over-current, bus under- or over-voltage, overrun and stall turn the bridge off and latch
+//! a fault (cleared by `ClearFault`, the bridge stays off until a mode is set again). The independent watchdog resets the MCU when the
 //! loop stops (TIM1's reset state has the outputs off); a panic or HardFault clears TIM1's
 //! MOE first, logs over defmt and waits for the watchdog.
 //!
@@ -24,16 +25,14 @@
 
 mod board;
 mod bridge;
-mod excitation;
 mod hall_capture;
 mod link;
 
 use core::sync::atomic::Ordering;
 
-use control::blob::{Coefficients, HALL_INVALID};
-use control::frame::{BoardMsg, Excitation, Fault, Mode, Sample, Warning};
+use control::board::{store_coefficients, Board, Drive, Measurements};
+use control::frame::{BoardMsg, Mode, Warning};
 use control::slots::Slots;
-use control::step::{ControlStep, Faults, StepInputs};
 use defmt_rtt as _;
 use embassy_executor::Spawner;
 use embassy_stm32::adc::{Adc, AdcConfig, SampleTime};
@@ -51,48 +50,17 @@ use embassy_time::{Duration, Instant, Ticker};
 use static_cell::StaticCell;
 
 use crate::bridge::Bridge;
-use crate::link::{Command, COMMANDS, MODE, NEW_COEFFS, OUTGOING};
+use crate::link::{COMMANDS, MODE, NEW_COEFFS, OUTGOING, SLOTS};
 
 bind_interrupts!(struct Irqs {
     USART2 => usart::BufferedInterruptHandler<peripherals::USART2>;
 });
 
 /// Nominal bus voltage [V] when the measurement is missing: a 6S LiPo is 22.2 V nominal
-/// (UM2516: up to 6S); the step uses the measured value whenever it is valid.
+/// (UM2516: up to 6S); the board logic uses the measured value whenever it is valid.
 const V_BUS_NOMINAL: f32 = 22.2;
 /// Samples averaged for the zero-current offset of each op-amp at boot (bridge off).
 const ZERO_SAMPLES: u32 = 64;
-
-/// What runs.
-#[derive(Debug, Clone, Copy, PartialEq)]
-enum Run {
-    Idle,
-    Speed,
-    Experiment {
-        signal: Excitation,
-        duration_s: f32,
-        start: Instant,
-    },
-}
-
-/// The coefficients' Hall table for the commutation (negative: invalid state).
-fn hall_table_of(c: &Coefficients) -> [i8; 8] {
-    let mut t = [-1i8; 8];
-    for (s, &b) in t.iter_mut().zip(&c.hall_table) {
-        *s = if b == HALL_INVALID { -1 } else { b as i8 };
-    }
-    t
-}
-
-fn fault_of(f: Faults) -> Option<Fault> {
-    if f.contains(Faults::HALL_INVALID) {
-        Some(Fault::InvalidHall)
-    } else if f.contains(Faults::HALL_JUMP) || f.contains(Faults::EDGE_OVERFLOW) {
-        Some(Fault::ImpossibleTransition)
-    } else {
-        None
-    }
-}
 
 #[embassy_executor::main]
 async fn main(spawner: Spawner) {
@@ -144,28 +112,28 @@ async fn main(spawner: Spawner) {
         (zw / ZERO_SAMPLES) as u16,
     ];
 
-    // Coefficients from flash: newest valid slot, or none (plain PI loop, a warning).
+    // Coefficients from flash: newest valid slot, or none (identify and commissioning only,
+    // a warning).
     let slots = Slots::new(
         Flash::new_blocking(p.FLASH),
         link::SLOTS_OFFSET,
         link::SLOT_SIZE,
     );
-    let (slots, coeffs) = match slots {
+    let loaded = match slots {
         Ok(mut s) => {
             let c = link::load_coefficients(&mut s);
-            (Some(s), c)
+            SLOTS.lock(|cell| *cell.borrow_mut() = Some(s));
+            c
         }
         Err(_) => {
             defmt::error!("coefficient slots do not fit the flash: storage disabled");
-            (None, None)
+            None
         }
     };
-    if coeffs.is_none() {
+    if loaded.is_none() {
         let _ = OUTGOING.try_send(BoardMsg::Warning(Warning::NoCoefficients));
     }
-    let mut coeffs = coeffs.unwrap_or_default();
-    let mut step = ControlStep::new(&coeffs.step_config(V_BUS_NOMINAL));
-    let mut hall_table = hall_table_of(&coeffs);
+    let mut board = Board::new(loaded, env!("CARGO_PKG_VERSION"), V_BUS_NOMINAL);
 
     hall_capture::start(p.TIM4, p.PB6, p.PB7, p.PB8);
 
@@ -183,14 +151,14 @@ async fn main(spawner: Spawner) {
         Irqs,
         ucfg,
     );
-    match (uart, slots) {
-        (Ok(uart), Some(slots)) => {
+    match uart {
+        Ok(uart) => {
             let (tx, rx) = uart.split();
             // Each task is spawned once: its pool (size 1) cannot be exhausted.
             if let Ok(t) = link::tx_task(tx) {
                 spawner.spawn(t);
             }
-            if let Ok(t) = link::rx_task(rx, slots) {
+            if let Ok(t) = link::rx_task(rx) {
                 spawner.spawn(t);
             }
         }
@@ -200,17 +168,12 @@ async fn main(spawner: Spawner) {
     let mut wdg = IndependentWatchdog::new(p.IWDG, board::WATCHDOG_US);
     wdg.unleash();
 
-    let mut run = Run::Idle;
-    let mut omega_ref = 0.0f32;
-    let mut latched: Option<Fault> = None;
-    let mut seq = 0u32;
-    let mut run_start = Instant::now();
     let mut ticker = Ticker::every(Duration::from_micros(
         (control::CONTROL_PERIOD_S * 1.0e6) as u64,
     ));
-
     let period = Duration::from_micros((control::CONTROL_PERIOD_S * 1.0e6) as u64);
     let mut last_tick = Instant::now();
+    let mut send = |m: BoardMsg| link::send(m);
     loop {
         ticker.next().await;
         wdg.pet();
@@ -219,146 +182,82 @@ async fn main(spawner: Spawner) {
         let overrun = tick - last_tick > period + period;
         last_tick = tick;
 
-        // New coefficients (only committed in Idle): rebuild the step.
-        if let Some(c) = NEW_COEFFS.try_take() {
-            coeffs = c;
-            step = ControlStep::new(&coeffs.step_config(V_BUS_NOMINAL));
-            hall_table = hall_table_of(&coeffs);
+        // New coefficients (only committed in Idle).
+        if let Some((c, seq)) = NEW_COEFFS.try_take() {
+            board.load(c, seq);
         }
-
-        // Host commands.
-        while let Ok(cmd) = COMMANDS.try_receive() {
-            match cmd {
-                Command::SetSpeed(w) if w.is_finite() => omega_ref = w,
-                Command::SetSpeed(_) => {}
-                Command::SetMode(Mode::Idle) | Command::Stop => run = Run::Idle,
-                Command::SetMode(Mode::Speed) if latched.is_none() => {
-                    step.reset();
-                    run = Run::Speed;
-                    run_start = Instant::now();
-                    seq = 0;
-                }
-                Command::SetMode(Mode::Experiment) => {}
-                Command::Start { signal, duration_s } if latched.is_none() => {
-                    step.reset();
-                    run_start = Instant::now();
-                    seq = 0;
-                    run = Run::Experiment {
-                        signal,
-                        duration_s,
-                        start: run_start,
-                    };
-                }
-                Command::ClearFault => latched = None,
-                _ => {
-                    // Start refused while a fault is latched: repeat the fault.
-                    if let Some(f) = latched {
-                        let _ = OUTGOING.try_send(BoardMsg::Fault(f));
-                    }
-                }
-            }
+        // Host commands: the board logic answers them.
+        while let Ok(msg) = COMMANDS.try_receive() {
+            board.handle(&msg, &mut send);
         }
 
         // Measurements.
         let v_bus = board::vbus_from_raw(adc1.blocking_read(&mut vbus_pin, ST_VBUS));
-        let last_step_k = bridge::last_step();
-        let lo = bridge::low_phase(last_step_k);
+        let lo = bridge::low_phase(bridge::last_step());
         let raw = match lo {
             0 => adc1.blocking_read(&mut i_u, ST_CURRENT),
             1 => adc2.blocking_read(&mut i_v, ST_CURRENT),
             _ => adc1.blocking_read(&mut i_w, ST_CURRENT),
         };
-        // Current leaves through the low phase's shunt; in the reversed steps (k ≥ 3) the
-        // winding current is negative. ASSUMED sign convention: verify on the bench.
-        let i_phase = board::current_from_raw(raw, zero[lo]);
-        let i_meas = if bridge.is_on() {
-            if last_step_k < 3 {
-                -i_phase
-            } else {
-                i_phase
-            }
+        // The winding current leaves through the low phase's shunt: along the applied vector
+        // it is −i_phase (ASSUMED sign convention; commissioning measures and stores the
+        // sign, `Commissioning::current_sign`).
+        let i_vector = if bridge.is_on() {
+            -board::current_from_raw(raw, zero[lo])
         } else {
             0.0
         };
         let (edges, edges_overflow) = hall_capture::take_edges();
-        let now = Instant::now();
-        let v_override = match run {
-            Run::Experiment {
-                signal,
-                duration_s,
-                start,
-            } => {
-                let t = (now - start).as_micros() as f32 * 1.0e-6;
-                if t >= duration_s {
-                    run = Run::Idle;
-                    None
-                } else {
-                    Some(excitation::voltage(signal, t))
-                }
-            }
-            _ => None,
-        };
-        let inp = StepInputs {
+        let m = Measurements {
             hall: hall_capture::hall_state(),
             edges,
             edges_overflow,
             now_ticks: hall_capture::now_ticks(),
-            i_meas,
+            i_vector,
             v_bus,
-            omega_ref,
-            v_override,
+            overrun,
         };
-        let out = step.step(&inp);
-
-        // Safety checks.
-        let active = run != Run::Idle;
-        let lim = &coeffs.limits;
-        let fault = if i_meas.abs() > lim.i_max {
-            Some(Fault::OverCurrent)
-        } else if v_bus > lim.vbus_max {
-            Some(Fault::OverVoltage)
-        } else if active && v_bus < lim.vbus_min {
-            Some(Fault::UnderVoltage)
-        } else if active && overrun {
-            Some(Fault::Overrun)
-        } else if active {
-            fault_of(out.faults)
-        } else {
-            None
-        };
-        if let Some(f) = fault {
-            bridge.off();
-            if latched.is_none() {
-                defmt::error!("fault {}: bridge off", f as u8);
-                let _ = OUTGOING.try_send(BoardMsg::Fault(f));
-            }
-            latched = Some(f);
-            run = Run::Idle;
+        let drive = board.tick(&m, &mut send);
+        if board.mode() == Mode::Idle {
+            // A commissioning result to store (the bridge is off: erasing stalls the CPU).
+            SLOTS.lock(|cell| {
+                if let Some(slots) = cell.borrow_mut().as_mut() {
+                    store_coefficients(&mut board, slots, &mut send);
+                }
+            });
         }
 
         // Actuation: set the drive; the Hall-edge interrupt commutates between samples.
-        let v_applied = match (run, step.decoder().sector()) {
-            (Run::Idle, _) | (_, None) => {
-                bridge.off();
-                0.0
-            }
-            (_, Some(_)) => {
-                let d = bridge::duty(out.v_cmd, v_bus);
+        match drive {
+            Drive::Off => bridge.off(),
+            Drive::SixStep { volts, table } => {
+                let d = bridge::duty(volts, v_bus);
                 bridge::set_drive(bridge::Drive {
                     on: true,
-                    reverse: out.v_cmd < 0.0,
+                    reverse: volts < 0.0,
                     duty: bridge.duty_counts(d),
-                    table: hall_table,
+                    table: table.sector,
+                    hold: None,
                 });
                 bridge::commutate(hall_capture::hall_state());
-                d * v_bus * if out.v_cmd < 0.0 { -1.0 } else { 1.0 }
             }
-        };
+            Drive::Vector { step, volts } => {
+                let d = bridge::duty(volts, v_bus);
+                bridge::set_drive(bridge::Drive {
+                    on: true,
+                    reverse: false,
+                    duty: bridge.duty_counts(d),
+                    table: [-1; 8],
+                    hold: Some(step),
+                });
+                bridge::commutate(hall_capture::hall_state());
+            }
+        }
         MODE.store(
-            match run {
-                Run::Idle => link::MODE_IDLE,
-                Run::Speed => link::MODE_SPEED,
-                Run::Experiment { .. } => link::MODE_EXPERIMENT,
+            if board.mode() == Mode::Idle {
+                link::MODE_IDLE
+            } else {
+                link::MODE_RUNNING
             },
             Ordering::Relaxed,
         );
@@ -367,20 +266,6 @@ async fn main(spawner: Spawner) {
         } else {
             Level::Low
         });
-
-        // Log sample every 12 ms while running.
-        if run != Run::Idle {
-            let t = (now - run_start).as_micros() as f32 * 1.0e-6;
-            let _ = OUTGOING.try_send(BoardMsg::Sample(Sample {
-                seq,
-                t,
-                u: v_applied,
-                i: i_meas,
-                theta: out.theta,
-                omega: out.omega,
-            }));
-            seq = seq.wrapping_add(1);
-        }
     }
 }
 

@@ -44,6 +44,8 @@ enum Command {
     Record(cmd::record::Args),
     /// Run the emulated board (control step + motor) behind a pseudo-terminal.
     Board(cmd::board::Args),
+    /// Run the board's Hall commissioning and store the result.
+    Commission(cmd::commission::Args),
     /// Closed-loop speed control with friction compensation on the emulated motor.
     Emulate(cmd::emulate::Args),
     /// Regenerate the reference paper's fit table on emulated data.
@@ -119,6 +121,7 @@ fn main() -> ExitCode {
         Command::Upload(a) => cmd::upload::run(a),
         Command::Record(a) => cmd::record::run(a),
         Command::Board(a) => cmd::board::run(a),
+        Command::Commission(a) => cmd::commission::run(a),
         Command::Emulate(a) => cmd::emulate::run(a),
         Command::PaperTable(a) => cmd::paper_table::run(a),
         Command::RealData(a) => cmd::real_data::run(a),

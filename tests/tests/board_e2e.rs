@@ -14,8 +14,13 @@ struct Board {
 
 impl Board {
     fn start(dir: &Path, speed: &str) -> Board {
+        Board::start_wired(dir, speed, &[])
+    }
+
+    fn start_wired(dir: &Path, speed: &str, extra: &[&str]) -> Board {
         let mut child = Command::new(motorid_bin())
             .args(["board", "--pty", "--speed", speed])
+            .args(extra)
             .current_dir(dir)
             .stdout(Stdio::piped())
             .stderr(Stdio::null())
@@ -178,4 +183,110 @@ fn no_board_is_one_error_line() {
     assert_eq!(err.lines().count(), 1, "{err}");
     assert!(err.starts_with("error: /dev/nonexistent-tty"), "{err}");
     assert!(!dir.path().join("x.csv").exists());
+}
+
+/// The Hall state sequence a motor wired as (`hall`, `phase`) shows under bridge steps 0..5.
+fn expected_sequence(hall: &str, phase: &str) -> [u8; 6] {
+    use motorid::board::hw::{parse_order, Wiring};
+    let w = Wiring {
+        hall_order: parse_order(hall).unwrap(),
+        phase_order: parse_order(phase).unwrap(),
+        current_inverted: false,
+    };
+    let default = control::commission::DEFAULT_SEQUENCE;
+    std::array::from_fn(|k| w.hall(default[w.aligned_sector(k as u8) as usize]))
+}
+
+#[test]
+fn commissioning_learns_every_hall_order_and_the_motor_then_runs() {
+    // All six Hall connector orders, with phase orders that reverse the direction too.
+    let cases = [
+        ("123", "123", false),
+        ("132", "123", false),
+        ("213", "132", false),
+        ("231", "321", true),
+        ("312", "213", false),
+        ("321", "231", false),
+    ];
+    let mut reversed_seen = false;
+    for (hall, phase, invert) in cases {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        let mut extra = vec!["--hall-order", hall, "--phase-order", phase];
+        if invert {
+            extra.push("--invert-current");
+        }
+        let board = Board::start_wired(d, "50", &extra);
+        let what = format!("hall {hall} phase {phase}");
+
+        // Without coefficients the board refuses to run...
+        let out = motorid(
+            d,
+            &[
+                "record",
+                "--port",
+                &board.port,
+                "--speed-ref",
+                "30",
+                "--duration",
+                "1",
+                "-o",
+                "x.csv",
+            ],
+        );
+        assert!(!out.status.success(), "{what}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains("no valid coefficients"), "{what}: {err}");
+
+        // ...but commissions.
+        let out = ok(&motorid(
+            d,
+            &["commission", "--port", &board.port, "--json"],
+        ));
+        let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+        let seq: Vec<u8> = v["hall_sequence"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x.as_u64().unwrap() as u8)
+            .collect();
+        assert_eq!(seq, expected_sequence(hall, phase), "{what}: {v}");
+        assert_eq!(v["edges_per_electrical_rev"], 6, "{what}: {v}");
+        assert_eq!(
+            v["current_sign"],
+            if invert { -1 } else { 1 },
+            "{what}: {v}"
+        );
+        assert_eq!(v["stored_seq"], 1, "{what}: {v}");
+        reversed_seen |= v["reversed"] == true;
+
+        // The stored result reads back.
+        let again = ok(&motorid(
+            d,
+            &["commission", "--port", &board.port, "--read", "--json"],
+        ));
+        let w: serde_json::Value = serde_json::from_str(&again).unwrap();
+        assert_eq!(w, v, "{what}");
+
+        // With the learned table the motor runs under speed control.
+        ok(&motorid(
+            d,
+            &[
+                "record",
+                "--port",
+                &board.port,
+                "--speed-ref",
+                "30",
+                "--duration",
+                "4",
+                "-o",
+                "s.csv",
+            ],
+        ));
+        let (_, rows, _) = read_log(&d.join("s.csv"));
+        let tail: Vec<f64> = rows[rows.len() - 80..].iter().map(|r| r[4]).collect();
+        let mean = tail.iter().sum::<f64>() / tail.len() as f64;
+        assert!((mean - 30.0).abs() < 3.0, "{what}: mean speed {mean}");
+    }
+    assert!(reversed_seen, "no case reversed the direction");
 }

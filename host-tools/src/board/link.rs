@@ -1,6 +1,7 @@
 //! The serial link client: talks to the board (or `motorid board --pty`) with the frames of
 //! `control::frame` over a serial device, with timeouts and retries.
 use anyhow::{anyhow, bail, Context, Result};
+use control::commission::CommissionOutcome;
 use control::frame::{
     self, BoardMsg, Excitation, FrameDecoder, HostMsg, Nack, Sample, CHUNK_LEN, MAX_ENCODED_LEN,
 };
@@ -204,6 +205,43 @@ impl Link {
         Ok(())
     }
 
+    /// Read the board's Hall commissioning result and the slot it is stored in.
+    pub fn read_commission(&mut self) -> Result<(CommissionOutcome, u32)> {
+        match self.request(&HostMsg::ReadCommission)? {
+            BoardMsg::Commission { outcome, seq } => Ok((outcome, seq)),
+            BoardMsg::Nack(n) => bail!("{}: the board refused: {}", self.name, nack_text(n)),
+            other => bail!(
+                "{}: unexpected answer to ReadCommission: {other:?}",
+                self.name
+            ),
+        }
+    }
+
+    /// Run the Hall commissioning and wait (at most `timeout`) for its result.
+    pub fn commission(&mut self, timeout: Duration) -> Result<(CommissionOutcome, u32)> {
+        self.command(&HostMsg::Commission, "the commissioning")?;
+        let deadline = Instant::now() + timeout;
+        while let Some(left) = deadline.checked_duration_since(Instant::now()) {
+            match self.recv(left)? {
+                Some(BoardMsg::Commission { outcome, seq })
+                    if outcome != CommissionOutcome::Running =>
+                {
+                    return Ok((outcome, seq))
+                }
+                Some(BoardMsg::Fault(f)) => {
+                    bail!("{}: the board stopped with a fault: {f:?}", self.name)
+                }
+                Some(_) => {}
+                None => break,
+            }
+        }
+        bail!(
+            "{}: no commissioning result within {} s",
+            self.name,
+            timeout.as_secs()
+        )
+    }
+
     /// A request answered by a plain `Ack`.
     pub fn command(&mut self, msg: &HostMsg, what: &str) -> Result<()> {
         self.expect(msg, what, |m| matches!(m, BoardMsg::Ack))?;
@@ -234,5 +272,9 @@ pub fn nack_text(n: Nack) -> String {
         Nack::Busy => "the motor is running; stop it first".into(),
         Nack::Flash => "writing the flash failed".into(),
         Nack::Faulted => "a fault is latched; clear it first".into(),
+        Nack::NoCoefficients => {
+            "the board has no valid coefficients (upload a blob, or run motorid commission)".into()
+        }
+        Nack::OutOfRange => "a parameter is outside what the board allows".into(),
     }
 }

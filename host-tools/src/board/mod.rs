@@ -5,12 +5,14 @@
 //! |---|---|
 //! | [`coeffs`] | MODEL.toml → [`control::blob::Coefficients`] → blob bytes; blob files checked |
 //! | [`rig`] | the emulated board: control step (f32) + emulated motor, 12 ms at a time |
-//! | [`sim`] | the emulated firmware: serial protocol handler, modes, faults, log samples |
+//! | [`sim`] | the emulated board: `control::board` (the firmware's logic) on [`hw`] |
+//! | [`hw`] | the emulated hardware: motor, six-step bridge, Hall inputs, wiring |
 //! | [`flash`] | the emulated coefficient flash (RAM or file) for `control::slots` |
 //! | [`pty`] | a raw pseudo-terminal whose slave device clients open as a serial port |
 //! | [`link`] | the serial link client: identify, upload, experiments, with retries |
 pub mod coeffs;
 pub mod flash;
+pub mod hw;
 pub mod link;
 pub mod pty;
 pub mod rig;

@@ -1,120 +1,99 @@
-//! The emulated board's firmware logic, transport-free: the serial protocol handler (the
-//! same messages and rules as `firmware/src/link.rs`, built on `control::frame`'s decoder and
-//! upload state machine and `control::slots`' two-slot storage) and the 12 ms control task
-//! (modes idle / speed / experiment, faults, log samples), driving the [`Rig`].
+//! The emulated board, transport-free: the firmware's own logic ([`control::board`]: command
+//! handler, modes, limits, faults, commissioning; the upload handler and `control::slots`'
+//! two-slot storage) on emulated hardware ([`super::hw`]: the motor emulator behind a
+//! six-step bridge, Hall inputs and a current sense, wired in any order).
 //!
 //! Feed received bytes to [`BoardSim::receive`], call [`BoardSim::tick`] every control
 //! period, send what [`BoardSim::take_output`] returns.
 use super::flash::RamFlash;
-use super::rig::Rig;
-use crate::emulator::{signal_at, EmulatorConfig, SignalKind};
+use super::hw::{Hardware, Wiring};
+use crate::emulator::EmulatorConfig;
 use anyhow::{anyhow, Result};
 use control::blob::{self, Coefficients};
+use control::board::{handle_upload, store_coefficients, Board};
 use control::frame::{
-    self, BoardMsg, ChunkOutcome, Excitation, Fault, FrameDecoder, HostMsg, Mode, Nack, Sample,
-    Upload, Warning, MAX_ENCODED_LEN, PROTOCOL_VERSION,
+    self, BoardMsg, FrameDecoder, HostMsg, Mode, Upload, Warning, MAX_ENCODED_LEN,
 };
 use control::slots::Slots;
-use control::step::Faults;
 
 /// Nominal bus voltage of the emulated board [V]: a 6S LiPo at rest (the firmware's
 /// `V_BUS_NOMINAL`, 22.2 V).
 pub const V_BUS_NOMINAL: f32 = 22.2;
 
-#[derive(Debug, Clone, PartialEq)]
-enum Run {
-    Idle,
-    Speed,
-    Experiment {
-        /// Voltage per period, precomputed.
-        volts: Vec<f64>,
-        k: usize,
-    },
-}
-
-/// The emulated board.
+/// The emulated board: [`control::board::Board`] (the firmware's logic) on emulated
+/// hardware, with the serial transport and the flash of `control`.
 pub struct BoardSim {
-    rig: Rig,
-    coeffs: Coefficients,
-    coeff_seq: u32,
+    hw: Hardware,
+    board: Board,
     slots: Slots<RamFlash>,
     upload: Upload,
     decoder: FrameDecoder,
-    run: Run,
-    omega_ref: f32,
-    latched: Option<Fault>,
-    seq: u32,
-    run_start: f64,
     out: Vec<u8>,
-    seed: u64,
 }
 
-fn fault_of(f: Faults) -> Option<Fault> {
-    if f.contains(Faults::HALL_INVALID) {
-        Some(Fault::InvalidHall)
-    } else if f.contains(Faults::HALL_JUMP) {
-        Some(Fault::ImpossibleTransition)
-    } else {
-        None
+/// Frames `msg` into `out`.
+fn put(out: &mut Vec<u8>, msg: BoardMsg) {
+    let mut buf = [0u8; MAX_ENCODED_LEN];
+    if let Ok(f) = frame::encode_frame(&msg, &mut buf) {
+        out.extend_from_slice(f);
     }
 }
 
 impl BoardSim {
     /// A board at power-up: loads the newest valid coefficient slot of `flash` (or runs
-    /// without compensation, with a warning, as the firmware does).
-    pub fn new(plant: EmulatorConfig, flash: RamFlash) -> Result<BoardSim> {
-        let seed = plant.seed;
+    /// without compensation, with a warning, as the firmware does); the motor is connected
+    /// as `wiring` says.
+    pub fn new(plant: EmulatorConfig, wiring: Wiring, flash: RamFlash) -> Result<BoardSim> {
         let mut slots = Slots::new(flash, 0, super::flash::PAGE as u32)
             .map_err(|e| anyhow!("emulated flash geometry: {e:?}"))?;
         let loaded = slots
             .load()
             .map_err(|e| anyhow!("emulated flash read: {e:?}"))?;
-        let (coeffs, coeff_seq) = match loaded {
-            Some((info, c)) => (c, info.seq),
-            None => (Coefficients::default(), 0),
-        };
-        let rig = Rig::new(plant, &coeffs.step_config(V_BUS_NOMINAL))?;
+        let loaded = loaded.map(|(info, c)| (c, info.seq));
+        let none = loaded.is_none();
+        // "emu-" marks the emulated board; the version is the firmware crate's.
+        let board = Board::new(
+            loaded,
+            concat!("emu-", env!("CARGO_PKG_VERSION")),
+            V_BUS_NOMINAL,
+        );
         let mut sim = BoardSim {
-            rig,
-            coeffs,
-            coeff_seq,
+            hw: Hardware::new(plant, wiring)?,
+            board,
             slots,
             upload: Upload::new(),
             decoder: FrameDecoder::new(),
-            run: Run::Idle,
-            omega_ref: 0.0,
-            latched: None,
-            seq: 0,
-            run_start: 0.0,
             out: Vec::new(),
-            seed,
         };
-        if coeff_seq == 0 {
-            sim.send(&BoardMsg::Warning(Warning::NoCoefficients));
+        if none {
+            put(&mut sim.out, BoardMsg::Warning(Warning::NoCoefficients));
         }
         Ok(sim)
     }
 
     /// The loaded coefficients.
     pub fn coefficients(&self) -> &Coefficients {
-        &self.coeffs
+        self.board.coefficients()
     }
 
     /// Sequence number of the loaded slot (0: none).
     pub fn coeff_seq(&self) -> u32 {
-        self.coeff_seq
+        self.board.coeff_seq()
     }
 
-    /// True while a run (speed or experiment) is active.
+    /// True while a run (speed, experiment, commissioning) is active.
     pub fn is_running(&self) -> bool {
-        self.run != Run::Idle
+        self.board.mode() != Mode::Idle
     }
 
-    fn send(&mut self, msg: &BoardMsg) {
-        let mut buf = [0u8; MAX_ENCODED_LEN];
-        if let Ok(f) = frame::encode_frame(msg, &mut buf) {
-            self.out.extend_from_slice(f);
-        }
+    /// The board logic.
+    pub fn board(&self) -> &Board {
+        &self.board
+    }
+
+    /// The emulated hardware (motor truth).
+    pub fn hardware(&self) -> &Hardware {
+        &self.hw
     }
 
     /// Bytes to send to the host (whole frames).
@@ -127,174 +106,35 @@ impl BoardSim {
         for &b in bytes {
             match self.decoder.push::<HostMsg>(b) {
                 None => {}
-                Some(Err(_)) => self.send(&BoardMsg::Warning(Warning::BadFrame)),
-                Some(Ok(msg)) => self.handle(msg),
+                Some(Err(_)) => put(&mut self.out, BoardMsg::Warning(Warning::BadFrame)),
+                Some(Ok(msg)) => self.handle(&msg),
             }
         }
     }
 
-    fn handle(&mut self, msg: HostMsg) {
-        let reply = match msg {
-            HostMsg::Identify => {
-                let mut id = BoardMsg::Identity {
-                    protocol: PROTOCOL_VERSION,
-                    firmware: Default::default(),
-                    model: self.coeffs.model,
-                    coeff_seq: self.coeff_seq,
-                };
-                if let BoardMsg::Identity { firmware, .. } = &mut id {
-                    // "emu-" marks the emulated board; the version is the firmware crate's.
-                    let _ = firmware.push_str(concat!("emu-", env!("CARGO_PKG_VERSION")));
-                }
-                id
-            }
-            HostMsg::UploadBegin { total_len, crc } => match self.upload.begin(total_len, crc) {
-                Ok(()) => BoardMsg::UploadAck { index: 0xFFFF },
-                Err(n) => BoardMsg::Nack(n),
-            },
-            HostMsg::UploadChunk { index, data } => match self.upload.chunk(index, &data) {
-                Ok(ChunkOutcome::Stored) | Ok(ChunkOutcome::Duplicate) => {
-                    BoardMsg::UploadAck { index }
-                }
-                Err(n) => BoardMsg::Nack(n),
-            },
-            HostMsg::UploadAbort => {
-                self.upload.abort();
-                BoardMsg::UploadAck { index: 0xFFFF }
-            }
-            HostMsg::UploadCommit => {
-                if self.run != Run::Idle {
-                    BoardMsg::Nack(Nack::Busy)
-                } else {
-                    match self.upload.commit() {
-                        Err(n) => BoardMsg::Nack(n),
-                        Ok((bytes, coeffs)) => match self.slots.store(bytes) {
-                            Ok(info) => {
-                                self.coeff_seq = info.seq;
-                                self.rig.reconfigure(&coeffs.step_config(V_BUS_NOMINAL));
-                                self.coeffs = coeffs;
-                                BoardMsg::Committed { seq: info.seq }
-                            }
-                            Err(_) => BoardMsg::Nack(Nack::Flash),
-                        },
-                    }
-                }
-            }
-            HostMsg::SetSpeed { omega_ref } => {
-                if omega_ref.is_finite() {
-                    self.omega_ref = omega_ref;
-                }
-                BoardMsg::Ack
-            }
-            HostMsg::SetMode { mode } => match mode {
-                Mode::Idle => {
-                    self.run = Run::Idle;
-                    BoardMsg::Ack
-                }
-                _ if self.latched.is_some() => BoardMsg::Nack(Nack::Faulted),
-                Mode::Speed => {
-                    self.start(Run::Speed);
-                    BoardMsg::Ack
-                }
-                // Experiment mode starts with StartExperiment.
-                Mode::Experiment => BoardMsg::Ack,
-            },
-            HostMsg::StartExperiment { signal, duration_s } => {
-                if self.latched.is_some() {
-                    BoardMsg::Nack(Nack::Faulted)
-                } else {
-                    let volts = excitation(signal, f64::from(duration_s), self.seed);
-                    self.start(Run::Experiment { volts, k: 0 });
-                    BoardMsg::Ack
-                }
-            }
-            HostMsg::Stop => {
-                self.run = Run::Idle;
-                BoardMsg::Ack
-            }
-            HostMsg::ClearFault => {
-                self.latched = None;
-                BoardMsg::Ack
-            }
-        };
-        self.send(&reply);
-    }
-
-    fn start(&mut self, run: Run) {
-        self.rig
-            .reconfigure(&self.coeffs.step_config(V_BUS_NOMINAL));
-        self.run = run;
-        self.run_start = self.rig.time();
-        self.seq = 0;
-    }
-
-    /// One 12 ms control period. In idle the bridge is off and nothing is simulated.
-    pub fn tick(&mut self) {
-        let v_override = match &mut self.run {
-            Run::Idle => return,
-            Run::Speed => None,
-            Run::Experiment { volts, k } => match volts.get(*k) {
-                Some(&v) => {
-                    *k += 1;
-                    Some(v)
-                }
-                None => {
-                    self.run = Run::Idle;
-                    return;
-                }
-            },
-        };
-        let s = self.rig.step(f64::from(self.omega_ref), v_override);
-        let lim = self.coeffs.limits;
-        let fault = if s.i_meas.abs() > f64::from(lim.i_max) {
-            Some(Fault::OverCurrent)
-        } else {
-            fault_of(s.out.faults)
-        };
-        if let Some(f) = fault {
-            if self.latched.is_none() {
-                self.send(&BoardMsg::Fault(f));
-            }
-            self.latched = Some(f);
-            self.run = Run::Idle;
+    /// One host message, as the firmware's link task and control loop handle it.
+    pub fn handle(&mut self, msg: &HostMsg) {
+        let out = &mut self.out;
+        if self.board.handle(msg, &mut |m| put(out, m)) {
             return;
         }
-        let sample = Sample {
-            seq: self.seq,
-            t: (s.t - self.run_start) as f32,
-            u: s.out.v_cmd,
-            i: s.i_meas as f32,
-            theta: s.out.theta,
-            omega: s.out.omega,
-        };
-        self.seq = self.seq.wrapping_add(1);
-        self.send(&BoardMsg::Sample(sample));
-    }
-}
-
-/// Longest experiment the board runs [s]; a longer request is cut to this.
-pub const MAX_EXPERIMENT_S: f64 = 3600.0;
-
-/// The board's excitation voltage per period, from the host emulator's signal table.
-pub fn excitation(signal: Excitation, duration_s: f64, seed: u64) -> Vec<f64> {
-    let ts = f64::from(control::CONTROL_PERIOD_S);
-    // The duration comes over the serial link: bounded (NaN gives 0 samples).
-    let n = (duration_s.clamp(0.0, MAX_EXPERIMENT_S) / ts).round() as usize;
-    let kind = match signal {
-        Excitation::A => SignalKind::A,
-        Excitation::B => SignalKind::B,
-        Excitation::C => SignalKind::C,
-        Excitation::D => SignalKind::D,
-        Excitation::Steady { volts } => return vec![f64::from(volts); n],
-        Excitation::Ramp { volts_per_s } => {
-            return (0..n)
-                .map(|k| f64::from(volts_per_s) * k as f64 * ts)
-                .collect()
+        let idle = self.board.mode() == Mode::Idle;
+        if let Some((reply, new)) = handle_upload(msg, &mut self.upload, &mut self.slots, idle) {
+            if let Some((c, seq)) = new {
+                self.board.load(c, seq);
+            }
+            put(&mut self.out, reply);
         }
-    };
-    let mut v = signal_at(kind, duration_s.max(2.0 * ts), seed, ts);
-    v.truncate(n);
-    v
+    }
+
+    /// One 12 ms control period: measure, run the board logic, drive the motor.
+    pub fn tick(&mut self) {
+        let m = self.hw.measure();
+        let out = &mut self.out;
+        let drive = self.board.tick(&m, &mut |msg| put(out, msg));
+        store_coefficients(&mut self.board, &mut self.slots, &mut |msg| put(out, msg));
+        self.hw.apply(drive, f64::from(control::CONTROL_PERIOD_S));
+    }
 }
 
 /// Blob helper for tests and tools: decode or say why not.
@@ -305,7 +145,7 @@ pub fn decode_blob(bytes: &[u8]) -> Result<Coefficients> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use control::frame::{decode_frame, encode_frame, CHUNK_LEN};
+    use control::frame::{decode_frame, encode_frame, Excitation, Fault, Nack, Sample, CHUNK_LEN};
 
     fn frame(msg: &HostMsg) -> Vec<u8> {
         let mut buf = [0u8; MAX_ENCODED_LEN];
@@ -332,7 +172,12 @@ mod tests {
 
     #[test]
     fn upload_with_a_retried_chunk_commits_once_and_is_refused_while_running() {
-        let mut sim = BoardSim::new(EmulatorConfig::paper(), RamFlash::new(None)).unwrap();
+        let mut sim = BoardSim::new(
+            EmulatorConfig::paper(),
+            Wiring::default(),
+            RamFlash::new(None),
+        )
+        .unwrap();
         assert_eq!(
             replies(&mut sim),
             [BoardMsg::Warning(Warning::NoCoefficients)]
@@ -378,5 +223,247 @@ mod tests {
         sim.receive(&frame(&HostMsg::UploadCommit));
         let r = replies(&mut sim);
         assert_eq!(r.last(), Some(&BoardMsg::Nack(Nack::Busy)));
+    }
+
+    /// Upload `co` through the board's own upload handler.
+    fn upload(sim: &mut BoardSim, co: &Coefficients) {
+        let blob = crate::board::coeffs::encode(co).unwrap();
+        let crc = control::blob::CRC32.checksum(&blob);
+        sim.receive(&frame(&HostMsg::UploadBegin {
+            total_len: blob.len() as u16,
+            crc,
+        }));
+        for (k, c) in blob.chunks(CHUNK_LEN).enumerate() {
+            sim.receive(&frame(&chunk(k as u16, c)));
+        }
+        sim.receive(&frame(&HostMsg::UploadCommit));
+        let r = replies(sim);
+        assert!(
+            matches!(r.last(), Some(BoardMsg::Committed { .. })),
+            "{r:?}"
+        );
+    }
+
+    /// Ticks until a fault (returned with the samples seen) or `n` periods.
+    fn run_until_fault(sim: &mut BoardSim, n: usize) -> (Option<Fault>, Vec<Sample>) {
+        let mut samples = Vec::new();
+        for k in 0..n {
+            if k.is_multiple_of(50) {
+                // As a listening host does: a sign of life now and then.
+                sim.receive(&frame(&HostMsg::Heartbeat));
+            }
+            sim.tick();
+            for m in replies(sim) {
+                match m {
+                    BoardMsg::Sample(s) => samples.push(s),
+                    BoardMsg::Fault(f) => return (Some(f), samples),
+                    _ => {}
+                }
+            }
+        }
+        (None, samples)
+    }
+
+    fn sim_with(plant: EmulatorConfig, co: Option<&Coefficients>) -> BoardSim {
+        let mut sim = BoardSim::new(plant, Wiring::default(), RamFlash::new(None)).unwrap();
+        replies(&mut sim);
+        if let Some(co) = co {
+            upload(&mut sim, co);
+        }
+        sim
+    }
+
+    #[test]
+    fn speed_and_experiment_need_a_valid_blob_and_sane_parameters() {
+        let mut sim = sim_with(EmulatorConfig::paper(), None);
+        sim.receive(&frame(&HostMsg::SetMode { mode: Mode::Speed }));
+        sim.receive(&frame(&HostMsg::StartExperiment {
+            signal: Excitation::A,
+            duration_s: 1.0,
+        }));
+        assert_eq!(
+            replies(&mut sim),
+            [
+                BoardMsg::Nack(Nack::NoCoefficients),
+                BoardMsg::Nack(Nack::NoCoefficients)
+            ]
+        );
+        assert!(!sim.is_running());
+        // A damaged upload is refused and changes nothing.
+        let blob = crate::board::coeffs::encode(&Coefficients::default()).unwrap();
+        let mut bad = blob.clone();
+        bad[20] ^= 0x40;
+        sim.receive(&frame(&HostMsg::UploadBegin {
+            total_len: bad.len() as u16,
+            crc: control::blob::CRC32.checksum(&bad),
+        }));
+        for (k, c) in bad.chunks(CHUNK_LEN).enumerate() {
+            sim.receive(&frame(&chunk(k as u16, c)));
+        }
+        sim.receive(&frame(&HostMsg::UploadCommit));
+        assert_eq!(
+            replies(&mut sim).last(),
+            Some(&BoardMsg::Nack(Nack::BadBlob))
+        );
+        sim.receive(&frame(&HostMsg::SetMode { mode: Mode::Speed }));
+        assert_eq!(replies(&mut sim), [BoardMsg::Nack(Nack::NoCoefficients)]);
+        // Identify and commissioning stay allowed.
+        sim.receive(&frame(&HostMsg::Identify));
+        assert!(matches!(
+            replies(&mut sim)[0],
+            BoardMsg::Identity { coeff_seq: 0, .. }
+        ));
+        sim.receive(&frame(&HostMsg::Commission));
+        assert_eq!(replies(&mut sim), [BoardMsg::Ack]);
+        sim.receive(&frame(&HostMsg::Stop));
+        replies(&mut sim);
+
+        upload(&mut sim, &Coefficients::default());
+        for (signal, duration_s) in [
+            (Excitation::A, f32::NAN),
+            (Excitation::A, f32::INFINITY),
+            (Excitation::A, 1.0e9),
+            (Excitation::A, -1.0),
+            (Excitation::A, 0.0),
+            (Excitation::Steady { volts: 100.0 }, 1.0),
+            (Excitation::Steady { volts: f32::NAN }, 1.0),
+        ] {
+            sim.receive(&frame(&HostMsg::StartExperiment { signal, duration_s }));
+            assert_eq!(
+                replies(&mut sim),
+                [BoardMsg::Nack(Nack::OutOfRange)],
+                "{signal:?} {duration_s}"
+            );
+        }
+        // Amplitudes are relative to u_max (12 V by default: signal d steps up to 5 V).
+        sim.receive(&frame(&HostMsg::StartExperiment {
+            signal: Excitation::D,
+            duration_s: 6.0,
+        }));
+        let (f, samples) = run_until_fault(&mut sim, 600);
+        assert_eq!(f, None);
+        assert_eq!(samples.len(), 500);
+        let peak = samples.iter().map(|s| s.u.abs()).fold(0.0, f32::max);
+        assert!(peak > 1.0 && peak <= 5.0 + 1e-4, "peak {peak}");
+    }
+
+    #[test]
+    fn u_max_from_the_blob_bounds_the_speed_loop() {
+        let mut co = Coefficients::default();
+        co.pi.u_max = 3.0;
+        let mut sim = sim_with(EmulatorConfig::paper(), Some(&co));
+        sim.receive(&frame(&HostMsg::SetSpeed { omega_ref: 150.0 }));
+        sim.receive(&frame(&HostMsg::SetMode { mode: Mode::Speed }));
+        let (f, samples) = run_until_fault(&mut sim, 150);
+        assert_eq!(f, None);
+        let peak = samples.iter().map(|s| s.u.abs()).fold(0.0, f32::max);
+        assert!((peak - 3.0).abs() < 1e-6, "peak {peak}");
+    }
+
+    #[test]
+    fn overcurrent_trips_and_turns_the_bridge_off() {
+        let mut co = Coefficients::default();
+        co.limits.i_max = 5.0;
+        let mut sim = sim_with(EmulatorConfig::paper(), Some(&co));
+        // 6 V on a 0.22 Ω winding: 27 A within the first period.
+        sim.receive(&frame(&HostMsg::StartExperiment {
+            signal: Excitation::Steady { volts: 6.0 },
+            duration_s: 2.0,
+        }));
+        replies(&mut sim);
+        let (f, _) = run_until_fault(&mut sim, 50);
+        assert_eq!(f, Some(Fault::OverCurrent));
+        assert!(!sim.is_running());
+        // Latched: no start until cleared.
+        sim.receive(&frame(&HostMsg::SetMode { mode: Mode::Speed }));
+        assert_eq!(replies(&mut sim), [BoardMsg::Nack(Nack::Faulted)]);
+        // The bridge is off: the current dies away.
+        for _ in 0..20 {
+            sim.tick();
+        }
+        assert!(sim.hardware().plant().truth().i.abs() < 1e-3);
+        sim.receive(&frame(&HostMsg::ClearFault));
+        sim.receive(&frame(&HostMsg::SetMode { mode: Mode::Speed }));
+        assert_eq!(replies(&mut sim), [BoardMsg::Ack, BoardMsg::Ack]);
+    }
+
+    #[test]
+    fn current_derating_keeps_a_rising_voltage_below_the_trip() {
+        // A locked rotor and a voltage ramp of 8 V/s: 44 A after 1.2 s without a limit.
+        let mut plant = EmulatorConfig::paper();
+        plant.extra_load = Some(std::sync::Arc::new(|x| 1.0e4 * x.omega));
+        let mut co = Coefficients::default();
+        co.pi.u_max = 20.0;
+        co.limits.i_max = 20.0;
+        let mut no_limit = co.clone();
+        no_limit.limits.i_max = 1000.0;
+        let peak = |co: &Coefficients| {
+            let mut sim = sim_with(plant.clone(), Some(co));
+            sim.receive(&frame(&HostMsg::StartExperiment {
+                signal: Excitation::Ramp { volts_per_s: 8.0 },
+                duration_s: 1.2,
+            }));
+            replies(&mut sim);
+            let (f, samples) = run_until_fault(&mut sim, 100);
+            let peak = samples.iter().map(|s| s.i.abs()).fold(0.0, f32::max);
+            (f, peak, samples.last().map_or(0.0, |s| s.i))
+        };
+        let (f, free, _) = peak(&no_limit);
+        assert_eq!(f, None);
+        assert!(free > 40.0, "without a limit the ramp draws {free} A");
+        let (f, limited, last) = peak(&co);
+        assert_eq!(f, None, "peak {limited} A");
+        // Derated from 0.8·i_max = 16 A: the current settles there, below the 20 A trip.
+        assert!(limited <= 20.0, "peak {limited} A");
+        assert!((last - 16.0).abs() < 1.0, "last {last} A");
+    }
+
+    #[test]
+    fn a_blocked_rotor_is_a_stall_fault() {
+        let mut plant = EmulatorConfig::paper();
+        // A locked rotor: an enormous viscous load.
+        plant.extra_load = Some(std::sync::Arc::new(|x| 1.0e4 * x.omega));
+        let mut co = Coefficients::default();
+        co.limits.i_max = 100.0;
+        let mut sim = sim_with(plant, Some(&co));
+        sim.receive(&frame(&HostMsg::StartExperiment {
+            signal: Excitation::Steady { volts: 8.0 },
+            duration_s: 10.0,
+        }));
+        replies(&mut sim);
+        let (f, samples) = run_until_fault(&mut sim, 200);
+        assert_eq!(f, Some(Fault::Stall));
+        let n = samples.len() as u32;
+        assert!(
+            (control::board::STALL_PERIODS - 2..=control::board::STALL_PERIODS + 2).contains(&n),
+            "{n} samples"
+        );
+        assert!(!sim.is_running());
+    }
+
+    #[test]
+    fn silence_on_the_link_stops_a_run_and_heartbeats_keep_it() {
+        let mut sim = sim_with(EmulatorConfig::paper(), Some(&Coefficients::default()));
+        sim.receive(&frame(&HostMsg::SetSpeed { omega_ref: 20.0 }));
+        sim.receive(&frame(&HostMsg::SetMode { mode: Mode::Speed }));
+        replies(&mut sim);
+        for k in 0..400u32 {
+            if k.is_multiple_of(50) {
+                sim.receive(&frame(&HostMsg::Heartbeat));
+            }
+            sim.tick();
+        }
+        assert!(sim.is_running());
+        let mut lost = None;
+        for k in 0..400 {
+            sim.tick();
+            if replies(&mut sim).contains(&BoardMsg::Warning(Warning::LinkLost)) {
+                lost = Some(k);
+                break;
+            }
+        }
+        let k = lost.expect("no link-loss stop");
+        assert!(k as u32 <= control::board::LINK_TIMEOUT_PERIODS, "{k}");
+        assert!(!sim.is_running());
     }
 }

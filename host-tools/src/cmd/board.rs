@@ -1,5 +1,6 @@
 //! `motorid board`: the emulated board behind a pseudo-terminal.
 use crate::board::flash::RamFlash;
+use crate::board::hw::{parse_order, Wiring};
 use crate::board::pty::Pty;
 use crate::board::sim::BoardSim;
 use crate::effect_spec::EffectSpec;
@@ -34,6 +35,17 @@ pub struct Args {
     /// Keep the emulated coefficient flash in this file (survives restarts).
     #[arg(long, value_name = "FILE")]
     pub flash: Option<PathBuf>,
+    /// Hall connector wiring: board inputs H1 H2 H3 carry the motor's sensors in this order
+    /// (a permutation of 1, 2, 3; `motorid commission` learns it).
+    #[arg(long, value_name = "ORDER", default_value = "123")]
+    pub hall_order: String,
+    /// Phase connector wiring: bridge outputs U V W drive the motor's phases in this order
+    /// (a permutation of 1, 2, 3; 132 reverses the direction).
+    #[arg(long, value_name = "ORDER", default_value = "123")]
+    pub phase_order: String,
+    /// The current sense is wired with the opposite sign.
+    #[arg(long)]
+    pub invert_current: bool,
 }
 
 pub fn run(args: Args) -> Result<()> {
@@ -49,7 +61,12 @@ pub fn run(args: Args) -> Result<()> {
         let s: EffectSpec = EffectSpec::parse_flag("--effect", spec)?;
         plant.effects.push(s.to_effect());
     }
-    let mut sim = BoardSim::new(plant, RamFlash::new(args.flash.clone()))?;
+    let wiring = Wiring {
+        hall_order: parse_order(&args.hall_order).context("--hall-order")?,
+        phase_order: parse_order(&args.phase_order).context("--phase-order")?,
+        current_inverted: args.invert_current,
+    };
+    let mut sim = BoardSim::new(plant, wiring, RamFlash::new(args.flash.clone()))?;
     let pty = Pty::open()?;
     println!("{}", pty.path.display());
     std::io::stdout().flush()?;

@@ -42,6 +42,14 @@ pub fn effect_specs(co: &Coefficients) -> Vec<EffectSpec> {
 }
 
 /// The JSON object `inspect --json` prints.
+/// The format version in a (decoded, so well-formed) blob's header: 1 or 2, see
+/// [`blob::VERSION`].
+fn format_version(bytes: &[u8]) -> u16 {
+    bytes
+        .get(4..6)
+        .map_or(blob::VERSION, |b| u16::from_le_bytes([b[0], b[1]]))
+}
+
 pub fn to_json(file: &str, bytes: &[u8], co: &Coefficients) -> Result<serde_json::Value> {
     let crc = u32::from_le_bytes(bytes[bytes.len() - 4..].try_into()?);
     let effects: Vec<_> = effect_specs(co)
@@ -51,7 +59,7 @@ pub fn to_json(file: &str, bytes: &[u8], co: &Coefficients) -> Result<serde_json
     Ok(json!({
         "file": file,
         "bytes": bytes.len(),
-        "version": blob::VERSION,
+        "version": format_version(bytes),
         "crc32": format!("{crc:08x}"),
         "model": kind_name(co.model),
         "effects": effects,
@@ -73,7 +81,7 @@ pub fn run(args: Args) -> Result<()> {
     let m = &co.motor;
     println!(
         "{file}: valid coefficient blob, format version {}, {} bytes",
-        blob::VERSION,
+        format_version(&bytes),
         bytes.len()
     );
     println!("model:      {}", kind_name(co.model));

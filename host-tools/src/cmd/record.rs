@@ -44,6 +44,9 @@ pub struct Args {
 /// Longest silence during a run before giving up [s]: the board sends a sample every
 /// 12 ms, so 3 s means it stopped or the cable is out.
 const SILENCE: Duration = Duration::from_secs(3);
+/// Samples between heartbeats: 0.12 s of board time, far below the board's link timeout
+/// (`control::board::LINK_TIMEOUT_PERIODS`, 2 s).
+const HEARTBEAT_SAMPLES: usize = 10;
 
 pub fn run(args: Args) -> Result<()> {
     let what = match (&args.signal, args.speed_ref) {
@@ -106,6 +109,11 @@ pub fn run(args: Args) -> Result<()> {
             Some(BoardMsg::Sample(s)) => {
                 samples.push(s);
                 bar.set_position(samples.len() as u64);
+                // The board stops a run that hears nothing (link loss): a sign of life
+                // every HEARTBEAT_SAMPLES samples, in the board's time whatever its speed.
+                if samples.len().is_multiple_of(HEARTBEAT_SAMPLES) {
+                    link.send(&HostMsg::Heartbeat)?;
+                }
             }
             Some(BoardMsg::Fault(f)) => {
                 bar.finish_and_clear();

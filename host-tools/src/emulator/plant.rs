@@ -90,6 +90,9 @@ pub struct Plant {
     current: CurrentSensor,
     /// Velocity at the start of the previous fine step (for the solver's first guess).
     omega_prev: f64,
+    /// Commutation factor g: torque K_t·g·I and back-EMF K_b·g·ω (1: a DC motor, or a BLDC
+    /// motor commutated right; the emulated board sets it per bridge vector).
+    g: f64,
 }
 
 impl std::fmt::Debug for Plant {
@@ -121,6 +124,7 @@ impl Plant {
             vloss_max,
             sensor_offset,
             omega_prev: 0.0,
+            g: 1.0,
             cfg,
         })
     }
@@ -150,6 +154,13 @@ impl Plant {
         for _ in 0..n {
             self.fine_step(v, h);
         }
+    }
+
+    /// Set the commutation factor g (torque K_t·g·I, back-EMF K_b·g·ω) for the next
+    /// [`Plant::apply`]: 1 for a DC motor (the default), otherwise how well the bridge vector
+    /// applied lines up with the rotor (the emulated board, `board::hw`).
+    pub fn set_commutation(&mut self, g: f64) {
+        self.g = if g.is_finite() { g } else { 0.0 };
     }
 
     /// The true state.
@@ -219,7 +230,7 @@ impl Plant {
     fn current_for(&self, v: f64, h: f64, r: f64, w: f64) -> f64 {
         let m = &self.cfg.motor;
         let a = m.l / h + r;
-        let rhs = m.l / h * self.state.i + v - m.kb * w;
+        let rhs = m.l / h * self.state.i + v - m.kb * self.g * w;
         if self.vloss_max == 0.0 {
             return rhs / a;
         }
@@ -245,7 +256,7 @@ impl Plant {
             let fric = self.lugre.friction_at(w, z, zdot);
             let theta = s0.theta + h * w;
             let load = self.load_at(t1, theta, w, i);
-            let resid = m.j * (w - s0.omega) / h - m.kt * i + fric + load;
+            let resid = m.j * (w - s0.omega) / h - m.kt * self.g * i + fric + load;
             (resid, i, z, fric, load, theta)
         };
         // First guess: linear extrapolation of the velocity; first search step: the velocity

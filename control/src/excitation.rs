@@ -1,9 +1,12 @@
-//! Open-loop excitations of experiment mode, computed on the board at each 12 ms sample.
+//! Open-loop excitations of experiment mode, computed on the board at each 12 ms sample (by
+//! the firmware and the emulated board alike, through [`crate::board`]).
 //!
 //! The reference paper gives its signals only by amplitude and frequency range; these follow
-//! the same table as the host emulator (`host-tools/src/emulator/signals.rs`): `a` multisine
-//! 0.1-1 Hz up to 12 V, `b` up to 6 V 0.05-1 Hz, `c` up to 0.5 V 0.25-1 Hz, `d` steps
-//! between −10 and 10 V held 1-3 s, plus constant and ramp. The shapes are deterministic but
+//! the same table as the host emulator (`host-tools/src/emulator/signals.rs`), with the
+//! amplitudes relative to the loop's voltage limit `u_max` (the paper's 24 V motor, where
+//! they are the paper's values): `a` multisine 0.1-1 Hz up to u_max/2 (12 V), `b` up to
+//! u_max/4 (6 V) 0.05-1 Hz, `c` up to u_max/48 (0.5 V) 0.25-1 Hz, `d` steps between
+//! ±5/12·u_max (±10 V) held 1-3 s, plus constant and ramp in volts, bounded by ±u_max. The shapes are deterministic but
 //! not sample-identical to the host's (which uses a seeded `StdRng`): the log records the
 //! voltage actually applied, which is what identification uses.
 //!
@@ -12,7 +15,10 @@
 //! amplitude, and the first second fades in from rest.
 use core::f32::consts::PI;
 
-use control::frame::Excitation;
+use crate::frame::Excitation;
+
+/// The `u_max` [V] at which the signals a-d have the paper's amplitudes (its 24 V motor).
+pub const U_MAX_REFERENCE: f32 = 24.0;
 
 struct Multisine {
     f_lo: f32,
@@ -69,9 +75,11 @@ fn steps(t: f32) -> f32 {
     }
 }
 
-/// Voltage of `signal` at time `t` [s] since the start.
-pub fn voltage(signal: Excitation, t: f32) -> f32 {
-    match signal {
+/// Voltage [V] of `signal` at time `t` [s] since the start, for the voltage limit `u_max`
+/// [V] (the result is within ±u_max).
+pub fn voltage(signal: Excitation, t: f32, u_max: f32) -> f32 {
+    let scale = u_max / U_MAX_REFERENCE;
+    let v = match signal {
         Excitation::A => multisine(
             &Multisine {
                 f_lo: 0.1,
@@ -106,7 +114,10 @@ pub fn voltage(signal: Excitation, t: f32) -> f32 {
             t,
         ),
         Excitation::D => steps(t),
-        Excitation::Steady { volts } => volts,
-        Excitation::Ramp { volts_per_s } => volts_per_s * t,
-    }
+        Excitation::Steady { volts } => return crate::pi::saturate(volts, -u_max, u_max),
+        Excitation::Ramp { volts_per_s } => {
+            return crate::pi::saturate(volts_per_s * t, -u_max, u_max)
+        }
+    };
+    crate::pi::saturate(v * scale, -u_max, u_max)
 }

@@ -1,0 +1,594 @@
+//! The board's logic, written once: the command handler, the modes (idle, speed,
+//! experiment, commissioning), the limits and the fault logic. The firmware
+//! (`firmware/src/main.rs`) and the emulated board (`host-tools/src/board/sim.rs`) both run
+//! this [`Board`]; they only move bytes, read sensors and drive the bridge.
+//!
+//! Per 12 ms period the transport calls [`Board::tick`] with the [`Measurements`] and applies
+//! the [`Drive`] it returns; every host message goes to [`Board::handle`] (uploads to
+//! [`handle_upload`], which needs the flash). Messages for the host leave through the `send`
+//! callback.
+//!
+//! Limits and faults (each turns the bridge off; faults latch until `ClearFault`):
+//! - over-current: |I| > `limits.i_max` (the step derates the voltage above
+//!   [`crate::blob::DERATE_FRACTION`]·i_max first, [`crate::step`]);
+//! - bus over-voltage always, under-voltage and control overrun while running;
+//! - Hall faults (invalid state, impossible jump, edge overflow) while running;
+//! - stall: |V| above [`STALL_FRACTION`]·u_max and no Hall step for [`STALL_PERIODS`];
+//! - link loss (a stop, not a fault): no frame for [`LINK_TIMEOUT_PERIODS`] in speed or
+//!   experiment mode.
+//!
+//! The voltage never exceeds `min(pi.u_max, MAX_DUTY·V_bus)`; speed and experiment modes
+//! need valid coefficients (identify and commissioning do not); experiment amplitudes are
+//! relative to `u_max` ([`crate::excitation`]) and durations are bounded.
+use embedded_storage::nor_flash::NorFlash;
+
+use crate::blob::{self, Coefficients, HALL_INVALID, MAX_BLOB_LEN};
+use crate::commission::{
+    CommissionError, CommissionOutcome, CommissionStep, Commissioner, Commissioning,
+};
+use crate::excitation;
+use crate::frame::{
+    BoardMsg, ChunkOutcome, Excitation, Fault, HostMsg, Mode, Nack, Sample, Upload, Warning,
+    PROTOCOL_VERSION,
+};
+use crate::hall::{HallTable, INVALID};
+use crate::slots::Slots;
+use crate::step::{ControlStep, Faults, HallEdge, StepInputs, MAX_EDGES};
+
+/// Largest duty cycle (95 %, so the bootstrap capacitors of the high-side drivers recharge
+/// every PWM period): the largest voltage is `MAX_DUTY·V_bus`.
+pub const MAX_DUTY: f32 = 0.95;
+/// Longest experiment [s].
+pub const MAX_EXPERIMENT_S: f32 = 3600.0;
+/// Periods without any frame after which a speed or experiment run stops (2 s).
+pub const LINK_TIMEOUT_PERIODS: u32 = 167;
+/// Periods with a voltage above the stall threshold and no Hall step before the stall
+/// fault (0.6 s).
+pub const STALL_PERIODS: u32 = 50;
+/// Stall threshold as a fraction of the voltage limit.
+pub const STALL_FRACTION: f32 = 0.5;
+/// Commissioning voltage: at most this fraction of the voltage limit...
+pub const COMMISSION_U_FRACTION: f32 = 0.25;
+/// ...and at most the voltage that drives this fraction of `i_max` through R at standstill.
+pub const COMMISSION_I_FRACTION: f32 = 0.3;
+
+/// Bridge step (0..5) that drives a rotor in Hall sector `sector`: one vector ahead
+/// (forward, positive voltage) or four ahead (reverse, negative voltage). With a
+/// commissioned table, sector `k` is where bridge step `k` holds the rotor
+/// ([`crate::commission`]), so step `k + 1` leads it by 30-90° electrical.
+pub fn commutation_step(sector: u8, reverse: bool) -> u8 {
+    (sector % 6 + if reverse { 4 } else { 1 }) % 6
+}
+
+/// What the bridge does until the next period.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Drive {
+    /// All gates off.
+    Off,
+    /// Six-step commutation from the Hall state through `table` at every Hall edge
+    /// ([`commutation_step`]), duty |volts|/V_bus, reverse for a negative voltage.
+    SixStep { volts: f32, table: HallTable },
+    /// Hold bridge step `step` (0..5) at `volts` ≥ 0 (commissioning).
+    Vector { step: u8, volts: f32 },
+}
+
+/// What the transport measured this period.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Measurements {
+    /// Hall state now (bit 0 = H1, bit 1 = H2, bit 2 = H3).
+    pub hall: u8,
+    /// Hall edges since the last period, oldest first.
+    pub edges: heapless::Vec<HallEdge, MAX_EDGES>,
+    /// More edges than `edges` holds came.
+    pub edges_overflow: bool,
+    /// Capture-timer count now.
+    pub now_ticks: u32,
+    /// Current along the applied bridge vector [A], positive when it flows the way the
+    /// applied (positive) duty drives it; the board signs it by the drive's direction and
+    /// the commissioned current sign.
+    pub i_vector: f32,
+    /// Bus voltage [V] (non-finite: not measured, the nominal one is used).
+    pub v_bus: f32,
+    /// The previous period overran.
+    pub overrun: bool,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+enum Run {
+    Idle,
+    Speed,
+    Experiment { signal: Excitation, duration_s: f32 },
+    Commission(Commissioner),
+}
+
+/// The board's state.
+#[derive(Debug, Clone)]
+pub struct Board {
+    coeffs: Coefficients,
+    coeff_seq: u32,
+    firmware: &'static str,
+    v_bus_nominal: f32,
+    step: ControlStep<f32>,
+    table: HallTable,
+    run: Run,
+    omega_ref: f32,
+    latched: Option<Fault>,
+    seq: u32,
+    /// Periods since the run started.
+    k: u32,
+    /// Periods since the last frame.
+    quiet: u32,
+    /// Periods in a row at a stall voltage without a Hall step.
+    stall: u32,
+    last_steps: i32,
+    /// Voltage commanded last period (its sign gives the current's).
+    last_volts: f32,
+    commission: CommissionOutcome,
+    commission_seq: u32,
+    store_request: bool,
+}
+
+fn table_of(c: &Coefficients) -> HallTable {
+    let mut sector = [INVALID; 8];
+    for (s, &b) in sector.iter_mut().zip(&c.hall_table) {
+        *s = if b == HALL_INVALID { INVALID } else { b as i8 };
+    }
+    HallTable { sector }
+}
+
+/// The latched fault a step's flags call for (the Hall faults).
+pub fn fault_of(f: Faults) -> Option<Fault> {
+    if f.contains(Faults::HALL_INVALID) {
+        Some(Fault::InvalidHall)
+    } else if f.contains(Faults::HALL_JUMP) || f.contains(Faults::EDGE_OVERFLOW) {
+        Some(Fault::ImpossibleTransition)
+    } else {
+        None
+    }
+}
+
+impl Board {
+    /// A board at power-up with the coefficients of flash slot sequence `seq` (`None`: no
+    /// valid slot; the defaults run, and only identify and commissioning are allowed).
+    /// `firmware` is what `Identify` reports; `v_bus_nominal` [V] is used while the bus is
+    /// not measured.
+    pub fn new(
+        loaded: Option<(Coefficients, u32)>,
+        firmware: &'static str,
+        v_bus_nominal: f32,
+    ) -> Self {
+        let (coeffs, seq) = loaded.unwrap_or_default();
+        let mut b = Board {
+            step: ControlStep::new(&coeffs.step_config(v_bus_nominal)),
+            table: table_of(&coeffs),
+            coeffs,
+            coeff_seq: 0,
+            firmware,
+            v_bus_nominal,
+            run: Run::Idle,
+            omega_ref: 0.0,
+            latched: None,
+            seq: 0,
+            k: 0,
+            quiet: 0,
+            stall: 0,
+            last_steps: 0,
+            last_volts: 0.0,
+            commission: CommissionOutcome::NotRun,
+            commission_seq: 0,
+            store_request: false,
+        };
+        b.coeff_seq = seq;
+        if seq != 0 {
+            if let Some(c) = b.coeffs.commission {
+                b.commission = CommissionOutcome::Done(c);
+                b.commission_seq = seq;
+            }
+        }
+        b
+    }
+
+    /// Load newly committed coefficients (flash slot sequence `seq`); any run stops.
+    pub fn load(&mut self, coeffs: Coefficients, seq: u32) {
+        self.step = ControlStep::new(&coeffs.step_config(self.v_bus_nominal));
+        self.table = table_of(&coeffs);
+        if let Some(c) = coeffs.commission {
+            self.commission = CommissionOutcome::Done(c);
+            self.commission_seq = seq;
+        }
+        self.coeffs = coeffs;
+        self.coeff_seq = seq;
+        self.run = Run::Idle;
+    }
+
+    /// The coefficients in force.
+    pub fn coefficients(&self) -> &Coefficients {
+        &self.coeffs
+    }
+
+    /// Flash slot sequence of the coefficients (0: none, the defaults run).
+    pub fn coeff_seq(&self) -> u32 {
+        self.coeff_seq
+    }
+
+    /// The mode running now.
+    pub fn mode(&self) -> Mode {
+        match self.run {
+            Run::Idle => Mode::Idle,
+            Run::Speed => Mode::Speed,
+            Run::Experiment { .. } => Mode::Experiment,
+            Run::Commission(_) => Mode::Commission,
+        }
+    }
+
+    /// The latched fault.
+    pub fn fault(&self) -> Option<Fault> {
+        self.latched
+    }
+
+    /// The control step (decoder, PI).
+    pub fn control(&self) -> &ControlStep<f32> {
+        &self.step
+    }
+
+    /// The voltage limit [V]: `min(u_max, MAX_DUTY·V_bus)`.
+    fn u_limit(&self, v_bus: f32) -> f32 {
+        let u = self.coeffs.pi.u_max;
+        let b = MAX_DUTY * v_bus;
+        if u < b {
+            u
+        } else {
+            b
+        }
+    }
+
+    fn v_bus_of(&self, v: f32) -> f32 {
+        if v.is_finite() && v > 0.0 {
+            v
+        } else {
+            self.v_bus_nominal
+        }
+    }
+
+    fn start(&mut self, run: Run) {
+        self.step.reset();
+        self.run = run;
+        self.seq = 0;
+        self.k = 0;
+        self.quiet = 0;
+        self.stall = 0;
+        self.last_steps = self.step.decoder().steps();
+    }
+
+    fn stop(&mut self, send: &mut impl FnMut(BoardMsg)) {
+        if let Run::Commission(_) = self.run {
+            self.commission = CommissionOutcome::Failed(CommissionError::Aborted);
+            send(self.commission_msg());
+        }
+        self.run = Run::Idle;
+    }
+
+    fn commission_msg(&self) -> BoardMsg {
+        BoardMsg::Commission {
+            outcome: self.commission,
+            seq: self.commission_seq,
+        }
+    }
+
+    /// Commissioning voltage [V] (see [`COMMISSION_U_FRACTION`]).
+    pub fn commission_volts(&self) -> f32 {
+        let u = COMMISSION_U_FRACTION * self.u_limit(self.v_bus_nominal);
+        let i = COMMISSION_I_FRACTION * self.coeffs.limits.i_max * self.coeffs.motor.r;
+        if i < u {
+            i
+        } else {
+            u
+        }
+    }
+
+    /// Handles one host message (not the upload messages: `false`, see [`handle_upload`]).
+    /// Every frame counts as a sign of life of the link.
+    pub fn handle(&mut self, msg: &HostMsg, send: &mut impl FnMut(BoardMsg)) -> bool {
+        self.quiet = 0;
+        let reply = match *msg {
+            HostMsg::Identify => {
+                let mut firmware = heapless::String::new();
+                let _ = firmware.push_str(self.firmware);
+                BoardMsg::Identity {
+                    protocol: PROTOCOL_VERSION,
+                    firmware,
+                    model: self.coeffs.model,
+                    coeff_seq: self.coeff_seq,
+                }
+            }
+            HostMsg::UploadBegin { .. }
+            | HostMsg::UploadChunk { .. }
+            | HostMsg::UploadCommit
+            | HostMsg::UploadAbort => return false,
+            HostMsg::SetSpeed { omega_ref } => {
+                if omega_ref.is_finite() {
+                    self.omega_ref = omega_ref;
+                    BoardMsg::Ack
+                } else {
+                    BoardMsg::Nack(Nack::OutOfRange)
+                }
+            }
+            HostMsg::SetMode { mode: Mode::Idle } | HostMsg::Stop => {
+                self.stop(send);
+                BoardMsg::Ack
+            }
+            HostMsg::ClearFault => {
+                self.latched = None;
+                BoardMsg::Ack
+            }
+            HostMsg::Heartbeat => return true,
+            HostMsg::ReadCommission => self.commission_msg(),
+            _ if self.latched.is_some() => BoardMsg::Nack(Nack::Faulted),
+            HostMsg::SetMode {
+                mode: Mode::Commission,
+            }
+            | HostMsg::Commission => {
+                let volts = self.commission_volts();
+                self.start(Run::Commission(Commissioner::new(volts)));
+                self.commission = CommissionOutcome::Running;
+                BoardMsg::Ack
+            }
+            _ if self.coeff_seq == 0 => BoardMsg::Nack(Nack::NoCoefficients),
+            HostMsg::SetMode { mode: Mode::Speed } => {
+                self.start(Run::Speed);
+                BoardMsg::Ack
+            }
+            // Experiment mode starts with StartExperiment.
+            HostMsg::SetMode {
+                mode: Mode::Experiment,
+            } => BoardMsg::Ack,
+            HostMsg::StartExperiment { signal, duration_s } => {
+                let u = self.u_limit(self.v_bus_nominal);
+                let ok_signal = match signal {
+                    Excitation::Steady { volts } => volts.is_finite() && volts.abs() <= u,
+                    Excitation::Ramp { volts_per_s } => volts_per_s.is_finite(),
+                    _ => true,
+                };
+                let ok_duration =
+                    duration_s.is_finite() && duration_s > 0.0 && duration_s <= MAX_EXPERIMENT_S;
+                if !(ok_duration && ok_signal) {
+                    BoardMsg::Nack(Nack::OutOfRange)
+                } else {
+                    self.start(Run::Experiment { signal, duration_s });
+                    BoardMsg::Ack
+                }
+            }
+        };
+        send(reply);
+        true
+    }
+
+    /// True once after a commissioning run succeeded: store [`Board::coefficients`] in
+    /// flash, then call [`Board::stored`] (see [`store_coefficients`]).
+    pub fn take_store_request(&mut self) -> bool {
+        core::mem::replace(&mut self.store_request, false)
+    }
+
+    /// The coefficients with the commissioning result were stored as slot `seq` (`None`:
+    /// the write failed); reports the result to the host.
+    pub fn stored(&mut self, seq: Option<u32>, send: &mut impl FnMut(BoardMsg)) {
+        if let Some(s) = seq {
+            self.coeff_seq = s;
+            self.commission_seq = s;
+        }
+        send(self.commission_msg());
+    }
+
+    fn latch(&mut self, f: Fault, send: &mut impl FnMut(BoardMsg)) {
+        if self.latched.is_none() {
+            send(BoardMsg::Fault(f));
+        }
+        self.latched = Some(f);
+        self.stop(send);
+    }
+
+    fn commissioned(
+        &mut self,
+        r: Result<Commissioning, CommissionError>,
+        send: &mut impl FnMut(BoardMsg),
+    ) {
+        self.run = Run::Idle;
+        match r {
+            Ok(c) => {
+                let mut co = self.coeffs.clone();
+                co.commission = Some(c);
+                co.hall_table = [HALL_INVALID; 8];
+                for (k, &s) in c.sequence.iter().enumerate() {
+                    co.hall_table[(s & 7) as usize] = k as u8;
+                }
+                self.step = ControlStep::new(&co.step_config(self.v_bus_nominal));
+                self.table = table_of(&co);
+                self.coeffs = co;
+                self.commission = CommissionOutcome::Done(c);
+                self.commission_seq = 0;
+                self.store_request = true;
+            }
+            Err(e) => {
+                self.commission = CommissionOutcome::Failed(e);
+                send(self.commission_msg());
+            }
+        }
+    }
+
+    /// One control period.
+    pub fn tick(&mut self, m: &Measurements, send: &mut impl FnMut(BoardMsg)) -> Drive {
+        let dt = crate::CONTROL_PERIOD_S;
+        self.quiet = self.quiet.saturating_add(1);
+        let v_bus = self.v_bus_of(m.v_bus);
+        let u_lim = self.u_limit(v_bus);
+        let lim = self.coeffs.limits;
+        let sign = self
+            .coeffs
+            .commission
+            .map_or(1.0, |c| f32::from(c.current_sign));
+        let dir = if self.last_volts < 0.0 { -1.0 } else { 1.0 };
+        let i = m.i_vector * dir * sign;
+        let active = self.run != Run::Idle;
+
+        // Faults that do not need the step.
+        let hard = if i.abs() > lim.i_max {
+            Some(Fault::OverCurrent)
+        } else if m.v_bus.is_finite() && m.v_bus > lim.vbus_max {
+            Some(Fault::OverVoltage)
+        } else if active && m.v_bus.is_finite() && m.v_bus < lim.vbus_min {
+            Some(Fault::UnderVoltage)
+        } else if active && m.overrun {
+            Some(Fault::Overrun)
+        } else {
+            None
+        };
+        if let Some(f) = hard {
+            self.latch(f, send);
+        }
+
+        // Link loss.
+        if matches!(self.run, Run::Speed | Run::Experiment { .. })
+            && self.quiet > LINK_TIMEOUT_PERIODS
+        {
+            self.run = Run::Idle;
+            send(BoardMsg::Warning(Warning::LinkLost));
+        }
+
+        // Commissioning: vectors held open loop, no speed loop.
+        if let Run::Commission(c) = &mut self.run {
+            let edges = m.edges.iter().map(|e| e.state);
+            match c.tick(m.hall, edges, m.edges_overflow, m.i_vector) {
+                CommissionStep::Hold { step, volts } => {
+                    self.last_volts = volts;
+                    return Drive::Vector { step, volts };
+                }
+                CommissionStep::Done(r) => {
+                    self.commissioned(r, send);
+                    self.last_volts = 0.0;
+                    return Drive::Off;
+                }
+            }
+        }
+
+        let v_override = match self.run {
+            Run::Experiment { signal, duration_s } => {
+                let t = self.k as f32 * dt;
+                if t >= duration_s {
+                    self.run = Run::Idle;
+                    None
+                } else {
+                    Some(excitation::voltage(signal, t, u_lim))
+                }
+            }
+            _ => None,
+        };
+        let inp = StepInputs {
+            hall: m.hall,
+            edges: m.edges.clone(),
+            edges_overflow: m.edges_overflow,
+            now_ticks: m.now_ticks,
+            i_meas: i,
+            v_bus: u_lim,
+            omega_ref: self.omega_ref,
+            v_override,
+        };
+        let out = self.step.step(&inp);
+
+        if self.run != Run::Idle {
+            // Stall: a large voltage and the rotor does not step.
+            if out.v_cmd.abs() > STALL_FRACTION * u_lim && out.steps == self.last_steps {
+                self.stall += 1;
+            } else {
+                self.stall = 0;
+            }
+            let f = if self.stall >= STALL_PERIODS {
+                Some(Fault::Stall)
+            } else {
+                fault_of(out.faults)
+            };
+            if let Some(f) = f {
+                self.latch(f, send);
+            }
+        }
+        self.last_steps = out.steps;
+
+        if self.run == Run::Idle || self.step.decoder().sector().is_none() {
+            self.last_volts = 0.0;
+            return Drive::Off;
+        }
+        self.last_volts = out.v_cmd;
+        send(BoardMsg::Sample(Sample {
+            seq: self.seq,
+            t: self.k as f32 * dt,
+            u: out.v_cmd,
+            i,
+            theta: out.theta,
+            omega: out.omega,
+        }));
+        self.seq = self.seq.wrapping_add(1);
+        self.k = self.k.wrapping_add(1);
+        Drive::SixStep {
+            volts: out.v_cmd,
+            table: self.table,
+        }
+    }
+}
+
+/// Handles the upload messages (the others: `None`) on `slots`; `idle`: no run is active
+/// (a commit is refused otherwise, erasing stalls the CPU). Returns the reply and, after a
+/// commit, the new coefficients with their slot sequence for [`Board::load`].
+pub fn handle_upload<S: NorFlash>(
+    msg: &HostMsg,
+    upload: &mut Upload,
+    slots: &mut Slots<S>,
+    idle: bool,
+) -> Option<(BoardMsg, Option<(Coefficients, u32)>)> {
+    let reply = match msg {
+        HostMsg::UploadBegin { total_len, crc } => match upload.begin(*total_len, *crc) {
+            Ok(()) => BoardMsg::UploadAck { index: 0xFFFF },
+            Err(n) => BoardMsg::Nack(n),
+        },
+        HostMsg::UploadChunk { index, data } => match upload.chunk(*index, data) {
+            Ok(ChunkOutcome::Stored) | Ok(ChunkOutcome::Duplicate) => {
+                BoardMsg::UploadAck { index: *index }
+            }
+            Err(n) => BoardMsg::Nack(n),
+        },
+        HostMsg::UploadAbort => {
+            upload.abort();
+            BoardMsg::UploadAck { index: 0xFFFF }
+        }
+        HostMsg::UploadCommit if !idle => BoardMsg::Nack(Nack::Busy),
+        HostMsg::UploadCommit => match upload.commit() {
+            Err(n) => BoardMsg::Nack(n),
+            Ok((bytes, coeffs)) => match slots.store(bytes) {
+                Ok(info) => {
+                    return Some((
+                        BoardMsg::Committed { seq: info.seq },
+                        Some((coeffs, info.seq)),
+                    ))
+                }
+                Err(_) => BoardMsg::Nack(Nack::Flash),
+            },
+        },
+        _ => return None,
+    };
+    Some((reply, None))
+}
+
+/// Serves a store request of `board` (after commissioning) on `slots`.
+pub fn store_coefficients<S: NorFlash>(
+    board: &mut Board,
+    slots: &mut Slots<S>,
+    send: &mut impl FnMut(BoardMsg),
+) {
+    if !board.take_store_request() {
+        return;
+    }
+    let mut buf = [0u8; MAX_BLOB_LEN];
+    let seq = match blob::encode(board.coefficients(), &mut buf) {
+        Ok(bytes) => slots.store(bytes).ok().map(|i| i.seq),
+        Err(_) => None,
+    };
+    board.stored(seq, send);
+}

@@ -1,0 +1,212 @@
+//! The emulated board's hardware: the motor emulator ([`Plant`]) behind a six-step bridge,
+//! three Hall inputs, a current sense and a capture timer, wired in any order.
+//!
+//! The motor is BLDC-like: bridge step `k` (two phases driven, `control::board`'s step
+//! numbering) holds the rotor in one electrical sector `a(k)`; with the default wiring
+//! `a(k) = k`, and a permutation of the phase connector maps the steps onto each other as
+//! the phase pairs are permuted. With the rotor in sector `s`, the vector makes torque
+//! `K_t·g·I` and back-EMF `K_b·g·ω` with `g = G[(a − s) mod 6]`, `G = [0, 1, 1, 0, −1, −1]`
+//! (the mean of sin(lead) over the sector, normalised: a vector one or two sectors ahead
+//! pulls forward, the vector of the rotor's own sector holds it). The firmware's
+//! commutation, step = sector + 1, gives g = 1: the DC-equivalent motor of the paper.
+//! Bridge off: g = 0 and no voltage (the winding current decays, no braking).
+//!
+//! The Hall connector may permute the three sensors, and the current sense may be
+//! inverted: [`Wiring`].
+use super::rig::TICK_HZ;
+use crate::emulator::{EmulatorConfig, Plant};
+use anyhow::{bail, Result};
+use control::board::{commutation_step, Drive, Measurements};
+use control::step::HallEdge;
+
+/// How the emulated motor is connected to the board.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Wiring {
+    /// Board Hall input j (H1, H2, H3) carries the motor's sensor `hall_order[j]` (0..2).
+    pub hall_order: [u8; 3],
+    /// Bridge output j (U, V, W) drives the motor's phase `phase_order[j]` (0..2).
+    pub phase_order: [u8; 3],
+    /// The current sense reads the opposite sign.
+    pub current_inverted: bool,
+}
+
+impl Default for Wiring {
+    fn default() -> Self {
+        Wiring {
+            hall_order: [0, 1, 2],
+            phase_order: [0, 1, 2],
+            current_inverted: false,
+        }
+    }
+}
+
+/// (high, low) phase of each bridge step, as in `firmware/src/bridge.rs`.
+const STEPS: [(u8, u8); 6] = [(0, 1), (0, 2), (1, 2), (1, 0), (2, 0), (2, 1)];
+/// Torque factor by (aligned sector − rotor sector) mod 6.
+const G: [f64; 6] = [0.0, 1.0, 1.0, 0.0, -1.0, -1.0];
+
+/// Parses a permutation of 1, 2, 3 written as three digits ("132").
+pub fn parse_order(s: &str) -> Result<[u8; 3]> {
+    let d: Vec<u8> = s.bytes().map(|b| b.wrapping_sub(b'1')).collect();
+    let mut seen = [false; 3];
+    if d.len() != 3
+        || d.iter()
+            .any(|&x| x > 2 || std::mem::replace(&mut seen[x as usize], true))
+    {
+        bail!("'{s}' is not an order of 1, 2, 3 (e.g. 123, 213, 321)");
+    }
+    Ok([d[0], d[1], d[2]])
+}
+
+impl Wiring {
+    /// Checks that both orders are permutations.
+    pub fn check(&self) -> Result<()> {
+        for o in [self.hall_order, self.phase_order] {
+            let mut s = o;
+            s.sort_unstable();
+            if s != [0, 1, 2] {
+                bail!("wiring order {o:?} is not a permutation of 0, 1, 2");
+            }
+        }
+        Ok(())
+    }
+
+    /// The Hall state the board reads for the motor's own state `code`.
+    pub fn hall(&self, code: u8) -> u8 {
+        (0..3).fold(0, |acc, j| acc | (((code >> self.hall_order[j]) & 1) << j))
+    }
+
+    /// The sector bridge step `k` holds the rotor in.
+    pub fn aligned_sector(&self, k: u8) -> u8 {
+        let (hi, lo) = STEPS[k as usize % 6];
+        let pair = (self.phase_order[hi as usize], self.phase_order[lo as usize]);
+        STEPS.iter().position(|&p| p == pair).unwrap_or(0) as u8
+    }
+}
+
+/// Capture-timer count at time `t` [s] (a free-running u32 counter that wraps).
+fn ticks_at(t: f64) -> u32 {
+    ((t * TICK_HZ).round() as u64 & u64::from(u32::MAX)) as u32
+}
+
+/// The emulated hardware.
+pub struct Hardware {
+    plant: Plant,
+    wiring: Wiring,
+    pending: Vec<HallEdge>,
+    /// Sign of the voltage applied last (the current along the vector is I·sign).
+    last_sign: f64,
+}
+
+impl Hardware {
+    /// A motor at rest, wired as `wiring`.
+    pub fn new(cfg: EmulatorConfig, wiring: Wiring) -> Result<Hardware> {
+        wiring.check()?;
+        let mut plant = Plant::new(cfg)?;
+        plant.take_hall_edges(); // start recording edges
+        Ok(Hardware {
+            plant,
+            wiring,
+            pending: Vec::new(),
+            last_sign: 1.0,
+        })
+    }
+
+    /// The emulated motor.
+    pub fn plant(&self) -> &Plant {
+        &self.plant
+    }
+
+    /// What the board's inputs read now.
+    pub fn measure(&mut self) -> Measurements {
+        let truth = self.plant.truth();
+        let mut i = self.plant.measured_current() * self.last_sign;
+        if self.wiring.current_inverted {
+            i = -i;
+        }
+        let mut m = Measurements {
+            hall: self.wiring.hall(self.plant.hall_state()),
+            now_ticks: ticks_at(truth.t),
+            i_vector: i as f32,
+            v_bus: f32::NAN, // no bus measurement: the board's nominal voltage
+            ..Measurements::default()
+        };
+        for e in self.pending.drain(..) {
+            if m.edges.push(e).is_err() {
+                m.edges_overflow = true;
+            }
+        }
+        m
+    }
+
+    /// Apply `drive` for `dt` seconds; the bridge commutates at every Hall edge (per fine
+    /// integration step) as the firmware's capture interrupt does.
+    pub fn apply(&mut self, drive: Drive, dt: f64) {
+        let fine = self.plant.config().fine_step;
+        let n = (dt / fine - 1e-9).ceil().max(1.0) as usize;
+        let h = dt / n as f64;
+        let step = std::f64::consts::TAU / (6.0 * f64::from(self.plant.config().pole_pairs));
+        for _ in 0..n {
+            let theta = self.plant.truth().theta;
+            let s = ((theta / step + 0.5).floor() as i64).rem_euclid(6) as usize;
+            let (v, k) = match drive {
+                Drive::Off => (0.0, None),
+                Drive::SixStep { volts, table } => {
+                    let hall = self.wiring.hall(self.plant.hall_state());
+                    match table.sector_of(hall) {
+                        Some(sec) => (f64::from(volts), Some(commutation_step(sec, volts < 0.0))),
+                        None => (0.0, None),
+                    }
+                }
+                Drive::Vector { step, volts } => (f64::from(volts), Some(step)),
+            };
+            let g = match k {
+                Some(k) if v.is_finite() => {
+                    let a = self.wiring.aligned_sector(k) as usize;
+                    G[(a + 6 - s) % 6] * if v < 0.0 { -1.0 } else { 1.0 }
+                }
+                _ => 0.0,
+            };
+            self.plant.set_commutation(g);
+            self.plant.apply(if k.is_some() { v } else { 0.0 }, h);
+        }
+        self.last_sign = match drive {
+            Drive::SixStep { volts, .. } | Drive::Vector { volts, .. } if volts < 0.0 => -1.0,
+            _ => 1.0,
+        };
+        for e in self.plant.take_hall_edges() {
+            self.pending.push(HallEdge {
+                ticks: ticks_at(e.t),
+                state: self.wiring.hall(e.state),
+            });
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn phase_orders_map_steps_by_a_symmetry_of_the_hexagon() {
+        let id = Wiring::default();
+        for k in 0..6 {
+            assert_eq!(id.aligned_sector(k), k);
+        }
+        for o in ["123", "132", "213", "231", "312", "321"] {
+            let w = Wiring {
+                phase_order: parse_order(o).unwrap(),
+                ..Wiring::default()
+            };
+            let a: Vec<u8> = (0..6).map(|k| w.aligned_sector(k)).collect();
+            // Neighbouring steps stay neighbours, all in one direction.
+            let d = (a[1] + 6 - a[0]) % 6;
+            assert!(d == 1 || d == 5, "{o}: {a:?}");
+            for k in 0..6 {
+                assert_eq!((a[(k + 1) % 6] + 6 - a[k]) % 6, d, "{o}: {a:?}");
+            }
+        }
+        assert!(parse_order("112").is_err());
+        assert!(parse_order("12").is_err());
+    }
+}

@@ -1,0 +1,123 @@
+//! `motorid commission`: run the board's Hall commissioning over its serial port.
+use crate::board::link::Link;
+use anyhow::{bail, Result};
+use control::commission::{CommissionError, CommissionOutcome, Commissioning};
+use std::time::Duration;
+
+/// Run the board's Hall commissioning: with the motor free to turn, the board holds each of
+/// its six bridge vectors in turn at a limited voltage (a quarter of u_max, at most the
+/// voltage that drives 30 % of i_max at standstill), both directions, and learns which Hall
+/// state belongs to which sector (the Hall table), the direction, the current-sense sign and
+/// whether the Hall sensors have the motor's pole pairs (6 edges per electrical revolution).
+/// The board stores the result with its coefficients (a new flash slot) and uses it at once.
+///
+/// Works with the real board and with `motorid board --pty` (try `--hall-order 213` or
+/// `--phase-order 132` there).
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// Serial device of the board (e.g. /dev/ttyACM0, or what `motorid board --pty` printed).
+    #[arg(long, value_name = "P")]
+    pub port: String,
+    /// Only read the stored result, do not run the commissioning.
+    #[arg(long)]
+    pub read: bool,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Longest wait for the result after the start: the run itself is 18 holds of 0.3 s.
+const RESULT_TIMEOUT: Duration = Duration::from_secs(60);
+
+fn error_text(e: CommissionError) -> &'static str {
+    match e {
+        CommissionError::NoMotion => {
+            "the Hall state did not change (rotor blocked, voltage too low, or Hall sensors not connected)"
+        }
+        CommissionError::InvalidState => "a Hall state 000 or 111 was read (a sensor is not connected?)",
+        CommissionError::NotSixStates => "the six vectors did not give six different Hall states",
+        CommissionError::NotAdjacent => "neighbouring vectors gave Hall states more than one sensor apart",
+        CommissionError::Inconsistent => "the backward pass read other Hall states than the forward pass",
+        CommissionError::PolePairs => {
+            "not 6 Hall edges per electrical revolution: the Hall magnet's pole pairs differ from the motor's"
+        }
+        CommissionError::Aborted => "stopped before the end (a stop command or a fault)",
+    }
+}
+
+/// The result as JSON.
+pub fn to_json(c: &Commissioning, seq: u32) -> serde_json::Value {
+    let table: Vec<serde_json::Value> = (0..8u8)
+        .map(|s| match c.sequence.iter().position(|&x| x == s) {
+            Some(k) => serde_json::json!(k),
+            None => serde_json::Value::Null,
+        })
+        .collect();
+    serde_json::json!({
+        "hall_sequence": c.sequence,
+        "hall_table": table,
+        "reversed": c.reversed,
+        "permuted": c.permuted,
+        "current_sign": c.current_sign,
+        "edges_per_electrical_rev": c.edges_per_elec_rev,
+        "volts": crate::cmd::inspect::f32_shortest(c.volts),
+        "stored_seq": seq,
+    })
+}
+
+pub fn run(args: Args) -> Result<()> {
+    let mut link = Link::open(&args.port)?;
+    link.identify()?;
+    let (outcome, seq) = if args.read {
+        link.read_commission()?
+    } else {
+        if !args.json {
+            eprintln!(
+                "commissioning on {}: the motor turns slowly both ways",
+                args.port
+            );
+        }
+        link.commission(RESULT_TIMEOUT)?
+    };
+    let c = match outcome {
+        CommissionOutcome::Done(c) => c,
+        CommissionOutcome::Failed(e) => {
+            bail!("{}: commissioning failed: {}", args.port, error_text(e))
+        }
+        CommissionOutcome::NotRun => bail!("{}: no commissioning result on the board", args.port),
+        CommissionOutcome::Running => bail!("{}: commissioning is still running", args.port),
+    };
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&to_json(&c, seq))?);
+        return Ok(());
+    }
+    let dir = if c.permuted {
+        "permuted Hall order"
+    } else if c.reversed {
+        "reversed (default Hall order backward)"
+    } else {
+        "default"
+    };
+    println!("Hall sequence (bridge steps 0-5): {:?}", c.sequence);
+    println!("direction: {dir}");
+    println!("current-sense sign: {:+}", c.current_sign);
+    println!(
+        "Hall edges per electrical revolution: {} (pole pairs {})",
+        c.edges_per_elec_rev,
+        if c.edges_per_elec_rev == 6 {
+            "match"
+        } else {
+            "differ"
+        }
+    );
+    println!(
+        "vector voltage: {} V",
+        crate::cmd::inspect::f32_shortest(c.volts)
+    );
+    if seq == 0 {
+        println!("not stored (the board's flash write failed)");
+    } else {
+        println!("stored with the coefficients as flash slot sequence {seq}");
+    }
+    Ok(())
+}
