@@ -227,7 +227,7 @@ fn write_verdict_table() {
         ("correct model", Extra::None, SignalKind::A),
         ("correct model", Extra::None, SignalKind::D),
         (
-            "compliant coupling, 5 Hz, load 2× rotor",
+            "compliant coupling (5 Hz two-mass resonance), load 2× rotor",
             Extra::Coupling {
                 j2: 6e-4,
                 k: 0.2,
@@ -307,10 +307,12 @@ fn write_verdict_table() {
          shows the same, acceleration 6-14 %). Judge a model on smooth signals (a, b, c); on \
          steps, read the carriers against that floor. A torque constant that falls 3 % by 10 A goes unseen on the \
          fitting signal a, whose current rarely leaves that range (on voltage steps it is \
-         carried by acceleration and current, which rise together). A compliant coupling \
-         shows at reversals, where the load winds the spring up, rather than as a spectral \
-         peak: the 0.19 s weak-form windows attenuate 5 Hz, and the frequency carrier is \
-         tested on disjoint windows only. A gap is carried by reversals or by acceleration.\n",
+         carried by acceleration and current, which rise together). A compliant coupling is \
+         named `compliance` with its load inertia and natural frequency; what it leaves shows \
+         at reversals rather than as a spectral peak (the 0.19 s weak-form windows attenuate \
+         5 Hz, and the frequency carrier is tested on disjoint windows only). A gap has no \
+         candidate of its own yet: its nearest named physics is a soft coupling (`compliance` \
+         at about 1 Hz), which is what `diagnose` reports.\n",
     );
     let path = tests::root().join("docs").join("diagnose-verdict.md");
     std::fs::write(&path, md).unwrap();
