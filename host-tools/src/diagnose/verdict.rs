@@ -336,6 +336,16 @@ mod tests {
     }
 
     #[test]
+    fn a_non_finite_residual_fails_the_parameter_check() {
+        let refit = noise(100, 9);
+        let mut given = refit.clone();
+        given[3] = f64::NAN;
+        assert!(!parameter_check(&given, &refit, 4, 0.01).passed);
+        given[3] = f64::INFINITY;
+        assert!(!parameter_check(&given, &refit, 4, 0.01).passed);
+    }
+
+    #[test]
     fn parameters_are_off_only_when_a_refit_removes_most_of_the_error() {
         let refit = noise(500, 5);
         let near: Vec<f64> = refit.iter().map(|v| v * 1.05).collect();
