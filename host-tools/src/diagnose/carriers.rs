@@ -139,13 +139,13 @@ fn test_rows(
 ) -> Tested {
     let thin = |v: Vec<f64>| -> Vec<f64> { v.into_iter().step_by(step).collect() };
     let resid: Vec<f64> = rows.resid.iter().step_by(step).copied().collect();
-    let ones_w: Vec<f64> = thin(select(
+    let ones_w: Vec<f64> = thin(super::select_rows(
         &rows.wf.integral(&vec![1.0; cols[0].len()]),
         rows.keep,
     ));
     let w: Vec<Vec<f64>> = cols
         .iter()
-        .map(|c| thin(select(&rows.wf.integral(c), rows.keep)))
+        .map(|c| thin(super::select_rows(&rows.wf.integral(c), rows.keep)))
         .collect();
     let mut refs: Vec<&[f64]> = Vec::with_capacity(w.len() + 1);
     if !spans_constant {
@@ -170,14 +170,6 @@ fn test_rows(
         p_value: t.p_value,
         beta,
     }
-}
-
-fn select(v: &[f64], keep: &[bool]) -> Vec<f64> {
-    v.iter()
-        .zip(keep)
-        .filter(|(_, k)| **k)
-        .map(|(x, _)| *x)
-        .collect()
 }
 
 /// Time since the last reversal of the velocity [s] at each sample (a reversal: the velocity

@@ -944,7 +944,7 @@ fn forward_select(
 }
 
 /// The rows of `v` where `keep` is true.
-fn select_rows(v: &[f64], keep: &[bool]) -> Vec<f64> {
+pub(crate) fn select_rows(v: &[f64], keep: &[bool]) -> Vec<f64> {
     v.iter()
         .zip(keep)
         .filter(|(_, k)| **k)

@@ -241,15 +241,22 @@ pub fn rms(x: &[f64]) -> f64 {
     (x.iter().map(|v| v * v).sum::<f64>() / x.len() as f64).sqrt()
 }
 
+/// `n` standard normal numbers from `seed` (for the statistics' tests).
+#[cfg(test)]
+pub(crate) fn white_noise(n: usize, seed: u64) -> Vec<f64> {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+    (0..n)
+        .map(|_| rng.sample(rand_distr::StandardNormal))
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use rand::{Rng, SeedableRng};
-    use rand_distr::StandardNormal;
 
     fn noise(n: usize, seed: u64) -> Vec<f64> {
-        let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
-        (0..n).map(|_| rng.sample(StandardNormal)).collect()
+        white_noise(n, seed)
     }
 
     #[test]

@@ -294,13 +294,7 @@ pub fn given_residuals(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use rand::{Rng, SeedableRng};
-    use rand_distr::StandardNormal;
-
-    fn noise(n: usize, seed: u64) -> Vec<f64> {
-        let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
-        (0..n).map(|_| rng.sample(StandardNormal)).collect()
-    }
+    use crate::diagnose::stats::white_noise as noise;
 
     #[test]
     fn white_noise_passes_whiteness_at_about_the_level() {
