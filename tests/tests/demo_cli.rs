@@ -47,12 +47,12 @@ fn demo_finds_the_hidden_effect_and_the_error_falls() {
     for key in ["x", "i"] {
         assert!(
             fit_of(last, key) > fit_of(first, key) + 1.0,
-            "validation {key} fit did not improve: {first} -> {last}"
+            "test {key} fit did not improve: {first} -> {last}"
         );
     }
     assert!(
         fit_of(last, "xdot") > fit_of(first, "xdot") - 1.0,
-        "validation velocity fit fell: {first} -> {last}"
+        "test velocity fit fell: {first} -> {last}"
     );
     let html = std::fs::read_to_string(dir.path().join("rep").join("index.html")).unwrap();
     assert!(html.contains("<svg") && html.contains("position_load"));

@@ -1,7 +1,8 @@
 //! `motorid demo`: the whole identification loop on the built-in emulator with a hidden
-//! physical effect: simulate fitting (signal a) and validation (signal b) data, fit LuGre,
-//! diagnose, add the top finding, refit, until nothing significant is left; print the
-//! validation fit after each step, name the hidden effect and whether it was found.
+//! physical effect: simulate fitting (signals a and d), validation (signal b: it chooses
+//! among models) and test data (another draw of signal b, on which no choice is made), fit
+//! LuGre, diagnose, add the top finding, refit, until nothing significant is left; print the
+//! test fit after each step, name the hidden effect and whether it was found.
 use crate::diagnose::{self, Options, Structure};
 use crate::effect_spec::EffectSpec;
 use crate::emulator::{simulate_signal, EmulatorConfig, SignalKind};
@@ -121,7 +122,7 @@ pub fn run_loop(
     let mut cfg = EmulatorConfig::paper();
     cfg.seed = seed;
     cfg.effects = hidden.iter().map(EffectSpec::to_effect).collect();
-    bar.set_message("simulating signals a and d (fit) and b (validation)");
+    bar.set_message("simulating signals a and d (fit), b (validation) and b (test)");
     let mut fit_log = simulate_signal(&cfg, SignalKind::A, duration)?.log;
     fit_log.source = PathBuf::from("emulated signal a");
     // The braking experiment: after each voltage step down the drive brakes the moving
@@ -135,6 +136,12 @@ pub fn run_loop(
     val_cfg.seed = seed.wrapping_add(1000);
     let mut val_log = simulate_signal(&val_cfg, SignalKind::B, duration)?.log;
     val_log.source = PathBuf::from("emulated signal b");
+    // The validation log chooses among models (the guard of added effects); the scores are
+    // reported on a fresh log that no choice was made on.
+    let mut test_cfg = cfg.clone();
+    test_cfg.seed = seed.wrapping_add(3000);
+    let mut test_log = simulate_signal(&test_cfg, SignalKind::B, duration)?.log;
+    test_log.source = PathBuf::from("emulated signal b (test)");
     bar.inc(1);
     let mut adds: Vec<EffectSpec> = Vec::new();
     let mut iterations = Vec::new();
@@ -143,10 +150,10 @@ pub fn run_loop(
         bar.set_message(format!("round {round}: fitting {}", label(&adds)));
         let model = fit(&fit_logs, &val_log, &adds)?;
         bar.inc(1);
-        let pred = ident::freerun::simulate(&model, &val_log)?;
-        let sc = ident::score_prediction(&model, &val_log, &pred)?;
+        let pred = ident::freerun::simulate(&model, &test_log)?;
+        let sc = ident::score_prediction(&model, &test_log, &pred)?;
         say(&format!(
-            "step {round}: {:<32} validation fit: x {:6.2} %, xdot {:6.2} %, i {}",
+            "step {round}: {:<32} test fit: x {:6.2} %, xdot {:6.2} %, i {}",
             label(&adds),
             sc.fit.x,
             sc.fit.xdot,
@@ -229,7 +236,7 @@ pub fn run_loop(
             &hidden_s,
             verdict,
             &outcome.iterations,
-            (&model, &val_log, &d, &pred),
+            (&model, &test_log, &d, &pred),
         )?;
         outcome.report = Some(w.path);
     }
@@ -270,10 +277,12 @@ pub fn run(args: Args) -> Result<()> {
     }
     println!(
         "Emulated motor (paper's BLDC motor, LuGre friction) with {} hidden effect(s); \
-         fitting on signals a ({} s) and d ({} s, voltage steps), validating on signal b ({} s).",
+         fitting on signals a ({} s) and d ({} s, voltage steps), choosing among models on \
+         signal b ({} s) and scoring on a second draw of b ({} s) that no choice is made on.",
         hidden.len(),
         args.duration,
         STEP_DURATION,
+        args.duration,
         args.duration
     );
     let bar = ProgressBar::new((2 + MAX_ROUNDS) as u64);

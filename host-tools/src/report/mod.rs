@@ -360,7 +360,7 @@ pub fn write_demo_report(
         .map(|it| (100.0 - it.validation.xdot).max(0.0))
         .collect();
     page.chart(svg::bar_chart(
-        "Velocity error on validation data, 100 − fit % (before → after each added effect)",
+        "Velocity error on test data (a fresh log no choice was made on), 100 − fit % (before → after each added effect)",
         "100 − fit %",
         &labels,
         &gap,
