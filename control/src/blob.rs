@@ -244,6 +244,16 @@ fn effect_finite(e: &Effect<f32>) -> bool {
 }
 
 impl Coefficients {
+    /// Takes a Hall commissioning result: stores it and the sector table it learned (the Hall
+    /// state seen with bridge step k is sector k; the two impossible states stay invalid).
+    pub fn apply_commissioning(&mut self, c: Commissioning) {
+        self.commission = Some(c);
+        self.hall_table = [HALL_INVALID; 8];
+        for (k, &s) in c.sequence.iter().enumerate() {
+            self.hall_table[(s & 7) as usize] = k as u8;
+        }
+    }
+
     /// Checks the values: finite numbers, positive motor constants, a Hall table that maps
     /// the six valid states one-to-one onto sectors 0..5, parameters present for the model.
     pub fn validate(&self) -> Result<(), BlobError> {

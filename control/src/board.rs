@@ -396,11 +396,7 @@ impl Board {
         match r {
             Ok(c) => {
                 let mut co = self.coeffs.clone();
-                co.commission = Some(c);
-                co.hall_table = [HALL_INVALID; 8];
-                for (k, &s) in c.sequence.iter().enumerate() {
-                    co.hall_table[(s & 7) as usize] = k as u8;
-                }
+                co.apply_commissioning(c);
                 self.step = ControlStep::new(&co.step_config(self.v_bus_nominal));
                 self.table = table_of(&co);
                 self.coeffs = co;

@@ -290,3 +290,55 @@ fn commissioning_learns_every_hall_order_and_the_motor_then_runs() {
     }
     assert!(reversed_seen, "no case reversed the direction");
 }
+
+/// Commissioning, then the usual workflow (fit, export, upload): the exported blob carries the
+/// default Hall table, and the upload keeps the board's learned one, so the motor wired in a
+/// reversed order still runs under speed control afterwards.
+#[test]
+fn an_uploaded_model_keeps_the_commissioned_hall_table() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let board = Board::start_wired(d, "50", &["--hall-order", "231", "--phase-order", "321"]);
+    let first = ok(&motorid(
+        d,
+        &["commission", "--port", &board.port, "--json"],
+    ));
+    let v: serde_json::Value = serde_json::from_str(&first).unwrap();
+    std::fs::write(d.join("m.toml"), tests::PAPER_LUGRE_MODEL).unwrap();
+    ok(&motorid(d, &["export", "m.toml", "-o", "c.bin"]));
+    let out = motorid(d, &["upload", "c.bin", "--port", &board.port]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("kept the board's Hall commissioning"),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let again = ok(&motorid(
+        d,
+        &["commission", "--port", &board.port, "--read", "--json"],
+    ));
+    let w: serde_json::Value = serde_json::from_str(&again).unwrap();
+    assert_eq!(w["hall_sequence"], v["hall_sequence"], "{w}");
+    ok(&motorid(
+        d,
+        &[
+            "record",
+            "--port",
+            &board.port,
+            "--speed-ref",
+            "30",
+            "--duration",
+            "4",
+            "-o",
+            "s.csv",
+        ],
+    ));
+    let (_, rows, _) = read_log(&d.join("s.csv"));
+    let tail: Vec<f64> = rows[rows.len() - 80..].iter().map(|r| r[4]).collect();
+    let mean = tail.iter().sum::<f64>() / tail.len() as f64;
+    assert!((mean - 30.0).abs() < 3.0, "mean speed {mean}");
+}

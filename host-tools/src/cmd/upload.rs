@@ -3,6 +3,7 @@ use crate::board::coeffs;
 use crate::board::link::Link;
 use crate::cmd::inspect::kind_name;
 use anyhow::{bail, Result};
+use control::commission::CommissionOutcome;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::PathBuf;
 
@@ -23,9 +24,30 @@ pub struct Args {
 
 pub fn run(args: Args) -> Result<()> {
     // Refuse a damaged blob here, with the file's name, before the board does.
-    let (bytes, co) = coeffs::decode_file(&args.blob)?;
+    let (mut bytes, mut co) = coeffs::decode_file(&args.blob)?;
     let mut link = Link::open(&args.port)?;
     let before = link.identify()?;
+    // A blob from `export` carries the default Hall table; the board's commissioning (the
+    // table learned on this motor's wiring) must survive the upload, or the motor would be
+    // commutated with a table it was never checked against.
+    if co.commission.is_none() {
+        if let (CommissionOutcome::Done(c), _) = link.read_commission()? {
+            co.apply_commissioning(c);
+            let mut buf = vec![0u8; control::blob::MAX_BLOB_LEN];
+            bytes = control::blob::encode(&co, &mut buf)
+                .map_err(|e| {
+                    anyhow::anyhow!(
+                        "{}: cannot keep the board's commissioning: {e:?}",
+                        args.blob.display()
+                    )
+                })?
+                .to_vec();
+            eprintln!(
+                "note: kept the board's Hall commissioning (sequence {:?}) in the uploaded coefficients",
+                c.sequence
+            );
+        }
+    }
     let bar = ProgressBar::new(bytes.len() as u64);
     bar.set_style(
         ProgressStyle::with_template("uploading {bar:30} {bytes}/{total_bytes}")
