@@ -269,24 +269,7 @@ fn commissioning_learns_every_hall_order_and_the_motor_then_runs() {
         assert_eq!(w, v, "{what}");
 
         // With the learned table the motor runs under speed control.
-        ok(&motorid(
-            d,
-            &[
-                "record",
-                "--port",
-                &board.port,
-                "--speed-ref",
-                "30",
-                "--duration",
-                "4",
-                "-o",
-                "s.csv",
-            ],
-        ));
-        let (_, rows, _) = read_log(&d.join("s.csv"));
-        let tail: Vec<f64> = rows[rows.len() - 80..].iter().map(|r| r[4]).collect();
-        let mean = tail.iter().sum::<f64>() / tail.len() as f64;
-        assert!((mean - 30.0).abs() < 3.0, "{what}: mean speed {mean}");
+        assert_runs_at_30(d, &board.port, &what);
     }
     assert!(reversed_seen, "no case reversed the direction");
 }
@@ -304,7 +287,7 @@ fn an_uploaded_model_keeps_the_commissioned_hall_table() {
         &["commission", "--port", &board.port, "--json"],
     ));
     let v: serde_json::Value = serde_json::from_str(&first).unwrap();
-    std::fs::write(d.join("m.toml"), tests::PAPER_LUGRE_MODEL).unwrap();
+    std::fs::write(d.join("m.toml"), PAPER_LUGRE_MODEL).unwrap();
     ok(&motorid(d, &["export", "m.toml", "-o", "c.bin"]));
     let out = motorid(d, &["upload", "c.bin", "--port", &board.port]);
     assert!(
@@ -323,12 +306,17 @@ fn an_uploaded_model_keeps_the_commissioned_hall_table() {
     ));
     let w: serde_json::Value = serde_json::from_str(&again).unwrap();
     assert_eq!(w["hall_sequence"], v["hall_sequence"], "{w}");
+    assert_runs_at_30(d, &board.port, "after the upload");
+}
+
+/// A 4 s speed run at 30 rad/s settles within 3 rad/s (mean of the last 80 samples, about 1 s).
+fn assert_runs_at_30(d: &Path, port: &str, what: &str) {
     ok(&motorid(
         d,
         &[
             "record",
             "--port",
-            &board.port,
+            port,
             "--speed-ref",
             "30",
             "--duration",
@@ -340,5 +328,5 @@ fn an_uploaded_model_keeps_the_commissioned_hall_table() {
     let (_, rows, _) = read_log(&d.join("s.csv"));
     let tail: Vec<f64> = rows[rows.len() - 80..].iter().map(|r| r[4]).collect();
     let mean = tail.iter().sum::<f64>() / tail.len() as f64;
-    assert!((mean - 30.0).abs() < 3.0, "mean speed {mean}");
+    assert!((mean - 30.0).abs() < 3.0, "{what}: mean speed {mean}");
 }
