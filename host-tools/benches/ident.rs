@@ -1,4 +1,4 @@
-//! Speed of the SINDYc building blocks on 10^6 samples (issue 3, part 4):
+//! Speed of the SINDYc building blocks on 10^6 samples:
 //! Hankel state extraction (target ≤ 0.25 s) and one SINDYc regression with the paper's
 //! 17-term library and STLSQ (target ≤ 0.2 s), on a 2-core machine.
 //!

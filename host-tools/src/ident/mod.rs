@@ -10,7 +10,7 @@
 //! | [`linear`] | the linear model (viscous friction), paper eqs. 1–2 |
 //! | [`lugre_fit`] | LuGre static curve and dynamic parameters |
 //! | [`nlsq`] | bounded nonlinear least squares (Levenberg–Marquardt with projection) |
-//! | [`hankel`], [`stlsq`], [`library`], [`sindyc`] | SINDYc (the colleague's files) |
+//! | [`hankel`], [`stlsq`], [`library`], [`sindyc`] | SINDYc |
 //!
 //! Entry points: [`fit`] and [`score`].
 pub mod effect_residual;
@@ -580,12 +580,12 @@ pub fn score_prediction(model: &Model, log: &MotorLog, pred: &Prediction) -> Res
     })
 }
 
-/// SINDYc fitting (the colleague's `sindyc.rs`); this is the single call site.
+/// SINDYc fitting ([`sindyc`]); this is the single call site.
 fn sindyc_fit(req: &FitRequest) -> Result<Model> {
     sindyc::fit_model(req)
 }
 
-/// SINDYc free-run simulation (the colleague's `sindyc.rs`); this is the single call site.
+/// SINDYc free-run simulation ([`sindyc`]); this is the single call site.
 pub(crate) fn sindyc_simulate(model: &Model, log: &MotorLog) -> Result<Prediction> {
     sindyc::simulate_model(model, log)
 }

@@ -20,7 +20,7 @@
 //!    without z 97.4 %, refined without z 98.3 %). The paper's method stays the default and
 //!    is reported as measured; the z terms only enter a model when they predict better.
 //! 3. **Weak form.** No derivative of quantised data is taken: each equation is multiplied
-//!    by the hub's smooth test functions ([`super::weak_form`], 40-sample windows, hop 20)
+//!    by the shared smooth test functions ([`super::weak_form`], 40-sample windows, hop 20)
 //!    and integrated by parts: `∫φ·dẋ/dt = ∫φ''·x`, `∫φ·dz/dt = −∫φ'·z`,
 //!    `∫φ·dI/dt = −∫φ'·I`; the library columns become `∫φ·θ_j`.
 //!    Uniformly sampled logs take a fast path ([`weak_rows_uniform`]: each library value
@@ -45,7 +45,7 @@
 //!
 //! # Free run
 //! States `(x, ẋ, z, I)`, `u` held between samples. Steps are exponential Rosenbrock–Euler
-//! (the hub's scheme, [`super::freerun`]: exact for the linear part, stable however stiff the
+//! (the free-run scheme of [`super::freerun`]: exact for the linear part, stable however stiff the
 //! current or `z` equation), [`SUBSTEPS`] sub-steps per sample; `z` is clamped to `±z_max` after each
 //! step as the firmware's observer does. A non-finite state or a velocity/current beyond ten
 //! times the data's range is a divergence: such a candidate is never returned.
@@ -440,7 +440,7 @@ pub fn simulate(
 }
 
 /// One exponential Rosenbrock–Euler step `s⁺ = s + h·φ1(h·A)·f(s)` (A: central-difference
-/// Jacobian, forward differences), through the hub's augmented-matrix exponential.
+/// Jacobian, forward differences), through [`super::freerun`]'s augmented-matrix exponential.
 fn rosenbrock_step(
     rhs: &impl Fn(&[f64; 4], f64) -> [f64; 4],
     s: &[f64; 4],
@@ -1312,7 +1312,7 @@ pub fn from_table(t: &toml::Table) -> Result<(SindyModel<f64>, HankelSettings)> 
     Ok((m, h))
 }
 
-/// `fit --model sindyc`: identify and wrap as a [`crate::model::Model`] (the hub's call site).
+/// `fit --model sindyc`: identify and wrap as a [`crate::model::Model`] (called from [`super::fit`]).
 pub fn fit_model(req: &super::FitRequest) -> Result<crate::model::Model> {
     use crate::model::{Model, ModelKind, Parameter};
     let opts = SindycOptions {
@@ -1366,7 +1366,7 @@ pub fn fit_model(req: &super::FitRequest) -> Result<crate::model::Model> {
     Ok(model)
 }
 
-/// Free run of a `sindyc` [`crate::model::Model`] (the hub's call site).
+/// Free run of a `sindyc` [`crate::model::Model`] (called from [`super::fit`]).
 pub fn simulate_model(model: &crate::model::Model, log: &MotorLog) -> Result<Prediction> {
     let table = model
         .sindy
