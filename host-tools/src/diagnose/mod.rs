@@ -386,19 +386,15 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
         if st.has(EffectKind::LoadFriction) {
             mech.base_cols.push(wf.integral_zoh(&lf_col));
         }
-        // Saturation likewise per interval (its I³ weighs the step transients).
-        let sat_col = s.saturation_intervals(units.r);
+        // A model's saturation likewise per interval (its I³ weighs the step transients).
         if st.has(EffectKind::Saturation) && voltage {
-            mech.base_cols.push(wf.integral_zoh(&sat_col));
+            mech.base_cols
+                .push(wf.integral_zoh(&s.saturation_intervals(units.r)));
         }
         for (v, cols) in mech.cand.iter_mut() {
             if v.kind == EffectKind::LoadFriction {
                 *cols = vec![wf.integral_zoh(&lf_col)];
                 v.torque = Some(lf_torque.clone());
-            }
-            if v.kind == EffectKind::Saturation {
-                *cols = vec![wf.integral_zoh(&sat_col)];
-                v.torque = Some(sat_col.clone());
             }
         }
         // Every window, for presliding (with its nuisance term, see `presliding_pass`).
