@@ -12,14 +12,15 @@
 //!
 //! Safety (in `control::board`): an invalid Hall state or impossible transition,
 //! over-current, bus under- or over-voltage, overrun and stall turn the bridge off and latch
-//! a fault (cleared by `ClearFault`, the bridge stays off until a mode is set again). The independent watchdog resets the MCU when the
-//! loop stops (TIM1's reset state has the outputs off); a panic or HardFault clears TIM1's
-//! MOE first, logs over defmt and waits for the watchdog.
+//! a fault (cleared by `ClearFault`, the bridge stays off until a mode is set again). The
+//! independent watchdog runs before the flash is read and resets the MCU when the loop
+//! stops (TIM1's reset state has the outputs off); a panic, HardFault or unexpected
+//! interrupt clears TIM1's MOE first and waits for the watchdog. A flash ECC error in a
+//! coefficient slot (an interrupted commit) makes that slot invalid ([`storage`]).
 //!
 //! TODO (needs the board to get right, not faked here): cycle-by-cycle over-current with
 //! COMP + TIM1 break input (the 12 ms software check is only a backstop); ADC sampling
-//! synchronised to the PWM centre; the flash ECC NMI on an interrupted write (see
-//! `control::slots`).
+//! synchronised to the PWM centre.
 #![no_std]
 #![no_main]
 
@@ -27,6 +28,7 @@ mod board;
 mod bridge;
 mod hall_capture;
 mod link;
+mod storage;
 
 use core::sync::atomic::Ordering;
 
@@ -112,10 +114,15 @@ async fn main(spawner: Spawner) {
         (zw / ZERO_SAMPLES) as u16,
     ];
 
+    // The watchdog runs from here on: a fault while reading the flash resets the MCU
+    // instead of hanging it (TIM1's reset state has the outputs off).
+    let mut wdg = IndependentWatchdog::new(p.IWDG, board::WATCHDOG_US);
+    wdg.unleash();
+
     // Coefficients from flash: newest valid slot, or none (identify and commissioning only,
-    // a warning).
+    // a warning). A slot with a flash ECC error counts as invalid (`storage`).
     let slots = Slots::new(
-        Flash::new_blocking(p.FLASH),
+        storage::EccFlash(Flash::new_blocking(p.FLASH)),
         link::SLOTS_OFFSET,
         link::SLOT_SIZE,
     );
@@ -165,8 +172,7 @@ async fn main(spawner: Spawner) {
         _ => defmt::error!("serial link not started"),
     }
 
-    let mut wdg = IndependentWatchdog::new(p.IWDG, board::WATCHDOG_US);
-    wdg.unleash();
+    wdg.pet();
 
     let mut ticker = Ticker::every(Duration::from_micros(
         (control::CONTROL_PERIOD_S * 1.0e6) as u64,
@@ -288,6 +294,16 @@ fn panic(info: &core::panic::PanicInfo) -> ! {
 /// HardFault: bridge off, then wait for the watchdog.
 #[cortex_m_rt::exception]
 unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
+    bridge::force_off();
+    loop {
+        cortex_m::asm::nop();
+    }
+}
+
+/// Any exception or interrupt without a handler of its own (the NMI has one, `storage`):
+/// bridge off, then wait for the watchdog.
+#[cortex_m_rt::exception]
+unsafe fn DefaultHandler(_irqn: i16) -> ! {
     bridge::force_off();
     loop {
         cortex_m::asm::nop();

@@ -442,6 +442,36 @@ mod tests {
     }
 
     #[test]
+    fn an_ecc_error_in_the_newest_slot_boots_on_the_other() {
+        // Two uploads (slot 0, then slot 1), then a double ECC error in slot 1's header, as
+        // a commit cut by a power loss leaves it: the board boots on slot 0 instead of
+        // hanging, and the next upload rewrites slot 1.
+        let mut slots =
+            Slots::new(RamFlash::new(None), 0, super::super::flash::PAGE as u32).unwrap();
+        let old = Coefficients::default();
+        let mut new = Coefficients::default();
+        new.pi.kp = 0.125;
+        slots
+            .store(&crate::board::coeffs::encode(&old).unwrap())
+            .unwrap();
+        slots
+            .store(&crate::board::coeffs::encode(&new).unwrap())
+            .unwrap();
+        let mut flash = slots.into_inner();
+        flash.inject_ecc_error(super::super::flash::PAGE + 8);
+        let mut sim = BoardSim::new(EmulatorConfig::paper(), Wiring::default(), flash).unwrap();
+        assert_eq!(replies(&mut sim), []);
+        assert_eq!((sim.coeff_seq(), sim.coefficients()), (1, &old));
+        // Speed mode is allowed: the board has valid coefficients.
+        sim.receive(&frame(&HostMsg::SetMode { mode: Mode::Speed }));
+        sim.receive(&frame(&HostMsg::Stop));
+        assert_eq!(replies(&mut sim), [BoardMsg::Ack, BoardMsg::Ack]);
+        // The unreadable slot's sequence number is lost: the rewrite outranks slot 0.
+        upload(&mut sim, &new);
+        assert_eq!((sim.coeff_seq(), sim.coefficients()), (2, &new));
+    }
+
+    #[test]
     fn silence_on_the_link_stops_a_run_and_heartbeats_keep_it() {
         let mut sim = sim_with(EmulatorConfig::paper(), Some(&Coefficients::default()));
         sim.receive(&frame(&HostMsg::SetSpeed { omega_ref: 20.0 }));
