@@ -9,6 +9,8 @@
 //! callback.
 //!
 //! Limits and faults (each turns the bridge off; faults latch until `ClearFault`):
+//! - hardware over-current: the transport's comparators cut the bridge within a PWM period
+//!   above [`HW_TRIP_A`] ([`Measurements::hw_overcurrent`]);
 //! - over-current: |I| > `limits.i_max` (the step derates the voltage above
 //!   [`crate::blob::DERATE_FRACTION`]·i_max first, [`crate::step`]);
 //! - bus over-voltage always, under-voltage and control overrun while running;
@@ -35,6 +37,10 @@ use crate::hall::{HallTable, INVALID};
 use crate::slots::Slots;
 use crate::step::{ControlStep, Faults, HallEdge, StepInputs, MAX_EDGES};
 
+/// Phase current at which the hardware stops the bridge within a PWM period [A]: the
+/// B-G431B-ESC1's 40 A peak rating (ST UM2516). The firmware sets its comparators' threshold
+/// from it, the emulated board trips at it.
+pub const HW_TRIP_A: f32 = 40.0;
 /// Largest duty cycle (95 %, so the bootstrap capacitors of the high-side drivers recharge
 /// every PWM period): the largest voltage is `MAX_DUTY·V_bus`.
 pub const MAX_DUTY: f32 = 0.95;
@@ -91,6 +97,9 @@ pub struct Measurements {
     pub v_bus: f32,
     /// The previous period overran.
     pub overrun: bool,
+    /// The hardware over-current stop has cut the bridge (held by the hardware until the
+    /// transport clears it after `ClearFault`, see [`Board::handle`]).
+    pub hw_overcurrent: bool,
 }
 
 #[derive(Debug, Clone, PartialEq)]
@@ -287,7 +296,8 @@ impl Board {
     }
 
     /// Handles one host message (not the upload messages: `false`, see [`handle_upload`]).
-    /// Every frame counts as a sign of life of the link.
+    /// Every frame counts as a sign of life of the link. After a `ClearFault` ([`Board::fault`]
+    /// went from some to none) the transport re-arms its hardware over-current stop.
     pub fn handle(&mut self, msg: &HostMsg, send: &mut impl FnMut(BoardMsg)) -> bool {
         self.quiet = 0;
         let reply = match *msg {
@@ -427,7 +437,9 @@ impl Board {
         let active = self.run != Run::Idle;
 
         // Faults that do not need the step.
-        let hard = if i.abs() > lim.i_max {
+        let hard = if m.hw_overcurrent {
+            Some(Fault::HardwareOverCurrent)
+        } else if i.abs() > lim.i_max {
             Some(Fault::OverCurrent)
         } else if m.v_bus.is_finite() && m.v_bus > lim.vbus_max {
             Some(Fault::OverVoltage)

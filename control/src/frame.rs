@@ -183,6 +183,10 @@ pub enum Fault {
     /// A voltage above the stall threshold and no Hall edge for
     /// [`crate::board::STALL_PERIODS`] periods.
     Stall,
+    /// The hardware over-current stop cut the bridge within a PWM period: a phase current
+    /// above [`crate::board::HW_TRIP_A`] (the board's rating), e.g. a short or a winding
+    /// of very low resistance.
+    HardwareOverCurrent,
 }
 
 /// Warnings: logged, nothing stops.
@@ -194,6 +198,9 @@ pub enum Warning {
     BadFrame,
     /// No frame for [`crate::board::LINK_TIMEOUT_PERIODS`] periods: the run was stopped.
     LinkLost,
+    /// The hardware over-current stop failed its boot self-test and is not armed: only the
+    /// 12 ms software current limit protects the bridge (see the defmt log for why).
+    NoHardwareStop,
 }
 
 /// One log sample, every 12 ms while running (the contract's CSV columns).

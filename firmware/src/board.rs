@@ -69,6 +69,10 @@ pub const VBUS_GAIN: f32 = 0.0962;
 pub const SHUNT_OHM: f32 = 0.003;
 /// Total current-sense amplification (sign included), see [`SHUNT_OHM`].
 pub const SENSE_GAIN: f32 = -9.14;
+/// Gain of the op-amps' programmable-gain amplifier [NuttX src/stm32_foc.c, "PGA gain = 16"]:
+/// the op-amps' non-inverting inputs (PA1, PA7, PB0), which the over-current comparators
+/// watch, carry the shunt voltage scaled by `|SENSE_GAIN| / PGA_GAIN` (4/7).
+pub const PGA_GAIN: f32 = 16.0;
 
 /// Volts at an ADC pin for a raw reading.
 pub fn adc_volts(raw: u16) -> f32 {

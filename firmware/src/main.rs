@@ -18,9 +18,11 @@
 //! interrupt clears TIM1's MOE first and waits for the watchdog. A flash ECC error in a
 //! coefficient slot (an interrupted commit) makes that slot invalid ([`storage`]).
 //!
-//! TODO (needs the board to get right, not faked here): cycle-by-cycle over-current with
-//! COMP + TIM1 break input (the 12 ms software check is only a backstop); ADC sampling
-//! synchronised to the PWM centre.
+//! - [`overcurrent`]: comparators on the shunts into TIM1's break input, armed at boot: the
+//!   bridge turns off within a PWM period above the board's 40 A rating.
+//!
+//! TODO (needs the board to get right, not faked here): ADC sampling synchronised to the
+//! PWM centre.
 #![no_std]
 #![no_main]
 
@@ -28,6 +30,7 @@ mod board;
 mod bridge;
 mod hall_capture;
 mod link;
+mod overcurrent;
 mod storage;
 
 use core::sync::atomic::Ordering;
@@ -114,6 +117,15 @@ async fn main(spawner: Spawner) {
         (zw / ZERO_SAMPLES) as u16,
     ];
 
+    // Hardware over-current stop: calibrated on the op-amps with the bridge off.
+    match overcurrent::arm(p.DAC3) {
+        Ok(a) => defmt::info!("hardware over-current stop armed: {}", a),
+        Err(why) => {
+            defmt::error!("hardware over-current stop NOT armed: {=str}", why);
+            let _ = OUTGOING.try_send(BoardMsg::Warning(Warning::NoHardwareStop));
+        }
+    }
+
     // The watchdog runs from here on: a fault while reading the flash resets the MCU
     // instead of hanging it (TIM1's reset state has the outputs off).
     let mut wdg = IndependentWatchdog::new(p.IWDG, board::WATCHDOG_US);
@@ -192,9 +204,15 @@ async fn main(spawner: Spawner) {
         if let Some((c, seq)) = NEW_COEFFS.try_take() {
             board.load(c, seq);
         }
-        // Host commands: the board logic answers them.
+        // Host commands: the board logic answers them. A cleared fault re-arms the
+        // hardware over-current stop (while a fault is latched the bridge is off, so a
+        // break flag set meanwhile is stale).
         while let Ok(msg) = COMMANDS.try_receive() {
+            let faulted = board.fault().is_some();
             board.handle(&msg, &mut send);
+            if faulted && board.fault().is_none() {
+                bridge::rearm();
+            }
         }
 
         // Measurements.
@@ -222,6 +240,7 @@ async fn main(spawner: Spawner) {
             i_vector,
             v_bus,
             overrun,
+            hw_overcurrent: bridge::hw_tripped(),
         };
         let drive = board.tick(&m, &mut send);
         if board.mode() == Mode::Idle {

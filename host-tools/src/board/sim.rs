@@ -115,7 +115,11 @@ impl BoardSim {
     /// One host message, as the firmware's link task and control loop handle it.
     pub fn handle(&mut self, msg: &HostMsg) {
         let out = &mut self.out;
+        let faulted = self.board.fault().is_some();
         if self.board.handle(msg, &mut |m| put(out, m)) {
+            if faulted && self.board.fault().is_none() {
+                self.hw.rearm();
+            }
             return;
         }
         let idle = self.board.mode() == Mode::Idle;
@@ -408,14 +412,44 @@ mod tests {
             let peak = samples.iter().map(|s| s.i.abs()).fold(0.0, f32::max);
             (f, peak, samples.last().map_or(0.0, |s| s.i))
         };
-        let (f, free, _) = peak(&no_limit);
-        assert_eq!(f, None);
-        assert!(free > 40.0, "without a limit the ramp draws {free} A");
+        // Without the software limit the ramp reaches the board's rating: the hardware stop.
+        let (f, _, _) = peak(&no_limit);
+        assert_eq!(f, Some(Fault::HardwareOverCurrent));
         let (f, limited, last) = peak(&co);
         assert_eq!(f, None, "peak {limited} A");
         // Derated from 0.8·i_max = 16 A: the current settles there, below the 20 A trip.
         assert!(limited <= 20.0, "peak {limited} A");
         assert!((last - 16.0).abs() < 1.0, "last {last} A");
+    }
+
+    #[test]
+    fn the_hardware_stop_cuts_a_short_until_the_fault_is_cleared() {
+        // A locked rotor, 12 V on 0.22 Ω and no software limit to speak of: 55 A within a
+        // few milliseconds, above the board's 40 A rating.
+        let mut plant = EmulatorConfig::paper();
+        plant.extra_load = Some(std::sync::Arc::new(|x| 1.0e4 * x.omega));
+        let mut co = Coefficients::default();
+        co.limits.i_max = 1000.0;
+        let mut sim = sim_with(plant, Some(&co));
+        sim.receive(&frame(&HostMsg::StartExperiment {
+            signal: Excitation::Steady { volts: 12.0 },
+            duration_s: 2.0,
+        }));
+        replies(&mut sim);
+        let (f, samples) = run_until_fault(&mut sim, 10);
+        assert_eq!(f, Some(Fault::HardwareOverCurrent));
+        assert!(samples.len() <= 1, "{} samples", samples.len());
+        assert!(!sim.is_running());
+        // Cut within the period: by its end the winding current has died away.
+        let i = sim.hardware().plant().truth().i.abs();
+        assert!(i < 1.0, "{i} A after the stop");
+        // Held off until cleared: a start is refused, ClearFault re-arms.
+        sim.receive(&frame(&HostMsg::SetMode { mode: Mode::Speed }));
+        assert_eq!(replies(&mut sim), [BoardMsg::Nack(Nack::Faulted)]);
+        sim.receive(&frame(&HostMsg::ClearFault));
+        sim.tick();
+        sim.receive(&frame(&HostMsg::SetMode { mode: Mode::Speed }));
+        assert_eq!(replies(&mut sim), [BoardMsg::Ack, BoardMsg::Ack]);
     }
 
     #[test]
