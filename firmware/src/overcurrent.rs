@@ -24,10 +24,9 @@
 //! and stay there until software sets MOE again. `bridge::commutate` does not set MOE while
 //! the break flag is set, and the flag is cleared only after the host's `ClearFault`
 //! ([`bridge::rearm`](crate::bridge::rearm)).
-use embassy_stm32::dac::{Dac, Value};
-use embassy_stm32::mode::Blocking;
 use embassy_stm32::pac;
 use embassy_stm32::pac::comp::vals::{Blanking, Hysteresis, Inm, Polarity};
+use embassy_stm32::pac::dac::vals::Mode;
 use embassy_stm32::pac::timer::vals::{Bkinp, Bkp, FilterValue};
 use embassy_stm32::peripherals::DAC3;
 use embassy_stm32::Peri;
@@ -57,29 +56,33 @@ fn settle() {
     cortex_m::asm::delay(SYSCLK_HZ / 1_000_000 * SETTLE_US);
 }
 
-fn set_threshold(dac: &mut Dac<'static, Blocking>, code: u16) {
-    dac.ch1().set(Value::Bit12Right(code));
-    dac.ch2().set(Value::Bit12Right(code));
+/// Sets both DAC3 channels (the comparators' inverting inputs) to `code` and waits.
+fn set_threshold(code: u16) {
+    pac::DAC3.dhr12rd().write(|w| {
+        w.set_dhr(0, code);
+        w.set_dhr(1, code);
+    });
     settle();
 }
 
 /// Smallest DAC code at which comparator `c` is low (its input at or below the threshold),
 /// or `None` when it stays high at full scale.
-fn flip_code(dac: &mut Dac<'static, Blocking>, c: pac::comp::Comp) -> Option<u16> {
-    let high = |dac: &mut Dac<'static, Blocking>, code| {
-        set_threshold(dac, code);
+#[inline(never)]
+fn flip_code(c: pac::comp::Comp) -> Option<u16> {
+    let high = |code| {
+        set_threshold(code);
         c.csr().read().value()
     };
-    if high(dac, DAC_MAX) {
+    if high(DAC_MAX) {
         return None;
     }
-    if !high(dac, 0) {
+    if !high(0) {
         return Some(0);
     }
     let (mut lo, mut hi) = (0u16, DAC_MAX); // high at lo, low at hi
     while hi - lo > 1 {
         let mid = lo + (hi - lo) / 2;
-        if high(dac, mid) {
+        if high(mid) {
             lo = mid;
         } else {
             hi = mid;
@@ -99,7 +102,19 @@ fn codes_per_amp() -> f32 {
 pub fn arm(dac3: Peri<'static, DAC3>) -> Result<Armed, &'static str> {
     // The comparators are clocked with SYSCFG (RM0440, "COMP clocks").
     pac::RCC.apb2enr().modify(|w| w.set_syscfgen(true));
-    let mut dac = Dac::<Blocking>::new_internal(dac3);
+    // DAC3: both channels internal only, unbuffered (RM0440, "DAC_MCR"); HFSEL for an AHB
+    // clock above 160 MHz. It keeps driving the threshold for as long as the firmware runs.
+    let _dac3 = dac3;
+    pac::RCC.ahb2enr().modify(|w| w.set_dac3en(true));
+    pac::DAC3.mcr().write(|w| {
+        w.set_hfsel(0b10);
+        w.set_mode(0, Mode::NORMAL_INT_BUFDIS);
+        w.set_mode(1, Mode::NORMAL_INT_BUFDIS);
+    });
+    pac::DAC3.cr().write(|w| {
+        w.set_en(0, true);
+        w.set_en(1, true);
+    });
     for c in COMPS {
         c.csr().write(|w| {
             w.set_inpsel(false); // INP0: PA1, PA7, PB0
@@ -114,7 +129,7 @@ pub fn arm(dac3: Peri<'static, DAC3>) -> Result<Armed, &'static str> {
 
     let mut zero = 0u16;
     for c in COMPS {
-        let z = flip_code(&mut dac, c).ok_or("a comparator input sits above the DAC range")?;
+        let z = flip_code(c).ok_or("a comparator input sits above the DAC range")?;
         zero = zero.max(z);
     }
     let trip = zero as f32 + libm::roundf(control::board::HW_TRIP_A * codes_per_amp());
@@ -122,12 +137,10 @@ pub fn arm(dac3: Peri<'static, DAC3>) -> Result<Armed, &'static str> {
         return Err("the trip threshold lies above the DAC range");
     }
     let trip = trip as u16;
-    set_threshold(&mut dac, trip);
+    set_threshold(trip);
     if COMPS.iter().any(|c| c.csr().read().value()) {
         return Err("a comparator is high at the threshold with the bridge off");
     }
-    // The DAC must keep driving the threshold for as long as the firmware runs.
-    core::mem::forget(dac);
 
     let t = pac::TIM1;
     t.af1().modify(|w| {
