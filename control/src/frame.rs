@@ -201,6 +201,11 @@ pub enum Warning {
     /// The hardware over-current stop failed its boot self-test and is not armed: only the
     /// 12 ms software current limit protects the bridge (see the defmt log for why).
     NoHardwareStop,
+    /// The option bytes take BOOT0 from its pin (nSWBOOT0 = 1); on the B-G431B-ESC1 that
+    /// pin (PB8) is Hall input H3, so a motor resting with H3 high can start the ROM
+    /// bootloader at reset instead of the firmware. Set nSWBOOT0 = 0, nBOOT0 = 1
+    /// (docs/bring-up.md).
+    Boot0FromPin,
 }
 
 /// One log sample, every 12 ms while running (the contract's CSV columns).

@@ -103,7 +103,8 @@ pub fn current_from_raw(raw: u16, zero: u16) -> f32 {
 //   ASSUMED: open-collector sensors, so the internal pull-ups are enabled.
 //   PB8 is also the STM32G431's BOOT0 pin (DS12589 pinout "PB8-BOOT0"): a Hall level high
 //   at reset can start the ROM bootloader unless the option bytes take BOOT0 from nBOOT0
-//   (nSWBOOT0 = 0, nBOOT0 = 1). Program them once with STM32CubeProgrammer or probe-rs.
+//   (nSWBOOT0 = 0, nBOOT0 = 1). The firmware checks them at boot (warning `Boot0FromPin`);
+//   docs/bring-up.md gives the STM32CubeProgrammer and OpenOCD commands that set them.
 // - USART2 (ST-LINK virtual COM port): TX PB3, RX PB4 [NuttX include/board.h; UM2516].
 // - User LED LD2: PC6; user button: PC10 [NuttX src/b-g431b-esc1.h; UM2516].
 

@@ -50,7 +50,7 @@ use embassy_stm32::timer::low_level::CountingMode;
 use embassy_stm32::timer::simple_pwm::PwmPin;
 use embassy_stm32::usart::{self, BufferedUart};
 use embassy_stm32::wdg::IndependentWatchdog;
-use embassy_stm32::{bind_interrupts, peripherals};
+use embassy_stm32::{bind_interrupts, pac, peripherals};
 use embassy_time::{Duration, Instant, Ticker};
 use static_cell::StaticCell;
 
@@ -116,6 +116,17 @@ async fn main(spawner: Spawner) {
         (zv / ZERO_SAMPLES) as u16,
         (zw / ZERO_SAMPLES) as u16,
     ];
+
+    // PB8 is both Hall H3 and BOOT0: unless the option bytes take BOOT0 from nBOOT0
+    // (nSWBOOT0 = 0), a high H3 at reset boots the ROM. Programming option bytes from the
+    // firmware could brick the board on a power cut: report, the engineer sets them once
+    // (docs/bring-up.md).
+    if pac::FLASH.optr().read().n_swboot0() {
+        defmt::warn!(
+            "option byte nSWBOOT0 = 1: BOOT0 follows PB8 = Hall H3; set nSWBOOT0 = 0, nBOOT0 = 1"
+        );
+        let _ = OUTGOING.try_send(BoardMsg::Warning(Warning::Boot0FromPin));
+    }
 
     // Hardware over-current stop: calibrated on the op-amps with the bridge off.
     match overcurrent::arm(p.DAC3) {
