@@ -187,6 +187,8 @@ pub enum Fault {
     /// above [`crate::board::HW_TRIP_A`] (the board's rating), e.g. a short or a winding
     /// of very low resistance.
     HardwareOverCurrent,
+    /// The board temperature (its NTC) reached [`crate::board::TEMP_MAX_C`].
+    OverTemperature,
 }
 
 /// Warnings: logged, nothing stops.

@@ -11,7 +11,8 @@
 //!   emulated board) in the middle, the bridge drive out.
 //!
 //! Safety (in `control::board`): an invalid Hall state or impossible transition,
-//! over-current, bus under- or over-voltage, overrun and stall turn the bridge off and latch
+//! over-current, over-temperature (the board's NTC, which also lowers the current limit from
+//! 80 °C), bus under- or over-voltage, overrun and stall turn the bridge off and latch
 //! a fault (cleared by `ClearFault`, the bridge stays off until a mode is set again). The
 //! independent watchdog runs before the flash is read and resets the MCU when the loop
 //! stops (TIM1's reset state has the outputs off); a panic, HardFault or unexpected
@@ -101,6 +102,7 @@ async fn main(spawner: Spawner) {
     let mut adc1 = Adc::new(p.ADC1, AdcConfig::default());
     let mut adc2 = Adc::new(p.ADC2, AdcConfig::default());
     let mut vbus_pin = p.PA0;
+    let mut ntc_pin = p.PB14;
     const ST_CURRENT: SampleTime = SampleTime::CYCLES24_5;
     const ST_VBUS: SampleTime = SampleTime::CYCLES247_5;
 
@@ -228,6 +230,7 @@ async fn main(spawner: Spawner) {
 
         // Measurements.
         let v_bus = board::vbus_from_raw(adc1.blocking_read(&mut vbus_pin, ST_VBUS));
+        let temperature_c = board::ntc_celsius(adc1.blocking_read(&mut ntc_pin, ST_VBUS));
         let lo = bridge::low_phase(bridge::last_step());
         let raw = match lo {
             0 => adc1.blocking_read(&mut i_u, ST_CURRENT),
@@ -252,6 +255,7 @@ async fn main(spawner: Spawner) {
             v_bus,
             overrun,
             hw_overcurrent: bridge::hw_tripped(),
+            temperature_c,
         };
         let drive = board.tick(&m, &mut send);
         if board.mode() == Mode::Idle {

@@ -138,6 +138,7 @@ impl Hardware {
             i_vector: i as f32,
             v_bus: f32::NAN, // no bus measurement: the board's nominal voltage
             hw_overcurrent: self.tripped,
+            temperature_c: f32::NAN, // no board temperature model: no derating
             ..Measurements::default()
         };
         for e in self.pending.drain(..) {
