@@ -13,7 +13,7 @@
 //! update erases the bad page, which clears the error). Any other NMI (an ECC error in the
 //! program itself, the clock security system) turns the bridge off and waits for the
 //! watchdog.
-use core::sync::atomic::{AtomicBool, Ordering};
+use core::sync::atomic::{compiler_fence, AtomicBool, Ordering};
 
 use embassy_stm32::flash::{Blocking, Flash};
 use embassy_stm32::pac;
@@ -56,7 +56,13 @@ impl ReadNorFlash for EccFlash {
 
     fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), StorageError> {
         ECC_ERROR.store(false, Ordering::SeqCst);
+        compiler_fence(Ordering::SeqCst);
         self.0.read(offset, bytes).map_err(StorageError::Driver)?;
+        // The NMI follows the failing load by a few cycles: complete every access and flush
+        // the pipeline, so that a pending NMI has run before the flag is read.
+        compiler_fence(Ordering::SeqCst);
+        cortex_m::asm::dsb();
+        cortex_m::asm::isb();
         if ECC_ERROR.swap(false, Ordering::SeqCst) {
             return Err(StorageError::Ecc);
         }
