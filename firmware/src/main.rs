@@ -132,7 +132,14 @@ async fn main(spawner: Spawner) {
 
     // Hardware over-current stop: calibrated on the op-amps with the bridge off.
     match overcurrent::arm(p.DAC3) {
-        Ok(a) => defmt::info!("hardware over-current stop armed: {}", a),
+        Ok(a) => {
+            defmt::info!("hardware over-current stop armed: {}", a);
+            #[cfg(feature = "trip-test")]
+            defmt::warn!(
+                "trip-test build: the stop trips at {=f32} A, not at the rating",
+                overcurrent::TRIP_TEST_A
+            );
+        }
         Err(why) => {
             defmt::error!("hardware over-current stop NOT armed: {=str}", why);
             let _ = OUTGOING.try_send(BoardMsg::Warning(Warning::NoHardwareStop));

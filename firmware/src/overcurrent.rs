@@ -16,7 +16,7 @@
 //! search over the DAC code finds where its output flips (the node's zero-current level, in
 //! DAC codes, so neither the bias network nor the DAC reference needs to be known exactly),
 //! and the threshold is the highest of the three plus [`control::board::HW_TRIP_A`] in DAC
-//! codes. The search doubles as a self-test: a comparator that does not flip, or that is
+//! codes (the `trip-test` build: [`TRIP_TEST_A`], for checking the stop on the bench). The search doubles as a self-test: a comparator that does not flip, or that is
 //! high at the threshold with no current, leaves the stop unarmed and [`arm`] says why.
 //!
 //! Once armed, a comparator output high clears TIM1's MOE through the break input (filter:
@@ -37,6 +37,16 @@ use crate::board::{ADC_VREF, PGA_GAIN, SENSE_GAIN, SHUNT_OHM, SYSCLK_HZ};
 const COMPS: [pac::comp::Comp; 3] = [pac::COMP1, pac::COMP2, pac::COMP4];
 /// Index of each comparator's bit in TIM1_AF1 (BKCMPxE, BKCMPxP: COMP1 = 0 .. COMP4 = 3).
 const BREAK_INDEX: [usize; 3] = [0, 1, 3];
+/// Trip current of the `trip-test` build [A]: low enough to reach on the bench with a
+/// current-limited supply (docs/bring-up.md), high enough above the zero-level spread of the
+/// three inputs (a few amperes) not to trip at rest.
+pub const TRIP_TEST_A: f32 = 8.0;
+/// Trip current armed [A].
+const TRIP_A: f32 = if cfg!(feature = "trip-test") {
+    TRIP_TEST_A
+} else {
+    control::board::HW_TRIP_A
+};
 /// Largest 12-bit DAC code.
 const DAC_MAX: u16 = 4095;
 /// Settling time after a DAC or comparator change [µs] (DAC3 unbuffered settles within
@@ -132,7 +142,7 @@ pub fn arm(dac3: Peri<'static, DAC3>) -> Result<Armed, &'static str> {
         let z = flip_code(c).ok_or("a comparator input sits above the DAC range")?;
         zero = zero.max(z);
     }
-    let trip = zero as f32 + libm::roundf(control::board::HW_TRIP_A * codes_per_amp());
+    let trip = zero as f32 + libm::roundf(TRIP_A * codes_per_amp());
     if trip > DAC_MAX as f32 {
         return Err("the trip threshold lies above the DAC range");
     }
