@@ -85,6 +85,9 @@ pub struct Scan {
     pub unreadable: u8,
 }
 
+/// Coefficients loaded from a slot, with where they were found.
+pub type Loaded = (SlotInfo, Coefficients);
+
 /// Two coefficient slots on a NOR flash.
 pub struct Slots<F> {
     flash: F,
@@ -186,12 +189,12 @@ impl<F: NorFlash> Slots<F> {
     }
 
     /// Loads the newest valid coefficients, or `None` when neither slot holds any.
-    pub fn load(&mut self) -> Result<Option<(SlotInfo, Coefficients)>, F::Error> {
+    pub fn load(&mut self) -> Result<Option<Loaded>, F::Error> {
         Ok(self.load_scanned()?.1)
     }
 
     /// [`Slots::load`] with what the scan found (unreadable slots, for the boot report).
-    pub fn load_scanned(&mut self) -> Result<(Scan, Option<(SlotInfo, Coefficients)>), F::Error> {
+    pub fn load_scanned(&mut self) -> Result<(Scan, Option<Loaded>), F::Error> {
         let mut buf = [0u8; MAX_BLOB_LEN];
         let scan = self.scan(&mut buf)?;
         let loaded = scan.active.and_then(|a| {

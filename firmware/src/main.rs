@@ -6,6 +6,10 @@
 //!   interrupt commutates the bridge at every edge.
 //! - [`link`]: the serial protocol of `control::frame` on USART2 (ST-LINK virtual COM port),
 //!   coefficient uploads into the two flash slots of `control::slots`.
+//! - [`storage`]: the flash behind those slots, a double ECC error (NMI) turned into a
+//!   failed read.
+//! - [`overcurrent`]: comparators on the shunts into TIM1's break input, armed at boot: the
+//!   bridge turns off within a PWM period above the board's 40 A rating.
 //! - this file: start-up and the 12 ms control loop: measurements in, `control::board::Board`
 //!   (the board's logic: commands, modes, limits, faults, commissioning, shared with the
 //!   emulated board) in the middle, the bridge drive out.
@@ -17,10 +21,8 @@
 //! independent watchdog runs before the flash is read and resets the MCU when the loop
 //! stops (TIM1's reset state has the outputs off); a panic, HardFault or unexpected
 //! interrupt clears TIM1's MOE first and waits for the watchdog. A flash ECC error in a
-//! coefficient slot (an interrupted commit) makes that slot invalid ([`storage`]).
-//!
-//! - [`overcurrent`]: comparators on the shunts into TIM1's break input, armed at boot: the
-//!   bridge turns off within a PWM period above the board's 40 A rating.
+//! coefficient slot (an interrupted commit) makes that slot invalid ([`storage`]). The
+//! option bytes are checked at boot (PB8 is Hall H3 and BOOT0, docs/bring-up.md).
 //!
 //! TODO (needs the board to get right, not faked here): ADC sampling synchronised to the
 //! PWM centre.
