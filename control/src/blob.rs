@@ -255,7 +255,9 @@ impl Coefficients {
     }
 
     /// Checks the values: finite numbers, positive motor constants, a Hall table that maps
-    /// the six valid states one-to-one onto sectors 0..5, parameters present for the model.
+    /// the six valid states one-to-one onto sectors 0..5, parameters present for the model,
+    /// limits within the board's ratings ([`crate::board::HW_TRIP_A`],
+    /// [`crate::board::VBUS_RATING_V`]).
     pub fn validate(&self) -> Result<(), BlobError> {
         let m = &self.motor;
         if !finite(&[m.r, m.l, m.kt, m.kb, m.j]) || m.r <= 0.0 || m.l <= 0.0 || m.kt <= 0.0 {
@@ -310,6 +312,16 @@ impl Coefficients {
         {
             return Err(BlobError::Invalid(
                 "limits must be finite with vbus_min < vbus_max",
+            ));
+        }
+        if l.i_max > crate::board::HW_TRIP_A {
+            return Err(BlobError::Invalid(
+                "limits.i_max is above the board's 40 A peak rating",
+            ));
+        }
+        if l.vbus_max > crate::board::VBUS_RATING_V {
+            return Err(BlobError::Invalid(
+                "limits.vbus_max is above the board's 28 V bus rating",
             ));
         }
         if !self.effects.iter().all(effect_finite) {
@@ -600,12 +612,15 @@ mod tests {
     #[test]
     fn invalid_values_are_rejected_even_with_a_good_crc() {
         let mut buf = [0u8; MAX_BLOB_LEN];
-        let cases: [fn(&mut Coefficients); 5] = [
+        let cases: [fn(&mut Coefficients); 7] = [
             |c| c.hall_table = [HALL_INVALID, 0, 0, 1, 4, 5, 3, HALL_INVALID],
             |c| c.pole_pairs = 0,
             |c| c.motor.r = f32::NAN,
             |c| c.model = ModelKind::Lugre,
             |c| c.limits.vbus_min = 50.0,
+            // Above the board's ratings.
+            |c| c.limits.i_max = crate::board::HW_TRIP_A + 1.0,
+            |c| c.limits.vbus_max = crate::board::VBUS_RATING_V + 1.0,
         ];
         for (k, spoil) in cases.iter().enumerate() {
             let mut c = Coefficients::default();

@@ -9,8 +9,12 @@
 //! callback.
 //!
 //! Limits and faults (each turns the bridge off; faults latch until `ClearFault`):
+//! - hardware over-current: the transport's comparators cut the bridge within a PWM period
+//!   above [`HW_TRIP_A`] ([`Measurements::hw_overcurrent`]);
 //! - over-current: |I| > `limits.i_max` (the step derates the voltage above
 //!   [`crate::blob::DERATE_FRACTION`]·i_max first, [`crate::step`]);
+//! - over-temperature: the board's NTC at [`TEMP_MAX_C`] or above; from [`TEMP_DERATE_C`]
+//!   up the step's soft current limit falls linearly to zero ([`temperature_derating`]);
 //! - bus over-voltage always, under-voltage and control overrun while running;
 //! - Hall faults (invalid state, impossible jump, edge overflow) while running;
 //! - stall: |V| above [`STALL_FRACTION`]·u_max and no Hall step for [`STALL_PERIODS`];
@@ -34,6 +38,34 @@ use crate::frame::{
 use crate::hall::{HallTable, INVALID};
 use crate::slots::Slots;
 use crate::step::{ControlStep, Faults, HallEdge, StepInputs, MAX_EDGES};
+
+/// Phase current at which the hardware stops the bridge within a PWM period [A]: the
+/// B-G431B-ESC1's 40 A peak rating (ST UM2516). The firmware sets its comparators' threshold
+/// from it, the emulated board trips at it; `limits.i_max` may not exceed it.
+pub const HW_TRIP_A: f32 = 40.0;
+/// Highest bus voltage the board is rated for [V]: the over-voltage threshold of ST's motor
+/// control project for the B-G431B-ESC1 (a 6S LiPo pack is 25.2 V fully charged).
+/// `limits.vbus_max` may not exceed it.
+pub const VBUS_RATING_V: f32 = 28.0;
+/// Board temperature [°C] from which the current limit is lowered.
+pub const TEMP_DERATE_C: f32 = 80.0;
+/// Board temperature [°C] at which the bridge stops with [`Fault::OverTemperature`] (the
+/// current limit has reached zero here). Conservative for a first spin: the NTC sits on the
+/// board, not on the MOSFET junctions.
+pub const TEMP_MAX_C: f32 = 100.0;
+
+/// Fraction of the current limit allowed at board temperature `t` [°C]: 1 up to
+/// [`TEMP_DERATE_C`], falling linearly to 0 at [`TEMP_MAX_C`]; 1 when the temperature is not
+/// measured (non-finite).
+pub fn temperature_derating(t: f32) -> f32 {
+    if !t.is_finite() || t <= TEMP_DERATE_C {
+        1.0
+    } else if t >= TEMP_MAX_C {
+        0.0
+    } else {
+        (TEMP_MAX_C - t) / (TEMP_MAX_C - TEMP_DERATE_C)
+    }
+}
 
 /// Largest duty cycle (95 %, so the bootstrap capacitors of the high-side drivers recharge
 /// every PWM period): the largest voltage is `MAX_DUTY·V_bus`.
@@ -91,6 +123,11 @@ pub struct Measurements {
     pub v_bus: f32,
     /// The previous period overran.
     pub overrun: bool,
+    /// Board temperature [°C] (the NTC; non-finite: not measured, no limit).
+    pub temperature_c: f32,
+    /// The hardware over-current stop has cut the bridge (held by the hardware until the
+    /// transport clears it after `ClearFault`, see [`Board::handle`]).
+    pub hw_overcurrent: bool,
 }
 
 #[derive(Debug, Clone, PartialEq)]
@@ -287,7 +324,8 @@ impl Board {
     }
 
     /// Handles one host message (not the upload messages: `false`, see [`handle_upload`]).
-    /// Every frame counts as a sign of life of the link.
+    /// Every frame counts as a sign of life of the link. After a `ClearFault` ([`Board::fault`]
+    /// went from some to none) the transport re-arms its hardware over-current stop.
     pub fn handle(&mut self, msg: &HostMsg, send: &mut impl FnMut(BoardMsg)) -> bool {
         self.quiet = 0;
         let reply = match *msg {
@@ -427,8 +465,12 @@ impl Board {
         let active = self.run != Run::Idle;
 
         // Faults that do not need the step.
-        let hard = if i.abs() > lim.i_max {
+        let hard = if m.hw_overcurrent {
+            Some(Fault::HardwareOverCurrent)
+        } else if i.abs() > lim.i_max {
             Some(Fault::OverCurrent)
+        } else if m.temperature_c >= TEMP_MAX_C {
+            Some(Fault::OverTemperature)
         } else if m.v_bus.is_finite() && m.v_bus > lim.vbus_max {
             Some(Fault::OverVoltage)
         } else if active && m.v_bus.is_finite() && m.v_bus < lim.vbus_min {
@@ -441,6 +483,9 @@ impl Board {
         if let Some(f) = hard {
             self.latch(f, send);
         }
+        self.step.set_current_limit(
+            blob::DERATE_FRACTION * lim.i_max * temperature_derating(m.temperature_c),
+        );
 
         // Link loss.
         if matches!(self.run, Run::Speed | Run::Experiment { .. })
@@ -587,4 +632,83 @@ pub fn store_coefficients<S: NorFlash>(
         Err(_) => None,
     };
     board.stored(seq, send);
+}
+
+#[cfg(test)]
+mod tests {
+    extern crate std;
+    use super::*;
+    use std::vec::Vec;
+
+    #[test]
+    fn temperature_derating_falls_from_the_derate_point_to_the_trip() {
+        assert_eq!(temperature_derating(25.0), 1.0);
+        assert_eq!(temperature_derating(TEMP_DERATE_C), 1.0);
+        let mid = 0.5 * (TEMP_DERATE_C + TEMP_MAX_C);
+        assert!((temperature_derating(mid) - 0.5).abs() < 1e-6);
+        assert_eq!(temperature_derating(TEMP_MAX_C), 0.0);
+        assert_eq!(temperature_derating(f32::NAN), 1.0);
+    }
+
+    fn running_board() -> (Board, Vec<BoardMsg>) {
+        let mut b = Board::new(Some((Coefficients::default(), 1)), "test", 22.2);
+        let mut out = Vec::new();
+        b.handle(&HostMsg::SetMode { mode: Mode::Speed }, &mut |m| {
+            out.push(m)
+        });
+        assert_eq!(out, [BoardMsg::Ack]);
+        (b, Vec::new())
+    }
+
+    fn at(temperature_c: f32) -> Measurements {
+        Measurements {
+            hall: 1,
+            v_bus: f32::NAN,
+            temperature_c,
+            ..Measurements::default()
+        }
+    }
+
+    #[test]
+    fn a_hot_board_lowers_the_current_limit_then_stops() {
+        let (mut b, mut out) = running_board();
+        let full = blob::DERATE_FRACTION * b.coefficients().limits.i_max;
+        b.tick(&at(40.0), &mut |m| out.push(m));
+        assert_eq!(b.control().current_limit(), full);
+        let mid = 0.5 * (TEMP_DERATE_C + TEMP_MAX_C);
+        b.tick(&at(mid), &mut |m| out.push(m));
+        assert!((b.control().current_limit() - 0.5 * full).abs() < 1e-4);
+        assert_eq!(b.fault(), None);
+        assert_eq!(b.mode(), Mode::Speed);
+
+        let d = b.tick(&at(TEMP_MAX_C + 1.0), &mut |m| out.push(m));
+        assert_eq!(d, Drive::Off);
+        assert_eq!(b.fault(), Some(Fault::OverTemperature));
+        assert_eq!(b.mode(), Mode::Idle);
+        assert!(out.contains(&BoardMsg::Fault(Fault::OverTemperature)));
+        // Clearing while still hot latches again at the next period; once cool it holds.
+        b.handle(&HostMsg::ClearFault, &mut |m| out.push(m));
+        b.tick(&at(TEMP_MAX_C + 1.0), &mut |m| out.push(m));
+        assert_eq!(b.fault(), Some(Fault::OverTemperature));
+        b.handle(&HostMsg::ClearFault, &mut |m| out.push(m));
+        b.tick(&at(60.0), &mut |m| out.push(m));
+        assert_eq!(b.fault(), None);
+    }
+
+    #[test]
+    fn a_hardware_stop_latches_even_when_idle() {
+        let mut b = Board::new(Some((Coefficients::default(), 1)), "test", 22.2);
+        let mut out = Vec::new();
+        let m = Measurements {
+            hw_overcurrent: true,
+            ..at(25.0)
+        };
+        assert_eq!(b.tick(&m, &mut |m| out.push(m)), Drive::Off);
+        assert_eq!(b.fault(), Some(Fault::HardwareOverCurrent));
+        assert_eq!(out, [BoardMsg::Fault(Fault::HardwareOverCurrent)]);
+        b.handle(&HostMsg::SetMode { mode: Mode::Speed }, &mut |m| {
+            out.push(m)
+        });
+        assert_eq!(out.last(), Some(&BoardMsg::Nack(Nack::Faulted)));
+    }
 }

@@ -183,6 +183,12 @@ pub enum Fault {
     /// A voltage above the stall threshold and no Hall edge for
     /// [`crate::board::STALL_PERIODS`] periods.
     Stall,
+    /// The hardware over-current stop cut the bridge within a PWM period: a phase current
+    /// above [`crate::board::HW_TRIP_A`] (the board's rating), e.g. a short or a winding
+    /// of very low resistance.
+    HardwareOverCurrent,
+    /// The board temperature (its NTC) reached [`crate::board::TEMP_MAX_C`].
+    OverTemperature,
 }
 
 /// Warnings: logged, nothing stops.
@@ -194,6 +200,14 @@ pub enum Warning {
     BadFrame,
     /// No frame for [`crate::board::LINK_TIMEOUT_PERIODS`] periods: the run was stopped.
     LinkLost,
+    /// The hardware over-current stop failed its boot self-test and is not armed: only the
+    /// 12 ms software current limit protects the bridge (see the defmt log for why).
+    NoHardwareStop,
+    /// The option bytes take BOOT0 from its pin (nSWBOOT0 = 1); on the B-G431B-ESC1 that
+    /// pin (PB8) is Hall input H3, so a motor resting with H3 high can start the ROM
+    /// bootloader at reset instead of the firmware. Set nSWBOOT0 = 0, nBOOT0 = 1
+    /// (docs/bring-up.md).
+    Boot0FromPin,
 }
 
 /// One log sample, every 12 ms while running (the contract's CSV columns).

@@ -21,9 +21,12 @@
 //! the old slot intact. The tests below cut the power after every single byte written or
 //! erased and check exactly that.
 //!
-//! Hardware note: on the STM32G4 an interrupted double-word program can leave an ECC error
-//! that faults when read; the firmware must treat a flash ECC fault (NMI) in this region as
-//! "slot invalid". That path cannot be tested on the host.
+//! A slot that cannot be read at all is invalid too: on the STM32G4 a double-word program cut
+//! by a power loss can leave a double ECC error, whose read raises an NMI; the firmware's
+//! flash driver turns that into a read error for this slot only (`firmware/src/storage.rs`).
+//! [`Slots::scan`] skips an unreadable slot ([`Scan::unreadable`]) and boots on the other
+//! one; the next update erases the unreadable slot, which clears its ECC error. The host
+//! tests model the error as a read that fails on a poisoned double-word.
 use embedded_storage::nor_flash::NorFlash;
 
 use crate::blob::{self, BlobError, Coefficients, CRC32, MAX_BLOB_LEN};
@@ -77,7 +80,13 @@ pub struct Scan {
     pub active: Option<SlotInfo>,
     /// Highest sequence number of any slot whose header and CRC hold (0 if none).
     pub max_seq: u32,
+    /// Bit `k` set: slot `k` could not be read (a flash read error, e.g. an ECC error left
+    /// by an interrupted write); it counts as invalid.
+    pub unreadable: u8,
 }
+
+/// Coefficients loaded from a slot, with where they were found.
+pub type Loaded = (SlotInfo, Coefficients);
 
 /// Two coefficient slots on a NOR flash.
 pub struct Slots<F> {
@@ -146,13 +155,22 @@ impl<F: NorFlash> Slots<F> {
         Ok((digest.finalize() == crc).then_some((seq, len)))
     }
 
-    /// Scans both slots; the newest valid blob is left in `buf[..active.len]`.
+    /// Scans both slots; the newest valid blob is left in `buf[..active.len]`. A slot whose
+    /// read fails is invalid ([`Scan::unreadable`]); only a failure to re-read the winner is
+    /// an error.
     pub fn scan(&mut self, buf: &mut [u8; MAX_BLOB_LEN]) -> Result<Scan, F::Error> {
         let mut scan = Scan::default();
         // Read the slot that turns out to be the newest valid one last, so that `buf` holds
         // it: scan both, then re-read the winner.
         for index in 0..2u8 {
-            if let Some((seq, len)) = self.read_slot(index, buf)? {
+            let read = match self.read_slot(index, buf) {
+                Ok(r) => r,
+                Err(_) => {
+                    scan.unreadable |= 1 << index;
+                    None
+                }
+            };
+            if let Some((seq, len)) = read {
                 scan.max_seq = scan.max_seq.max(seq);
                 let valid = blob::decode(&buf[..len]).is_ok();
                 let newer = scan.active.is_none_or(|a| seq > a.seq);
@@ -171,14 +189,20 @@ impl<F: NorFlash> Slots<F> {
     }
 
     /// Loads the newest valid coefficients, or `None` when neither slot holds any.
-    pub fn load(&mut self) -> Result<Option<(SlotInfo, Coefficients)>, F::Error> {
+    pub fn load(&mut self) -> Result<Option<Loaded>, F::Error> {
+        Ok(self.load_scanned()?.1)
+    }
+
+    /// [`Slots::load`] with what the scan found (unreadable slots, for the boot report).
+    pub fn load_scanned(&mut self) -> Result<(Scan, Option<Loaded>), F::Error> {
         let mut buf = [0u8; MAX_BLOB_LEN];
         let scan = self.scan(&mut buf)?;
-        Ok(scan.active.and_then(|a| {
+        let loaded = scan.active.and_then(|a| {
             // `scan` validated this blob already; decode cannot fail here, but a failure
             // would only mean "no coefficients", never a panic.
             blob::decode(&buf[..a.len]).ok().map(|c| (a, c))
-        }))
+        });
+        Ok((scan, loaded))
     }
 
     /// Stores a blob in the slot not in use and returns where. The blob must decode.
@@ -249,12 +273,13 @@ mod tests {
         PowerCut,
         Misaligned,
         OutOfBounds,
+        Ecc,
     }
 
     impl NorFlashError for MemError {
         fn kind(&self) -> NorFlashErrorKind {
             match self {
-                MemError::PowerCut => NorFlashErrorKind::Other,
+                MemError::PowerCut | MemError::Ecc => NorFlashErrorKind::Other,
                 MemError::Misaligned => NorFlashErrorKind::NotAligned,
                 MemError::OutOfBounds => NorFlashErrorKind::OutOfBounds,
             }
@@ -265,11 +290,15 @@ mod tests {
     /// only clear bits (NOR), erases set 0xFF. With a `budget`, the power fails after that
     /// many byte steps (each byte erased or written is one step): the interrupted operation
     /// is left half done and every later operation fails.
+    ///
+    /// `ecc` lists double-words (by offset) holding a double ECC error: reading any byte of
+    /// one fails, erasing its page clears it.
     #[derive(Clone)]
     struct MemFlash {
         mem: Vec<u8>,
         budget: Option<usize>,
         steps: usize,
+        ecc: Vec<usize>,
     }
 
     impl MemFlash {
@@ -278,6 +307,7 @@ mod tests {
                 mem: std::vec![0xFF; pages * PAGE],
                 budget: None,
                 steps: 0,
+                ecc: Vec::new(),
             }
         }
 
@@ -297,6 +327,7 @@ mod tests {
                 mem: self.mem.clone(),
                 budget: None,
                 steps: 0,
+                ecc: self.ecc.clone(),
             }
         }
     }
@@ -309,6 +340,9 @@ mod tests {
         const READ_SIZE: usize = 1;
         fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), MemError> {
             let o = offset as usize;
+            if self.ecc.iter().any(|&d| d < o + bytes.len() && o < d + 8) {
+                return Err(MemError::Ecc);
+            }
             let src = self
                 .mem
                 .get(o..o + bytes.len())
@@ -336,6 +370,7 @@ mod tests {
                 self.step()?;
                 self.mem[k] = 0xFF;
             }
+            self.ecc.retain(|&d| d < from || d >= to);
             Ok(())
         }
         fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), MemError> {
@@ -465,6 +500,44 @@ mod tests {
         let next = s.store(&blob_of(&coeffs(0))).unwrap();
         assert_eq!((next.index, next.seq), (1, seq + 1));
         assert_eq!(loaded(&s.into_inner()).unwrap().1, coeffs(0));
+    }
+
+    #[test]
+    fn an_unreadable_slot_is_skipped_and_its_next_update_clears_it() {
+        // The newest slot's header holds a double ECC error (a write cut by a power loss):
+        // boot takes the older slot, and the next update goes to the unreadable one.
+        let mut s = slots(MemFlash::new(4));
+        s.store(&blob_of(&coeffs(1))).unwrap();
+        let newest = s.store(&blob_of(&coeffs(2))).unwrap();
+        let mut f = s.into_inner();
+        let slot1 = 2 * PAGE; // slot 1 (page 2) holds the newest
+        assert_eq!(newest.index, 1);
+        f.ecc.push(slot1 + 8);
+        let mut s = slots(f.rebooted());
+        let (scan, got) = s.load_scanned().unwrap();
+        assert_eq!(scan.unreadable, 0b10);
+        let (info, got) = got.unwrap();
+        assert_eq!((info.index, got), (0, coeffs(1)));
+        let next = s.store(&blob_of(&coeffs(0))).unwrap();
+        assert_eq!(next.index, 1);
+        assert!(next.seq > info.seq);
+        let f = s.into_inner();
+        assert!(f.ecc.is_empty(), "the erase clears the ECC error");
+        let mut s = slots(f.rebooted());
+        let (scan, got) = s.load_scanned().unwrap();
+        assert_eq!(scan.unreadable, 0);
+        assert_eq!(got.unwrap().1, coeffs(0));
+    }
+
+    #[test]
+    fn both_slots_unreadable_is_no_coefficients_not_an_error() {
+        let mut s = slots(MemFlash::new(4));
+        s.store(&blob_of(&coeffs(1))).unwrap();
+        s.store(&blob_of(&coeffs(2))).unwrap();
+        let mut f = s.into_inner();
+        f.ecc.extend([PAGE, 2 * PAGE + 16]);
+        let (scan, got) = slots(f.rebooted()).load_scanned().unwrap();
+        assert_eq!((scan.unreadable, got), (0b11, None));
     }
 
     #[test]

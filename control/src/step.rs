@@ -303,6 +303,21 @@ impl<F: Float> ControlStep<F> {
         }
     }
 
+    /// Soft current limit [A] (see [`StepConfig::i_limit`]).
+    pub fn current_limit(&self) -> F {
+        self.i_limit
+    }
+
+    /// Changes the soft current limit [A] (e.g. lowered with the board temperature); zero
+    /// holds the voltage at the back-EMF, so that no current flows.
+    pub fn set_current_limit(&mut self, i_limit: F) {
+        self.i_limit = if i_limit >= F::zero() {
+            i_limit
+        } else {
+            F::zero()
+        };
+    }
+
     /// Back to rest: position count, estimator, observer, PI, compensation, heat.
     pub fn reset(&mut self) {
         self.decoder.reset();

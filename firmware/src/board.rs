@@ -69,6 +69,25 @@ pub const VBUS_GAIN: f32 = 0.0962;
 pub const SHUNT_OHM: f32 = 0.003;
 /// Total current-sense amplification (sign included), see [`SHUNT_OHM`].
 pub const SENSE_GAIN: f32 = -9.14;
+/// Gain of the op-amps' programmable-gain amplifier [NuttX src/stm32_foc.c, "PGA gain = 16"]:
+/// the op-amps' non-inverting inputs (PA1, PA7, PB0), which the over-current comparators
+/// watch, carry the shunt voltage scaled by `|SENSE_GAIN| / PGA_GAIN` (4/7).
+pub const PGA_GAIN: f32 = 16.0;
+
+/// Board temperature sensor (NTC divider) on PB14 = ADC1_IN5, linearised as ST's motor
+/// control project for this board does [MCSDK "ElectronicSpeedControl" for the
+/// B-G431B-ESC1: TEMP_FDBK PB14 ADC1 channel 5, V0 = 1.055 V at T0 = 25 °C, dV/dT =
+/// 0.023 V/°C]: T = T0 + (V − V0)/(dV/dT).
+pub const NTC_V0: f32 = 1.055;
+/// Temperature at which the NTC divider gives [`NTC_V0`] [°C].
+pub const NTC_T0_C: f32 = 25.0;
+/// Slope of the NTC divider [V/°C] near [`NTC_T0_C`].
+pub const NTC_DV_DT: f32 = 0.023;
+
+/// Board temperature [°C] from the raw PB14 reading.
+pub fn ntc_celsius(raw: u16) -> f32 {
+    NTC_T0_C + (adc_volts(raw) - NTC_V0) / NTC_DV_DT
+}
 
 /// Volts at an ADC pin for a raw reading.
 pub fn adc_volts(raw: u16) -> f32 {
@@ -94,12 +113,14 @@ pub fn current_from_raw(raw: u16, zero: u16) -> f32 {
 //   OPAMP2 VINP PA7, VINM PA5, VOUT PA6 = ADC2_IN3 (phase V, not on ADC1);
 //   OPAMP3 VINP PB0, VINM PB2, VOUT PB1 = ADC1_IN12 (phase W) [NuttX src/stm32_foc.c].
 // - VBUS: PA0 = ADC1_IN1; potentiometer PB12 = ADC1_IN11 [NuttX src/stm32_foc.c].
+// - Board temperature (NTC): PB14 = ADC1_IN5, see [`NTC_V0`].
 // - Hall / encoder connector: H1 PB6 (TIM4_CH1), H2 PB7 (TIM4_CH2), H3 PB8 (TIM4_CH3)
 //   [NuttX src/b-g431b-esc1.h, GPIO_HALL_PHA..C; include/board.h, TIM4 pins].
 //   ASSUMED: open-collector sensors, so the internal pull-ups are enabled.
 //   PB8 is also the STM32G431's BOOT0 pin (DS12589 pinout "PB8-BOOT0"): a Hall level high
 //   at reset can start the ROM bootloader unless the option bytes take BOOT0 from nBOOT0
-//   (nSWBOOT0 = 0, nBOOT0 = 1). Program them once with STM32CubeProgrammer or probe-rs.
+//   (nSWBOOT0 = 0, nBOOT0 = 1). The firmware checks them at boot (warning `Boot0FromPin`);
+//   docs/bring-up.md gives the STM32CubeProgrammer and OpenOCD commands that set them.
 // - USART2 (ST-LINK virtual COM port): TX PB3, RX PB4 [NuttX include/board.h; UM2516].
 // - User LED LD2: PC6; user button: PC10 [NuttX src/b-g431b-esc1.h; UM2516].
 

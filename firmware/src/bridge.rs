@@ -20,7 +20,11 @@
 //!
 //! [`Bridge::off`] clears MOE with OSSI = idle level and OIS = 0, which forces all six gate
 //! signals low (RM0440, "TIMx_BDTR", off-state selection); [`force_off`] does the same from
-//! a panic or fault handler without the driver object.
+//! a panic or fault handler without the driver object. The hardware over-current stop
+//! (`overcurrent`) clears MOE through TIM1's break input; [`commutate`] does not set MOE
+//! again while the break flag is set, until [`rearm`]. While the core is halted by a
+//! debugger, TIM1 stops with its outputs disabled (DBGMCU freeze), so a breakpoint never
+//! leaves a phase pair conducting.
 use core::cell::Cell;
 use core::sync::atomic::{AtomicU8, Ordering};
 
@@ -106,6 +110,11 @@ pub fn commutate(state: u8) {
     };
     let (hi, lo) = STEPS[k as usize];
     let t = pac::TIM1;
+    if hw_tripped() {
+        // The hardware stop cut the bridge: it stays off until the fault is cleared.
+        force_off();
+        return;
+    }
     // Register access beside the ComplementaryPwm driver, which owns TIM1 but is only used
     // for the configuration: CCR1-3, CCER and MOE are written here and in `force_off` only.
     for p in 0..3 {
@@ -131,6 +140,9 @@ pub struct Bridge<'d> {
 impl<'d> Bridge<'d> {
     /// Takes the configured PWM (outputs still off).
     pub fn new(mut pwm: ComplementaryPwm<'d, TIM1>) -> Self {
+        // A debugger halt stops TIM1 with its outputs disabled (RM0440, "DBGMCU_APB2FZR":
+        // for advanced timers the outputs behave as with MOE = 0 while frozen).
+        pac::DBGMCU.apb2fzr().modify(|w| w.set_tim1(true));
         pwm.set_off_state_selection_idle(Ossi::IDLE_LEVEL);
         pwm.set_off_state_selection_run(Ossr::IDLE_LEVEL);
         let mut b = Bridge { pwm };
@@ -165,4 +177,31 @@ impl<'d> Bridge<'d> {
 /// Turns the bridge off by register access: for the panic and fault handlers.
 pub fn force_off() {
     pac::TIM1.bdtr().modify(|w| w.set_moe(false));
+}
+
+/// True once the hardware over-current stop has cut the bridge (TIM1 break flag).
+pub fn hw_tripped() -> bool {
+    pac::TIM1.sr().read().bif(0)
+}
+
+/// Clears the break flag, so that [`commutate`] may turn the bridge on again. Write-zero-
+/// to-clear: every other flag of TIM1_SR is written 1, which leaves it as it is.
+pub fn rearm() {
+    let mut v = pac::timer::regs::SrAdv(0);
+    v.set_uif(true);
+    for n in 0..4 {
+        v.set_ccif(n, true);
+        v.set_ccof(n, true);
+    }
+    v.set_comif(true);
+    v.set_tif(true);
+    v.set_bif(1, true);
+    v.set_sbif(true);
+    v.set_ccif5(true);
+    v.set_ccif6(true);
+    v.set_idxif(true);
+    v.set_dirif(true);
+    v.set_ierrif(true);
+    v.set_terrif(true);
+    pac::TIM1.sr().write_value(v);
 }

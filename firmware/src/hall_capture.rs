@@ -146,8 +146,25 @@ fn TIM4() {
             }
         }
         if sr.uif() {
-            t.sr().modify(|w| w.set_uif(false));
+            clear_update_flag();
             q.high = q.high.wrapping_add(1);
         }
     });
+}
+
+/// Clears TIM4's update (overflow) flag alone. TIM4_SR's flags are cleared by writing 0 and
+/// kept by writing 1; a read-modify-write would clear a capture flag set between its read
+/// and its write, and that Hall edge would be lost.
+fn clear_update_flag() {
+    let mut v = pac::timer::regs::SrGp16(0);
+    for n in 0..4 {
+        v.set_ccif(n, true);
+        v.set_ccof(n, true);
+    }
+    v.set_tif(true);
+    v.set_idxif(true);
+    v.set_dirif(true);
+    v.set_ierrif(true);
+    v.set_terrif(true);
+    pac::TIM4.sr().write_value(v);
 }

@@ -15,7 +15,6 @@ use control::frame::{
     self, BoardMsg, FrameDecoder, HostMsg, Nack, Upload, Warning, MAX_ENCODED_LEN,
 };
 use control::slots::Slots;
-use embassy_stm32::flash::{Blocking, Flash};
 use embassy_stm32::usart::{BufferedUartRx, BufferedUartTx};
 use embassy_sync::blocking_mutex::raw::{CriticalSectionRawMutex, ThreadModeRawMutex};
 use embassy_sync::blocking_mutex::Mutex;
@@ -23,14 +22,16 @@ use embassy_sync::channel::Channel;
 use embassy_sync::signal::Signal;
 use embedded_io_async::{Read, Write};
 
+use crate::storage::EccFlash;
+
 /// Flash offset of the first coefficient slot: `COEFFS` in `memory.x` (0x0801_F000), as an
 /// offset from the flash base 0x0800_0000 (the `NorFlash` driver counts from there).
 pub const SLOTS_OFFSET: u32 = 0x1_F000;
 /// One slot per 2 KiB page (STM32G431 single-bank page size).
 pub const SLOT_SIZE: u32 = 2048;
 
-/// The coefficient flash slots.
-pub type FlashSlots = Slots<Flash<'static, Blocking>>;
+/// The coefficient flash slots (reads of a double ECC error fail, `storage`).
+pub type FlashSlots = Slots<EccFlash>;
 
 /// Host messages for the board logic (`control::board::Board::handle`, in the control loop).
 pub static COMMANDS: Channel<CriticalSectionRawMutex, HostMsg, 4> = Channel::new();
@@ -51,7 +52,18 @@ pub const MODE_RUNNING: u8 = 1;
 
 /// Loads the newest valid coefficients at boot; `None` (with a warning) when there are none.
 pub fn load_coefficients(slots: &mut FlashSlots) -> Option<(Coefficients, u32)> {
-    match slots.load() {
+    let loaded = slots.load_scanned().map(|(scan, loaded)| {
+        for k in 0..2u8 {
+            if scan.unreadable & (1 << k) != 0 {
+                defmt::error!(
+                    "coefficient slot {} unreadable (flash ECC error): skipped, the next upload rewrites it",
+                    k
+                );
+            }
+        }
+        loaded
+    });
+    match loaded {
         Ok(Some((info, c))) => {
             defmt::info!(
                 "coefficients: slot {} seq {} ({} bytes)",

@@ -6,20 +6,26 @@
 //!   interrupt commutates the bridge at every edge.
 //! - [`link`]: the serial protocol of `control::frame` on USART2 (ST-LINK virtual COM port),
 //!   coefficient uploads into the two flash slots of `control::slots`.
+//! - [`storage`]: the flash behind those slots, a double ECC error (NMI) turned into a
+//!   failed read.
+//! - [`overcurrent`]: comparators on the shunts into TIM1's break input, armed at boot: the
+//!   bridge turns off within a PWM period above the board's 40 A rating.
 //! - this file: start-up and the 12 ms control loop: measurements in, `control::board::Board`
 //!   (the board's logic: commands, modes, limits, faults, commissioning, shared with the
 //!   emulated board) in the middle, the bridge drive out.
 //!
 //! Safety (in `control::board`): an invalid Hall state or impossible transition,
-//! over-current, bus under- or over-voltage, overrun and stall turn the bridge off and latch
-//! a fault (cleared by `ClearFault`, the bridge stays off until a mode is set again). The independent watchdog resets the MCU when the
-//! loop stops (TIM1's reset state has the outputs off); a panic or HardFault clears TIM1's
-//! MOE first, logs over defmt and waits for the watchdog.
+//! over-current, over-temperature (the board's NTC, which also lowers the current limit from
+//! 80 °C), bus under- or over-voltage, overrun and stall turn the bridge off and latch
+//! a fault (cleared by `ClearFault`, the bridge stays off until a mode is set again). The
+//! independent watchdog runs before the flash is read and resets the MCU when the loop
+//! stops (TIM1's reset state has the outputs off); a panic, HardFault or unexpected
+//! interrupt clears TIM1's MOE first and waits for the watchdog. A flash ECC error in a
+//! coefficient slot (an interrupted commit) makes that slot invalid ([`storage`]). The
+//! option bytes are checked at boot (PB8 is Hall H3 and BOOT0, docs/bring-up.md).
 //!
-//! TODO (needs the board to get right, not faked here): cycle-by-cycle over-current with
-//! COMP + TIM1 break input (the 12 ms software check is only a backstop); ADC sampling
-//! synchronised to the PWM centre; the flash ECC NMI on an interrupted write (see
-//! `control::slots`).
+//! TODO (needs the board to get right, not faked here): ADC sampling synchronised to the
+//! PWM centre.
 #![no_std]
 #![no_main]
 
@@ -27,6 +33,8 @@ mod board;
 mod bridge;
 mod hall_capture;
 mod link;
+mod overcurrent;
+mod storage;
 
 use core::sync::atomic::Ordering;
 
@@ -45,7 +53,7 @@ use embassy_stm32::timer::low_level::CountingMode;
 use embassy_stm32::timer::simple_pwm::PwmPin;
 use embassy_stm32::usart::{self, BufferedUart};
 use embassy_stm32::wdg::IndependentWatchdog;
-use embassy_stm32::{bind_interrupts, peripherals};
+use embassy_stm32::{bind_interrupts, pac, peripherals};
 use embassy_time::{Duration, Instant, Ticker};
 use static_cell::StaticCell;
 
@@ -96,6 +104,7 @@ async fn main(spawner: Spawner) {
     let mut adc1 = Adc::new(p.ADC1, AdcConfig::default());
     let mut adc2 = Adc::new(p.ADC2, AdcConfig::default());
     let mut vbus_pin = p.PA0;
+    let mut ntc_pin = p.PB14;
     const ST_CURRENT: SampleTime = SampleTime::CYCLES24_5;
     const ST_VBUS: SampleTime = SampleTime::CYCLES247_5;
 
@@ -112,10 +121,42 @@ async fn main(spawner: Spawner) {
         (zw / ZERO_SAMPLES) as u16,
     ];
 
+    // PB8 is both Hall H3 and BOOT0: unless the option bytes take BOOT0 from nBOOT0
+    // (nSWBOOT0 = 0), a high H3 at reset boots the ROM. Programming option bytes from the
+    // firmware could brick the board on a power cut: report, the engineer sets them once
+    // (docs/bring-up.md).
+    if pac::FLASH.optr().read().n_swboot0() {
+        defmt::warn!(
+            "option byte nSWBOOT0 = 1: BOOT0 follows PB8 = Hall H3; set nSWBOOT0 = 0, nBOOT0 = 1"
+        );
+        let _ = OUTGOING.try_send(BoardMsg::Warning(Warning::Boot0FromPin));
+    }
+
+    // Hardware over-current stop: calibrated on the op-amps with the bridge off.
+    match overcurrent::arm(p.DAC3) {
+        Ok(a) => {
+            defmt::info!("hardware over-current stop armed: {}", a);
+            #[cfg(feature = "trip-test")]
+            defmt::warn!(
+                "trip-test build: the stop trips at {=f32} A, not at the rating",
+                overcurrent::TRIP_TEST_A
+            );
+        }
+        Err(why) => {
+            defmt::error!("hardware over-current stop NOT armed: {=str}", why);
+            let _ = OUTGOING.try_send(BoardMsg::Warning(Warning::NoHardwareStop));
+        }
+    }
+
+    // The watchdog runs from here on: a fault while reading the flash resets the MCU
+    // instead of hanging it (TIM1's reset state has the outputs off).
+    let mut wdg = IndependentWatchdog::new(p.IWDG, board::WATCHDOG_US);
+    wdg.unleash();
+
     // Coefficients from flash: newest valid slot, or none (identify and commissioning only,
-    // a warning).
+    // a warning). A slot with a flash ECC error counts as invalid (`storage`).
     let slots = Slots::new(
-        Flash::new_blocking(p.FLASH),
+        storage::EccFlash(Flash::new_blocking(p.FLASH)),
         link::SLOTS_OFFSET,
         link::SLOT_SIZE,
     );
@@ -165,8 +206,7 @@ async fn main(spawner: Spawner) {
         _ => defmt::error!("serial link not started"),
     }
 
-    let mut wdg = IndependentWatchdog::new(p.IWDG, board::WATCHDOG_US);
-    wdg.unleash();
+    wdg.pet();
 
     let mut ticker = Ticker::every(Duration::from_micros(
         (control::CONTROL_PERIOD_S * 1.0e6) as u64,
@@ -186,13 +226,20 @@ async fn main(spawner: Spawner) {
         if let Some((c, seq)) = NEW_COEFFS.try_take() {
             board.load(c, seq);
         }
-        // Host commands: the board logic answers them.
+        // Host commands: the board logic answers them. A cleared fault re-arms the
+        // hardware over-current stop (while a fault is latched the bridge is off, so a
+        // break flag set meanwhile is stale).
         while let Ok(msg) = COMMANDS.try_receive() {
+            let faulted = board.fault().is_some();
             board.handle(&msg, &mut send);
+            if faulted && board.fault().is_none() {
+                bridge::rearm();
+            }
         }
 
         // Measurements.
         let v_bus = board::vbus_from_raw(adc1.blocking_read(&mut vbus_pin, ST_VBUS));
+        let temperature_c = board::ntc_celsius(adc1.blocking_read(&mut ntc_pin, ST_VBUS));
         let lo = bridge::low_phase(bridge::last_step());
         let raw = match lo {
             0 => adc1.blocking_read(&mut i_u, ST_CURRENT),
@@ -216,6 +263,8 @@ async fn main(spawner: Spawner) {
             i_vector,
             v_bus,
             overrun,
+            hw_overcurrent: bridge::hw_tripped(),
+            temperature_c,
         };
         let drive = board.tick(&m, &mut send);
         if board.mode() == Mode::Idle {
@@ -288,6 +337,16 @@ fn panic(info: &core::panic::PanicInfo) -> ! {
 /// HardFault: bridge off, then wait for the watchdog.
 #[cortex_m_rt::exception]
 unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
+    bridge::force_off();
+    loop {
+        cortex_m::asm::nop();
+    }
+}
+
+/// Any exception or interrupt without a handler of its own (the NMI has one, `storage`):
+/// bridge off, then wait for the watchdog.
+#[cortex_m_rt::exception]
+unsafe fn DefaultHandler(_irqn: i16) -> ! {
     bridge::force_off();
     loop {
         cortex_m::asm::nop();

@@ -22,10 +22,16 @@ impl NorFlashError for FlashError {
 }
 
 /// Two erased pages; with `file`, loaded from and saved to it after every write.
+///
+/// A double-word can be marked as holding a double ECC error
+/// ([`RamFlash::inject_ecc_error`]), as a program cut by a power loss leaves it on the
+/// STM32G4: reading it fails (the firmware's NMI handler turns the NMI into a read error),
+/// erasing its page clears it.
 #[derive(Debug)]
 pub struct RamFlash {
     mem: Vec<u8>,
     file: Option<PathBuf>,
+    ecc: Vec<usize>,
 }
 
 impl RamFlash {
@@ -36,7 +42,16 @@ impl RamFlash {
             let n = bytes.len().min(SIZE);
             mem[..n].copy_from_slice(&bytes[..n]);
         }
-        RamFlash { mem, file }
+        RamFlash {
+            mem,
+            file,
+            ecc: Vec::new(),
+        }
+    }
+
+    /// Marks the double-word holding byte `offset` as unreadable (a double ECC error).
+    pub fn inject_ecc_error(&mut self, offset: usize) {
+        self.ecc.push(offset / 8 * 8);
     }
 
     fn check(&self, offset: u32, len: usize, align: usize) -> Result<usize, FlashError> {
@@ -66,6 +81,9 @@ impl ReadNorFlash for RamFlash {
     const READ_SIZE: usize = 1;
     fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), FlashError> {
         let o = self.check(offset, bytes.len(), 1)?;
+        if self.ecc.iter().any(|&d| d < o + bytes.len() && o < d + 8) {
+            return Err(FlashError(NorFlashErrorKind::Other));
+        }
         bytes.copy_from_slice(&self.mem[o..o + bytes.len()]);
         Ok(())
     }
@@ -84,6 +102,7 @@ impl NorFlash for RamFlash {
         }
         let o = self.check(from, (to - from) as usize, PAGE)?;
         self.mem[o..to as usize].fill(0xFF);
+        self.ecc.retain(|&d| d < o || d >= to as usize);
         self.persist();
         Ok(())
     }

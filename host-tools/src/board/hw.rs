@@ -13,10 +13,15 @@
 //!
 //! The Hall connector may permute the three sensors, and the current sense may be
 //! inverted: [`Wiring`].
+//!
+//! The hardware over-current stop (the firmware's comparators on the shunts into TIM1's
+//! break input) is checked at every fine integration step: a winding current above
+//! [`HW_TRIP_A`] turns the bridge off until [`Hardware::rearm`], and the next measurement
+//! reports it.
 use super::rig::TICK_HZ;
 use crate::emulator::{EmulatorConfig, Plant};
 use anyhow::{bail, Result};
-use control::board::{commutation_step, Drive, Measurements};
+use control::board::{commutation_step, Drive, Measurements, HW_TRIP_A};
 use control::step::HallEdge;
 
 /// How the emulated motor is connected to the board.
@@ -96,6 +101,8 @@ pub struct Hardware {
     pending: Vec<HallEdge>,
     /// Sign of the voltage applied last (the current along the vector is I·sign).
     last_sign: f64,
+    /// The hardware over-current stop tripped (bridge held off).
+    tripped: bool,
 }
 
 impl Hardware {
@@ -109,6 +116,7 @@ impl Hardware {
             wiring,
             pending: Vec::new(),
             last_sign: 1.0,
+            tripped: false,
         })
     }
 
@@ -129,6 +137,8 @@ impl Hardware {
             now_ticks: ticks_at(truth.t),
             i_vector: i as f32,
             v_bus: f32::NAN, // no bus measurement: the board's nominal voltage
+            hw_overcurrent: self.tripped,
+            temperature_c: f32::NAN, // no board temperature model: no derating
             ..Measurements::default()
         };
         for e in self.pending.drain(..) {
@@ -139,14 +149,24 @@ impl Hardware {
         m
     }
 
+    /// Re-arms the hardware over-current stop (the firmware does it after `ClearFault`).
+    pub fn rearm(&mut self) {
+        self.tripped = false;
+    }
+
     /// Apply `drive` for `dt` seconds; the bridge commutates at every Hall edge (per fine
-    /// integration step) as the firmware's capture interrupt does.
+    /// integration step) as the firmware's capture interrupt does, and stops for good when
+    /// the current exceeds the hardware trip.
     pub fn apply(&mut self, drive: Drive, dt: f64) {
         let fine = self.plant.config().fine_step;
         let n = (dt / fine - 1e-9).ceil().max(1.0) as usize;
         let h = dt / n as f64;
         let step = std::f64::consts::TAU / (6.0 * f64::from(self.plant.config().pole_pairs));
         for _ in 0..n {
+            if self.plant.truth().i.abs() > f64::from(HW_TRIP_A) {
+                self.tripped = true;
+            }
+            let drive = if self.tripped { Drive::Off } else { drive };
             let theta = self.plant.truth().theta;
             let s = ((theta / step + 0.5).floor() as i64).rem_euclid(6) as usize;
             let (v, k) = match drive {

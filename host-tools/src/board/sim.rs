@@ -115,7 +115,11 @@ impl BoardSim {
     /// One host message, as the firmware's link task and control loop handle it.
     pub fn handle(&mut self, msg: &HostMsg) {
         let out = &mut self.out;
+        let faulted = self.board.fault().is_some();
         if self.board.handle(msg, &mut |m| put(out, m)) {
+            if faulted && self.board.fault().is_none() {
+                self.hw.rearm();
+            }
             return;
         }
         let idle = self.board.mode() == Mode::Idle;
@@ -395,8 +399,8 @@ mod tests {
         let mut co = Coefficients::default();
         co.pi.u_max = 20.0;
         co.limits.i_max = 20.0;
-        let mut no_limit = co.clone();
-        no_limit.limits.i_max = 1000.0;
+        let mut widest = co.clone();
+        widest.limits.i_max = control::board::HW_TRIP_A;
         let peak = |co: &Coefficients| {
             let mut sim = sim_with(plant.clone(), Some(co));
             sim.receive(&frame(&HostMsg::StartExperiment {
@@ -408,9 +412,10 @@ mod tests {
             let peak = samples.iter().map(|s| s.i.abs()).fold(0.0, f32::max);
             (f, peak, samples.last().map_or(0.0, |s| s.i))
         };
-        let (f, free, _) = peak(&no_limit);
+        // With the board's widest limit (derating from 32 A) the ramp passes 20 A.
+        let (f, free, _) = peak(&widest);
         assert_eq!(f, None);
-        assert!(free > 40.0, "without a limit the ramp draws {free} A");
+        assert!(free > 25.0, "with i_max = 40 A the ramp draws {free} A");
         let (f, limited, last) = peak(&co);
         assert_eq!(f, None, "peak {limited} A");
         // Derated from 0.8·i_max = 16 A: the current settles there, below the 20 A trip.
@@ -419,12 +424,42 @@ mod tests {
     }
 
     #[test]
+    fn the_hardware_stop_cuts_a_short_until_the_fault_is_cleared() {
+        // A locked rotor and 12 V on 0.22 Ω: 55 A within a few milliseconds of the first
+        // period, before the 12 ms software limit (the widest allowed) can act.
+        let mut plant = EmulatorConfig::paper();
+        plant.extra_load = Some(std::sync::Arc::new(|x| 1.0e4 * x.omega));
+        let mut co = Coefficients::default();
+        co.limits.i_max = control::board::HW_TRIP_A;
+        let mut sim = sim_with(plant, Some(&co));
+        sim.receive(&frame(&HostMsg::StartExperiment {
+            signal: Excitation::Steady { volts: 12.0 },
+            duration_s: 2.0,
+        }));
+        replies(&mut sim);
+        let (f, samples) = run_until_fault(&mut sim, 10);
+        assert_eq!(f, Some(Fault::HardwareOverCurrent));
+        assert!(samples.len() <= 1, "{} samples", samples.len());
+        assert!(!sim.is_running());
+        // Cut within the period: by its end the winding current has died away.
+        let i = sim.hardware().plant().truth().i.abs();
+        assert!(i < 1.0, "{i} A after the stop");
+        // Held off until cleared: a start is refused, ClearFault re-arms.
+        sim.receive(&frame(&HostMsg::SetMode { mode: Mode::Speed }));
+        assert_eq!(replies(&mut sim), [BoardMsg::Nack(Nack::Faulted)]);
+        sim.receive(&frame(&HostMsg::ClearFault));
+        sim.tick();
+        sim.receive(&frame(&HostMsg::SetMode { mode: Mode::Speed }));
+        assert_eq!(replies(&mut sim), [BoardMsg::Ack, BoardMsg::Ack]);
+    }
+
+    #[test]
     fn a_blocked_rotor_is_a_stall_fault() {
         let mut plant = EmulatorConfig::paper();
         // A locked rotor: an enormous viscous load.
         plant.extra_load = Some(std::sync::Arc::new(|x| 1.0e4 * x.omega));
         let mut co = Coefficients::default();
-        co.limits.i_max = 100.0;
+        co.limits.i_max = control::board::HW_TRIP_A;
         let mut sim = sim_with(plant, Some(&co));
         sim.receive(&frame(&HostMsg::StartExperiment {
             signal: Excitation::Steady { volts: 8.0 },
@@ -439,6 +474,36 @@ mod tests {
             "{n} samples"
         );
         assert!(!sim.is_running());
+    }
+
+    #[test]
+    fn an_ecc_error_in_the_newest_slot_boots_on_the_other() {
+        // Two uploads (slot 0, then slot 1), then a double ECC error in slot 1's header, as
+        // a commit cut by a power loss leaves it: the board boots on slot 0 instead of
+        // hanging, and the next upload rewrites slot 1.
+        let mut slots =
+            Slots::new(RamFlash::new(None), 0, super::super::flash::PAGE as u32).unwrap();
+        let old = Coefficients::default();
+        let mut new = Coefficients::default();
+        new.pi.kp = 0.125;
+        slots
+            .store(&crate::board::coeffs::encode(&old).unwrap())
+            .unwrap();
+        slots
+            .store(&crate::board::coeffs::encode(&new).unwrap())
+            .unwrap();
+        let mut flash = slots.into_inner();
+        flash.inject_ecc_error(super::super::flash::PAGE + 8);
+        let mut sim = BoardSim::new(EmulatorConfig::paper(), Wiring::default(), flash).unwrap();
+        assert_eq!(replies(&mut sim), []);
+        assert_eq!((sim.coeff_seq(), sim.coefficients()), (1, &old));
+        // Speed mode is allowed: the board has valid coefficients.
+        sim.receive(&frame(&HostMsg::SetMode { mode: Mode::Speed }));
+        sim.receive(&frame(&HostMsg::Stop));
+        assert_eq!(replies(&mut sim), [BoardMsg::Ack, BoardMsg::Ack]);
+        // The unreadable slot's sequence number is lost: the rewrite outranks slot 0.
+        upload(&mut sim, &new);
+        assert_eq!((sim.coeff_seq(), sim.coefficients()), (2, &new));
     }
 
     #[test]
