@@ -22,6 +22,5 @@ pub mod emulator;
 pub mod ident;
 pub mod log;
 pub mod model;
-pub mod real_data;
 pub mod report;
 pub mod validate;

@@ -48,10 +48,6 @@ enum Command {
     Commission(cmd::commission::Args),
     /// Closed-loop speed control with friction compensation on the emulated motor.
     Emulate(cmd::emulate::Args),
-    /// Regenerate the reference paper's fit table on emulated data.
-    PaperTable(cmd::paper_table::Args),
-    /// Fit and diagnose the measured data sets in ../shared/data (EMPS, screw drives, DC motors).
-    RealData(cmd::real_data::Args),
 }
 
 /// A command-line error as one `error:` line (clap's own text, its usage and tips left out);
@@ -123,8 +119,6 @@ fn main() -> ExitCode {
         Command::Board(a) => cmd::board::run(a),
         Command::Commission(a) => cmd::commission::run(a),
         Command::Emulate(a) => cmd::emulate::run(a),
-        Command::PaperTable(a) => cmd::paper_table::run(a),
-        Command::RealData(a) => cmd::real_data::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,8 +1,8 @@
 //! EMPS benchmark (../shared/data/EMPS): the authors' IDIM-LS model is reproduced, the
 //! friction terms they report are significant, the generic diagnosis finds Coulomb friction,
 //! and the generic CLI fits the data through `--map` and `--plant torque`.
-use motorid::real_data::{emps, emps_loop};
 use tests::{motorid, shared_data};
+use xtask::real_data::{emps, emps_loop};
 
 fn logs(test: &str) -> Option<(motorid::log::MotorLog, motorid::log::MotorLog)> {
     let d = shared_data(test)?.join("EMPS");

@@ -1,9 +1,9 @@
 //! TRO2021 screw drives (../shared/data/TRO2021_screw_drives): the static friction curves and
 //! the Stribeck significance test against the authors' parameters (strbVelocity 6.4, 0, 0.688
 //! for drives 1, 2, 3).
-use motorid::real_data::screw_drives;
-use motorid::real_data::static_curve::Term;
 use tests::shared_data;
+use xtask::real_data::screw_drives;
+use xtask::real_data::static_curve::Term;
 
 #[test]
 fn stribeck_where_the_authors_have_it_and_not_on_drive_2() {
