@@ -169,9 +169,9 @@ fn generic_loop_finds_coulomb_and_asymmetry_and_refits() {
         * motorid::effect_spec::EffectSpec::parse(&o.spec)
             .unwrap()
             .get("t0");
-    // −3.29 N with diagnose's exact discrete weak-form weights (−1.78 N with the sampled
-    // analytic φ'' used before, which leaked the absolute position; see the README's limits).
-    // Same sign and within a factor of two of the authors' OF.
+    // Tolerance: the offset and the direction asymmetry are nearly the same column on this
+    // trajectory (docs/real-data.md), so only the sign and a factor of two of the authors' OF
+    // are asked of it.
     assert!(
         of < -3.16 / 2.0 && of > -3.16 * 2.0,
         "offset {of} N (authors −3.16)"

@@ -68,7 +68,7 @@ fn each_set_point_becomes_one_point() {
     let Some(data) = shared_data("each_set_point_becomes_one_point") else {
         return;
     };
-    // README: 32, 30 and 46 set-points of 500 samples.
+    // ../shared/data/README.md: 32, 30 and 46 set-points of 500 samples.
     for (k, n) in [(1, 32), (2, 30), (3, 46)] {
         let pts = screw_drives::read_points(&screw_drives::path(&data, k)).unwrap();
         assert_eq!(pts.len(), n, "drive {k}");

@@ -332,7 +332,7 @@ pub fn relative_error_pct(a: &[f64], b: &[f64]) -> f64 {
 /// One nested-model test on the IDIM-LS regression.
 #[derive(Debug, Clone)]
 pub struct TermTest {
-    /// Effect name (contract's list).
+    /// Effect name (as `motorid` names it).
     pub name: &'static str,
     /// What the smaller model is.
     pub against: &'static str,
