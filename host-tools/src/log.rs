@@ -432,6 +432,12 @@ impl MotorLog {
         plant: Plant,
     ) -> Result<MotorLog> {
         let log = Self::read_with_units(path, map, units, plant)?;
+        tracing::debug!(
+            file = %path.display(),
+            samples = log.t.len(),
+            sample_period_s = log.sample_period(),
+            "log read"
+        );
         for w in log.sanity_warnings() {
             eprintln!("warning: {w}");
         }
