@@ -2,7 +2,7 @@
 # Speed of motorid's SINDYc building blocks against their peers, on the same 10^6 samples:
 # runs our criterion benches (which also write the data to target/bench-data/), then
 # scripts/bench_peers.py (numpy SVD of the Hankel matrix, pysindy STLSQ), and prints a
-# markdown table for the README (ours vs peers, ratio).
+# markdown table of docs/results.md (ours vs peers, ratio).
 # Installs numpy and pysindy 2.x into a venv under target/ when missing.
 set -euo pipefail
 cd "$(dirname "$0")/.."

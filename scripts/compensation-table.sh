@@ -2,7 +2,7 @@
 # The reference paper's friction-compensation experiment on the emulated board: simulate the
 # fitting signal (a) on the built-in motor emulator, fit a LuGre and a SINDYc model to it, then
 # run closed-loop PI speed control (same gains everywhere) with no, LuGre and SINDYc
-# compensation on a sine and a stepped speed reference, and print the README's Markdown table
+# compensation on a sine and a stepped speed reference, and print the Markdown table of docs/results.md
 # (RMS tracking error overall and at |ω_ref| below the Stribeck velocity).
 #
 # Usage: scripts/compensation-table.sh [extra `motorid emulate` options, e.g. --edge-timing 0.1]

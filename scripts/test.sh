@@ -45,11 +45,11 @@ else
 fi
 # Lib, bins, unit/integration tests, benches and examples (benches compile in the test profile).
 cargo test --no-run --all-targets
-# The non-test `motorid` binary for the end-to-end tests. tests::motorid_bin() runs the same
-# `cargo build $MOTORID_BUILD_ARGS` (it inherits these variables, the clippy wrapper included)
-# and finds it fresh. `--tests` makes cargo resolve features with the dev-dependencies, as the
-# workspace `cargo test` does; a bare `--bin motorid` would compile faer & co. a second time.
-export MOTORID_BUILD_ARGS="-p host-tools --bin motorid --tests"
+# The non-test `motorid` and `xtask` binaries for the end-to-end tests. The tests' helper runs
+# the same `cargo build $MOTORID_BUILD_ARGS` (it inherits these variables, the clippy wrapper
+# included) and finds them fresh. `--tests` makes cargo resolve features with the dev-dependencies, as the
+# workspace `cargo test` does; bare `--bin` targets would compile faer & co. a second time.
+export MOTORID_BUILD_ARGS="-p host-tools -p xtask --bin motorid --bin xtask --tests"
 # shellcheck disable=SC2086
 cargo build $MOTORID_BUILD_ARGS
 # Cargo runs test binaries one after another, and most are one long single-threaded fit: the

@@ -1,4 +1,4 @@
-//! The physical effects of the contract's list, as equations.
+//! The physical effects `motorid` names, as equations.
 //!
 //! One place defines what each effect *is*: the emulator adds them to the plant, the host
 //! models add them when the user says `fit --add NAME`, and the firmware evaluates them for
@@ -39,7 +39,7 @@ pub enum Site {
     State,
 }
 
-/// The effect names of the contract, without parameters.
+/// The effect names, without parameters.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum EffectKind {
@@ -60,7 +60,7 @@ pub enum EffectKind {
 }
 
 impl EffectKind {
-    /// Every effect, in the contract's order.
+    /// Every effect, in the documented order.
     pub const ALL: [EffectKind; 14] = [
         EffectKind::Coulomb,
         EffectKind::Viscous,
@@ -78,7 +78,7 @@ impl EffectKind {
         EffectKind::Compliance,
     ];
 
-    /// The contract's name (`position_load`, ...).
+    /// The effect's name on the command line (`position_load`, ...).
     pub fn name(self) -> &'static str {
         match self {
             EffectKind::Coulomb => "coulomb",
@@ -98,7 +98,7 @@ impl EffectKind {
         }
     }
 
-    /// Parse a contract name.
+    /// Parse an effect's name.
     pub fn from_name(name: &str) -> Option<EffectKind> {
         EffectKind::ALL.iter().copied().find(|k| k.name() == name)
     }

@@ -210,7 +210,7 @@ pub enum Warning {
     Boot0FromPin,
 }
 
-/// One log sample, every 12 ms while running (the contract's CSV columns).
+/// One log sample, every 12 ms while running (the motor log's standard columns).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Sample {
     /// Running sample number (gaps mean lost samples).

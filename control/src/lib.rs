@@ -6,7 +6,7 @@
 //! | module | what it is |
 //! |---|---|
 //! | [`motor`] | DC-equivalent motor constants (R, L, K_t, K_b, J) |
-//! | [`effects`] | the physical effects of the contract's list, as equations |
+//! | [`effects`] | the physical effects `motorid` names, as equations |
 //! | [`hall`] | Hall-state decoding, sectors, faults, angle |
 //! | [`velocity`] | velocity estimators: moving average (the paper's) and Hall-edge timing |
 //! | [`lugre`] | LuGre friction observer with an exact (exponential) update |

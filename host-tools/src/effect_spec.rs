@@ -159,10 +159,8 @@ pub fn keys(kind: EffectKind) -> &'static [Key] {
         EffectKind::LoadFriction => {
             // Default μ = 0.2: high-ratio transmissions (worm and harmonic gears, lead
             // screws) lose 10–30 % of the torque they transmit; spur gears and ball screws
-            // 2–10 %. 0.05 is physically invisible on the paper motor: it differs from a 5 %
-            // lower K_t only while the drive brakes, and on 60 s of the step signal d (which
-            // brakes about 0.4 % of the time) `diagnose` estimated it at 0.035 with p 0.03–0.2;
-            // 0.2 is found first with μ 0.19–0.22 (seeds 1–3).
+            // 2–10 %. Smaller values differ from a lower K_t only while the drive brakes and
+            // are not visible on the paper motor (docs/limits.md).
             const K: &[Key] = &[k("mu", "1", 0.2, "friction per N·m of transmitted torque")];
             K
         }

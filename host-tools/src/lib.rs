@@ -2,7 +2,7 @@
 //!
 //! | module | what it is |
 //! |---|---|
-//! | [`log`] | motor logs (the contract's CSV): read with `--map`/`--plant`, write atomically |
+//! | [`log`] | motor logs (CSV): read with `--map`/`--plant`, write atomically |
 //! | [`atomic`] | atomic output files (write to a temporary file, then rename) |
 //! | [`cmd`] | one file per `motorid` subcommand: its `--help` text and its `run` |
 //! | [`effect_spec`] | effect specs `NAME:key=value,...` with keys, units, defaults |
@@ -22,6 +22,5 @@ pub mod emulator;
 pub mod ident;
 pub mod log;
 pub mod model;
-pub mod real_data;
 pub mod report;
 pub mod validate;

@@ -1,4 +1,4 @@
-//! Motor logs: the contract's CSV format.
+//! Motor logs: the CSV format every command reads and writes.
 //!
 //! ```text
 //! # sample_period=0.012
@@ -211,7 +211,7 @@ const fn unit(
     }
 }
 
-/// Every unit a log may declare (the contract's list, plus a few obvious spellings).
+/// Every unit a log may declare (the documented list, plus a few obvious spellings).
 pub const UNIT_TABLE: &[UnitDef] = &[
     unit(&["s"], Quantity::Time, 1.0, 1.0, false),
     unit(&["ms"], Quantity::Time, 1.0, 1e3, false),
@@ -432,6 +432,12 @@ impl MotorLog {
         plant: Plant,
     ) -> Result<MotorLog> {
         let log = Self::read_with_units(path, map, units, plant)?;
+        tracing::debug!(
+            file = %path.display(),
+            samples = log.t.len(),
+            sample_period_s = log.sample_period(),
+            "log read"
+        );
         for w in log.sanity_warnings() {
             eprintln!("warning: {w}");
         }
@@ -813,7 +819,7 @@ impl MotorLog {
         out
     }
 
-    /// Render as contract CSV text (metadata first, standard columns, then extras).
+    /// Render as motor-log CSV text (metadata first, standard columns, then extras).
     pub fn to_csv(&self) -> String {
         use std::fmt::Write;
         let mut s = String::new();

@@ -16,8 +16,28 @@ use std::process::ExitCode;
         on the built-in emulator."
 )]
 struct Cli {
+    /// Print what the command does on stderr: -v for the steps of the fits and the
+    /// diagnosis, -vv for every iteration.
+    #[arg(short, long, action = clap::ArgAction::Count, global = true)]
+    verbose: u8,
     #[command(subcommand)]
     command: Command,
+}
+
+/// Diagnostic output on stderr through `tracing`, at the level `-v` asks for; none by
+/// default, so stderr carries only warnings and the `error:` line.
+fn init_tracing(verbose: u8) {
+    let level = match verbose {
+        0 => return,
+        1 => tracing::Level::DEBUG,
+        _ => tracing::Level::TRACE,
+    };
+    tracing_subscriber::fmt()
+        .with_max_level(level)
+        .with_writer(std::io::stderr)
+        .without_time()
+        .with_target(false)
+        .init();
 }
 
 #[derive(Subcommand, Debug)]
@@ -48,10 +68,6 @@ enum Command {
     Commission(cmd::commission::Args),
     /// Closed-loop speed control with friction compensation on the emulated motor.
     Emulate(cmd::emulate::Args),
-    /// Regenerate the reference paper's fit table on emulated data.
-    PaperTable(cmd::paper_table::Args),
-    /// Fit and diagnose the measured data sets in ../shared/data (EMPS, screw drives, DC motors).
-    RealData(cmd::real_data::Args),
 }
 
 /// A command-line error as one `error:` line (clap's own text, its usage and tips left out);
@@ -109,6 +125,7 @@ fn main() -> ExitCode {
         Ok(cli) => cli,
         Err(e) => return clap_error(e),
     };
+    init_tracing(cli.verbose);
     let result = match cli.command {
         Command::Simulate(a) => cmd::simulate::run(a),
         Command::Fit(a) => cmd::fit::run(a),
@@ -123,8 +140,6 @@ fn main() -> ExitCode {
         Command::Board(a) => cmd::board::run(a),
         Command::Commission(a) => cmd::commission::run(a),
         Command::Emulate(a) => cmd::emulate::run(a),
-        Command::PaperTable(a) => cmd::paper_table::run(a),
-        Command::RealData(a) => cmd::real_data::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -5,7 +5,7 @@
 //!
 //! * `linear`: viscous friction only, `F_f = b·ω` (the paper's linear model);
 //! * `lugre`: the LuGre law (paper eqs. 12–14), parameters in [`LugreParams`];
-//! * `sindyc`: sparse equations found by SINDYc (the colleague's `ident::sindyc`), stored as a
+//! * `sindyc`: sparse equations found by SINDYc (`ident::sindyc`), stored as a
 //!   TOML table in `sindy`.
 //!
 //! Every model may carry extra physical effects (`[[effects]]`, one table per effect with its

@@ -1,5 +1,5 @@
-//! Helpers for the end-to-end tests: find (and build once) the `motorid` binary, run it,
-//! and locate `../shared/data`.
+//! Helpers for the end-to-end tests: find (and build once) the `motorid` and `xtask`
+//! binaries, run them, and locate `../shared/data`.
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::sync::OnceLock;
@@ -12,32 +12,39 @@ pub fn root() -> PathBuf {
         .to_path_buf()
 }
 
-/// Path of the `motorid` binary, built once with the same (optimised) profile as the tests.
+/// Folder of the `motorid` and `xtask` binaries, both built once (one nested `cargo build`)
+/// with the same (optimised) profile as the tests.
 ///
-/// `MOTORID_BUILD_ARGS` (space-separated) replaces the default target selection `--bin motorid`
-/// of that nested `cargo build`. scripts/test.sh sets it to `-p host-tools --bin motorid
-/// --tests` after the workspace-wide `cargo test` build: with resolver 2 the dev-dependencies'
-/// features (proptest, criterion: `either/use_std`, `getrandom/std`, `zerocopy/derive`, ...) are
-/// unified only when a test target is part of the build, so a bare `--bin motorid` would
-/// compile rand, rayon, faer and their dependents a second time (about 3 minutes on 2 cores).
-/// The default suits `cargo test -p tests ...`, which resolves without dev-dependencies too.
-pub fn motorid_bin() -> &'static Path {
-    static BIN: OnceLock<PathBuf> = OnceLock::new();
-    BIN.get_or_init(|| {
+/// `MOTORID_BUILD_ARGS` (space-separated) replaces the default target selection
+/// `--bin motorid --bin xtask` of that nested `cargo build`. scripts/test.sh sets it to
+/// `-p host-tools -p xtask --bin motorid --bin xtask --tests` after the workspace-wide `cargo
+/// test` build: with resolver 2 the dev-dependencies' features (proptest, criterion:
+/// `either/use_std`, `getrandom/std`, `zerocopy/derive`, ...) are unified only when a test
+/// target is part of the build, so bare `--bin` targets would compile rand, rayon, faer and
+/// their dependents a second time (about 3 minutes on 2 cores). The default suits `cargo test
+/// -p tests ...`, which resolves without dev-dependencies too.
+fn bin_dir() -> &'static Path {
+    static DIR: OnceLock<PathBuf> = OnceLock::new();
+    DIR.get_or_init(|| {
         let target = std::env::var_os("CARGO_TARGET_DIR")
             .map(PathBuf::from)
             .unwrap_or_else(|| root().join("target"));
-        let select =
-            std::env::var("MOTORID_BUILD_ARGS").unwrap_or_else(|_| "--bin motorid".to_string());
+        let select = std::env::var("MOTORID_BUILD_ARGS")
+            .unwrap_or_else(|_| "--bin motorid --bin xtask".to_string());
         let status = Command::new(env!("CARGO"))
             .args(["build", "-q"])
             .args(select.split_whitespace())
             .current_dir(root())
             .status()
-            .expect("cannot run cargo to build motorid");
+            .expect("cannot run cargo to build motorid and xtask");
         assert!(status.success(), "cargo build {select} failed");
-        target.join("debug").join("motorid")
+        target.join("debug")
     })
+}
+
+/// Path of the `motorid` binary (the product).
+pub fn motorid_bin() -> PathBuf {
+    bin_dir().join("motorid")
 }
 
 /// Run `motorid ARGS...` in `dir`.
@@ -49,15 +56,29 @@ pub fn motorid(dir: &Path, args: &[&str]) -> Output {
         .expect("cannot start motorid")
 }
 
-/// `../shared/data` if present; `None` (and a line saying the test skipped) otherwise.
+/// Run `xtask ARGS...` (the project automation: `cargo xtask ARGS...`) in `dir`.
+pub fn xtask(dir: &Path, args: &[&str]) -> Output {
+    Command::new(bin_dir().join("xtask"))
+        .args(args)
+        .current_dir(dir)
+        .output()
+        .expect("cannot start xtask")
+}
+
+/// `../shared/data` if present. Where it is absent the test is skipped with a printed reason
+/// (`None`), except in CI (environment variable `CI` set), where the data must be present and
+/// its absence fails the test.
 pub fn shared_data(test: &str) -> Option<PathBuf> {
     let d = root().join("..").join("shared").join("data");
     if d.is_dir() {
-        Some(d)
-    } else {
-        eprintln!("SKIPPED {test}: ../shared/data is not present next to the repository");
-        None
+        return Some(d);
     }
+    let reason = format!("{test}: ../shared/data is not present next to the repository");
+    if std::env::var_os("CI").is_some_and(|v| !v.is_empty()) {
+        panic!("{reason}, and CI (environment variable CI is set) must have it");
+    }
+    eprintln!("SKIPPED {reason}");
+    None
 }
 
 /// The paper's motor with the paper's LuGre friction as a MODEL.toml text (voltage plant,

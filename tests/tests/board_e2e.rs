@@ -53,7 +53,7 @@ fn ok(out: &std::process::Output) -> String {
     String::from_utf8_lossy(&out.stdout).to_string()
 }
 
-/// (header, rows) of a contract CSV log.
+/// (header, rows) of a motor-log CSV.
 fn read_log(path: &Path) -> (Vec<String>, Vec<Vec<f64>>, Vec<String>) {
     let text = std::fs::read_to_string(path).unwrap();
     let meta: Vec<String> = text
@@ -93,7 +93,7 @@ fn upload_record_and_speed_control_over_a_pty() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.starts_with("error: bad.bin:"), "{err}");
 
-    // Record signal a for 6 s: 500 samples of the contract's columns.
+    // Record signal a for 6 s: 500 samples of the standard columns.
     ok(&motorid(
         d,
         &[

@@ -1,9 +1,9 @@
-//! `motorid compare --json` prints exactly the contract's object, and the fit percentages
+//! `motorid compare --json` prints exactly the documented object, and the fit percentages
 //! behave (the true model scores higher than a detuned one).
 use tests::motorid;
 
 #[test]
-fn json_has_exactly_the_contract_shape() {
+fn json_has_exactly_the_documented_shape() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     assert!(motorid(

@@ -1,4 +1,4 @@
-//! The contract's loop through the command line: simulate, fit, diagnose --json, fit --add
+//! The whole loop through the command line: simulate, fit, diagnose --json, fit --add
 //! the printed spec, compare --report.
 use tests::motorid;
 

@@ -125,7 +125,7 @@ fn fit_add_closes_half_the_gap_to_the_truth_for_every_effect() {
 
 /// The part of the table above that the test command runs every time (the whole table takes
 /// too long for CI): the two position-dependent torques, refined on multiple-shooting
-/// segments; cogging is the hardest row (a narrow basin, see the README's limits).
+/// segments; cogging is the hardest row (a narrow basin, see docs/limits.md).
 #[test]
 fn fit_add_closes_half_the_gap_for_position_load_and_cogging() {
     check(vec![EffectKind::PositionLoad, EffectKind::Cogging]);

@@ -149,11 +149,10 @@ fn lugre_fit_recovers_the_static_curve_and_validates_like_the_truth() {
     );
 }
 
-/// Issue 3's "must show" for SINDYc: fitted on signal a alone (the one-by-one thresholding
+/// SINDYc's bar: fitted on signal a alone (the one-by-one thresholding
 /// and the simulation-error refinement judged on a), its validation fit on signal b through
 /// the sensor chain is within 3 points of the emulator's own model scored by the same
-/// function, and the linear model is clearly below. (Measured when written: truth 99.5,
-/// SINDYc 97.8, linear 89.7 on `paper-table`'s signals.)
+/// function, and the linear model is clearly below.
 #[test]
 fn sindyc_fit_validates_like_the_truth() {
     let dir = tempfile::tempdir().unwrap();
@@ -187,9 +186,8 @@ fn sindyc_fit_validates_like_the_truth() {
 
 /// A compliant bristle (the `presliding` default: σ0 = 0.4 N·m/rad, a breakaway deflection of
 /// 2.6 Hall steps, as a geared axis shows at the rotor) is visible in Hall-quantised data, and
-/// the LuGre fit identifies it: σ0 within 30 %. (Measured when written: 0.41 on seed 1; with the
-/// old lower bound σ0 ≥ 1 the fit stopped at the bound.) A stiff start that ends in a local
-/// minimum near 10 N·m/rad, as the old grid did on seed 5, fails it.
+/// the LuGre fit identifies it: σ0 within 30 % (the tolerance covers the spread over noise
+/// draws). A stiff start that ends in a local minimum near 10 N·m/rad fails it.
 #[test]
 fn lugre_fit_identifies_a_compliant_bristle() {
     let dir = tempfile::tempdir().unwrap();

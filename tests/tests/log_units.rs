@@ -26,7 +26,7 @@ fn times_1000(s: &str) -> String {
     }
 }
 
-/// The contract CSV `text` rewritten with t in ms, theta in degrees and `;` delimiters;
+/// The motor-log CSV `text` rewritten with t in ms, theta in degrees and `;` delimiters;
 /// with `unit_lines`, the `# unit.t=ms` and `# unit.theta=deg` lines that declare it.
 fn rewrite_ms_deg(text: &str, unit_lines: bool) -> String {
     let mut out = String::new();

@@ -1,5 +1,5 @@
-//! `motorid real-data`: writes the figures and the markdown tables of the README.
-use tests::{motorid, shared_data};
+//! `cargo xtask real-data`: writes the figures and the markdown tables of docs/real-data.md.
+use tests::{shared_data, xtask};
 
 #[test]
 fn real_data_writes_figures_and_tables() {
@@ -7,7 +7,7 @@ fn real_data_writes_figures_and_tables() {
         return;
     };
     let dir = tempfile::tempdir().unwrap();
-    let out = motorid(
+    let out = xtask(
         dir.path(),
         &[
             "real-data",
@@ -53,7 +53,7 @@ fn real_data_writes_figures_and_tables() {
 #[test]
 fn missing_data_folder_is_one_error_line() {
     let dir = tempfile::tempdir().unwrap();
-    let out = motorid(dir.path(), &["real-data", "--data", "no/such/dir"]);
+    let out = xtask(dir.path(), &["real-data", "--data", "no/such/dir"]);
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.starts_with("error: no/such/dir"), "{err}");

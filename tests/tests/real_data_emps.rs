@@ -1,8 +1,8 @@
 //! EMPS benchmark (../shared/data/EMPS): the authors' IDIM-LS model is reproduced, the
 //! friction terms they report are significant, the generic diagnosis finds Coulomb friction,
 //! and the generic CLI fits the data through `--map` and `--plant torque`.
-use motorid::real_data::{emps, emps_loop};
 use tests::{motorid, shared_data};
+use xtask::real_data::{emps, emps_loop};
 
 fn logs(test: &str) -> Option<(motorid::log::MotorLog, motorid::log::MotorLog)> {
     let d = shared_data(test)?.join("EMPS");
@@ -27,7 +27,8 @@ fn idim_ls_matches_the_published_estimates() {
             "{name}: {ours} vs reference {val} ± {sd}"
         );
     }
-    // Condition number and relative errors near the published 25.99, 4.08 %, 5.98 %.
+    // Condition number and relative errors near the published 25.99, 4.08 %, 5.98 %
+    // (tolerances: the filter and decimation are written anew, not the authors' scripts).
     assert!((id.ols.cond - 25.99).abs() < 1.0, "cond {}", id.ols.cond);
     assert!((id.ols.rel_error_pct() - 4.08).abs() < 0.5);
     let cross = emps::idim_relative_error(&id.axis, &test, emps::GTAU);
@@ -106,7 +107,8 @@ fn generic_diagnosis_finds_coulomb_friction() {
     );
     let names: Vec<&str> = d.effects.iter().map(|f| f.name.as_str()).collect();
     assert_eq!(names.first(), Some(&"coulomb"), "found {names:?}");
-    // Its estimate, in newtons, is near the reference Fc = 20.39 N.
+    // Its estimate, in newtons, is near the reference Fc = 20.39 N (25 %: on the linear model
+    // the residual also holds the offset and the asymmetry, which bias a one-term estimate).
     let spec = motorid::effect_spec::EffectSpec::parse(&d.effects[0].spec).unwrap();
     let fc = emps::GTAU * spec.get("fc");
     assert!((fc - 20.39).abs() < 0.25 * 20.39, "fc = {fc} N");
@@ -137,6 +139,8 @@ fn generic_loop_finds_coulomb_and_asymmetry_and_refits() {
     let p = emps_loop::physical(&last.model, emps::GTAU);
     let (fvp, _, fvm, _) = emps_loop::per_direction(&p);
     // Authors (asymmetric IDIM-LS): M 95.15 kg, Fc ≈ 20.39 N, Fv+ 166.7, Fv- 240.4 N·s/m.
+    // Tolerances: the generic loop fits the free run on the 100 Hz log, not IDIM-LS on
+    // filtered derivatives, so it lands near, not on, the authors' estimates.
     assert!((p.m - 95.15).abs() < 0.06 * 95.15, "M = {} kg", p.m);
     let fc = p.fc.unwrap();
     assert!((fc - 20.39).abs() < 0.15 * 20.39, "Fc = {fc} N");
@@ -169,9 +173,9 @@ fn generic_loop_finds_coulomb_and_asymmetry_and_refits() {
         * motorid::effect_spec::EffectSpec::parse(&o.spec)
             .unwrap()
             .get("t0");
-    // −3.29 N with diagnose's exact discrete weak-form weights (−1.78 N with the sampled
-    // analytic φ'' used before, which leaked the absolute position; see the README's limits).
-    // Same sign and within a factor of two of the authors' OF.
+    // Tolerance: the offset and the direction asymmetry are nearly the same column on this
+    // trajectory (docs/real-data.md), so only the sign and a factor of two of the authors' OF
+    // are asked of it.
     assert!(
         of < -3.16 / 2.0 && of > -3.16 * 2.0,
         "offset {of} N (authors −3.16)"

@@ -1,8 +1,8 @@
 //! OmniRobot DC motors (../shared/data/OmniRobot_DC_motors): Coulomb + viscous friction beside
 //! the authors' b and T_0.
-use motorid::real_data::omni_dc;
-use motorid::real_data::static_curve::Term;
 use tests::shared_data;
+use xtask::real_data::omni_dc;
+use xtask::real_data::static_curve::Term;
 
 #[test]
 fn coulomb_and_viscous_near_the_authors_values() {

@@ -1,9 +1,9 @@
 //! TRO2021 screw drives (../shared/data/TRO2021_screw_drives): the static friction curves and
 //! the Stribeck significance test against the authors' parameters (strbVelocity 6.4, 0, 0.688
 //! for drives 1, 2, 3).
-use motorid::real_data::screw_drives;
-use motorid::real_data::static_curve::Term;
 use tests::shared_data;
+use xtask::real_data::screw_drives;
+use xtask::real_data::static_curve::Term;
 
 #[test]
 fn stribeck_where_the_authors_have_it_and_not_on_drive_2() {
@@ -68,7 +68,7 @@ fn each_set_point_becomes_one_point() {
     let Some(data) = shared_data("each_set_point_becomes_one_point") else {
         return;
     };
-    // README: 32, 30 and 46 set-points of 500 samples.
+    // ../shared/data/README.md: 32, 30 and 46 set-points of 500 samples.
     for (k, n) in [(1, 32), (2, 30), (3, 46)] {
         let pts = screw_drives::read_points(&screw_drives::path(&data, k)).unwrap();
         assert_eq!(pts.len(), n, "drive {k}");

@@ -1,4 +1,4 @@
-//! `motorid simulate` as a user runs it: contract logs, `--truth`, `--help`, bad input.
+//! `motorid simulate` as a user runs it: motor logs, `--truth`, `--help`, bad input.
 use motorid::log::{ColumnMap, MotorLog, Plant};
 use std::path::Path;
 use tests::motorid;
@@ -8,7 +8,7 @@ fn read(path: &Path) -> MotorLog {
 }
 
 #[test]
-fn signal_a_with_cogging_writes_a_contract_log() {
+fn signal_a_with_cogging_writes_a_motor_log() {
     let dir = tempfile::tempdir().unwrap();
     let out = motorid(
         dir.path(),

@@ -1,6 +1,6 @@
 //! The emulated motor against physics worked out by hand: steady states, presliding
 //! deflection, energy balance, convergence of the integrator, Hall quantisation, and that
-//! every effect of the contract changes what the board would measure.
+//! every named effect changes what the board would measure.
 use control::effects::{Effect, EffectKind};
 use motorid::effect_spec::EffectSpec;
 use motorid::emulator::experiments::steady_speed;

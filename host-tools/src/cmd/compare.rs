@@ -50,7 +50,7 @@ pub fn run(args: Args) -> Result<()> {
     let pred = ident::freerun::simulate(&model, &log)?;
     let sc = ident::score_prediction(&model, &log, &pred)?;
     if let Some(dir) = &args.report {
-        // Call site for the diagnosis engineer's report (host-tools/src/report/).
+        // The HTML report with its plots (host-tools/src/report/).
         write_report(dir, &model, &log, &pred, &sc)?;
     }
     if args.json {

@@ -86,6 +86,12 @@ pub fn run(args: Args) -> Result<()> {
     crate::ident::check_log(&log, model.plant)?;
     let st = Structure::from_model(&model);
     let d = diagnose::diagnose(&log, &st, &Options::default());
+    tracing::debug!(
+        adequate = d.verdict.adequate,
+        effects = d.effects.len(),
+        unexplained = d.verdict.unexplained.len(),
+        "diagnosis done"
+    );
     if let Some(dir) = &args.report {
         let pred = crate::ident::freerun::simulate(&model, &log).ok();
         let w = crate::report::write_diagnose_report(dir, &model, &log, &d, pred.as_ref())?;

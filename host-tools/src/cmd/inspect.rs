@@ -18,7 +18,7 @@ pub struct Args {
     pub json: bool,
 }
 
-/// Model kind as the contract names it.
+/// Model kind as the command line names it.
 pub fn kind_name(k: blob::ModelKind) -> &'static str {
     match k {
         blob::ModelKind::None => "none",

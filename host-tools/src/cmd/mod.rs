@@ -9,8 +9,6 @@ pub mod export;
 pub mod fit;
 pub mod flash;
 pub mod inspect;
-pub mod paper_table;
-pub mod real_data;
 pub mod record;
 pub mod simulate;
 pub mod upload;

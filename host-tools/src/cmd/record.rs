@@ -10,7 +10,7 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 /// Run one of the paper's excitations open loop (or closed-loop speed control) on the board
-/// and save what it measured as a motor log (the contract's CSV: t, u, i, theta, omega).
+/// and save what it measured as a motor log (CSV: t, u, i, theta, omega).
 ///
 /// The board plays the voltage signal for the given duration and streams a sample every
 /// 12 ms; the log holds the voltage actually applied, the measured current, the

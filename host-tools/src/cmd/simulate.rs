@@ -1,5 +1,5 @@
 //! `motorid simulate`: run the built-in motor emulator under one of the paper's excitations
-//! and write the log the board would record (contract CSV).
+//! and write the log the board would record (motor-log CSV).
 use crate::effect_spec::EffectSpec;
 use crate::emulator::{self, EmulatorConfig, SignalKind};
 use anyhow::{Context, Result};

@@ -1,5 +1,5 @@
 //! The built-in motor emulator: the reference paper's BLDC motor (DC-equivalent model, LuGre
-//! friction with the paper's parameters) plus any of the contract's physical effects, read
+//! friction with the paper's parameters) plus any of the named physical effects, read
 //! through the board's sensors (Hall sensors and decoder, noisy current sensor, the
 //! firmware's velocity estimator) at the 12 ms control period.
 //!

@@ -1,5 +1,5 @@
 //! The emulated motor, step by step: the paper's DC-equivalent model with LuGre friction and
-//! the contract's physical effects, integrated with an implicit (L-stable) scheme.
+//! the named physical effects, integrated with an implicit (L-stable) scheme.
 //!
 //! ```text
 //! J·dω/dt = K_t·I − F_f − Σ torque(effect) − T_extra

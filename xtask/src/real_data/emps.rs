@@ -14,8 +14,8 @@
 use super::butterworth::LowPass;
 use super::regression::{ols, Ols};
 use super::static_curve::sgn;
-use crate::log::{ColumnMap, MotorLog, Plant};
 use anyhow::{bail, Result};
+use motorid::log::{ColumnMap, MotorLog, Plant};
 use std::path::Path;
 
 /// Force per volt of `vir`, gτ [N/V] (scalar `gtau` in both .mat files).
@@ -332,13 +332,13 @@ pub fn relative_error_pct(a: &[f64], b: &[f64]) -> f64 {
 /// One nested-model test on the IDIM-LS regression.
 #[derive(Debug, Clone)]
 pub struct TermTest {
-    /// Effect name (contract's list).
+    /// Effect name (as `motorid` names it).
     pub name: &'static str,
     /// What the smaller model is.
     pub against: &'static str,
     /// The test, with the effective sample size of the larger model's residual (the statistics
-    /// `diagnose` uses: [`crate::diagnose::stats`]).
-    pub test: crate::diagnose::stats::FTest,
+    /// `diagnose` uses: [`motorid::diagnose::stats`]).
+    pub test: motorid::diagnose::stats::FTest,
 }
 
 /// (name, smaller model, its columns, the larger model's columns).
@@ -348,7 +348,7 @@ type Nested = (&'static str, &'static str, Vec<Vec<f64>>, Vec<Vec<f64>>);
 /// observation matrix: Coulomb against (M, Fv); offset against (M, Fv, Fc); asymmetry
 /// (one Fv/Fc per direction) against the symmetric model with offset.
 pub fn term_tests(log: &MotorLog, gain: f64) -> Result<Vec<TermTest>> {
-    use crate::diagnose::stats::{effective_n, f_test};
+    use motorid::diagnose::stats::{effective_n, f_test};
     let (sym, y) = observation(log, gain, false);
     let (asym, _) = observation(log, gain, true);
     let resid = |cols: &[Vec<f64>]| -> Result<(f64, Vec<f64>)> {

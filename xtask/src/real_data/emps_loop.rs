@@ -11,13 +11,13 @@
 //! ([`benchmark_rmse_mm`]): the generic free-run simulation is started at sample 19 from the
 //! state that a straight line through the first 20 measured positions gives.
 use super::emps;
-use crate::diagnose::{self, Diagnosis, Structure};
-use crate::effect_spec::EffectSpec;
-use crate::ident::{self, freerun, FitRequest};
-use crate::log::{MotorLog, Plant};
-use crate::model::{Model, ModelKind};
 use anyhow::Result;
 use control::effects::Effect;
+use motorid::diagnose::{self, Diagnosis, Structure};
+use motorid::effect_spec::EffectSpec;
+use motorid::ident::{self, freerun, FitRequest};
+use motorid::log::{MotorLog, Plant};
+use motorid::model::{Model, ModelKind};
 
 /// Most refits of the loop (each adds what the previous diagnosis found).
 pub const MAX_ROUNDS: usize = 3;

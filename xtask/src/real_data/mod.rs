@@ -16,7 +16,7 @@ use anyhow::{bail, Result};
 use std::path::{Path, PathBuf};
 
 /// The data directory: `dir` if given, else `../shared/data` relative to the repository root
-/// (the first ancestor of the current directory, or else of the `motorid` executable, that has
+/// (the first ancestor of the current directory, or else of the `xtask` executable, that has
 /// `../shared/data/README.md`).
 pub fn locate(dir: Option<&Path>) -> Result<PathBuf> {
     if let Some(d) = dir {

@@ -132,7 +132,7 @@ pub fn figure(
             .map_err(|e| err(&e))?;
         root.present().map_err(|e| err(&e))?;
     }
-    crate::atomic::write_str(path, &svg)
+    motorid::atomic::write_str(path, &svg)
 }
 
 /// Every `step`-th point of a time series (figures need no 25 000 points).

@@ -484,7 +484,7 @@ fn main() {
                 .map(|r| q * (pu[r] - m.kb * pw_h[r] - m.l * pdi[r]) - j * pth_h[r] - pf_sg[r])
                 .collect(),
         );
-        // The weights diagnose used before: the sampled analytic φ'' (weights sum ≠ 0).
+        // The sampled analytic φ'' as weights (their sum is not 0), for comparison.
         let big_t = h as f64 * SAMPLE_PERIOD;
         let w2_old: Vec<f64> = (-(h as isize)..=(h as isize))
             .map(|k| {

@@ -3,7 +3,7 @@
 //! searched only where the Stribeck level comes out positive (breakaway above Coulomb).
 //!
 //! Model: `τ = Fc·sgn v + Fv·v [+ τ0] [+ Dv·|v|] [+ Fs·exp(−(v/vs)²)·sgn v]`, i.e. the
-//! contract's effects `coulomb`, `viscous`, `offset`, `asymmetry` (the |v| part; its
+//! effects `coulomb`, `viscous`, `offset`, `asymmetry` (the |v| part; its
 //! `|sgn v|` part equals the offset at non-zero speed) and `stribeck` (the same law as
 //! `control::effects`). For a fixed Stribeck velocity `vs` the model is linear in the other
 //! parameters, so `vs` is found by variable projection: a log-spaced scan of the residual, then
@@ -29,7 +29,7 @@ pub enum Term {
 }
 
 impl Term {
-    /// The contract's effect name.
+    /// The effect's CLI name.
     pub fn name(self) -> &'static str {
         match self {
             Term::Coulomb => "coulomb",
