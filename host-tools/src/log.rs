@@ -10,7 +10,8 @@
 //! (comma, semicolon or tab) is sniffed from the header row; numbers use a decimal point
 //! (a decimal comma is an error, not a silent misreading). A UTF-8 byte-order mark is skipped.
 //! A MATLAB MAT-file (`.mat`, v5 or v7) is read too ([`MotorLog::parse_mat`]): its vectors are
-//! the columns, its scalars the metadata.
+//! the columns, its scalars the metadata. A log with a velocity `omega` but no angle `theta`
+//! gets the angle integrated from the velocity (trapezoid rule, from 0), and a warning says so.
 //! Standard columns `t`, `u`, `i`, `theta`, `omega` are SI unless a metadata line
 //! `# unit.COLUMN=UNIT` or `--units COLUMN=UNIT,...` declares another unit ([`Units`]); they are
 //! converted to SI on read and the declared units are kept in [`MotorLog::units`]. Other names
@@ -679,8 +680,16 @@ impl MotorLog {
                 ));
             }
         }
+        let integrated = self.meta.get(THETA_INTEGRATED);
+        if let Some(how) = integrated {
+            out.push(format!(
+                "{p}: no angle column: theta is the integral of {how}; effects of the angle \
+                 (cogging, position_load) and the angle's fit percentage rest on that integral"
+            ));
+        }
         let steps: Vec<f64> = self.theta.windows(2).map(|w| (w[1] - w[0]).abs()).collect();
-        if let Some(res) = self.meta_f64("hall_resolution_rad").filter(|r| *r > 0.0) {
+        let hall = self.meta_f64("hall_resolution_rad").filter(|r| *r > 0.0);
+        if let Some(res) = hall.filter(|_| integrated.is_none()) {
             let moved: Vec<f64> = steps.iter().copied().filter(|d| *d > 1e-9 * res).collect();
             if let Some(m) = median(moved) {
                 let r = m / res;
@@ -843,7 +852,10 @@ impl StdColumns {
             })
         };
         let omega = find("omega");
-        let theta = Some(need("theta", "")?);
+        let theta = match omega {
+            Some(_) => find("theta"),
+            None => Some(need("theta", ", or give a velocity column 'omega'")?),
+        };
         Ok(StdColumns {
             t: need("t", "")?,
             u: need("u", "")?,
@@ -874,6 +886,9 @@ impl StdColumns {
         }
     }
 }
+
+/// Metadata key set when the angle was integrated from the velocity (value: how).
+pub const THETA_INTEGRATED: &str = "theta_integrated_from";
 
 /// A log's columns as read, before units and checks: what CSV and MAT-files have in common.
 struct Table {
@@ -1003,8 +1018,19 @@ impl Table {
         let theta = columns.theta.map(|c| convert("theta", take(c, &mut cols)));
         let i = columns.i.map(|c| convert("i", take(c, &mut cols)));
         let omega = columns.omega.map(|c| convert("omega", take(c, &mut cols)));
-        let Some(theta) = theta else {
-            bail!("{p}: no column 'theta'");
+        let theta = match (theta, &omega) {
+            (Some(theta), _) => theta,
+            (None, Some(w)) => {
+                meta.insert(
+                    THETA_INTEGRATED.to_string(),
+                    format!(
+                        "{} (trapezoid rule, from 0)",
+                        echo(&headers[columns.omega.unwrap_or(0)])
+                    ),
+                );
+                integrate_trapezoid(&t, w)
+            }
+            (None, None) => bail!("{p}: no column 'theta' nor 'omega'"),
         };
         let extra = headers
             .iter()
@@ -1069,6 +1095,20 @@ impl Table {
             units,
         })
     }
+}
+
+/// The running integral of `y` over `t` by the trapezoid rule, starting at 0:
+/// `x_k = x_{k-1} + (t_k − t_{k−1})·(y_k + y_{k−1})/2`.
+fn integrate_trapezoid(t: &[f64], y: &[f64]) -> Vec<f64> {
+    let mut x = Vec::with_capacity(y.len());
+    let mut acc = 0.0;
+    for k in 0..y.len().min(t.len()) {
+        if k > 0 {
+            acc += (t[k] - t[k - 1]) * 0.5 * (y[k] + y[k - 1]);
+        }
+        x.push(acc);
+    }
+    x
 }
 
 /// Above this |Δθ/Δt| [rad/s] (about a million rpm) no motor turns: the units are wrong.
@@ -1505,6 +1545,33 @@ mod tests {
         .to_string();
         assert!(e.starts_with("e.mat: no vector variable 't' (map"), "{e}");
         assert!(e.contains("t_ms, qm, force, short"), "{e}");
+    }
+
+    #[test]
+    fn a_log_with_velocity_but_no_angle_integrates_it_and_says_so() {
+        // omega = 3 + 2t: the trapezoid rule is exact, theta = 3t + t^2.
+        let mut text = String::from("# hall_resolution_rad=0.1\nt,u,i,speed\n");
+        for k in 0..11 {
+            let t = 0.1 * k as f64;
+            text.push_str(&format!("{t},1,0,{}\n", 3.0 + 2.0 * t));
+        }
+        let map = ColumnMap::parse("omega=speed").unwrap();
+        let log = MotorLog::parse(&text, Path::new("w.csv"), &map, Plant::Voltage).unwrap();
+        for (t, th) in log.t.iter().zip(&log.theta) {
+            assert!((th - (3.0 * t + t * t)).abs() < 1e-12, "t {t}: {th}");
+        }
+        let w = log.sanity_warnings();
+        assert_eq!(w.len(), 1, "no Hall warning on an integrated angle: {w:?}");
+        assert!(
+            w[0].starts_with("w.csv: no angle column: theta is the integral of speed"),
+            "{w:?}"
+        );
+        // Neither angle nor velocity: the message names both.
+        let e = parse("t,u,i\n0,1,1\n1,1,1\n", Plant::Voltage)
+            .unwrap_err()
+            .to_string();
+        assert!(e.starts_with("x.csv:1: missing column 'theta'"), "{e}");
+        assert!(e.contains("velocity column 'omega'"), "{e}");
     }
 
     #[test]
