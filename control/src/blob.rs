@@ -16,7 +16,8 @@
 //! allocator and a blob with too many entries is an error, not an overflow.
 //!
 //! [`decode`] checks magic, version, length, CRC, the postcard payload, and then the values
-//! themselves ([`Coefficients::validate`]): finite numbers, a Hall table that is a
+//! themselves ([`Coefficients::validate`]): finite numbers, limits and gains within the
+//! board's ratings ([`RATED_I_MAX`], [`RATED_VBUS_MAX`], [`MAX_KP`]...), a Hall table that is a
 //! permutation, a model kind whose parameters are present. The firmware treats any error as
 //! "no compensation" and logs a warning.
 use heapless::Vec;
@@ -53,6 +54,17 @@ pub const MAX_EFFECTS: usize = 8;
 /// The control step derates the voltage above this fraction of `limits.i_max`; the board
 /// trips (fault, bridge off) above `i_max` itself.
 pub const DERATE_FRACTION: f32 = 0.8;
+/// Largest phase-current limit a blob may set [A]: the B-G431B-ESC1's 40 A peak output.
+pub const RATED_I_MAX: f32 = 40.0;
+/// Largest bus voltage a blob may allow [V], and so the largest loop voltage limit `u_max`:
+/// just above a fully charged 6S pack (6 × 4.2 V = 25.2 V).
+pub const RATED_VBUS_MAX: f32 = 26.0;
+/// Largest speed-loop proportional gain [V/(rad/s)].
+pub const MAX_KP: f32 = 1e3;
+/// Largest speed-loop integral gain [V/rad].
+pub const MAX_KI: f32 = 1e4;
+/// Largest weight of the friction compensation voltage.
+pub const MAX_COMP_GAIN: f32 = 10.0;
 /// Marker in a Hall table for a state that must never occur (000 and 111 on 120° sensors).
 pub const HALL_INVALID: u8 = 0xFF;
 
@@ -170,7 +182,7 @@ impl Default for Coefficients {
                 // limit sits above a fully charged 6S pack (6 × 4.2 V = 25.2 V).
                 i_max: 30.0,
                 vbus_min: 7.0,
-                vbus_max: 26.0,
+                vbus_max: RATED_VBUS_MAX,
             },
             commission: None,
         }
@@ -222,6 +234,11 @@ impl core::error::Error for BlobError {}
 
 fn finite(xs: &[f32]) -> bool {
     xs.iter().all(|x| x.is_finite())
+}
+
+/// `lo <= x <= hi` (false for NaN).
+fn within(x: f32, lo: f32, hi: f32) -> bool {
+    (lo..=hi).contains(&x)
 }
 
 fn effect_finite(e: &Effect<f32>) -> bool {
@@ -300,16 +317,31 @@ impl Coefficients {
             _ => {}
         }
         let p = &self.pi;
-        if !finite(&[p.kp, p.ki, p.u_max, p.comp_gain]) || p.u_max <= 0.0 {
+        if !(within(p.kp, 0.0, MAX_KP)
+            && within(p.ki, 0.0, MAX_KI)
+            && within(p.comp_gain, 0.0, MAX_COMP_GAIN))
+        {
             return Err(BlobError::Invalid(
-                "PI gains must be finite and u_max positive",
+                "PI gains must lie in kp 0..1e3, ki 0..1e4, comp_gain 0..10",
+            ));
+        }
+        if !(within(p.u_max, 0.0, RATED_VBUS_MAX) && p.u_max > 0.0) {
+            return Err(BlobError::Invalid(
+                "u_max must be positive and at most the rated bus voltage (26 V)",
             ));
         }
         let l = &self.limits;
-        if !finite(&[l.i_max, l.vbus_min, l.vbus_max]) || l.i_max <= 0.0 || l.vbus_min >= l.vbus_max
+        if !(within(l.i_max, 0.0, RATED_I_MAX) && l.i_max > 0.0) {
+            return Err(BlobError::Invalid(
+                "i_max must be positive and at most the board's rated 40 A",
+            ));
+        }
+        if !(within(l.vbus_min, 0.0, RATED_VBUS_MAX)
+            && within(l.vbus_max, 0.0, RATED_VBUS_MAX)
+            && l.vbus_min < l.vbus_max)
         {
             return Err(BlobError::Invalid(
-                "limits must be finite with vbus_min < vbus_max",
+                "bus limits must satisfy 0 <= vbus_min < vbus_max <= 26 V",
             ));
         }
         if !self.effects.iter().all(effect_finite) {
