@@ -115,3 +115,61 @@ fn fit_takes_a_mat_file_with_map() {
     );
     assert!(stderr.contains("qm"), "{stderr}");
 }
+
+/// `motorid fit ... FILE` expected to fail: its one stderr line, and no model written.
+fn refused(dir: &std::path::Path, file: &str) -> String {
+    let out = motorid(
+        dir,
+        &[
+            "fit",
+            "--model",
+            "linear",
+            "--plant",
+            "torque",
+            "--map",
+            "u=vir,theta=qm",
+            "-o",
+            "m.toml",
+            file,
+        ],
+    );
+    let stderr = String::from_utf8_lossy(&out.stderr).to_string();
+    assert!(!out.status.success(), "{file}: accepted");
+    assert_eq!(stderr.lines().count(), 1, "{stderr}");
+    assert!(stderr.starts_with(&format!("error: {file}")), "{stderr}");
+    assert!(!dir.join("m.toml").exists(), "{file}: a model was written");
+    stderr
+}
+
+#[test]
+fn v73_truncated_and_damaged_mat_files_are_one_error_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // A v7.3 file is HDF5 behind the same 128-byte header with version 0x0200.
+    let mut v73 = format!("{:<116}", "MATLAB 7.3 MAT-file, Platform: GLNXA64").into_bytes();
+    v73.extend_from_slice(&[0; 8]);
+    v73.extend_from_slice(&[0x00, 0x02]);
+    v73.extend_from_slice(b"IM");
+    v73.extend_from_slice(b"\x89HDF\r\n\x1a\n");
+    std::fs::write(d.join("v73.mat"), &v73).unwrap();
+    let e = refused(d, "v73.mat");
+    assert!(e.contains("v7.3") && e.contains("'-v7'"), "{e}");
+    std::fs::write(d.join("short.mat"), b"MATLAB 5.0").unwrap();
+    let e = refused(d, "short.mat");
+    assert!(e.contains("not a MATLAB MAT-file"), "{e}");
+
+    let Some(emps) = emps_dir("v73_truncated_and_damaged_mat_files_are_one_error_line") else {
+        return;
+    };
+    let bytes = std::fs::read(emps.join("DATA_EMPS.mat")).unwrap();
+    std::fs::write(d.join("cut.mat"), &bytes[..bytes.len() * 2 / 3]).unwrap();
+    let e = refused(d, "cut.mat");
+    assert!(e.contains("byte ") && e.contains("truncated"), "{e}");
+    let mut damaged = bytes.clone();
+    for b in &mut damaged[400..440] {
+        *b ^= 0xa5;
+    }
+    std::fs::write(d.join("damaged.mat"), &damaged).unwrap();
+    let e = refused(d, "damaged.mat");
+    assert!(e.contains("byte "), "{e}");
+}
