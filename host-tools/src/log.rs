@@ -631,6 +631,9 @@ impl MotorLog {
                     v.len(),
                     echo(t_name)
                 ),
+                None if !mat.undecoded.is_empty() => {
+                    anyhow!("{e}; not decoded: {}", header_list(&mat.undecoded))
+                }
                 None => e,
             })?;
         for c in columns.indices() {

@@ -5,8 +5,9 @@
 //! that re-saves it), every element's tag against the bytes that are there, and each
 //! `miCOMPRESSED` element inflated under a budget ([`MAX_INFLATED`]), so that a truncated,
 //! corrupt or hostile file is one error naming the file and the byte, never a panic or an
-//! allocation sized by a number in the file. Numeric vectors become columns, scalars metadata
-//! (see [`crate::log::MotorLog::parse_mat`]).
+//! allocation sized by a number in the file. Each numeric array is decoded on its own, so one
+//! the decoder refuses is named in [`MatData::undecoded`] and the others stay readable.
+//! Numeric vectors become columns, scalars metadata (see [`crate::log::MotorLog::parse_mat`]).
 use anyhow::{anyhow, bail, Result};
 use std::io::Read;
 use std::path::Path;
@@ -15,8 +16,12 @@ use std::path::Path;
 const HEADER: usize = 128;
 /// Element types of the level-5 format.
 const MI_INT32: u32 = 5;
+const MI_UINT32: u32 = 6;
 const MI_MATRIX: u32 = 14;
 const MI_COMPRESSED: u32 = 15;
+/// Array classes: double is the first numeric one, uint64 the last.
+const MX_DOUBLE: u32 = 6;
+const MX_UINT64: u32 = 15;
 /// Most bytes the compressed arrays of one file may inflate to, all together (1 GiB).
 pub const MAX_INFLATED: usize = 1 << 30;
 /// Largest MAT-file read (bytes), so that every size in it fits the format's 32-bit tags.
@@ -29,6 +34,8 @@ pub struct MatData {
     pub scalars: Vec<(String, f64)>,
     /// N×1 and 1×N arrays (N > 1).
     pub vectors: Vec<(String, Vec<f64>)>,
+    /// Numeric arrays the decoder could not read, by name (left out of the above).
+    pub undecoded: Vec<String>,
 }
 
 /// True when `bytes` start like a MAT-file's descriptive text.
@@ -64,8 +71,8 @@ pub fn read(bytes: &[u8], path: &Path) -> Result<MatData> {
         v => bail!("{p}: byte 124: unknown MAT-file version 0x{v:04x}"),
     }
 
-    // The file again, every array uncompressed and checked: what `matfile` then decodes.
-    let mut plain = bytes[..HEADER].to_vec();
+    // Every numeric array uncompressed and checked: what `matfile` then decodes, one by one.
+    let mut arrays: Vec<Vec<u8>> = Vec::new();
     let mut inflated_total = 0usize;
     let mut at = HEADER;
     while bytes.len() - at >= 8 {
@@ -100,23 +107,32 @@ pub fn read(bytes: &[u8], path: &Path) -> Result<MatData> {
                     if inner > out.len() - 8 {
                         bail!("{p}: byte {at}: a compressed array is truncated");
                     }
-                    push_matrix(&mut plain, &out[..8 + inner], word)
+                    push_matrix(&mut arrays, &out[..8 + inner], word)
                         .map_err(|e| anyhow!("{p}: byte {at}: {e}"))?;
                 }
                 at = start + size;
             }
             MI_MATRIX => {
-                push_matrix(&mut plain, &bytes[at..start + size], word)
+                push_matrix(&mut arrays, &bytes[at..start + size], word)
                     .map_err(|e| anyhow!("{p}: byte {at}: {e}"))?;
                 at = (start + size.next_multiple_of(8)).min(bytes.len());
             }
             _ => at = (start + size.next_multiple_of(8)).min(bytes.len()),
         }
     }
-    let file = matfile::MatFile::parse(plain.as_slice())
-        .map_err(|e| anyhow!("{p}: not a readable MAT-file: {e}"))?;
     let mut out = MatData::default();
-    for a in file.arrays() {
+    for element in arrays {
+        // Alone behind the header, so that one array the decoder refuses (it reads int32
+        // storage as uint32, for one) leaves the others readable.
+        let mut one = bytes[..HEADER].to_vec();
+        one.extend_from_slice(&element);
+        let Ok(file) = matfile::MatFile::parse(one.as_slice()) else {
+            out.undecoded.push(array_name(&element, word));
+            continue;
+        };
+        let Some(a) = file.arrays().first() else {
+            continue;
+        };
         let Some(values) = real_values(a.data()) else {
             continue;
         };
@@ -131,48 +147,72 @@ pub fn read(bytes: &[u8], path: &Path) -> Result<MatData> {
     Ok(out)
 }
 
-/// Append an `miMATRIX` element (tag included) to `plain`, padded to 8 bytes, after checking
-/// that its sub-elements fit inside it and that its dimensions multiply without overflow;
-/// an array that fails the checks is an error.
-fn push_matrix(plain: &mut Vec<u8>, element: &[u8], word: Words) -> Result<()> {
-    let payload = &element[8..];
+/// The sub-elements of an `miMATRIX` payload: `(kind, data)` each, after checking that each
+/// fits inside the payload (a small element holds at most 4 bytes).
+fn sub_elements(payload: &[u8], word: Words) -> Result<Vec<(u32, &[u8])>> {
+    let mut out = Vec::new();
     let mut at = 0usize;
-    let mut index = 0usize;
     while payload.len() - at >= 8 {
         let first = word.u32(&payload[at..]);
         let small = (first >> 16) as usize;
-        let (kind, size, next) = if small != 0 {
+        if small != 0 {
             if small > 4 {
                 bail!("an array's sub-element claims {small} bytes in a 4-byte slot");
             }
-            (first & 0xffff, small, at + 8)
+            out.push((first & 0xffff, &payload[at + 4..at + 4 + small]));
+            at += 8;
         } else {
             let size = word.u32(&payload[at + 4..]) as usize;
             if size > payload.len() - at - 8 {
                 bail!("an array's sub-element of {size} bytes runs past the array's end");
             }
-            (first, size, at + 8 + size.next_multiple_of(8))
-        };
-        // The second sub-element is the dimensions: int32, multiplying to at most i32::MAX.
-        if index == 1 {
-            let data_at = if small != 0 { at + 4 } else { at + 8 };
-            if kind != MI_INT32 || size < 8 || size % 4 != 0 {
-                bail!("an array's dimensions are not int32 pairs");
-            }
-            let mut n: i32 = 1;
-            for d in payload[data_at..data_at + size].chunks_exact(4) {
-                let d = word.u32(d) as i32;
-                n = d
-                    .checked_mul(n)
-                    .filter(|n| *n >= 0)
-                    .ok_or_else(|| anyhow!("an array's dimensions are out of range"))?;
-            }
+            out.push((first, &payload[at + 8..at + 8 + size]));
+            at = (at + 8 + size.next_multiple_of(8)).min(payload.len());
         }
-        at = next.min(payload.len());
-        index += 1;
     }
-    plain.extend_from_slice(element);
-    plain.resize(plain.len().next_multiple_of(8), 0);
+    Ok(out)
+}
+
+/// The name of an `miMATRIX` element (its third sub-element), for messages.
+fn array_name(element: &[u8], word: Words) -> String {
+    sub_elements(&element[8..], word)
+        .ok()
+        .and_then(|s| {
+            s.get(2)
+                .map(|(_, d)| String::from_utf8_lossy(d).into_owned())
+        })
+        .unwrap_or_else(|| "?".to_string())
+}
+
+/// Append an `miMATRIX` element (tag included) of a real or integer class to `arrays`, padded
+/// to 8 bytes, after checking that its sub-elements fit inside it and that its dimensions
+/// multiply without overflow (an error otherwise). Cells, structures, strings and sparse
+/// arrays are left out.
+fn push_matrix(arrays: &mut Vec<Vec<u8>>, element: &[u8], word: Words) -> Result<()> {
+    let subs = sub_elements(&element[8..], word)?;
+    let Some((MI_UINT32, flags)) = subs.first().copied() else {
+        bail!("an array without its flags");
+    };
+    if flags.len() < 4 || !(MX_DOUBLE..=MX_UINT64).contains(&(word.u32(flags) & 0xff)) {
+        return Ok(());
+    }
+    // The dimensions: int32, multiplying to at most i32::MAX.
+    let Some((MI_INT32, dims)) = subs.get(1).copied() else {
+        bail!("an array's dimensions are not int32");
+    };
+    if dims.len() < 8 || dims.len() % 4 != 0 {
+        bail!("an array's dimensions are not int32 pairs");
+    }
+    let mut n: i32 = 1;
+    for d in dims.chunks_exact(4) {
+        n = (word.u32(d) as i32)
+            .checked_mul(n)
+            .filter(|n| *n >= 0)
+            .ok_or_else(|| anyhow!("an array's dimensions are out of range"))?;
+    }
+    let mut e = element.to_vec();
+    e.resize(e.len().next_multiple_of(8), 0);
+    arrays.push(e);
     Ok(())
 }
 
@@ -301,6 +341,20 @@ pub(crate) mod tests {
                 "a 2x2 matrix is not a column; compress {compress}"
             );
         }
+    }
+
+    #[test]
+    fn an_array_the_decoder_refuses_leaves_the_others_readable() {
+        // An int32 vector stored as int32, which the decoder does not take, then a double one.
+        let mut b = mat_file(&[("t", 2, 1, vec![0.0, 1.0])], false);
+        let mut m = element(6, &[12, 0, 0, 0, 0, 0, 0, 0]); // flags: mxINT32_CLASS
+        m.extend(element(MI_INT32, &[2, 0, 0, 0, 1, 0, 0, 0]));
+        m.extend(element(1, b"count"));
+        m.extend(element(MI_INT32, &[0xff, 0xff, 0xff, 0xff, 7, 0, 0, 0]));
+        b.splice(HEADER..HEADER, element(MI_MATRIX, &m));
+        let r = read(&b, Path::new("a.mat")).unwrap();
+        assert_eq!(r.vectors, vec![("t".to_string(), vec![0.0, 1.0])]);
+        assert_eq!(r.undecoded, vec!["count".to_string()]);
     }
 
     #[test]
