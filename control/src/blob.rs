@@ -16,7 +16,8 @@
 //! allocator and a blob with too many entries is an error, not an overflow.
 //!
 //! [`decode`] checks magic, version, length, CRC, the postcard payload, and then the values
-//! themselves ([`Coefficients::validate`]): finite numbers, a Hall table that is a
+//! themselves ([`Coefficients::validate`]): finite numbers, limits and gains within the
+//! board's ratings ([`RATED_I_MAX`], [`RATED_VBUS_MAX`], [`MAX_KP`]...), a Hall table that is a
 //! permutation, a model kind whose parameters are present. The firmware treats any error as
 //! "no compensation" and logs a warning.
 use heapless::Vec;
@@ -53,6 +54,18 @@ pub const MAX_EFFECTS: usize = 8;
 /// The control step derates the voltage above this fraction of `limits.i_max`; the board
 /// trips (fault, bridge off) above `i_max` itself.
 pub const DERATE_FRACTION: f32 = 0.8;
+/// Largest phase-current limit a blob may set [A]: the B-G431B-ESC1's 40 A peak output.
+pub const RATED_I_MAX: f32 = 40.0;
+/// Largest bus voltage a blob may allow [V], and so the largest loop voltage limit `u_max`:
+/// the over-voltage threshold of ST's motor-control project for the B-G431B-ESC1 (a fully
+/// charged 6S pack is 6 × 4.2 V = 25.2 V).
+pub const RATED_VBUS_MAX: f32 = 28.0;
+/// Largest speed-loop proportional gain [V/(rad/s)].
+pub const MAX_KP: f32 = 1e3;
+/// Largest speed-loop integral gain [V/rad].
+pub const MAX_KI: f32 = 1e4;
+/// Largest weight of the friction compensation voltage.
+pub const MAX_COMP_GAIN: f32 = 10.0;
 /// Marker in a Hall table for a state that must never occur (000 and 111 on 120° sensors).
 pub const HALL_INVALID: u8 = 0xFF;
 
@@ -170,7 +183,7 @@ impl Default for Coefficients {
                 // limit sits above a fully charged 6S pack (6 × 4.2 V = 25.2 V).
                 i_max: 30.0,
                 vbus_min: 7.0,
-                vbus_max: 26.0,
+                vbus_max: RATED_VBUS_MAX,
             },
             commission: None,
         }
@@ -224,6 +237,11 @@ fn finite(xs: &[f32]) -> bool {
     xs.iter().all(|x| x.is_finite())
 }
 
+/// `lo <= x <= hi` (false for NaN).
+fn within(x: f32, lo: f32, hi: f32) -> bool {
+    (lo..=hi).contains(&x)
+}
+
 fn effect_finite(e: &Effect<f32>) -> bool {
     match *e {
         Effect::Coulomb { fc } => finite(&[fc]),
@@ -256,8 +274,7 @@ impl Coefficients {
 
     /// Checks the values: finite numbers, positive motor constants, a Hall table that maps
     /// the six valid states one-to-one onto sectors 0..5, parameters present for the model,
-    /// limits within the board's ratings ([`crate::board::HW_TRIP_A`],
-    /// [`crate::board::VBUS_RATING_V`]).
+    /// limits within the board's ratings ([`RATED_I_MAX`], [`RATED_VBUS_MAX`]).
     pub fn validate(&self) -> Result<(), BlobError> {
         let m = &self.motor;
         if !finite(&[m.r, m.l, m.kt, m.kb, m.j]) || m.r <= 0.0 || m.l <= 0.0 || m.kt <= 0.0 {
@@ -302,26 +319,31 @@ impl Coefficients {
             _ => {}
         }
         let p = &self.pi;
-        if !finite(&[p.kp, p.ki, p.u_max, p.comp_gain]) || p.u_max <= 0.0 {
+        if !(within(p.kp, 0.0, MAX_KP)
+            && within(p.ki, 0.0, MAX_KI)
+            && within(p.comp_gain, 0.0, MAX_COMP_GAIN))
+        {
             return Err(BlobError::Invalid(
-                "PI gains must be finite and u_max positive",
+                "PI gains must lie in kp 0..1e3, ki 0..1e4, comp_gain 0..10",
+            ));
+        }
+        if !(within(p.u_max, 0.0, RATED_VBUS_MAX) && p.u_max > 0.0) {
+            return Err(BlobError::Invalid(
+                "u_max must be positive and at most the rated bus voltage (28 V)",
             ));
         }
         let l = &self.limits;
-        if !finite(&[l.i_max, l.vbus_min, l.vbus_max]) || l.i_max <= 0.0 || l.vbus_min >= l.vbus_max
+        if !(within(l.i_max, 0.0, RATED_I_MAX) && l.i_max > 0.0) {
+            return Err(BlobError::Invalid(
+                "i_max must be positive and at most the board's rated 40 A",
+            ));
+        }
+        if !(within(l.vbus_min, 0.0, RATED_VBUS_MAX)
+            && within(l.vbus_max, 0.0, RATED_VBUS_MAX)
+            && l.vbus_min < l.vbus_max)
         {
             return Err(BlobError::Invalid(
-                "limits must be finite with vbus_min < vbus_max",
-            ));
-        }
-        if l.i_max > crate::board::HW_TRIP_A {
-            return Err(BlobError::Invalid(
-                "limits.i_max is above the board's 40 A peak rating",
-            ));
-        }
-        if l.vbus_max > crate::board::VBUS_RATING_V {
-            return Err(BlobError::Invalid(
-                "limits.vbus_max is above the board's 28 V bus rating",
+                "bus limits must satisfy 0 <= vbus_min < vbus_max <= 28 V",
             ));
         }
         if !self.effects.iter().all(effect_finite) {
@@ -619,8 +641,8 @@ mod tests {
             |c| c.model = ModelKind::Lugre,
             |c| c.limits.vbus_min = 50.0,
             // Above the board's ratings.
-            |c| c.limits.i_max = crate::board::HW_TRIP_A + 1.0,
-            |c| c.limits.vbus_max = crate::board::VBUS_RATING_V + 1.0,
+            |c| c.limits.i_max = RATED_I_MAX + 1.0,
+            |c| c.limits.vbus_max = RATED_VBUS_MAX + 1.0,
         ];
         for (k, spoil) in cases.iter().enumerate() {
             let mut c = Coefficients::default();

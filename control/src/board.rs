@@ -42,11 +42,11 @@ use crate::step::{ControlStep, Faults, HallEdge, StepInputs, MAX_EDGES};
 /// Phase current at which the hardware stops the bridge within a PWM period [A]: the
 /// B-G431B-ESC1's 40 A peak rating (ST UM2516). The firmware sets its comparators' threshold
 /// from it, the emulated board trips at it; `limits.i_max` may not exceed it.
-pub const HW_TRIP_A: f32 = 40.0;
+pub const HW_TRIP_A: f32 = crate::blob::RATED_I_MAX;
 /// Highest bus voltage the board is rated for [V]: the over-voltage threshold of ST's motor
 /// control project for the B-G431B-ESC1 (a 6S LiPo pack is 25.2 V fully charged).
 /// `limits.vbus_max` may not exceed it.
-pub const VBUS_RATING_V: f32 = 28.0;
+pub const VBUS_RATING_V: f32 = crate::blob::RATED_VBUS_MAX;
 /// Board temperature [°C] from which the current limit is lowered.
 pub const TEMP_DERATE_C: f32 = 80.0;
 /// Board temperature [°C] at which the bridge stops with [`Fault::OverTemperature`] (the

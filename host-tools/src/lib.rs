@@ -21,6 +21,7 @@ pub mod effect_spec;
 pub mod emulator;
 pub mod ident;
 pub mod log;
+pub mod matlab;
 pub mod model;
 pub mod report;
 pub mod validate;

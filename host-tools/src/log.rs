@@ -9,6 +9,9 @@
 //! Optional `# key=value` metadata lines, one header row, one row per sample. The delimiter
 //! (comma, semicolon or tab) is sniffed from the header row; numbers use a decimal point
 //! (a decimal comma is an error, not a silent misreading). A UTF-8 byte-order mark is skipped.
+//! A MATLAB MAT-file (`.mat`, v5 or v7) is read too ([`MotorLog::parse_mat`]): its vectors are
+//! the columns, its scalars the metadata. A log with a velocity `omega` but no angle `theta`
+//! gets the angle integrated from the velocity (trapezoid rule, from 0), and a warning says so.
 //! Standard columns `t`, `u`, `i`, `theta`, `omega` are SI unless a metadata line
 //! `# unit.COLUMN=UNIT` or `--units COLUMN=UNIT,...` declares another unit ([`Units`]); they are
 //! converted to SI on read and the declared units are kept in [`MotorLog::units`]. Other names
@@ -344,8 +347,8 @@ pub struct MotorLog {
 /// Where a declared unit came from (for messages).
 #[derive(Debug, Clone)]
 enum UnitSource {
-    /// A `# unit.X=...` line of the file (1-based line number).
-    Line(usize),
+    /// A `# unit.X=...` line of the file (its place, `x.csv:2`).
+    Line(String),
     /// `--units`.
     Flag,
 }
@@ -396,8 +399,8 @@ impl MotorLog {
             .map(|(_, v)| v.as_slice())
     }
 
-    /// Read a log in SI units or with `# unit.*` lines. `plant` decides whether `i` is
-    /// required.
+    /// Read a log (CSV, or a MATLAB MAT-file: [`MotorLog::parse_mat`]) in SI units or with
+    /// `# unit.*` lines. `plant` decides whether `i` is required.
     pub fn read(path: &Path, map: &ColumnMap, plant: Plant) -> Result<MotorLog> {
         Self::read_with_units(path, map, &Units::default(), plant)
     }
@@ -411,6 +414,13 @@ impl MotorLog {
     ) -> Result<MotorLog> {
         let text =
             std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
+        if crate::matlab::is_mat_file(&text)
+            || path
+                .extension()
+                .is_some_and(|e| e.eq_ignore_ascii_case("mat"))
+        {
+            return Self::parse_mat(&text, path, map, units, plant);
+        }
         let text = String::from_utf8(text).map_err(|e| {
             let bytes = e.as_bytes();
             let at = e.utf8_error().valid_up_to();
@@ -500,96 +510,13 @@ impl MotorLog {
             .iter()
             .map(str::to_string)
             .collect();
-        let find = |std: &str| headers.iter().position(|h| h == map.name_of(std));
-        let need = |std: &str| {
-            find(std).ok_or_else(|| {
-                let name = map.name_of(std);
-                let hint = if name == std {
-                    format!(" (map another column with --map {std}=NAME)")
-                } else {
-                    String::new()
-                };
-                anyhow!(
-                    "{p}:{header_line}: missing column '{}'{hint}; the header has: {}",
-                    echo(name),
-                    header_list(&headers)
-                )
-            })
+        let mut places = Places::Csv {
+            header_line,
+            meta_line,
+            row_lines: Vec::new(),
         };
-        let ci_t = need("t")?;
-        let ci_u = need("u")?;
-        let ci_theta = need("theta")?;
-        let ci_i = match plant {
-            Plant::Voltage => Some(need("i")?),
-            Plant::Torque => find("i"),
-        };
-        let ci_omega = find("omega");
-        let std_cols: Vec<usize> = [Some(ci_t), Some(ci_u), Some(ci_theta), ci_i, ci_omega]
-            .into_iter()
-            .flatten()
-            .collect();
-        let present = |std: &str| match std {
-            "i" => ci_i.is_some(),
-            "omega" => ci_omega.is_some(),
-            _ => true,
-        };
-
-        // Declared units: the file's `# unit.X` lines, then --units over them.
-        let mut declared: BTreeMap<&'static str, (&'static UnitDef, UnitSource)> = BTreeMap::new();
-        let unit_keys: Vec<String> = meta
-            .keys()
-            .filter(|k| k.starts_with("unit."))
-            .cloned()
-            .collect();
-        for key in unit_keys {
-            let col = &key["unit.".len()..];
-            let line = meta_line[&key];
-            let Some(std) = map.standard_of(col) else {
-                if headers.iter().any(|h| h == col) {
-                    // The unit of an extra column: kept in the metadata, not converted.
-                    continue;
-                }
-                bail!(
-                    "{p}:{line}: unit.{}: no column '{}' in the header ({})",
-                    echo(col),
-                    echo(col),
-                    header_list(&headers)
-                );
-            };
-            let value = meta.remove(&key).unwrap_or_default();
-            let def = check_unit(std, &value, plant)
-                .map_err(|e| anyhow!("{p}:{line}: unit.{}={}: {e}", echo(col), echo(&value)))?;
-            declared.insert(std, (def, UnitSource::Line(line)));
-        }
-        for (col, value) in &units.0 {
-            let std = map.standard_of(col).ok_or_else(|| {
-                anyhow!(
-                    "--units: '{}' is not a standard column (t, u, i, theta, omega) nor a \
-                     column mapped to one with --map",
-                    echo(col)
-                )
-            })?;
-            let def = check_unit(std, value, plant)
-                .map_err(|e| anyhow!("--units: {}={}: {e}", echo(col), echo(value)))?;
-            declared.insert(std, (def, UnitSource::Flag));
-        }
-        declared.retain(|std, _| present(std));
-        if let (Some((a, sa)), Some((w, sw))) = (declared.get("theta"), declared.get("omega")) {
-            if a.linear != w.linear {
-                let at = |s: &UnitSource| match s {
-                    UnitSource::Line(l) => format!("{p}:{l}"),
-                    UnitSource::Flag => "--units".to_string(),
-                };
-                bail!(
-                    "{}: unit of omega '{}' does not match unit of theta '{}' ({}): one is \
-                     rotary, the other linear",
-                    at(sw),
-                    w.name(),
-                    a.name(),
-                    at(sa)
-                );
-            }
-        }
+        let columns = StdColumns::find(&headers, map, plant, &places.header(path))?;
+        let std_cols = columns.indices();
 
         let mut cols: Vec<Vec<f64>> = vec![Vec::new(); headers.len()];
         let mut row_lines: Vec<usize> = Vec::new();
@@ -644,110 +571,94 @@ impl MotorLog {
                 cols[c].push(v);
             }
         }
-        let n = cols[ci_t].len();
-        if n < 2 {
-            bail!("{p}: only {n} data rows; a log needs at least 2");
+        if let Places::Csv { row_lines: r, .. } = &mut places {
+            *r = row_lines;
         }
-        for k in 1..n {
-            let step = cols[ci_t][k] - cols[ci_t][k - 1];
-            if step > crate::validate::MAX_TIME_STEP {
-                bail!(
-                    "{p}:{}: column '{}': time jumps by {} s (from {} to {}); a step longer \
-                     than {} s is not a recording's",
-                    row_lines[k],
-                    echo(&headers[ci_t]),
-                    crate::validate::show(step),
-                    crate::validate::show(cols[ci_t][k - 1]),
-                    crate::validate::show(cols[ci_t][k]),
-                    crate::validate::show(crate::validate::MAX_TIME_STEP)
-                );
-            }
-            if cols[ci_t][k] <= cols[ci_t][k - 1] {
-                bail!(
-                    "{p}:{}: column '{}': time does not increase ({} after {})",
-                    row_lines[k],
-                    echo(&headers[ci_t]),
-                    cols[ci_t][k],
-                    cols[ci_t][k - 1]
-                );
-            }
-        }
-        let take = |c: usize, cols: &mut Vec<Vec<f64>>| std::mem::take(&mut cols[c]);
-        let convert = |std: &str, mut v: Vec<f64>| {
-            if let Some((d, _)) = declared.get(std) {
-                for x in &mut v {
-                    *x = d.to_si(*x);
-                }
-            }
-            v
-        };
-        let t = convert("t", take(ci_t, &mut cols));
-        let u = convert("u", take(ci_u, &mut cols));
-        let theta = convert("theta", take(ci_theta, &mut cols));
-        let i = ci_i.map(|c| convert("i", take(c, &mut cols)));
-        let omega = ci_omega.map(|c| convert("omega", take(c, &mut cols)));
-        let extra = headers
-            .iter()
-            .enumerate()
-            .filter(|(c, _)| !std_cols.contains(c))
-            .map(|(c, h)| (h.clone(), std::mem::take(&mut cols[c])))
-            .collect();
-        // `# sample_period` is in the unit of `t`.
-        if let Some((d, _)) = declared.get("t") {
-            if let Some(sp) = meta
-                .get("sample_period")
-                .and_then(|v| v.parse::<f64>().ok())
-            {
-                meta.insert("sample_period".to_string(), format!("{}", d.to_si(sp)));
-            }
-        }
-        // The sample period sizes every window and loop downstream: it must be physical.
-        // Too long and undeclared: perhaps t is in ms or us.
-        let hint = |dt: f64| {
-            if declared.contains_key("t") || dt <= crate::validate::MAX_SAMPLE_PERIOD {
-                return String::new();
-            }
-            [(1e3, "ms"), (1e6, "us")]
-                .iter()
-                .find(|(f, _)| crate::validate::sample_period(dt / f).is_ok())
-                .map(|(_, u)| {
-                    format!(
-                        " (is t in {u}? declare it with a line '# unit.t={u}' or --units t={u})"
-                    )
-                })
-                .unwrap_or_default()
-        };
-        if let Some(v) = meta.get("sample_period") {
-            let line = meta_line.get("sample_period").copied().unwrap_or(0);
-            let sp: f64 = v
-                .parse()
-                .map_err(|_| anyhow!("{p}:{line}: sample_period: '{}' is not a number", echo(v)))?;
-            crate::validate::sample_period(sp)
-                .map_err(|e| anyhow!("{p}:{line}: sample_period: {e}{}", hint(sp)))?;
-        }
-        let dt = median(t.windows(2).map(|w| w[1] - w[0]).collect()).unwrap_or(0.0);
-        if let Err(e) = crate::validate::sample_period(dt) {
-            bail!(
-                "{p}: column '{}': median time step: {e}{}",
-                echo(&headers[ci_t]),
-                hint(dt)
-            );
-        }
-        let units = declared
-            .iter()
-            .map(|(std, (d, _))| (std.to_string(), d.name().to_string()))
-            .collect();
-        Ok(MotorLog {
-            source: path.to_path_buf(),
+        Table {
             meta,
-            t,
-            u,
-            i,
-            theta,
-            omega,
-            extra,
-            units,
-        })
+            places,
+            headers,
+            cols,
+        }
+        .into_log(path, &columns, map, units, plant)
+    }
+
+    /// Read a MATLAB MAT-file (v5, or v7 with compressed arrays): every numeric vector as
+    /// long as the time vector (`t`, or the name `--map` gives it) is a column, every scalar
+    /// a metadata value; `path` is used in messages only.
+    pub fn parse_mat(
+        bytes: &[u8],
+        path: &Path,
+        map: &ColumnMap,
+        units: &Units,
+        plant: Plant,
+    ) -> Result<MotorLog> {
+        let p = path.display();
+        let mat = crate::matlab::read(bytes, path)?;
+        let t_name = map.name_of("t");
+        let Some(n) = mat
+            .vectors
+            .iter()
+            .find(|(k, _)| k == t_name)
+            .map(|(_, v)| v.len())
+        else {
+            let names: Vec<String> = mat.vectors.iter().map(|(k, _)| k.clone()).collect();
+            let hint = if t_name == "t" {
+                " (map another variable with --map t=NAME)"
+            } else {
+                ""
+            };
+            bail!(
+                "{p}: no vector variable '{}'{hint}; its vectors are: {}",
+                echo(t_name),
+                header_list(&names)
+            );
+        };
+        let mut meta = BTreeMap::new();
+        for (k, v) in &mat.scalars {
+            meta.insert(k.clone(), format!("{v}"));
+        }
+        let (headers, cols): (Vec<String>, Vec<Vec<f64>>) = mat
+            .vectors
+            .iter()
+            .filter(|(_, v)| v.len() == n)
+            .cloned()
+            .unzip();
+        let places = Places::Mat;
+        let columns =
+            StdColumns::find(&headers, map, plant, &places.header(path)).map_err(|e| match mat
+                .vectors
+                .iter()
+                .find(|(_, v)| v.len() != n)
+            {
+                Some((k, v)) => anyhow!(
+                    "{e}; variable '{}' has {} elements, not {n} as '{}'",
+                    echo(k),
+                    v.len(),
+                    echo(t_name)
+                ),
+                None if !mat.undecoded.is_empty() => {
+                    anyhow!("{e}; not decoded: {}", header_list(&mat.undecoded))
+                }
+                None => e,
+            })?;
+        for c in columns.indices() {
+            if let Some(k) = cols[c].iter().position(|v| !v.is_finite()) {
+                bail!(
+                    "{p}: variable '{}', element {}: value {} is not finite",
+                    echo(&headers[c]),
+                    k + 1,
+                    cols[c][k]
+                );
+            }
+        }
+        Table {
+            meta,
+            places,
+            headers,
+            cols,
+        }
+        .into_log(path, &columns, map, units, plant)
     }
 
     /// Numbers that do not fit the units, as readable sentences naming the file (for
@@ -778,8 +689,16 @@ impl MotorLog {
                 ));
             }
         }
+        let integrated = self.meta.get(THETA_INTEGRATED);
+        if let Some(how) = integrated {
+            out.push(format!(
+                "{p}: no angle column: theta is the integral of {how}; effects of the angle \
+                 (cogging, position_load) and the angle's fit percentage rest on that integral"
+            ));
+        }
         let steps: Vec<f64> = self.theta.windows(2).map(|w| (w[1] - w[0]).abs()).collect();
-        if let Some(res) = self.meta_f64("hall_resolution_rad").filter(|r| *r > 0.0) {
+        let hall = self.meta_f64("hall_resolution_rad").filter(|r| *r > 0.0);
+        if let Some(res) = hall.filter(|_| integrated.is_none()) {
             let moved: Vec<f64> = steps.iter().copied().filter(|d| *d > 1e-9 * res).collect();
             if let Some(m) = median(moved) {
                 let r = m / res;
@@ -860,6 +779,345 @@ impl MotorLog {
     pub fn write(&self, path: &Path) -> Result<()> {
         crate::atomic::write_str(path, &self.to_csv())
     }
+}
+
+/// Where a log's parts are in its file, for messages.
+#[derive(Debug, Clone)]
+enum Places {
+    /// A CSV text: the header's, each metadata key's and each data row's line (1-based).
+    Csv {
+        header_line: usize,
+        meta_line: BTreeMap<String, usize>,
+        row_lines: Vec<usize>,
+    },
+    /// A MAT-file: variables by name, samples by index.
+    Mat,
+}
+
+impl Places {
+    /// The header row (`x.csv:3`), or the file.
+    fn header(&self, path: &Path) -> String {
+        match self {
+            Places::Csv { header_line, .. } => format!("{}:{header_line}", path.display()),
+            Places::Mat => path.display().to_string(),
+        }
+    }
+
+    /// A metadata value (`x.csv:2`, `x.mat: variable 'k'`).
+    fn meta(&self, path: &Path, key: &str) -> String {
+        match self {
+            Places::Csv { meta_line, .. } => {
+                let line = meta_line.get(key).copied().unwrap_or(0);
+                format!("{}:{line}", path.display())
+            }
+            Places::Mat => format!("{}: variable '{}'", path.display(), echo(key)),
+        }
+    }
+
+    /// Data row `k` (0-based): `x.csv:17`, `x.mat: sample 15`.
+    fn row(&self, path: &Path, k: usize) -> String {
+        match self {
+            Places::Csv { row_lines, .. } => {
+                format!(
+                    "{}:{}",
+                    path.display(),
+                    row_lines.get(k).copied().unwrap_or(0)
+                )
+            }
+            Places::Mat => format!("{}: sample {}", path.display(), k + 1),
+        }
+    }
+}
+
+/// The positions of the standard columns in a header.
+#[derive(Debug, Clone, Copy)]
+struct StdColumns {
+    t: usize,
+    u: usize,
+    /// Absent when `omega` is there: the angle is then integrated from it.
+    theta: Option<usize>,
+    i: Option<usize>,
+    omega: Option<usize>,
+}
+
+impl StdColumns {
+    /// Find them (mapped with `--map`); `t`, `u`, `theta` or `omega`, and for a voltage plant
+    /// `i`, are required. `at` is the header's place for messages.
+    fn find(headers: &[String], map: &ColumnMap, plant: Plant, at: &str) -> Result<StdColumns> {
+        let find = |std: &str| headers.iter().position(|h| h == map.name_of(std));
+        let need = |std: &str, also: &str| {
+            find(std).ok_or_else(|| {
+                let name = map.name_of(std);
+                let hint = if name == std {
+                    format!(" (map another column with --map {std}=NAME{also})")
+                } else {
+                    String::new()
+                };
+                anyhow!(
+                    "{at}: missing column '{}'{hint}; the header has: {}",
+                    echo(name),
+                    header_list(headers)
+                )
+            })
+        };
+        let omega = find("omega");
+        let theta = match omega {
+            Some(_) => find("theta"),
+            None => Some(need("theta", ", or give a velocity column 'omega'")?),
+        };
+        Ok(StdColumns {
+            t: need("t", "")?,
+            u: need("u", "")?,
+            theta,
+            i: match plant {
+                Plant::Voltage => Some(need("i", "")?),
+                Plant::Torque => find("i"),
+            },
+            omega,
+        })
+    }
+
+    /// The columns that are standard ones.
+    fn indices(&self) -> Vec<usize> {
+        [Some(self.t), Some(self.u), self.theta, self.i, self.omega]
+            .into_iter()
+            .flatten()
+            .collect()
+    }
+
+    /// True when standard column `std` is in the file.
+    fn present(&self, std: &str) -> bool {
+        match std {
+            "i" => self.i.is_some(),
+            "omega" => self.omega.is_some(),
+            "theta" => self.theta.is_some(),
+            _ => true,
+        }
+    }
+}
+
+/// Metadata key set when the angle was integrated from the velocity (value: how).
+pub const THETA_INTEGRATED: &str = "theta_integrated_from";
+
+/// A log's columns as read, before units and checks: what CSV and MAT-files have in common.
+struct Table {
+    meta: BTreeMap<String, String>,
+    places: Places,
+    headers: Vec<String>,
+    /// One series per header, all of the same length; standard columns finite.
+    cols: Vec<Vec<f64>>,
+}
+
+impl Table {
+    /// Declared units, time checks, conversion to SI, the angle from the velocity where it is
+    /// absent, and the sample period's checks.
+    fn into_log(
+        self,
+        path: &Path,
+        columns: &StdColumns,
+        map: &ColumnMap,
+        units: &Units,
+        plant: Plant,
+    ) -> Result<MotorLog> {
+        let p = path.display();
+        let Table {
+            mut meta,
+            places,
+            headers,
+            mut cols,
+        } = self;
+        // Declared units: the file's `# unit.X` lines, then --units over them.
+        let mut declared: BTreeMap<&'static str, (&'static UnitDef, UnitSource)> = BTreeMap::new();
+        let unit_keys: Vec<String> = meta
+            .keys()
+            .filter(|k| k.starts_with("unit."))
+            .cloned()
+            .collect();
+        for key in unit_keys {
+            let col = &key["unit.".len()..];
+            let at = places.meta(path, &key);
+            let Some(std) = map.standard_of(col) else {
+                if headers.iter().any(|h| h == col) {
+                    // The unit of an extra column: kept in the metadata, not converted.
+                    continue;
+                }
+                bail!(
+                    "{at}: unit.{}: no column '{}' in the header ({})",
+                    echo(col),
+                    echo(col),
+                    header_list(&headers)
+                );
+            };
+            let value = meta.remove(&key).unwrap_or_default();
+            let def = check_unit(std, &value, plant)
+                .map_err(|e| anyhow!("{at}: unit.{}={}: {e}", echo(col), echo(&value)))?;
+            declared.insert(std, (def, UnitSource::Line(at)));
+        }
+        for (col, value) in &units.0 {
+            let std = map.standard_of(col).ok_or_else(|| {
+                anyhow!(
+                    "--units: '{}' is not a standard column (t, u, i, theta, omega) nor a \
+                     column mapped to one with --map",
+                    echo(col)
+                )
+            })?;
+            let def = check_unit(std, value, plant)
+                .map_err(|e| anyhow!("--units: {}={}: {e}", echo(col), echo(value)))?;
+            declared.insert(std, (def, UnitSource::Flag));
+        }
+        declared.retain(|std, _| columns.present(std));
+        if let (Some((a, sa)), Some((w, sw))) = (declared.get("theta"), declared.get("omega")) {
+            if a.linear != w.linear {
+                let at = |s: &UnitSource| match s {
+                    UnitSource::Line(at) => at.clone(),
+                    UnitSource::Flag => "--units".to_string(),
+                };
+                bail!(
+                    "{}: unit of omega '{}' does not match unit of theta '{}' ({}): one is \
+                     rotary, the other linear",
+                    at(sw),
+                    w.name(),
+                    a.name(),
+                    at(sa)
+                );
+            }
+        }
+
+        let ct = &cols[columns.t];
+        let n = ct.len();
+        if n < 2 {
+            bail!("{p}: only {n} data rows; a log needs at least 2");
+        }
+        for k in 1..n {
+            let step = ct[k] - ct[k - 1];
+            if step > crate::validate::MAX_TIME_STEP {
+                bail!(
+                    "{}: column '{}': time jumps by {} s (from {} to {}); a step longer \
+                     than {} s is not a recording's",
+                    places.row(path, k),
+                    echo(&headers[columns.t]),
+                    crate::validate::show(step),
+                    crate::validate::show(ct[k - 1]),
+                    crate::validate::show(ct[k]),
+                    crate::validate::show(crate::validate::MAX_TIME_STEP)
+                );
+            }
+            if ct[k] <= ct[k - 1] {
+                bail!(
+                    "{}: column '{}': time does not increase ({} after {})",
+                    places.row(path, k),
+                    echo(&headers[columns.t]),
+                    ct[k],
+                    ct[k - 1]
+                );
+            }
+        }
+        let take = |c: usize, cols: &mut Vec<Vec<f64>>| std::mem::take(&mut cols[c]);
+        let convert = |std: &str, mut v: Vec<f64>| {
+            if let Some((d, _)) = declared.get(std) {
+                for x in &mut v {
+                    *x = d.to_si(*x);
+                }
+            }
+            v
+        };
+        let std_cols = columns.indices();
+        let t = convert("t", take(columns.t, &mut cols));
+        let u = convert("u", take(columns.u, &mut cols));
+        let theta = columns.theta.map(|c| convert("theta", take(c, &mut cols)));
+        let i = columns.i.map(|c| convert("i", take(c, &mut cols)));
+        let omega = columns.omega.map(|c| convert("omega", take(c, &mut cols)));
+        let theta = match (theta, &omega) {
+            (Some(theta), _) => theta,
+            (None, Some(w)) => {
+                meta.insert(
+                    THETA_INTEGRATED.to_string(),
+                    format!(
+                        "{} (trapezoid rule, from 0)",
+                        echo(&headers[columns.omega.unwrap_or(0)])
+                    ),
+                );
+                integrate_trapezoid(&t, w)
+            }
+            (None, None) => bail!("{p}: no column 'theta' nor 'omega'"),
+        };
+        let extra = headers
+            .iter()
+            .enumerate()
+            .filter(|(c, _)| !std_cols.contains(c))
+            .map(|(c, h)| (h.clone(), std::mem::take(&mut cols[c])))
+            .collect();
+        // `# sample_period` is in the unit of `t`.
+        if let Some((d, _)) = declared.get("t") {
+            if let Some(sp) = meta
+                .get("sample_period")
+                .and_then(|v| v.parse::<f64>().ok())
+            {
+                meta.insert("sample_period".to_string(), format!("{}", d.to_si(sp)));
+            }
+        }
+        // The sample period sizes every window and loop downstream: it must be physical.
+        // Too long and undeclared: perhaps t is in ms or us.
+        let hint = |dt: f64| {
+            if declared.contains_key("t") || dt <= crate::validate::MAX_SAMPLE_PERIOD {
+                return String::new();
+            }
+            [(1e3, "ms"), (1e6, "us")]
+                .iter()
+                .find(|(f, _)| crate::validate::sample_period(dt / f).is_ok())
+                .map(|(_, u)| {
+                    format!(
+                        " (is t in {u}? declare it with a line '# unit.t={u}' or --units t={u})"
+                    )
+                })
+                .unwrap_or_default()
+        };
+        if let Some(v) = meta.get("sample_period") {
+            let at = places.meta(path, "sample_period");
+            let sp: f64 = v
+                .parse()
+                .map_err(|_| anyhow!("{at}: sample_period: '{}' is not a number", echo(v)))?;
+            crate::validate::sample_period(sp)
+                .map_err(|e| anyhow!("{at}: sample_period: {e}{}", hint(sp)))?;
+        }
+        let dt = median(t.windows(2).map(|w| w[1] - w[0]).collect()).unwrap_or(0.0);
+        if let Err(e) = crate::validate::sample_period(dt) {
+            bail!(
+                "{p}: column '{}': median time step: {e}{}",
+                echo(&headers[columns.t]),
+                hint(dt)
+            );
+        }
+        let units = declared
+            .iter()
+            .map(|(std, (d, _))| (std.to_string(), d.name().to_string()))
+            .collect();
+        Ok(MotorLog {
+            source: path.to_path_buf(),
+            meta,
+            t,
+            u,
+            i,
+            theta,
+            omega,
+            extra,
+            units,
+        })
+    }
+}
+
+/// The running integral of `y` over `t` by the trapezoid rule, starting at 0:
+/// `x_k = x_{k-1} + (t_k − t_{k−1})·(y_k + y_{k−1})/2`.
+fn integrate_trapezoid(t: &[f64], y: &[f64]) -> Vec<f64> {
+    let mut x = Vec::with_capacity(y.len());
+    let mut acc = 0.0;
+    for k in 0..y.len().min(t.len()) {
+        if k > 0 {
+            acc += (t[k] - t[k - 1]) * 0.5 * (y[k] + y[k - 1]);
+        }
+        x.push(acc);
+    }
+    x
 }
 
 /// Above this |Δθ/Δt| [rad/s] (about a million rpm) no motor turns: the units are wrong.
@@ -1247,6 +1505,82 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn a_mat_file_reads_with_map_and_units_like_a_csv() {
+        use crate::matlab::tests::mat_file;
+        let n = 5;
+        let t: Vec<f64> = (0..n).map(|k| k as f64).collect(); // ms
+        let q: Vec<f64> = (0..n).map(|k| 2.0 * k as f64).collect(); // mm
+        let f: Vec<f64> = (0..n).map(|k| 10.0 + k as f64).collect();
+        let bytes = mat_file(
+            &[
+                ("gtau", 1, 1, vec![35.15]),
+                ("t_ms", n, 1, t.clone()),
+                ("qm", n, 1, q),
+                ("force", 1, n, f.clone()),
+                ("short", 3, 1, vec![0.0; 3]),
+            ],
+            true,
+        );
+        let map = ColumnMap::parse("t=t_ms,theta=qm,u=force").unwrap();
+        let units = Units::parse("t=ms,theta=mm").unwrap();
+        let log =
+            MotorLog::parse_mat(&bytes, Path::new("e.mat"), &map, &units, Plant::Torque).unwrap();
+        assert_eq!(log.t, t.iter().map(|v| v / 1e3).collect::<Vec<_>>());
+        assert_eq!(log.theta, vec![0.0, 0.002, 0.004, 0.006, 0.008]);
+        assert_eq!(log.u, f);
+        assert_eq!(log.meta_f64("gtau"), Some(35.15));
+        assert!(log.is_linear() && log.i.is_none());
+        // A voltage plant needs a current; a variable of another length is named.
+        let e = MotorLog::parse_mat(&bytes, Path::new("e.mat"), &map, &units, Plant::Voltage)
+            .unwrap_err()
+            .to_string();
+        assert!(e.starts_with("e.mat: missing column 'i'"), "{e}");
+        let map = ColumnMap::parse("t=t_ms,theta=short,u=force").unwrap();
+        let e = MotorLog::parse_mat(&bytes, Path::new("e.mat"), &map, &units, Plant::Torque)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("variable 'short' has 3 elements, not 5"), "{e}");
+        let e = MotorLog::parse_mat(
+            &bytes,
+            Path::new("e.mat"),
+            &ColumnMap::default(),
+            &Units::default(),
+            Plant::Torque,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.starts_with("e.mat: no vector variable 't' (map"), "{e}");
+        assert!(e.contains("t_ms, qm, force, short"), "{e}");
+    }
+
+    #[test]
+    fn a_log_with_velocity_but_no_angle_integrates_it_and_says_so() {
+        // omega = 3 + 2t: the trapezoid rule is exact, theta = 3t + t^2.
+        let mut text = String::from("# hall_resolution_rad=0.1\nt,u,i,speed\n");
+        for k in 0..11 {
+            let t = 0.1 * k as f64;
+            text.push_str(&format!("{t},1,0,{}\n", 3.0 + 2.0 * t));
+        }
+        let map = ColumnMap::parse("omega=speed").unwrap();
+        let log = MotorLog::parse(&text, Path::new("w.csv"), &map, Plant::Voltage).unwrap();
+        for (t, th) in log.t.iter().zip(&log.theta) {
+            assert!((th - (3.0 * t + t * t)).abs() < 1e-12, "t {t}: {th}");
+        }
+        let w = log.sanity_warnings();
+        assert_eq!(w.len(), 1, "no Hall warning on an integrated angle: {w:?}");
+        assert!(
+            w[0].starts_with("w.csv: no angle column: theta is the integral of speed"),
+            "{w:?}"
+        );
+        // Neither angle nor velocity: the message names both.
+        let e = parse("t,u,i\n0,1,1\n1,1,1\n", Plant::Voltage)
+            .unwrap_err()
+            .to_string();
+        assert!(e.starts_with("x.csv:1: missing column 'theta'"), "{e}");
+        assert!(e.contains("velocity column 'omega'"), "{e}");
     }
 
     #[test]

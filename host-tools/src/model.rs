@@ -17,7 +17,7 @@
 //! inertia (rotary, kg·m²) or the mass (linear axis, kg) in units of `u` per rad/s² (m/s²),
 //! and `motor.r`, `motor.l`, `motor.kb` are unused (0).
 use crate::effect_spec::EffectSpec;
-use crate::log::Plant;
+use crate::log::{echo, Plant};
 use anyhow::{anyhow, Context, Result};
 use control::effects::{Effect, EffectKind};
 use control::motor::MotorParams;
@@ -218,8 +218,8 @@ fn field_at(text: &str, start: usize) -> String {
         .find(|l| l.starts_with('['))
         .map(|l| l.trim_matches(|c| c == '[' || c == ']').to_string());
     match table {
-        Some(t) => format!(" field '{t}.{key}':"),
-        None => format!(" field '{key}':"),
+        Some(t) => format!(" field '{}.{}':", echo(&t), echo(key)),
+        None => format!(" field '{}':", echo(key)),
     }
 }
 
@@ -301,7 +301,9 @@ impl Model {
     pub fn parse(text: &str, path: &Path) -> Result<Model> {
         let p = path.display();
         toml::from_str::<Model>(text).map_err(|e| {
-            let msg = e.message().trim().to_string();
+            // One line, and no word of the input echoed whole (a 300-digit number, escapes).
+            let msg: Vec<String> = e.message().split_whitespace().map(echo).collect();
+            let msg = msg.join(" ");
             match e.span() {
                 Some(span) => {
                     let before = &text[..span.start.min(text.len())];
@@ -385,6 +387,8 @@ impl Model {
         }
         if let Some(t) = &self.sindy {
             check_toml_numbers("sindy", &toml::Value::Table(t.clone()))?;
+            // Terms and keys too: a table the simulation cannot read is refused here, once.
+            crate::ident::sindyc::from_table(t)?;
         }
         pos("motor.j", self.motor.j)?;
         pos("motor.j", self.motor.j)?;

@@ -112,19 +112,19 @@ range_parser!(
 );
 range_parser!(
     /// Speed-loop proportional gain [V per rad/s]: 0 .. 1000.
-    parse_kp, f32, |v| in_range(v, 0.0, 1e3)
+    parse_kp, f32, |v| in_range(v, 0.0, control::blob::MAX_KP.into())
 );
 range_parser!(
     /// Speed-loop integral gain [V per rad]: 0 .. 10000.
-    parse_ki, f32, |v| in_range(v, 0.0, 1e4)
+    parse_ki, f32, |v| in_range(v, 0.0, control::blob::MAX_KI.into())
 );
 range_parser!(
-    /// Voltage limit of the speed loop [V]: (0, 100].
-    parse_u_max, f32, |v| positive_at_most(v, 100.0)
+    /// Voltage limit of the speed loop [V]: (0, 26], the board's rated bus.
+    parse_u_max, f32, |v| positive_at_most(v, control::blob::RATED_VBUS_MAX.into())
 );
 range_parser!(
     /// Weight of the friction compensation: 0 .. 10.
-    parse_comp_gain, f32, |v| in_range(v, 0.0, 10.0)
+    parse_comp_gain, f32, |v| in_range(v, 0.0, control::blob::MAX_COMP_GAIN.into())
 );
 range_parser!(
     /// Edge-timing standstill timeout [s]: 0.1 ms .. 60 s.

@@ -4,12 +4,14 @@
 //! | module | what it is |
 //! |---|---|
 //! | [`coeffs`] | MODEL.toml → [`control::blob::Coefficients`] → blob bytes; blob files checked |
+//! | [`coeff_text`] | the coefficients as JSON and as a C header, for firmware not in Rust |
 //! | [`rig`] | the emulated board: control step (f32) + emulated motor, 12 ms at a time |
 //! | [`sim`] | the emulated board: `control::board` (the firmware's logic) on [`hw`] |
 //! | [`hw`] | the emulated hardware: motor, six-step bridge, Hall inputs, wiring |
 //! | [`flash`] | the emulated coefficient flash (RAM or file) for `control::slots` |
 //! | [`pty`] | a raw pseudo-terminal whose slave device clients open as a serial port |
 //! | [`link`] | the serial link client: identify, upload, experiments, with retries |
+pub mod coeff_text;
 pub mod coeffs;
 pub mod flash;
 pub mod hw;

@@ -1,4 +1,6 @@
-//! `motorid export`: MODEL.toml → the coefficient blob the firmware loads.
+//! `motorid export`: MODEL.toml → the coefficient blob the firmware loads, or the same
+//! coefficients as JSON or a C header.
+use crate::board::coeff_text;
 use crate::board::coeffs::{self, LoopSettings};
 use crate::model::Model;
 use anyhow::{Context, Result};
@@ -10,13 +12,20 @@ use std::path::PathBuf;
 /// effects), the Hall and velocity-estimator setup, and the speed-loop gains, so that the
 /// board (or `motorid board`) runs the model's friction compensation. Check it with
 /// `motorid inspect`, put it on the board with `motorid flash` or `motorid upload`.
+/// `--format json` and `--format c-header` write the same coefficients, each with its unit,
+/// and the blob's layout, for firmware not written in Rust.
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// The identified model (written by `motorid fit`).
     pub model: PathBuf,
-    /// Output file for the blob (written atomically).
+    /// Output file (written atomically).
     #[arg(short, long, value_name = "COEFFS.bin")]
     pub output: PathBuf,
+    /// What to write: the binary blob the firmware loads, a JSON object (every coefficient
+    /// with its unit, the coefficients object, the blob layout) or a C header (one #define
+    /// per coefficient, units in comments).
+    #[arg(long, value_enum, default_value_t = Format::Blob)]
+    pub format: Format,
     /// Speed-loop proportional gain [V per rad/s]. Default: 0.05, see control::step.
     #[arg(long, value_parser = crate::validate::parse_kp, allow_hyphen_values = true, default_value_t = LoopSettings::default().kp)]
     pub kp: f32,
@@ -35,6 +44,17 @@ pub struct Args {
     pub edge_timing: Option<f32>,
 }
 
+/// Output format of `export`.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Format {
+    /// The coefficient blob (magic, version, postcard payload, CRC-32).
+    Blob,
+    /// A JSON object.
+    Json,
+    /// A C header.
+    CHeader,
+}
+
 pub fn run(args: Args) -> Result<()> {
     crate::atomic::check_outputs(&[&args.output], &[&args.model])?;
     let model = Model::load(&args.model)?;
@@ -48,7 +68,26 @@ pub fn run(args: Args) -> Result<()> {
     let co = coeffs::coefficients(&model, settings)
         .with_context(|| format!("{}", args.model.display()))?;
     let bytes = coeffs::encode(&co).with_context(|| format!("{}", args.model.display()))?;
-    crate::atomic::write(&args.output, &bytes)?;
+    let source = args.model.display().to_string();
+    match args.format {
+        Format::Blob => crate::atomic::write(&args.output, &bytes)?,
+        Format::Json => {
+            let v = coeff_text::to_json(&co, &source, &bytes)?;
+            crate::atomic::write_str(&args.output, &(serde_json::to_string_pretty(&v)? + "\n"))?
+        }
+        Format::CHeader => {
+            crate::atomic::write_str(&args.output, &coeff_text::to_c_header(&co, &source)?)?
+        }
+    }
+    if args.format != Format::Blob {
+        eprintln!(
+            "wrote {} ({} model, {} effects)",
+            args.output.display(),
+            model.kind.name(),
+            co.effects.len()
+        );
+        return Ok(());
+    }
     eprintln!(
         "wrote {} ({} bytes: {} model, {} effects)",
         args.output.display(),
