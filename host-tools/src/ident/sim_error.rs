@@ -10,6 +10,7 @@ use super::{freerun, nlsq, sensor_chain};
 use crate::log::MotorLog;
 use crate::model::{Model, Parameter};
 use anyhow::Result;
+use rayon::prelude::*;
 
 /// Weight of the angle residual relative to velocity and current: the free-run angle drifts
 /// (it integrates every velocity error), so it only steers the low frequencies.
@@ -191,8 +192,12 @@ pub fn better_effect_start(model: &mut Model, res: &Residuals) {
         return;
     }
     let mut best = (f64::INFINITY, 1.0);
-    for f in [0.0, 0.25, 0.5, 0.75, 1.0, 1.25] {
-        let c = cost(res, &scale_effect_magnitudes(model, f));
+    let factors = [0.0, 0.25, 0.5, 0.75, 1.0, 1.25];
+    let costs: Vec<f64> = factors
+        .par_iter()
+        .map(|&f| cost(res, &scale_effect_magnitudes(model, f)))
+        .collect();
+    for (&f, &c) in factors.iter().zip(&costs) {
         if std::env::var_os("MOTORID_DEBUG_IDENT").is_some() {
             eprintln!("effects {:?} x {f}: cost {c:.4e}", model.effects);
         }
@@ -233,14 +238,14 @@ pub fn refine_on(
         .map(|(f, x)| x.abs().max(1e-3 * (f.hi - f.lo).abs().min(1.0)).max(1e-9))
         .collect();
     let base = model.clone();
-    let mut f = |x: &[f64]| -> Result<Vec<f64>> {
+    let f = |x: &[f64]| -> Result<Vec<f64>> {
         let mut m = base.clone();
         for (fr, v) in free.iter().zip(x) {
             fr.slot.set(&mut m, *v);
         }
         res.eval(&m)
     };
-    let sol = nlsq::solve(&mut f, &x0, &lo, &hi, &scale, opts, progress)?;
+    let sol = nlsq::solve_parallel(&f, &x0, &lo, &hi, &scale, opts, progress)?;
     for (fr, v) in free.iter().zip(&sol.x) {
         fr.slot.set(model, *v);
     }
