@@ -249,6 +249,7 @@ pub fn fit(req: &FitRequest) -> Result<Model> {
         sigma0,
         sigma1: 2.0 * (sigma0 * m.motor.j).sqrt(),
     };
+    super::progress::report("static friction curve", 0, f64::NAN);
     let pts: Vec<SteadyPoint> = all_steady_points(&m, req.logs);
     let (lugre, _static_se) = fit_static(&pts, init, false)?;
     m.lugre = Some(lugre);
@@ -262,6 +263,7 @@ pub fn fit(req: &FitRequest) -> Result<Model> {
     // σ0 = 0.4 gave 0.41 on one seed and a local minimum at 10.3 on another (validation
     // x 97.45 % instead of 99.94 %).
     {
+        super::progress::report("bristle start grid", 0, f64::NAN);
         let res = sim_error::Residuals::new(req.logs, m.sensor.velocity_window);
         // Best start among the stiff (≥ 30) and among the soft grid points, separately.
         let mut best = (f64::INFINITY, sigma0, init.sigma1);

@@ -10,6 +10,7 @@
 //! | [`linear`] | the linear model (viscous friction), paper eqs. 1–2 |
 //! | [`lugre_fit`] | LuGre static curve and dynamic parameters |
 //! | [`nlsq`] | bounded nonlinear least squares (Levenberg–Marquardt with projection) |
+//! | [`progress`] | progress of a running fit (stage, iteration, cost) for a progress bar |
 //! | [`hankel`], [`stlsq`], [`library`], [`sindyc`] | SINDYc |
 //!
 //! Entry points: [`fit`] and [`score`].
@@ -22,6 +23,7 @@ pub mod library;
 pub mod linear;
 pub mod lugre_fit;
 pub mod nlsq;
+pub mod progress;
 pub mod sensor_chain;
 pub mod sim_error;
 pub mod sindyc;
@@ -225,6 +227,11 @@ pub fn validation_score(model: &Model, validate: &[MotorLog]) -> f64 {
 /// at zero, and the base structure fitted afresh (keeping the added effects in the structure
 /// at zero magnitude, so the model still names them). The validation logs decide.
 fn guard_added_effects(req: &FitRequest, with: Model) -> Result<Model> {
+    progress::report(
+        "checking the added effects on the validation logs",
+        0,
+        f64::NAN,
+    );
     let score_with = validation_score(&with, req.validate);
     let zeroed = sim_error::scale_effect_magnitudes(&with, 0.0);
     let mut best = (score_with, with.clone(), false);
@@ -311,6 +318,7 @@ fn guard_added_effects(req: &FitRequest, with: Model) -> Result<Model> {
         }
     }
     let base_req = FitRequest { adds: &[], ..*req };
+    progress::report("the base structure fitted afresh", 0, f64::NAN);
     if let Ok(mut base) = fit_kind(&base_req) {
         let cand = residual_candidate(&base);
         let s = validation_score(&cand, req.validate);

@@ -6,7 +6,7 @@
 //! velocity), current, and the angle with a small weight; each normalised by the spread of
 //! the measured signal so that the three are comparable.
 use super::free_params::{parameter_rows, Free};
-use super::{freerun, nlsq, sensor_chain};
+use super::{freerun, nlsq, progress, sensor_chain};
 use crate::log::MotorLog;
 use crate::model::{Model, Parameter};
 use anyhow::Result;
@@ -265,18 +265,22 @@ pub fn refine_with_effects(
     logs: &[MotorLog],
     opts: nlsq::Options,
 ) -> Result<Vec<Parameter>> {
+    let free_run = "free-run simulation error";
+    let report = |stage: &'static str| move |it: usize, c: f64| progress::report(stage, it, c);
     if model.effects.is_empty() {
-        return refine(model, base_free, logs, opts, &mut |_, _| {});
+        return refine(model, base_free, logs, opts, &mut report(free_run));
     }
     let weak = model.effects.clone();
     let mut base = scale_effect_magnitudes(model, 0.0);
-    refine(&mut base, base_free, logs, opts, &mut |_, _| {})?;
+    refine(&mut base, base_free, logs, opts, &mut report(free_run))?;
     base.effects = weak;
     let seg = Residuals::segmented(logs, model.sensor.velocity_window);
+    let with_effects = "with the added effects, 2 s segments";
+    progress::report(with_effects, 0, f64::NAN);
     better_effect_start(&mut base, &seg);
     let mut free = base_free.to_vec();
     free.extend(super::linear::effect_free(&base));
-    let rows = refine_on(&mut base, &free, &seg, opts, &mut |_, _| {})?;
+    let rows = refine_on(&mut base, &free, &seg, opts, &mut report(with_effects))?;
     *model = base;
     Ok(rows)
 }
