@@ -178,7 +178,9 @@ pub fn z_step_with_slope<F: Float>(p: &LugreParams<F>, z: F, v: F, dt: F) -> (F,
     let sg = sgn(v);
     let z_ss = s * sg / p.sigma0;
     let q = p.sigma0 * v.abs() * dt / s;
-    let decay = (-q).exp();
+    // e^(−q) below 1e-304 vanishes against z_ss in the sum below; taking it as 0 skips
+    // libm's slow underflow path (q is in the thousands when sliding on stiff bristles).
+    let decay = if q > c(700.0) { F::zero() } else { (-q).exp() };
     let z_new = z_ss + (z - z_ss) * decay;
     // Exactly a convex combination of z and z_ss; clamp away the last rounding bit so that the
     // bound max(|z0|, s_max/σ0) holds to the bit.
