@@ -97,88 +97,9 @@ pub fn find_root(mut f: impl FnMut(f64) -> f64, x0: f64, step0: f64, xtol: f64) 
     }
 }
 
-/// Newton's method for an increasing `f` given with its slope, `f(x) -> (f, f')`, kept
-/// inside the bracket the signs seen so far define (bisection when a step leaves it).
-///
-/// Returns the last evaluated point once the next Newton step is within `xtol` (the error
-/// there is of the order of that step squared), or `None` after `max_iter` evaluations, at a
-/// non-finite value or a slope that is not positive (the caller then falls back on
-/// [`find_root`]). With a guess from the previous step's extrapolation it takes two or three
-/// evaluations where [`find_root`] takes ten.
-pub fn newton_increasing(
-    mut f: impl FnMut(f64) -> (f64, f64),
-    x0: f64,
-    xtol: f64,
-    max_iter: usize,
-) -> Option<f64> {
-    let (mut lo, mut hi) = (f64::NEG_INFINITY, f64::INFINITY);
-    let mut x = x0;
-    for _ in 0..max_iter {
-        let (fx, dfx) = f(x);
-        if fx == 0.0 {
-            return Some(x);
-        }
-        if !fx.is_finite() || !(dfx > 0.0 && dfx.is_finite()) {
-            return None;
-        }
-        if fx < 0.0 {
-            lo = x;
-        } else {
-            hi = x;
-        }
-        let step = -fx / dfx;
-        if step.abs() <= xtol {
-            return Some(x);
-        }
-        let mut next = x + step;
-        if !(next > lo && next < hi) {
-            if !(lo.is_finite() && hi.is_finite()) {
-                return None;
-            }
-            next = 0.5 * (lo + hi);
-            if hi - lo <= xtol {
-                return Some(x);
-            }
-        }
-        x = next;
-    }
-    None
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn newton_converges_in_few_steps_and_declines_a_jump() {
-        let mut calls = 0;
-        let x = newton_increasing(
-            |x| {
-                calls += 1;
-                (x * x * x + 2.0 * x - 5.0, 3.0 * x * x + 2.0)
-            },
-            1.0,
-            1e-12,
-            20,
-        )
-        .unwrap();
-        assert!((x * x * x + 2.0 * x - 5.0).abs() < 1e-11, "x = {x}");
-        assert!(calls <= 7, "{calls} calls");
-        // A step function has no slope to follow: the caller's fallback decides.
-        assert_eq!(
-            newton_increasing(|x| (if x < 0.3 { -1.0 } else { 1.0 }, 0.0), 0.0, 1e-10, 20),
-            None
-        );
-        // A steep tanh overshoots with plain Newton; the bracket keeps it converging.
-        let f = |x: f64| {
-            (
-                (x / 1e-3).tanh() + 0.01 * x - 0.5,
-                1e3 / (x / 1e-3).cosh().powi(2) + 0.01,
-            )
-        };
-        let x = newton_increasing(f, 10.0, 1e-13, 200).unwrap();
-        assert!(f(x).0.abs() < 1e-8, "x = {x}");
-    }
 
     #[test]
     fn smooth_root_to_tolerance() {

@@ -8,20 +8,17 @@
 //! bristle state updated *exactly* for the new velocity (`control::lugre::z_step`) — the
 //! scheme of the emulator (`emulator::plant`), L-stable at any step and exact at equilibria
 //! (stiction). The unknown of a sub-step is the new velocity: the residual
-//! `J·(ω' − ω)/h − K_t·I'(ω') + F_f(ω') + loads(ω')` increases with ω', so Newton's method
-//! on it, kept inside a bracket, finds it in two or three evaluations, with the slope of the
-//! exact bristle update in ω' (`control::lugre::z_step_with_slope`); where the slope is of no
-//! use (a jump in a load law) the emulator's bracketing solver takes over. (An exponential
-//! Rosenbrock scheme was tried first: it diverges at LuGre breakaway, where the bilinear
-//! |ω|·z term changes within a step.)
+//! `J·(ω' − ω)/h − K_t·I'(ω') + F_f(ω') + loads(ω')` increases with ω', so the emulator's
+//! bracketing scalar solver finds it. (An exponential Rosenbrock scheme was tried first: it
+//! diverges at LuGre breakaway, where the bilinear |ω|·z term changes within a step.)
 //!
 //! SINDYc models are simulated by `ident::sindyc` (the equations live there).
-use crate::emulator::scalar_root::{find_root, newton_increasing};
+use crate::emulator::scalar_root::find_root;
 use crate::log::{MotorLog, Plant};
 use crate::model::{Model, ModelKind};
 use anyhow::{bail, Result};
 use control::effects::{self, EffectInputs};
-use control::lugre::z_step_with_slope;
+use control::lugre::z_step;
 
 /// A free-run prediction, one value per log sample.
 #[derive(Debug, Clone, PartialEq, Default)]
@@ -42,10 +39,6 @@ pub struct Prediction {
 /// 0.2 ms steps the velocity fit of the true model stays within ~1 point (tests), at 1/5 of
 /// the cost, which the parameter search needs.
 pub const SUBSTEPS: usize = 12;
-
-/// Newton iterations of a sub-step before falling back on bracketing (two or three suffice
-/// from the extrapolated guess).
-const NEWTON_MAX_ITER: usize = 8;
 
 /// States: θ, ω, I, z.
 const NX: usize = 4;
@@ -112,95 +105,49 @@ impl Dynamics<'_> {
         };
         let r = p.r * (1.0 + h_th);
         let vloss_max: f64 = m.effects.iter().map(|e| e.voltage_loss(1e9).abs()).sum();
-        let a = p.l / h + r;
-        // Current after the step for a new velocity w, and its slope dI/dw.
-        let current_for = |w: f64| -> (f64, f64) {
+        let current_for = |w: f64| -> f64 {
             match m.plant {
-                Plant::Torque => (u, 0.0),
+                Plant::Torque => u,
                 Plant::Voltage => {
+                    let a = p.l / h + r;
                     let rhs = p.l / h * x[2] + u - p.kb * w;
                     if vloss_max == 0.0 {
-                        (rhs / a, -p.kb / a)
+                        rhs / a
                     } else {
-                        let i = find_root(
+                        find_root(
                             |i| a * i + effects::total_voltage_loss(&m.effects, i) - rhs,
                             rhs / a,
                             vloss_max / a + 1e-12,
                             1e-12 * (1.0 + (rhs / a).abs()),
-                        );
-                        // a·I + loss(I) = rhs(w): dI/dw = −K_b/(a + loss'(I)).
-                        let e = 1e-7 * (1.0 + i.abs());
-                        let dloss = (effects::total_voltage_loss(&m.effects, i + e)
-                            - effects::total_voltage_loss(&m.effects, i - e))
-                            / (2.0 * e);
-                        (i, -p.kb / (a + dloss))
+                        )
                     }
                 }
             }
         };
-        let load_at = |theta: f64, w: f64, i: f64| {
-            effects::total_torque(
-                &m.effects,
-                &EffectInputs {
-                    theta,
-                    omega: w,
-                    current: i,
-                    kt: p.kt,
-                },
-            )
-        };
-        // The step's residual in the new velocity w, its slope, and the new state.
-        let eval = |w: f64| -> (f64, f64, [f64; NX]) {
-            let (i, di) = current_for(w);
-            let (z, fric, dfric) = match lugre {
+        let eval = |w: f64| {
+            let i = current_for(w);
+            let (z, fric) = match lugre {
                 Some(l) => {
-                    let (z, zdot, dz) = z_step_with_slope(l, x[3], w, h);
-                    (
-                        z,
-                        l.friction_at(w, z, zdot),
-                        (l.sigma0 + l.sigma1 / h) * dz + l.alpha2,
-                    )
+                    let (z, zdot) = z_step(l, x[3], w, h);
+                    (z, l.friction_at(w, z, zdot))
                 }
-                None => (x[3], m.viscous * w, m.viscous),
+                None => (x[3], m.viscous * w),
             };
             let theta = x[0] + h * w;
-            let load = load_at(theta, w, i);
-            // Effects' slope along (θ, ω, I)(w) by a forward difference (effects are given
-            // as torque laws only); nothing to do without effects.
-            let dload = if m.effects.is_empty() {
-                0.0
-            } else {
-                let e = 1e-7 * (1.0 + w.abs());
-                (load_at(theta + h * e, w + e, i + di * e) - load) / e
+            let inputs = EffectInputs {
+                theta,
+                omega: w,
+                current: i,
+                kt: p.kt,
             };
+            let load = effects::total_torque(&m.effects, &inputs);
             let resid = p.j * (w - x[1]) / h - p.kt * i + fric + load;
-            let slope = p.j / h - p.kt * di + dfric + dload;
-            (resid, slope, [theta, w, i, z])
+            (resid, [theta, w, i, z])
         };
-        let xtol = 1e-11 * (1.0 + x[1].abs());
-        // Newton from the guess; the last evaluated state is the answer when it converges.
-        let mut last = (f64::NAN, [0.0; NX]);
-        let newton = newton_increasing(
-            |w| {
-                let (g, dg, state) = eval(w);
-                last = (w, state);
-                (g, dg)
-            },
-            w_guess,
-            xtol,
-            NEWTON_MAX_ITER,
-        );
-        match newton {
-            Some(w) if w == last.0 => last.1,
-            Some(w) => eval(w).2,
-            None => {
-                // No usable slope (a jump in a user's load law): bracket and regula falsi.
-                let g0 = eval(w_guess).0;
-                let step0 = g0.abs() * h / p.j + 1e-9;
-                let w = find_root(|w| eval(w).0, w_guess, step0, xtol);
-                eval(w).2
-            }
-        }
+        let g0 = eval(w_guess).0;
+        let step0 = g0.abs() * h / p.j + 1e-9;
+        let w = find_root(|w| eval(w).0, w_guess, step0, 1e-11 * (1.0 + x[1].abs()));
+        eval(w).1
     }
 }
 
