@@ -68,6 +68,9 @@ pub struct Args {
     /// Length of each signal in seconds.
     #[arg(long, value_name = "S", default_value_t = DURATION)]
     pub duration: f64,
+    /// No progress bar on stderr (it is shown only when stderr is a terminal).
+    #[arg(short, long)]
+    pub quiet: bool,
 }
 
 /// The outcome of a demo run (for tests and the report).
@@ -89,7 +92,14 @@ impl Outcome {
     }
 }
 
-fn fit(logs: &[MotorLog], val: &MotorLog, adds: &[EffectSpec]) -> Result<Model> {
+/// Fit LuGre with `adds`, its progress (stage, iteration, cost) after `what` on `bar`.
+fn fit(
+    logs: &[MotorLog],
+    val: &MotorLog,
+    adds: &[EffectSpec],
+    bar: &ProgressBar,
+    what: &str,
+) -> Result<Model> {
     let validate = std::slice::from_ref(val);
     let req = FitRequest {
         kind: ModelKind::Lugre,
@@ -98,7 +108,13 @@ fn fit(logs: &[MotorLog], val: &MotorLog, adds: &[EffectSpec]) -> Result<Model> 
         adds,
         plant: Plant::Voltage,
     };
-    Ok(ident::fit(&req)?.model)
+    bar.set_message(what.to_string());
+    let b = bar.clone();
+    let what = what.to_string();
+    let show = move |u: &ident::progress::Update| {
+        b.set_message(format!("{what}: {}", super::fit::progress_message(u)))
+    };
+    Ok(ident::progress::observe(show, || ident::fit(&req))?.model)
 }
 
 fn label(adds: &[EffectSpec]) -> String {
@@ -147,8 +163,8 @@ pub fn run_loop(
     let mut iterations = Vec::new();
     let mut last = None;
     for round in 0..=MAX_ROUNDS {
-        bar.set_message(format!("round {round}: fitting {}", label(&adds)));
-        let model = fit(&fit_logs, &val_log, &adds)?;
+        let what = format!("round {round}: fitting {}", label(&adds));
+        let model = fit(&fit_logs, &val_log, &adds, bar, &what)?;
         bar.inc(1);
         let pred = ident::freerun::simulate(&model, &test_log)?;
         let sc = ident::score_prediction(&model, &test_log, &pred)?;
@@ -285,7 +301,11 @@ pub fn run(args: Args) -> Result<()> {
         args.duration,
         args.duration
     );
-    let bar = ProgressBar::new((2 + MAX_ROUNDS) as u64);
+    let bar = if args.quiet {
+        ProgressBar::hidden()
+    } else {
+        ProgressBar::new((2 + MAX_ROUNDS) as u64)
+    };
     bar.set_style(
         ProgressStyle::with_template("{bar:30} {pos}/{len} {elapsed} {msg}")
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
@@ -352,6 +372,7 @@ mod tests {
             seed,
             report: PathBuf::from("unused"),
             duration: DURATION,
+            quiet: true,
         }
     }
 

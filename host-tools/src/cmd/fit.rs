@@ -55,6 +55,9 @@ pub struct Args {
     /// unit and standard error, the fit percentages); the text summary is not printed.
     #[arg(long)]
     pub json: bool,
+    /// No progress bar on stderr (it is shown only when stderr is a terminal).
+    #[arg(short, long)]
+    pub quiet: bool,
     /// Output model (TOML).
     #[arg(short, long, value_name = "MODEL.toml")]
     pub output: PathBuf,
@@ -93,16 +96,18 @@ pub fn run(args: Args) -> Result<()> {
     for log in &validate {
         ident::check_log(log, args.plant)?;
     }
-    let bar = indicatif::ProgressBar::new_spinner();
-    bar.set_message(format!("fitting the {} model", args.model.name()));
-    bar.enable_steady_tick(std::time::Duration::from_millis(150));
-    let report = ident::fit(&FitRequest {
+    let bar = progress_bar(
+        args.quiet,
+        &format!("fitting the {} model", args.model.name()),
+    );
+    let req = FitRequest {
         kind: args.model,
         logs: &logs,
         validate: &validate,
         adds: &adds,
         plant: args.plant,
-    });
+    };
+    let report = ident::progress::observe(show_on(&bar), || ident::fit(&req));
     bar.finish_and_clear();
     let report = report?;
     report.model.save(&args.output)?;
@@ -114,6 +119,42 @@ pub fn run(args: Args) -> Result<()> {
         println!("wrote {}", args.output.display());
     }
     Ok(())
+}
+
+/// A spinner on stderr with the elapsed time and `what`, hidden with `quiet` (indicatif
+/// draws nothing when stderr is not a terminal).
+pub fn progress_bar(quiet: bool, what: &str) -> indicatif::ProgressBar {
+    let bar = if quiet {
+        indicatif::ProgressBar::hidden()
+    } else {
+        indicatif::ProgressBar::new_spinner()
+    };
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("{spinner} {elapsed:>3} {prefix}: {msg}")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_spinner()),
+    );
+    bar.set_prefix(what.to_string());
+    bar.enable_steady_tick(std::time::Duration::from_millis(150));
+    bar
+}
+
+/// A fit's progress reports shown as `bar`'s message: stage, iteration and cost.
+pub fn show_on(bar: &indicatif::ProgressBar) -> impl FnMut(&ident::progress::Update) + 'static {
+    let bar = bar.clone();
+    move |u| bar.set_message(progress_message(u))
+}
+
+/// `free-run simulation error, iteration 4, cost 8.4243e2` (the stage alone before its
+/// first iteration).
+pub fn progress_message(u: &ident::progress::Update) -> String {
+    if u.iteration == 0 || !u.cost.is_finite() {
+        u.stage.to_string()
+    } else {
+        format!(
+            "{}, iteration {}, cost {:.4e}",
+            u.stage, u.iteration, u.cost
+        )
+    }
 }
 
 /// The `--json` object: `{"model", "plant", "effects", "parameters": [{"name", "value",

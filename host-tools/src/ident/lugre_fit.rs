@@ -22,6 +22,7 @@ use crate::log::{MotorLog, Plant};
 use crate::model::{LugreParams, Model, ModelKind};
 use anyhow::{bail, Result};
 use control::effects::{smooth_sign, VELOCITY_EPS};
+use rayon::prelude::*;
 
 /// Shortest run of constant input used as a steady-state point [samples]: 1 s at 12 ms.
 const MIN_RUN: usize = 80;
@@ -248,6 +249,7 @@ pub fn fit(req: &FitRequest) -> Result<Model> {
         sigma0,
         sigma1: 2.0 * (sigma0 * m.motor.j).sqrt(),
     };
+    super::progress::report("static friction curve", 0, f64::NAN);
     let pts: Vec<SteadyPoint> = all_steady_points(&m, req.logs);
     let (lugre, _static_se) = fit_static(&pts, init, false)?;
     m.lugre = Some(lugre);
@@ -261,26 +263,36 @@ pub fn fit(req: &FitRequest) -> Result<Model> {
     // σ0 = 0.4 gave 0.41 on one seed and a local minimum at 10.3 on another (validation
     // x 97.45 % instead of 99.94 %).
     {
+        super::progress::report("bristle start grid", 0, f64::NAN);
         let res = sim_error::Residuals::new(req.logs, m.sensor.velocity_window);
         // Best start among the stiff (≥ 30) and among the soft grid points, separately.
         let mut best = (f64::INFINITY, sigma0, init.sigma1);
         let mut best_soft = (f64::INFINITY, sigma0, init.sigma1);
-        for s0 in SIGMA0_GRID {
-            let best = if s0 < 30.0 { &mut best_soft } else { &mut best };
-            let soft = [2.0 * (s0 * m.motor.j.max(0.0)).sqrt(), 0.1, 1.0];
-            let stiff = [0.1, 1.0, 10.0, 30.0];
-            for &s1 in if s0 < 30.0 { &soft[..] } else { &stiff[..] } {
+        let starts: Vec<(f64, f64)> = SIGMA0_GRID
+            .iter()
+            .flat_map(|&s0| {
+                let soft = vec![2.0 * (s0 * m.motor.j.max(0.0)).sqrt(), 0.1, 1.0];
+                let stiff = vec![0.1, 1.0, 10.0, 30.0];
+                let s1s = if s0 < 30.0 { soft } else { stiff };
+                s1s.into_iter().map(move |s1| (s0, s1))
+            })
+            .collect();
+        // The starts' free runs are independent: on rayon's threads.
+        let costs: Vec<f64> = starts
+            .par_iter()
+            .map(|&(s0, s1)| {
                 let mut trial = sim_error::scale_effect_magnitudes(&m, 0.0);
                 if let Some(l) = trial.lugre.as_mut() {
                     l.sigma0 = s0;
                     l.sigma1 = s1;
                 }
-                if let Ok(r) = res.eval(&trial) {
-                    let c: f64 = r.iter().map(|v| v * v).sum();
-                    if c < best.0 {
-                        *best = (c, s0, s1);
-                    }
-                }
+                sim_error::cost(&res, &trial)
+            })
+            .collect();
+        for (&(s0, s1), &c) in starts.iter().zip(&costs) {
+            let best = if s0 < 30.0 { &mut best_soft } else { &mut best };
+            if c < best.0 {
+                *best = (c, s0, s1);
             }
         }
         // A soft start only when it is clearly better: with stiff bristles in the data a

@@ -6,10 +6,11 @@
 //! velocity), current, and the angle with a small weight; each normalised by the spread of
 //! the measured signal so that the three are comparable.
 use super::free_params::{parameter_rows, Free};
-use super::{freerun, nlsq, sensor_chain};
+use super::{freerun, nlsq, progress, sensor_chain};
 use crate::log::MotorLog;
 use crate::model::{Model, Parameter};
 use anyhow::Result;
+use rayon::prelude::*;
 
 /// Weight of the angle residual relative to velocity and current: the free-run angle drifts
 /// (it integrates every velocity error), so it only steers the low frequencies.
@@ -191,8 +192,12 @@ pub fn better_effect_start(model: &mut Model, res: &Residuals) {
         return;
     }
     let mut best = (f64::INFINITY, 1.0);
-    for f in [0.0, 0.25, 0.5, 0.75, 1.0, 1.25] {
-        let c = cost(res, &scale_effect_magnitudes(model, f));
+    let factors = [0.0, 0.25, 0.5, 0.75, 1.0, 1.25];
+    let costs: Vec<f64> = factors
+        .par_iter()
+        .map(|&f| cost(res, &scale_effect_magnitudes(model, f)))
+        .collect();
+    for (&f, &c) in factors.iter().zip(&costs) {
         if std::env::var_os("MOTORID_DEBUG_IDENT").is_some() {
             eprintln!("effects {:?} x {f}: cost {c:.4e}", model.effects);
         }
@@ -233,14 +238,14 @@ pub fn refine_on(
         .map(|(f, x)| x.abs().max(1e-3 * (f.hi - f.lo).abs().min(1.0)).max(1e-9))
         .collect();
     let base = model.clone();
-    let mut f = |x: &[f64]| -> Result<Vec<f64>> {
+    let f = |x: &[f64]| -> Result<Vec<f64>> {
         let mut m = base.clone();
         for (fr, v) in free.iter().zip(x) {
             fr.slot.set(&mut m, *v);
         }
         res.eval(&m)
     };
-    let sol = nlsq::solve(&mut f, &x0, &lo, &hi, &scale, opts, progress)?;
+    let sol = nlsq::solve_parallel(&f, &x0, &lo, &hi, &scale, opts, progress)?;
     for (fr, v) in free.iter().zip(&sol.x) {
         fr.slot.set(model, *v);
     }
@@ -260,18 +265,22 @@ pub fn refine_with_effects(
     logs: &[MotorLog],
     opts: nlsq::Options,
 ) -> Result<Vec<Parameter>> {
+    let free_run = "free-run simulation error";
+    let report = |stage: &'static str| move |it: usize, c: f64| progress::report(stage, it, c);
     if model.effects.is_empty() {
-        return refine(model, base_free, logs, opts, &mut |_, _| {});
+        return refine(model, base_free, logs, opts, &mut report(free_run));
     }
     let weak = model.effects.clone();
     let mut base = scale_effect_magnitudes(model, 0.0);
-    refine(&mut base, base_free, logs, opts, &mut |_, _| {})?;
+    refine(&mut base, base_free, logs, opts, &mut report(free_run))?;
     base.effects = weak;
     let seg = Residuals::segmented(logs, model.sensor.velocity_window);
+    let with_effects = "with the added effects, 2 s segments";
+    progress::report(with_effects, 0, f64::NAN);
     better_effect_start(&mut base, &seg);
     let mut free = base_free.to_vec();
     free.extend(super::linear::effect_free(&base));
-    let rows = refine_on(&mut base, &free, &seg, opts, &mut |_, _| {})?;
+    let rows = refine_on(&mut base, &free, &seg, opts, &mut report(with_effects))?;
     *model = base;
     Ok(rows)
 }
