@@ -20,10 +20,15 @@
 //!    uncorrelated with the bristle state (the LuGre z is almost a static function of ẋ,
 //!    so it lives in the high-energy part the paper's method discards), so the z terms only
 //!    enter a model when they predict better.
-//! 4. **Refinement** ([`refine`]): the nonzero coefficients and the tanh gain `a` of the
-//!    thresholded model, and of the STLSQ start, refined by bounded Levenberg–Marquardt on
-//!    the free-run error of the fitting logs (velocity, current, angle); a refined model
-//!    replaces the result only if its validation fit is higher.
+//! 4. **Refinement** ([`refine`]): the nonzero coefficients of the mechanical equations and
+//!    the tanh gain `a` of the thresholded model refined by bounded Levenberg–Marquardt on
+//!    the free-run error of the fitting logs (velocity, current, angle); the refined model
+//!    replaces the result only if its validation fit is higher. The current equation keeps
+//!    the coefficients of its held-voltage regression ([`rows::held_current_normal`]).
+//!
+//! Every free run that judges a candidate (search and refinement) runs on at most
+//! [`EVALUATION_SAMPLES`] samples ([`bounded_segments`]), so the cost of identification is
+//! one linear pass over the data plus a bounded search.
 //! 5. **Simulation** ([`simulate`]): the free run every stage above is judged by, and
 //!    `compare`'s.
 //! 6. **Model file** ([`model_file`]): the `[sindy]` table of MODEL.toml and the printed
@@ -38,7 +43,9 @@ pub mod simulate;
 pub use embedding::{centred_velocity, correlation};
 pub use model_file::{equations_text, from_table, pareto_text, to_table};
 pub use rows::{weak_rows, weak_rows_generic, weak_rows_uniform};
-pub use simulate::{simulate, validation_fit, Limits, SUBSTEPS};
+pub use simulate::{
+    bounded_segments, simulate, validation_fit, Limits, EVALUATION_SAMPLES, SUBSTEPS,
+};
 
 use crate::effect_spec::EffectSpec;
 use crate::ident::freerun::Prediction;
@@ -146,12 +153,15 @@ pub fn identify(
     let hidden = HiddenState::of_logs(fit_logs, opts)?;
     let lib = Library::with_effects(opts.plant, opts.a, 1.0, adds)?;
     let nes = rows::normal_equations(&lib, fit_logs, &hidden, opts.plant)?;
-    let mut search = Search::new(&lib, nes, fit_logs, val_logs, &hidden, opts);
+    let held = match opts.plant {
+        Plant::Voltage => rows::held_current_normal(&lib, fit_logs, &hidden),
+        Plant::Torque => None,
+    };
+    let mut search = Search::new(&lib, nes, held, fit_logs, val_logs, &hidden, opts);
     let mut pareto = Vec::new();
     let allowed = search.allowed();
     let (start, start_fit) = search.stlsq_start(&allowed, &opts.stlsq, &mut pareto);
-    let (sparse, fit) =
-        search.threshold_one_by_one(start.clone(), start_fit, opts.tolerance, &mut pareto);
+    let (sparse, fit) = search.threshold_one_by_one(start, start_fit, opts.tolerance, &mut pareto);
     let Some(fit) = fit else {
         bail!(
             "SINDYc: every candidate model diverges in free run on the validation data; \
@@ -159,11 +169,9 @@ pub fn identify(
         );
     };
     let thresholded = search.model(&sparse);
-    let mut starts = vec![("the thresholded model", thresholded.clone())];
-    if start.terms() != sparse.terms() {
-        starts.push(("the STLSQ start", search.model(&start)));
-    }
-    let res = SimResiduals::new(fit_logs, opts.plant, opts.velocity_window, search.limits());
+    let starts = vec![("the thresholded model", thresholded.clone())];
+    let fit_runs = bounded_segments(fit_logs, EVALUATION_SAMPLES);
+    let res = SimResiduals::new(&fit_runs, opts.plant, opts.velocity_window, search.limits());
     let (model, validation_fit) = refine::refine_and_choose(
         thresholded,
         fit,
@@ -281,8 +289,8 @@ pub fn simulate_model(model: &crate::model::Model, log: &MotorLog) -> Result<Pre
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::ident::sensor_chain;
     use crate::emulator::{simulate_signal, EmulatorConfig, SignalKind};
+    use crate::ident::sensor_chain;
 
     fn emulated(kind: SignalKind, seed: u64) -> MotorLog {
         let cfg = EmulatorConfig {

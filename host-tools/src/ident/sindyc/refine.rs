@@ -2,9 +2,14 @@
 //! refined by bounded Levenberg–Marquardt ([`crate::ident::nlsq`]) on the free-run
 //! simulation error, as the LuGre model's dynamic step does. The weak form gets the structure
 //! and a start; the simulation error then corrects what the weak form cannot see (the lag of
-//! a quasi-static current, the bias of the sign-like terms on Hall-quantised data).
+//! a quasi-static current, the bias of the sign-like terms on Hall-quantised data). The
+//! current equation keeps the coefficients of its held-voltage regression
+//! ([`super::rows::held_current_normal`]): it is the sampled current's own law, and moving
+//! it to help the velocity fit trades a right equation for a wrong one (and one free run per
+//! coefficient per iteration).
 use super::simulate::{simulate, Limits};
 use super::ParetoRow;
+use crate::ident::library::IDOT;
 use crate::ident::{nlsq, sensor_chain, sim_error};
 use crate::log::{MotorLog, Plant};
 use anyhow::Result;
@@ -14,13 +19,12 @@ use control::sindy::{SindyModel, Term};
 /// grey-box refinement's, `sim_error.rs`: the free-run angle integrates every velocity error,
 /// so it only steers the low frequencies).
 const REFINE_ANGLE_WEIGHT: f64 = 0.3;
-/// Weight of the current residual of the refinement relative to velocity. Lower than the
-/// grey-box refinement's 1: the models are judged on x and ẋ, and at 12 ms the current is
-/// quasi-static (it follows `u` within a sample), so at full weight the current's fit pulls
-/// the electrical coefficients against the velocity fit. Measured on the emulated paper
-/// motor (`paper-table`, fitted on signal a, scored on b, fit_sensor x/ẋ): weight 1 gives
-/// 91.6/96.1 (the refinement was rejected), 0.3 gives 97.5/97.8, 0 gives 96.6/97.8.
-const REFINE_CURRENT_WEIGHT: f64 = 0.3;
+/// Weight of the current residual of the refinement relative to velocity, as the grey-box
+/// refinement's. The current equation itself is not refined (its coefficients come from
+/// the held-voltage regression), so the current residual only steers the mechanical
+/// equations: at 12 ms the current is `(u − K_b·ẋ)/R` within a sample, a sharp test of the
+/// simulated velocity.
+const REFINE_CURRENT_WEIGHT: f64 = 1.0;
 /// Iteration limit of the refinement (one Jacobian = one free run per coefficient each).
 const REFINE_ITER: usize = 25;
 /// Largest model (terms over all equations) the refinement takes on: each iteration costs
@@ -72,37 +76,47 @@ impl<'a> SimResiduals<'a> {
     }
 
     fn eval(&self, m: &SindyModel<f64>) -> Result<Vec<f64>> {
-        let mut r = Vec::new();
-        for ((log, w), (sw, si, sx)) in self.logs.iter().zip(&self.omega).zip(&self.spreads) {
-            let p = simulate(m, self.plant, log, self.limits)?;
-            let wp = sensor_chain::velocity_estimate(&p.t, &p.theta, self.window);
-            r.extend(wp.iter().zip(w).map(|(a, b)| (a - b) / sw));
-            if let (Some(im), Some(ip)) = (&log.i, &p.i) {
+        use rayon::prelude::*;
+        let runs: Vec<Vec<f64>> = self
+            .logs
+            .par_iter()
+            .zip(&self.omega)
+            .zip(&self.spreads)
+            .map(|((log, w), &(sw, si, sx))| -> Result<Vec<f64>> {
+                let p = simulate(m, self.plant, log, self.limits)?;
+                let wp = sensor_chain::velocity_estimate(&p.t, &p.theta, self.window);
+                let mut r: Vec<f64> = wp.iter().zip(w).map(|(a, b)| (a - b) / sw).collect();
+                if let (Some(im), Some(ip)) = (&log.i, &p.i) {
+                    r.extend(
+                        ip.iter()
+                            .zip(im)
+                            .map(|(a, b)| REFINE_CURRENT_WEIGHT * (a - b) / si),
+                    );
+                }
                 r.extend(
-                    ip.iter()
-                        .zip(im)
-                        .map(|(a, b)| REFINE_CURRENT_WEIGHT * (a - b) / si),
+                    p.theta
+                        .iter()
+                        .zip(&log.theta)
+                        .map(|(a, b)| REFINE_ANGLE_WEIGHT * (a - b) / sx),
                 );
-            }
-            r.extend(
-                p.theta
-                    .iter()
-                    .zip(&log.theta)
-                    .map(|(a, b)| REFINE_ANGLE_WEIGHT * (a - b) / sx),
-            );
-        }
-        Ok(r)
+                Ok(r)
+            })
+            .collect::<Result<_>>()?;
+        Ok(runs.concat())
     }
 }
 
-/// Which numbers of a model the refinement moves: every coefficient (equation, position in
-/// its term list) and, when a term uses it, the tanh gain `a`.
+/// Which numbers of a model the refinement moves: every coefficient of the acceleration and
+/// `z` equations (equation, position in its term list) and, when a term uses it, the tanh
+/// gain `a`.
 fn refine_slots(m: &SindyModel<f64>) -> (Vec<(usize, usize)>, bool) {
     let mut slots = Vec::new();
     let mut uses_a = false;
     for (e, eq) in [&m.accel, &m.zdot, &m.idot].into_iter().enumerate() {
         for (k, (t, _)) in eq.terms.iter().enumerate() {
-            slots.push((e, k));
+            if e != IDOT {
+                slots.push((e, k));
+            }
             uses_a |= matches!(t, Term::TanhXdot | Term::TanhZ);
         }
     }
@@ -279,16 +293,19 @@ mod tests {
     }
 
     #[test]
-    fn slots_cover_every_coefficient_and_the_gain_only_when_used() {
+    fn slots_cover_the_mechanical_coefficients_and_the_gain_only_when_used() {
         let mut m = SindyModel::empty(5.0, 1.0, 1.0);
         m.accel = SparseEq::from_slice(&[(Term::Xdot, -4.0), (Term::I, 190.0)]).unwrap();
+        m.zdot = SparseEq::from_slice(&[(Term::Z, -9.0)]).unwrap();
         m.idot = SparseEq::from_slice(&[(Term::U, 3300.0)]).unwrap();
         let (slots, uses_a) = refine_slots(&m);
-        assert_eq!(slots, vec![(0, 0), (0, 1), (2, 0)]);
+        // The current equation keeps its held-voltage regression.
+        assert_eq!(slots, vec![(0, 0), (0, 1), (1, 0)]);
         assert!(!uses_a);
         let back = with_values(&m, &slots, uses_a, &[1.0, 2.0, 3.0]);
         assert_eq!(back.accel.coef(Term::I), 2.0);
-        assert_eq!(back.idot.coef(Term::U), 3.0);
+        assert_eq!(back.zdot.coef(Term::Z), 3.0);
+        assert_eq!(back.idot.coef(Term::U), 3300.0);
         m.zdot = SparseEq::from_slice(&[(Term::TanhZ, 1.0)]).unwrap();
         assert!(refine_slots(&m).1);
     }

@@ -3,7 +3,7 @@
 //! ([`super::simulate::validation_fit`]), with divergent candidates rejected. Every candidate
 //! examined is a row of the Pareto table (number of terms vs validation fit).
 use super::embedding::HiddenState;
-use super::simulate::{validation_fit, Limits};
+use super::simulate::{bounded_segments, validation_fit, Limits, EVALUATION_SAMPLES};
 use super::{ParetoRow, SindycOptions};
 use crate::ident::library::{Library, ACCEL, EQUATION_NAMES, IDOT, ZDOT};
 use crate::ident::sensor_chain;
@@ -36,10 +36,15 @@ pub struct Search<'a> {
     /// Normal equations per equation. The current equation is fitted in its inverse form
     /// `u = L·dI/dt + Σ c_k·θ_k` (see [`super::rows::normal_equations`]); its last column is `dI/dt`.
     nes: Vec<Normal>,
+    /// The current equation's pointwise rows over the held voltage
+    /// ([`super::rows::held_current_normal`]), which give its coefficients once the weak
+    /// form has chosen its terms.
+    held: Option<Normal>,
     /// Sample period (for the fallback inductance).
     dt: f64,
     plant: Plant,
-    val: &'a [MotorLog],
+    /// The validation runs (at most [`EVALUATION_SAMPLES`] samples).
+    val: Vec<MotorLog>,
     val_omega: Vec<Vec<f64>>,
     /// Velocity-estimator window of the sensor chain.
     window: usize,
@@ -56,12 +61,16 @@ impl<'a> Search<'a> {
     pub fn new(
         lib: &'a Library,
         nes: Vec<Normal>,
+        held: Option<Normal>,
         fit_logs: &'a [MotorLog],
-        val: &'a [MotorLog],
+        val: &[MotorLog],
         hidden: &HiddenState,
         opts: &SindycOptions,
     ) -> Self {
-        let val = if val.is_empty() { fit_logs } else { val };
+        let val = bounded_segments(
+            if val.is_empty() { fit_logs } else { val },
+            EVALUATION_SAMPLES,
+        );
         let val_omega: Vec<Vec<f64>> = val
             .iter()
             .map(|l| sensor_chain::measured_velocity(l, opts.velocity_window))
@@ -73,13 +82,14 @@ impl<'a> Search<'a> {
             .fold(0.0f64, |m, v| m.max(v.abs()));
         let imax = fit_logs
             .iter()
-            .chain(val)
+            .chain(&val)
             .filter_map(|l| l.i.as_ref())
             .flatten()
             .fold(0.0f64, |m, v| m.max(v.abs()));
         Search {
             lib,
             nes,
+            held,
             dt: fit_logs[0].sample_period(),
             plant: opts.plant,
             val,
@@ -130,25 +140,48 @@ impl<'a> Search<'a> {
         m
     }
 
-    /// From the inverse form `u = L·dI/dt + Σ c_k·θ_k` to
-    /// `dI/dt = u/L − Σ (c_k/L)·θ_k`. When the fitted `L` is not positive (the current
-    /// settles within a sample, so 12 ms data cannot resolve it) `L` is set so that the
-    /// time constant `L/R` is a tenth of the sample period, `R` being the fitted
-    /// coefficient of `I`.
-    fn current_equation(&self, coef: &[f64]) -> Vec<f64> {
+    /// The current equation `dI/dt = u/L − Σ (c_k/L)·θ_k` on the terms the weak form chose
+    /// (`weak`: the inverse form `u = L·dI/dt + Σ c_k·θ_k`, its last entry `L`).
+    /// The coefficients `c_k` (with `R` for `I`) come from the held-voltage rows when they
+    /// give a positive `R` (the current as it is sampled), else from the weak form. The
+    /// time constant `L/R` is the weak form's when it resolves one shorter than a sample;
+    /// otherwise (the current settles within a sample, so the data cannot resolve it) a
+    /// tenth of the sample period: any value well below the period gives the same samples.
+    fn current_equation(&self, weak: &[f64]) -> Vec<f64> {
         let p = self.lib.len();
-        let r = self
-            .lib
-            .candidates
-            .iter()
-            .position(|c| c.term == Term::I)
-            .map_or(0.0, |j| coef[j]);
-        let mut l = coef[p];
-        if !(l.is_finite() && l > 0.0) {
-            l = r.abs().max(1e-6) * self.dt / 10.0;
-        }
-        let mut out: Vec<f64> = coef[..p].iter().map(|c| -c / l).collect();
-        if let Some(j) = self.lib.candidates.iter().position(|c| c.term == Term::U) {
+        let pos = |t: Term| self.lib.candidates.iter().position(|c| c.term == t);
+        let (j_i, j_u) = (pos(Term::I), pos(Term::U));
+        let r_weak = j_i.map_or(0.0, |j| weak[j]);
+        let tau_weak = weak[p] / r_weak;
+        let tau = if tau_weak > 0.0 && tau_weak < self.dt {
+            tau_weak
+        } else {
+            self.dt / 10.0
+        };
+        let held = self.held.as_ref().zip(j_i).and_then(|(ne, j_i)| {
+            let mut support: Vec<bool> = weak[..p].iter().map(|c| *c != 0.0).collect();
+            support[j_i] = true;
+            if let Some(j) = j_u {
+                support[j] = false;
+            }
+            let c = ne.solve(0, &support);
+            (c[j_i] > 0.0 && c.iter().all(|v| v.is_finite())).then_some(c)
+        });
+        let (coef, l) = match held {
+            Some(c) => {
+                let l = c[j_i.unwrap_or(0)] * tau;
+                (c, l)
+            }
+            None => {
+                let mut l = weak[p];
+                if !(l.is_finite() && l > 0.0) {
+                    l = r_weak.abs().max(1e-6) * self.dt / 10.0;
+                }
+                (weak[..p].to_vec(), l)
+            }
+        };
+        let mut out: Vec<f64> = coef.iter().map(|c| -c / l).collect();
+        if let Some(j) = j_u {
             out[j] = 1.0 / l;
         }
         out
@@ -166,7 +199,7 @@ impl<'a> Search<'a> {
         validation_fit(
             m,
             self.plant,
-            self.val,
+            &self.val,
             &self.val_omega,
             self.window,
             self.limits,
