@@ -1,12 +1,16 @@
 #!/usr/bin/env bash
-# Speed of motorid's SINDYc building blocks against their peers, on the same 10^6 samples:
-# runs our criterion benches (which also write the data to target/bench-data/), then
-# scripts/bench_peers.py (numpy SVD of the Hankel matrix, pysindy STLSQ), and prints a
-# markdown table of docs/results.md (ours vs peers, ratio).
-# Installs numpy and pysindy 2.x into a venv under target/ when missing.
+# `motorid fit --model sindyc` end to end against pysindy's STLSQ fit on the same 10^6 samples
+# (scripts/bench_peers.py: one run, ratio peer/ours, time per sample at each size), then the
+# building blocks' criterion benches beside numpy when `--blocks` is given.
+# Installs numpy and pysindy 2.x into a venv under target/ when missing; builds the release
+# binary. The table goes to docs/performance-sindyc.md. Arguments after the options go to bench_peers.py (e.g. `--sizes 1e5,1e6,1e7`).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-cargo bench -p host-tools --bench ident
+cargo build --release --bin motorid
+if [ "${1:-}" = "--blocks" ]; then
+    shift
+    cargo bench -p host-tools --bench ident
+fi
 VENV=target/bench-venv
 if ! "$VENV/bin/python" -c "import numpy, pysindy" 2>/dev/null; then
     if ! python3 -m venv "$VENV" 2>/dev/null; then
