@@ -84,6 +84,23 @@ pub fn map_effect<A: Copy, B>(e: &Effect<A>, c: impl Fn(A) -> B) -> Effect<B> {
             k: c(k),
             c: c(d),
         },
+        Effect::Backlash { j2, gap } => Effect::Backlash {
+            j2: c(j2),
+            gap: c(gap),
+        },
+        Effect::Table {
+            var,
+            bins,
+            lo,
+            hi,
+            values,
+        } => Effect::Table {
+            var,
+            bins,
+            lo: c(lo),
+            hi: c(hi),
+            values: values.map(&c),
+        },
     }
 }
 

@@ -1079,6 +1079,15 @@ pub fn explain(spec: &EffectSpec, score: f64, eq: Equation) -> String {
             g("j2"),
             (g("k") / g("j2")).sqrt() / (2.0 * std::f64::consts::PI)
         ),
+        EffectKind::Backlash => format!(
+            "a load of {:.2e} kg·m² is dragged along only after the rotor has turned {:.3} rad alone past each reversal (backlash in a gear or coupling)",
+            g("j2"),
+            g("gap")
+        ),
+        EffectKind::Table => format!(
+            "a torque that depends on {} as the fitted lookup table describes",
+            spec.table_var().name()
+        ),
         EffectKind::Saturation => format!(
             "the torque constant falls at high current (magnetic saturation, K_t/(1 + k·I²) with k = {:.2e}/A², {:.0}% lower at 20 A)",
             g("k"),
