@@ -1,7 +1,7 @@
 //! `fit --add table:var=theta,bins=N` on data from a plant our emulator did not make
 //! (`tests::other_plant`): a load torque shaped like a sawtooth over each revolution, which no
 //! named effect matches (position_load is its first harmonic only). The table's node torques
-//! are estimated with the model, written to MODEL.toml, and the free-run fit on a held-out log
+//! are estimated with the model (the spec as `diagnose` offers it), written to MODEL.toml, and the free-run fit on a held-out log
 //! (another excitation and seed) rises; `compare`, `diagnose` and `export` take the model.
 use motorid::emulator::{signal, SignalKind};
 use serde_json::Value;
@@ -54,23 +54,27 @@ fn a_theta_table_raises_the_held_out_fit_of_a_sawtooth_load() {
         d,
         &["fit", "--model", "lugre", "-o", "base.toml", "fit.csv"],
     );
-    run_ok(
-        d,
-        &[
-            "fit",
-            "--model",
-            "lugre",
-            "--add",
-            "table:var=theta,bins=12",
-            "-o",
-            "table.toml",
-            "fit.csv",
-        ],
-    );
+    // `diagnose` offers the table where the angle carries what no effect explains.
+    let v: Value =
+        serde_json::from_str(&run_ok(d, &["diagnose", "base.toml", "fit.csv", "--json"])).unwrap();
+    let theta = v["unexplained"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|u| u["variable"] == "theta")
+        .unwrap_or_else(|| panic!("no theta carrier: {v}"));
+    for key in ["variable", "share", "explanation", "spec"] {
+        assert!(theta.get(key).is_some(), "{key}: {theta}");
+    }
+    let spec = theta["spec"].as_str().unwrap();
+    assert!(spec.starts_with("table:var=theta,bins="), "{spec}");
+    assert!(theta["explanation"].as_str().unwrap().contains(spec));
+    let add = ["fit", "--model", "lugre", "--add", spec, "-o", "table.toml"];
+    run_ok(d, &[&add[..], &["fit.csv"]].concat());
     let text = std::fs::read_to_string(d.join("table.toml")).unwrap();
     assert!(text.contains("name = \"table\""), "{text}");
     assert!(text.contains("var = \"theta\""), "{text}");
-    assert!(text.contains("b11 = "), "{text}");
+    assert!(text.contains("b1 = "), "{text}");
     let (bx, bv) = fits(d, "base.toml");
     let (tx, tv) = fits(d, "table.toml");
     eprintln!("held-out fit: base x {bx:.1} xdot {bv:.1}; table x {tx:.1} xdot {tv:.1}");
