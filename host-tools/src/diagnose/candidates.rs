@@ -404,10 +404,12 @@ impl Signals {
         col
     }
 
-    /// Acceleration of a load engaged across a gap of `gap` rad, per unit of its inertia: the
-    /// rotor's acceleration while the load is engaged, zero while the rotor travels the gap
-    /// alone after a reversal. The load's side of the gap follows the measured angle through
-    /// a play operator of width `gap` (it moves only when the rotor pushes it); the load is
+    /// The inertia torque a load engaged across a gap of `gap` rad no longer adds, per unit
+    /// of its inertia: minus the rotor's acceleration while the rotor travels the gap alone
+    /// after a reversal, zero while the load is engaged (a rigid model carries the load's
+    /// inertia in J; only the dead angle differs from it, so the column cannot stand in for
+    /// an inertia error). The load's side of the gap follows the measured angle through a
+    /// play operator of width `gap` (it moves only when the rotor pushes it); the load is
     /// engaged at sample k when it moved. The acceleration is the central difference of ω.
     pub fn backlash_acceleration(&self, gap: f64) -> Vec<f64> {
         let n = self.len();
@@ -422,8 +424,8 @@ impl Signals {
             let pushed = load.clamp(th - half, th + half);
             let engaged = pushed != load || (th - load).abs() >= half;
             load = pushed;
-            if engaged && k > 0 && k + 1 < n {
-                out[k] = (self.omega[k + 1] - self.omega[k - 1]) / (2.0 * self.dt);
+            if !engaged && k > 0 && k + 1 < n {
+                out[k] = -(self.omega[k + 1] - self.omega[k - 1]) / (2.0 * self.dt);
             }
         }
         out
@@ -612,14 +614,14 @@ pub fn compliance_grid(s: &Signals) -> Vec<f64> {
     v
 }
 
-/// Gaps [rad] a backlash is tested at: from one angle quantisation step (a smaller gap does
-/// not show in a quantised angle) upward by factors of 1.6, up to 16 steps.
+/// Gaps [rad] a backlash is tested at: from two angle quantisation steps (a gap of one step
+/// hides in the quantisation of the angle) upward by factors of 1.6, up to 21 steps.
 pub fn backlash_gaps(s: &Signals) -> Vec<f64> {
     let step = s.angle_step();
     if !(step.is_finite() && step > 0.0) {
         return vec![];
     }
-    (0..7).map(|k| step * 1.6f64.powi(k)).collect()
+    (0..6).map(|k| 2.0 * step * 1.6f64.powi(k)).collect()
 }
 
 /// Variants of a missing backlash: one per gap of [`backlash_gaps`], the column

@@ -993,7 +993,7 @@ pub fn plausible(spec: &EffectSpec) -> bool {
         EffectKind::Thermal => g("k") > 0.0,
         EffectKind::LoadFriction => (0.0..=MAX_LOAD_FRICTION).contains(&g("mu")),
         EffectKind::Saturation => g("k") > 0.0,
-        EffectKind::Compliance => g("j2") > 0.0,
+        EffectKind::Compliance | EffectKind::Backlash => g("j2") > 0.0,
         EffectKind::Presliding => true,
         _ => true,
     }
