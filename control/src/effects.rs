@@ -180,7 +180,7 @@ pub fn table_nodes<F: Float>(var: TableVar, bins: u8, lo: F, hi: F, x: F) -> (us
         }
         TableVar::Omega | TableVar::Current => {
             let span = hi - lo;
-            if !(span > F::zero()) {
+            if span.is_nan() || span <= F::zero() {
                 return (0, 0, F::zero());
             }
             let t = ((x - lo) / span).max(F::zero()).min(F::one()) * (nf - F::one());

@@ -419,8 +419,7 @@ impl Signals {
         }
         let half = 0.5 * gap;
         let mut load = self.theta_s[0];
-        for k in 0..n {
-            let th = self.theta_s[k];
+        for (k, &th) in self.theta_s.iter().enumerate() {
             let pushed = load.clamp(th - half, th + half);
             let engaged = pushed != load || (th - load).abs() >= half;
             load = pushed;

@@ -182,7 +182,9 @@ impl EmulatorConfig {
                             bins.saturating_sub(1)
                         );
                     }
-                    if var != control::effects::TableVar::Theta && !(hi > lo) {
+                    if var != control::effects::TableVar::Theta
+                        && (hi.is_nan() || lo.is_nan() || hi <= lo)
+                    {
                         bail!(
                             "effect table:var={}: give the range its nodes span, lo < hi",
                             var.name()
