@@ -258,6 +258,18 @@ fn effect_finite(e: &Effect<f32>) -> bool {
         Effect::LoadFriction { mu } => finite(&[mu]),
         Effect::Saturation { k } => finite(&[k]) && k >= 0.0,
         Effect::Compliance { j2, k, c } => finite(&[j2, k, c]) && j2 > 0.0 && k > 0.0 && c >= 0.0,
+        Effect::Backlash { j2, gap } => finite(&[j2, gap]) && j2 > 0.0 && gap >= 0.0,
+        Effect::Table {
+            bins,
+            lo,
+            hi,
+            ref values,
+            ..
+        } => {
+            (2..=crate::effects::TABLE_MAX_BINS as u8).contains(&bins)
+                && finite(&[lo, hi])
+                && finite(values)
+        }
     }
 }
 

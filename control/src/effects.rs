@@ -57,11 +57,13 @@ pub enum EffectKind {
     LoadFriction,
     Saturation,
     Compliance,
+    Backlash,
+    Table,
 }
 
 impl EffectKind {
     /// Every effect, in the documented order.
-    pub const ALL: [EffectKind; 14] = [
+    pub const ALL: [EffectKind; 16] = [
         EffectKind::Coulomb,
         EffectKind::Viscous,
         EffectKind::Stribeck,
@@ -76,6 +78,8 @@ impl EffectKind {
         EffectKind::LoadFriction,
         EffectKind::Saturation,
         EffectKind::Compliance,
+        EffectKind::Backlash,
+        EffectKind::Table,
     ];
 
     /// The effect's name on the command line (`position_load`, ...).
@@ -95,6 +99,8 @@ impl EffectKind {
             EffectKind::LoadFriction => "load_friction",
             EffectKind::Saturation => "saturation",
             EffectKind::Compliance => "compliance",
+            EffectKind::Backlash => "backlash",
+            EffectKind::Table => "table",
         }
     }
 
@@ -106,11 +112,81 @@ impl EffectKind {
     /// Where the effect acts.
     pub fn site(self) -> Site {
         match self {
-            EffectKind::Presliding | EffectKind::Compliance => Site::State,
+            EffectKind::Presliding | EffectKind::Compliance | EffectKind::Backlash => Site::State,
             EffectKind::Deadtime => Site::Voltage,
             EffectKind::CurrentOffset => Site::Sensor,
             EffectKind::Thermal => Site::Resistance,
             _ => Site::Torque,
+        }
+    }
+}
+
+/// Most bins a [`Effect::Table`] holds.
+pub const TABLE_MAX_BINS: usize = 32;
+
+/// The variable a [`Effect::Table`] looks its torque up by.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum TableVar {
+    /// Rotor angle θ [rad]: the table spans one revolution and wraps around.
+    Theta,
+    /// Rotor velocity ω [rad/s], clamped to the table's range.
+    Omega,
+    /// Winding current I [A], clamped to the table's range.
+    Current,
+}
+
+impl TableVar {
+    /// Every variable, in the order of its code in a spec (`var` = 0, 1, 2).
+    pub const ALL: [TableVar; 3] = [TableVar::Theta, TableVar::Omega, TableVar::Current];
+
+    /// The variable's name in a spec (`theta`, `omega`, `current`).
+    pub fn name(self) -> &'static str {
+        match self {
+            TableVar::Theta => "theta",
+            TableVar::Omega => "omega",
+            TableVar::Current => "current",
+        }
+    }
+
+    /// Parse a variable's name.
+    pub fn from_name(name: &str) -> Option<TableVar> {
+        TableVar::ALL.iter().copied().find(|v| v.name() == name)
+    }
+}
+
+/// The two table nodes around `x` and the weight of the second: the value at `x` is
+/// `(1 − w)·v[k0] + w·v[k1]` (linear "hat" interpolation, continuous in `x`).
+///
+/// For [`TableVar::Theta`] the `bins` nodes sit at `θ_k = 2π·k/bins` and the table wraps
+/// around one revolution (`lo`, `hi` unused). Otherwise the nodes sit evenly from `lo`
+/// (node 0) to `hi` (node `bins − 1`) and `x` is clamped to that range. `bins` is taken as
+/// at least 2 and at most [`TABLE_MAX_BINS`].
+pub fn table_nodes<F: Float>(var: TableVar, bins: u8, lo: F, hi: F, x: F) -> (usize, usize, F) {
+    let n = (bins as usize).clamp(2, TABLE_MAX_BINS);
+    let nf = F::from(n).unwrap();
+    if !x.is_finite() {
+        return (0, 0, F::zero());
+    }
+    match var {
+        TableVar::Theta => {
+            let two_pi = F::from(core::f64::consts::TAU).unwrap();
+            let mut t = (x / two_pi).fract() * nf;
+            if t < F::zero() {
+                t = t + nf;
+            }
+            let k0 = t.floor().to_usize().unwrap_or(0).min(n - 1);
+            let w = (t - F::from(k0).unwrap()).max(F::zero()).min(F::one());
+            (k0, (k0 + 1) % n, w)
+        }
+        TableVar::Omega | TableVar::Current => {
+            let span = hi - lo;
+            if span.is_nan() || span <= F::zero() {
+                return (0, 0, F::zero());
+            }
+            let t = ((x - lo) / span).max(F::zero()).min(F::one()) * (nf - F::one());
+            let k0 = t.floor().to_usize().unwrap_or(0).min(n - 2);
+            let w = (t - F::from(k0).unwrap()).max(F::zero()).min(F::one());
+            (k0, k0 + 1, w)
         }
     }
 }
@@ -168,6 +244,22 @@ pub enum Effect<F> {
     /// (a compliant coupling or shaft; the angle is measured on the motor side). Its state,
     /// the load's angle and speed, is integrated by the plant; its torque here is zero.
     Compliance { j2: F, k: F, c: F },
+    /// A load inertia `j2` [kg·m²] engaged across a gap `gap` [rad] (gear or coupling
+    /// backlash): after a reversal the motor turns alone until it has travelled `gap`, then
+    /// drags the load along. Its state, the angle since the last reversal, is the plant's;
+    /// its torque here is zero.
+    Backlash { j2: F, gap: F },
+    /// A lookup table of load torque [N·m] over one variable, for physics without a name:
+    /// `Σ_k values[k]·h_k(x)` with the hat functions `h_k` of [`table_nodes`] (`bins` nodes;
+    /// over one revolution and periodic for θ, over `lo..hi` and clamped for ω [rad/s] or
+    /// I [A]). Entries from `bins` on are unused.
+    Table {
+        var: TableVar,
+        bins: u8,
+        lo: F,
+        hi: F,
+        values: [F; TABLE_MAX_BINS],
+    },
 }
 
 impl<F: Float> Effect<F> {
@@ -188,6 +280,8 @@ impl<F: Float> Effect<F> {
             Effect::LoadFriction { .. } => EffectKind::LoadFriction,
             Effect::Saturation { .. } => EffectKind::Saturation,
             Effect::Compliance { .. } => EffectKind::Compliance,
+            Effect::Backlash { .. } => EffectKind::Backlash,
+            Effect::Table { .. } => EffectKind::Table,
         }
     }
 
@@ -215,8 +309,24 @@ impl<F: Float> Effect<F> {
                 let q = k * x.current * x.current;
                 x.kt * x.current * q / (F::one() + q)
             }
+            Effect::Table {
+                var,
+                bins,
+                lo,
+                hi,
+                ref values,
+            } => {
+                let x = match var {
+                    TableVar::Theta => x.theta,
+                    TableVar::Omega => x.omega,
+                    TableVar::Current => x.current,
+                };
+                let (k0, k1, w) = table_nodes(var, bins, lo, hi, x);
+                values[k0] * (F::one() - w) + values[k1] * w
+            }
             Effect::Presliding { .. }
             | Effect::Compliance { .. }
+            | Effect::Backlash { .. }
             | Effect::Deadtime { .. }
             | Effect::CurrentOffset { .. }
             | Effect::Thermal { .. } => F::zero(),
@@ -298,6 +408,61 @@ mod tests {
             e.torque(&at(1.0, -3.0, 20.0)),
             -e.torque(&at(0.0, 3.0, -20.0))
         );
+    }
+
+    fn table(var: TableVar, bins: u8, lo: f64, hi: f64) -> Effect<f64> {
+        let mut values = [0.0; TABLE_MAX_BINS];
+        for (k, v) in values.iter_mut().enumerate().take(bins as usize) {
+            *v = 0.01 * (k as f64 + 1.0);
+        }
+        Effect::Table {
+            var,
+            bins,
+            lo,
+            hi,
+            values,
+        }
+    }
+
+    #[test]
+    fn theta_table_hits_its_nodes_and_wraps_around_one_revolution() {
+        let e = table(TableVar::Theta, 8, 0.0, 0.0);
+        let tau = core::f64::consts::TAU;
+        for k in 0..8 {
+            let th = tau * k as f64 / 8.0;
+            let want = 0.01 * (k as f64 + 1.0);
+            assert!(
+                (e.torque(&at(th, 0.0, 0.0)) - want).abs() < 1e-12,
+                "node {k}"
+            );
+            assert!((e.torque(&at(th - 3.0 * tau, 0.0, 0.0)) - want).abs() < 1e-9);
+        }
+        // Halfway between the last node and the first: the mean of both.
+        let mid = e.torque(&at(tau * 7.5 / 8.0, 0.0, 0.0));
+        assert!((mid - 0.5 * (0.08 + 0.01)).abs() < 1e-12);
+        // Continuous across the wrap.
+        let (a, b) = (
+            e.torque(&at(tau - 1e-9, 0.0, 0.0)),
+            e.torque(&at(0.0, 0.0, 0.0)),
+        );
+        assert!((a - b).abs() < 1e-6);
+    }
+
+    #[test]
+    fn omega_table_interpolates_inside_and_clamps_outside_its_range() {
+        let e = table(TableVar::Omega, 5, -20.0, 20.0);
+        assert!((e.torque(&at(0.0, -20.0, 0.0)) - 0.01).abs() < 1e-12);
+        assert!((e.torque(&at(0.0, 20.0, 0.0)) - 0.05).abs() < 1e-12);
+        assert!((e.torque(&at(0.0, 5.0, 0.0)) - 0.035).abs() < 1e-12);
+        assert!((e.torque(&at(0.0, 1e4, 0.0)) - 0.05).abs() < 1e-12);
+        assert!((e.torque(&at(0.0, -1e4, 0.0)) - 0.01).abs() < 1e-12);
+        let c = table(TableVar::Current, 2, 0.0, 10.0);
+        assert!((c.torque(&at(0.0, 3.0, 5.0)) - 0.015).abs() < 1e-12);
+        // A degenerate range or a non-finite input gives the first node, never a panic.
+        assert!(table(TableVar::Omega, 4, 1.0, 1.0)
+            .torque(&at(0.0, 2.0, 0.0))
+            .is_finite());
+        assert!(e.torque(&at(0.0, f64::NAN, 0.0)).is_finite());
     }
 
     #[test]

@@ -4,7 +4,7 @@
 //! The equations behind each name are in `control::effects`; this file holds the keys, their
 //! units and the defaults used when a key is left out.
 use anyhow::{anyhow, bail, Result};
-use control::effects::{Effect, EffectKind};
+use control::effects::{Effect, EffectKind, TableVar, TABLE_MAX_BINS};
 use std::collections::BTreeMap;
 use std::fmt;
 
@@ -29,6 +29,10 @@ impl Key {
             "rad/s" => (1e-6, 1e5),
             "1/rev" => (2.0, 1000.0),
             "1/A²" => (-1e3, 1e3),
+            "kg·m²" => (0.0, 1e3),
+            TABLE_VAR_UNIT => (0.0, 2.0),
+            "bins" => (2.0, TABLE_MAX_BINS as f64),
+            "rad/s or A" => (-1e5, 1e5),
             "s" => (1e-3, 1e7),
             "1" => (-1.0, 1.0),
             _ => (-1e9, 1e9),
@@ -36,19 +40,90 @@ impl Key {
     }
 }
 
+/// The "unit" of a table's `var` key: its value is a variable's name, stored as its index
+/// in [`TableVar::ALL`].
+pub const TABLE_VAR_UNIT: &str = "theta|omega|current";
+
+const fn k(name: &'static str, unit: &'static str, default: f64, meaning: &'static str) -> Key {
+    Key {
+        name,
+        unit,
+        default,
+        meaning,
+    }
+}
+
+/// The keys of a `table`: the variable, the number of nodes, the range of ω or I the nodes
+/// span (set from the data by `fit`), then the torque at each node.
+const TABLE_KEYS: &[Key] = &[
+    k(
+        "var",
+        TABLE_VAR_UNIT,
+        0.0,
+        "variable the torque is looked up by",
+    ),
+    k("bins", "bins", 8.0, "number of table nodes (2 to 32)"),
+    k("lo", "rad/s or A", 0.0, "first node (omega, current)"),
+    k("hi", "rad/s or A", 0.0, "last node (omega, current)"),
+    k("b0", "N·m", 0.0, "table torque at node 0"),
+    k("b1", "N·m", 0.0, "table torque at node 1"),
+    k("b2", "N·m", 0.0, "table torque at node 2"),
+    k("b3", "N·m", 0.0, "table torque at node 3"),
+    k("b4", "N·m", 0.0, "table torque at node 4"),
+    k("b5", "N·m", 0.0, "table torque at node 5"),
+    k("b6", "N·m", 0.0, "table torque at node 6"),
+    k("b7", "N·m", 0.0, "table torque at node 7"),
+    k("b8", "N·m", 0.0, "table torque at node 8"),
+    k("b9", "N·m", 0.0, "table torque at node 9"),
+    k("b10", "N·m", 0.0, "table torque at node 10"),
+    k("b11", "N·m", 0.0, "table torque at node 11"),
+    k("b12", "N·m", 0.0, "table torque at node 12"),
+    k("b13", "N·m", 0.0, "table torque at node 13"),
+    k("b14", "N·m", 0.0, "table torque at node 14"),
+    k("b15", "N·m", 0.0, "table torque at node 15"),
+    k("b16", "N·m", 0.0, "table torque at node 16"),
+    k("b17", "N·m", 0.0, "table torque at node 17"),
+    k("b18", "N·m", 0.0, "table torque at node 18"),
+    k("b19", "N·m", 0.0, "table torque at node 19"),
+    k("b20", "N·m", 0.0, "table torque at node 20"),
+    k("b21", "N·m", 0.0, "table torque at node 21"),
+    k("b22", "N·m", 0.0, "table torque at node 22"),
+    k("b23", "N·m", 0.0, "table torque at node 23"),
+    k("b24", "N·m", 0.0, "table torque at node 24"),
+    k("b25", "N·m", 0.0, "table torque at node 25"),
+    k("b26", "N·m", 0.0, "table torque at node 26"),
+    k("b27", "N·m", 0.0, "table torque at node 27"),
+    k("b28", "N·m", 0.0, "table torque at node 28"),
+    k("b29", "N·m", 0.0, "table torque at node 29"),
+    k("b30", "N·m", 0.0, "table torque at node 30"),
+    k("b31", "N·m", 0.0, "table torque at node 31"),
+];
+
+/// The name of the torque at node `k` of a table (`b0`, `b1`, ...).
+pub fn table_value_key(k: usize) -> &'static str {
+    TABLE_KEYS[4 + k.min(TABLE_MAX_BINS - 1)].name
+}
+
 /// The keys of an effect, in the order the spec prints them. Defaults are sized for the
 /// reference paper's motor (Coulomb friction 0.08 N·m, K_t = 0.071 N·m/A): clearly visible
 /// in the data, but smaller than the friction the base model already has.
 pub fn keys(kind: EffectKind) -> &'static [Key] {
-    const fn k(name: &'static str, unit: &'static str, default: f64, meaning: &'static str) -> Key {
-        Key {
-            name,
-            unit,
-            default,
-            meaning,
-        }
-    }
     match kind {
+        EffectKind::Table => TABLE_KEYS,
+        EffectKind::Backlash => {
+            // Default: a load twice the paper rotor's inertia behind a gap of two Hall steps
+            // of the paper's board (0.19 rad), a worn gear stage seen at the rotor.
+            const K: &[Key] = &[
+                k("j2", "kg·m²", 6e-4, "inertia of the load behind the gap"),
+                k(
+                    "gap",
+                    "rad",
+                    0.19,
+                    "angle the rotor turns alone after a reversal",
+                ),
+            ];
+            K
+        }
         EffectKind::Coulomb => {
             const K: &[Key] = &[k("fc", "N·m", 0.05, "Coulomb friction torque")];
             K
@@ -248,13 +323,25 @@ impl EffectSpec {
                         .join(", ")
                 );
             }
-            let v: f64 = v.trim().parse().map_err(|_| {
-                anyhow!(
-                    "effect '{}': key '{k}': '{}' is not a number",
-                    kind.name(),
+            let table_var = (kind == EffectKind::Table && k == "var")
+                .then(|| TableVar::from_name(v.trim()))
+                .flatten();
+            if kind == EffectKind::Table && k == "var" && table_var.is_none() {
+                bail!(
+                    "effect 'table': key 'var': '{}' is not one of theta, omega, current",
                     crate::log::echo(v.trim())
-                )
-            })?;
+                );
+            }
+            let v: f64 = match table_var {
+                Some(tv) => TableVar::ALL.iter().position(|x| *x == tv).unwrap_or(0) as f64,
+                None => v.trim().parse().map_err(|_| {
+                    anyhow!(
+                        "effect '{}': key '{k}': '{}' is not a number",
+                        kind.name(),
+                        crate::log::echo(v.trim())
+                    )
+                })?,
+            };
             values.insert(k.to_string(), v);
         }
         let spec = EffectSpec { kind, values };
@@ -289,7 +376,41 @@ impl EffectSpec {
                 }
             }
         }
+        if self.kind == EffectKind::Table {
+            let whole = |key: &str| self.values.get(key).is_none_or(|v| v.fract() == 0.0);
+            if !whole("var") || !whole("bins") {
+                bail!("effect 'table': var and bins must be whole (var one of theta, omega, current; bins 2 to {TABLE_MAX_BINS})");
+            }
+            let bins = self.get("bins") as usize;
+            if let Some(k) =
+                (bins..TABLE_MAX_BINS).find(|&k| self.values.contains_key(table_value_key(k)))
+            {
+                bail!(
+                    "effect 'table': key '{}' is beyond the table's {bins} bins (b0 to b{})",
+                    table_value_key(k),
+                    bins - 1
+                );
+            }
+            if self.table_var() != TableVar::Theta {
+                if let (Some(lo), Some(hi)) = (self.values.get("lo"), self.values.get("hi")) {
+                    if lo >= hi {
+                        bail!("effect 'table': lo ({lo}) must be below hi ({hi})");
+                    }
+                }
+            }
+        }
+        if self.kind == EffectKind::Backlash && self.get("gap") < 0.0 {
+            bail!(
+                "effect 'backlash': key 'gap' [rad] must be 0 or more (got {})",
+                self.get("gap")
+            );
+        }
         Ok(())
+    }
+
+    /// The variable of a `table` spec (θ for other effects).
+    pub fn table_var(&self) -> TableVar {
+        TableVar::ALL[(self.get("var").clamp(0.0, 2.0)) as usize]
     }
 
     /// The value of a key: the user's, or the default.
@@ -344,6 +465,24 @@ impl EffectSpec {
                 k: g("k"),
                 c: g("c"),
             },
+            EffectKind::Backlash => Effect::Backlash {
+                j2: g("j2"),
+                gap: g("gap"),
+            },
+            EffectKind::Table => {
+                let bins = g("bins").round().clamp(2.0, TABLE_MAX_BINS as f64) as u8;
+                let mut values = [0.0; TABLE_MAX_BINS];
+                for (k, v) in values.iter_mut().enumerate().take(bins as usize) {
+                    *v = g(table_value_key(k));
+                }
+                Effect::Table {
+                    var: self.table_var(),
+                    bins,
+                    lo: g("lo"),
+                    hi: g("hi"),
+                    values,
+                }
+            }
         }
     }
 
@@ -395,6 +534,30 @@ impl EffectSpec {
                 put("k", k);
                 put("c", c)
             }
+            Effect::Backlash { j2, gap } => {
+                put("j2", j2);
+                put("gap", gap)
+            }
+            Effect::Table {
+                var,
+                bins,
+                lo,
+                hi,
+                values: ref v,
+            } => {
+                put(
+                    "var",
+                    TableVar::ALL.iter().position(|x| *x == var).unwrap_or(0) as f64,
+                );
+                put("bins", bins as f64);
+                if var != TableVar::Theta {
+                    put("lo", lo);
+                    put("hi", hi);
+                }
+                for (k, x) in v.iter().enumerate().take(bins as usize) {
+                    put(table_value_key(k), *x);
+                }
+            }
         }
         EffectSpec {
             kind: e.kind(),
@@ -406,6 +569,16 @@ impl EffectSpec {
     pub fn help_text() -> String {
         let mut s = String::from("Effects (NAME or NAME:key=value,...):\n");
         for kind in EffectKind::ALL {
+            if kind == EffectKind::Table {
+                s.push_str(&format!(
+                    "  {:<15} var=theta|omega|current; bins=8 [2 to {TABLE_MAX_BINS}] nodes; \
+                     lo, hi [rad/s or A] range the nodes span (omega, current; fit takes it \
+                     from the data); b0..b<bins-1> [N·m] torque at each node (theta: one \
+                     revolution, periodic)\n",
+                    kind.name()
+                ));
+                continue;
+            }
             let ks: Vec<String> = keys(kind)
                 .iter()
                 .map(|k| format!("{}={} [{}] {}", k.name, k.default, k.unit, k.meaning))
@@ -423,13 +596,13 @@ impl fmt::Display for EffectSpec {
         let mut first = true;
         for key in keys(self.kind) {
             if let Some(v) = self.values.get(key.name) {
-                write!(
-                    f,
-                    "{}{}={}",
-                    if first { ":" } else { "," },
-                    key.name,
-                    short(*v)
-                )?;
+                let sep = if first { ":" } else { "," };
+                if key.unit == TABLE_VAR_UNIT {
+                    let var = TableVar::ALL[v.clamp(0.0, 2.0) as usize];
+                    write!(f, "{sep}{}={}", key.name, var.name())?;
+                } else {
+                    write!(f, "{sep}{}={}", key.name, short(*v))?;
+                }
                 first = false;
             }
         }
@@ -519,6 +692,41 @@ mod tests {
                 proptest::prop_assert!(again.is_ok(), "{} -> {}", spec, s);
                 let _ = s.to_effect();
             }
+        }
+    }
+
+    #[test]
+    fn table_specs_parse_print_and_refuse_what_does_not_fit() {
+        let s = EffectSpec::parse("table:var=omega,bins=3,lo=-10,hi=10,b0=0.1,b2=-0.2").unwrap();
+        assert_eq!(
+            s.to_string(),
+            "table:var=omega,bins=3,lo=-10,hi=10,b0=0.1,b2=-0.2"
+        );
+        let e = s.to_effect();
+        let x = |omega| control::effects::EffectInputs {
+            theta: 0.0,
+            omega,
+            current: 0.0,
+            kt: 0.07,
+        };
+        assert!((e.torque(&x(-10.0)) - 0.1).abs() < 1e-12);
+        assert!((e.torque(&x(5.0)) + 0.1).abs() < 1e-12);
+        assert_eq!(EffectSpec::from_effect(&e).to_effect(), e);
+        let t = EffectSpec::parse("table:var=theta,bins=12").unwrap();
+        assert_eq!(t.to_string(), "table:var=theta,bins=12");
+        assert_eq!(t.table_var(), TableVar::Theta);
+        for (bad, why) in [
+            ("table:var=speed", "not one of theta"),
+            ("table:bins=33", "bins"),
+            ("table:bins=1", "bins"),
+            ("table:bins=2.5", "whole"),
+            ("table:bins=4,b4=1", "beyond the table's 4 bins"),
+            ("table:var=current,lo=2,hi=1", "below hi"),
+            ("table:b32=1", "unknown key"),
+            ("backlash:gap=-0.1", "0 or more"),
+        ] {
+            let e = EffectSpec::parse(bad).unwrap_err().to_string();
+            assert!(e.contains(why), "{bad}: {e}");
         }
     }
 

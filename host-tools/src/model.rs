@@ -152,6 +152,9 @@ impl Default for Sensor {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 struct EffectEntry {
     name: String,
+    /// A table's variable by name (`theta`, `omega`, `current`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    var: Option<String>,
     #[serde(flatten)]
     values: BTreeMap<String, f64>,
 }
@@ -164,9 +167,17 @@ mod effects_serde {
         let entries: Vec<EffectEntry> = v
             .iter()
             .map(|e| {
-                let spec = EffectSpec::from_effect(e);
+                let mut spec = EffectSpec::from_effect(e);
+                let var = match e {
+                    Effect::Table { var, .. } => {
+                        spec.values.remove("var");
+                        Some(var.name().to_string())
+                    }
+                    _ => None,
+                };
                 EffectEntry {
                     name: spec.kind.name().to_string(),
+                    var,
                     values: spec.values,
                 }
             })
@@ -191,10 +202,24 @@ mod effects_serde {
                         )));
                     }
                 }
-                let spec = EffectSpec {
-                    kind,
-                    values: en.values,
-                };
+                let mut values = en.values;
+                if let Some(var) = &en.var {
+                    let tv = control::effects::TableVar::from_name(var)
+                        .filter(|_| kind == EffectKind::Table)
+                        .ok_or_else(|| {
+                            serde::de::Error::custom(format!(
+                                "effect '{}': key 'var': '{}' is not one of theta, omega, current",
+                                en.name,
+                                crate::log::echo(var)
+                            ))
+                        })?;
+                    let code = control::effects::TableVar::ALL
+                        .iter()
+                        .position(|v| *v == tv)
+                        .unwrap_or(0);
+                    values.insert("var".into(), code as f64);
+                }
+                let spec = EffectSpec { kind, values };
                 spec.check_values()
                     .map_err(|e| serde::de::Error::custom(format!("{e:#}")))?;
                 Ok(spec.to_effect())
@@ -451,11 +476,16 @@ mod tests {
             amp: 0.0123456789,
             phase: 0.5,
         });
+        let table = EffectSpec::parse("table:var=current,bins=3,lo=-2,hi=4,b0=0.01,b2=-0.03")
+            .unwrap()
+            .to_effect();
+        m.effects.push(table);
         m.parameters.push(Parameter::new("R", 0.2, "Ω"));
         m.data.units.insert("t".into(), "ms".into());
         let text = m.to_toml().unwrap();
         assert!(text.contains("[data.units]"), "{text}");
         assert!(text.contains("name = \"cogging\""), "{text}");
+        assert!(text.contains("var = \"current\""), "{text}");
         let back = Model::parse(&text, Path::new("m.toml")).unwrap();
         assert_eq!(back, m);
     }

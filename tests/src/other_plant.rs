@@ -36,6 +36,11 @@ pub enum Extra {
         dfc: f64,
         db: f64,
     },
+    /// A load torque that rises linearly over each revolution and drops back at θ = 0 (a
+    /// cam or a spring that releases once per turn): `amp·((θ mod 2π)/π − 1)` [N·m].
+    SawtoothLoad {
+        amp: f64,
+    },
 }
 
 /// The plant's constants (SI).
@@ -120,7 +125,14 @@ impl OtherPlant {
         // Karnopp stick-slip: inside a small velocity band the friction holds the rotor (it
         // balances every other torque and damps the residual speed in about a millisecond)
         // as long as that takes no more than the Coulomb level; outside, Coulomb + viscous.
-        let drive = self.kt_at(i) * i;
+        let load = match self.extra {
+            Extra::SawtoothLoad { amp } => {
+                let tau = 2.0 * std::f64::consts::PI;
+                amp * (x[0].rem_euclid(tau) / std::f64::consts::PI - 1.0)
+            }
+            _ => 0.0,
+        };
+        let drive = self.kt_at(i) * i - load;
         let friction = if w.abs() < self.v_eps {
             (drive - coupling + self.j * w / 1e-3).clamp(-fc, fc)
         } else {

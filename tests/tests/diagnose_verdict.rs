@@ -172,13 +172,38 @@ fn a_compliant_coupling_is_named_with_its_inertia_and_frequency() {
 
 #[test]
 fn a_gap_is_not_adequate_and_named_as_a_coupling_or_carried_by_reversals() {
-    // Half a radian of backlash at the rotor: 0.3° at the output of a 100:1 gear. No
-    // `backlash` candidate yet: the nearest named physics is a soft coupling.
+    // Half a radian of backlash at the rotor: 0.3° at the output of a 100:1 gear.
     not_adequate_and_carried(
         Extra::Gap { j2: 6e-4, gap: 0.5 },
         SignalKind::A,
-        &["reversal", "compliance"],
+        &["backlash", "reversal", "compliance"],
     );
+}
+
+/// A load engaged across a gap is named `backlash` (its look-alike a compliant coupling,
+/// which a gap with a stiff contact resembles), with the load's inertia of the right size.
+#[test]
+#[ignore = "open: on this plant's stiff contact the dead-angle column loses to compliance; \
+            a column that also counts the load's speed when it is caught is the next step"]
+fn a_gap_is_named_backlash_or_its_look_alike() {
+    for seed in [1, 2] {
+        let p = OtherPlant::new(Extra::Gap { j2: 6e-4, gap: 0.5 });
+        let d = run(&p, &correct_structure(&p), SignalKind::A, 60.0, seed);
+        let names: Vec<&str> = d.effects.iter().map(|f| f.name.as_str()).collect();
+        let pair = d.verdict.look_alikes.iter().any(|l| {
+            l.names.contains(&"backlash".to_string()) && l.names.contains(&"compliance".to_string())
+        });
+        eprintln!(
+            "seed {seed}: {} look-alikes {:?}",
+            summary(&d),
+            d.verdict.look_alikes
+        );
+        assert!(
+            names.first() == Some(&"backlash") || pair,
+            "seed {seed}: {}",
+            summary(&d)
+        );
+    }
 }
 
 #[test]

@@ -114,7 +114,16 @@ fn fit_add_closes_half_the_gap_to_the_truth_for_every_effect() {
     let only = std::env::var("FIT_ADD_EFFECTS").ok();
     let effects: Vec<EffectKind> = EffectKind::ALL
         .into_iter()
-        .filter(|k| !matches!(k, EffectKind::Presliding | EffectKind::Viscous))
+        // Backlash is not emulated, and a table has no default torques to hide.
+        .filter(|k| {
+            !matches!(
+                k,
+                EffectKind::Presliding
+                    | EffectKind::Viscous
+                    | EffectKind::Backlash
+                    | EffectKind::Table
+            )
+        })
         .filter(|k| {
             only.as_deref()
                 .is_none_or(|o| o.split(',').any(|n| n == k.name()))

@@ -84,6 +84,23 @@ pub fn map_effect<A: Copy, B>(e: &Effect<A>, c: impl Fn(A) -> B) -> Effect<B> {
             k: c(k),
             c: c(d),
         },
+        Effect::Backlash { j2, gap } => Effect::Backlash {
+            j2: c(j2),
+            gap: c(gap),
+        },
+        Effect::Table {
+            var,
+            bins,
+            lo,
+            hi,
+            values,
+        } => Effect::Table {
+            var,
+            bins,
+            lo: c(lo),
+            hi: c(hi),
+            values: values.map(&c),
+        },
     }
 }
 
@@ -207,7 +224,15 @@ pub fn coefficients(model: &Model, loop_settings: LoopSettings) -> Result<Coeffi
 /// Encode a blob (bytes ready for a file, the flash slot or an upload).
 pub fn encode(co: &Coefficients) -> Result<Vec<u8>> {
     let mut buf = [0u8; blob::MAX_BLOB_LEN];
-    let bytes = blob::encode(co, &mut buf).map_err(|e| anyhow!("{e}"))?;
+    let bytes = blob::encode(co, &mut buf).map_err(|e| match e {
+        blob::BlobError::BufferTooSmall => anyhow!(
+            "field 'effects': the model does not fit the board's {}-byte coefficient blob \
+             (a lookup table takes {} bytes); add fewer effects",
+            blob::MAX_BLOB_LEN,
+            4 * (control::effects::TABLE_MAX_BINS + 2) + 2
+        ),
+        e => anyhow!("{e}"),
+    })?;
     Ok(bytes.to_vec())
 }
 
@@ -227,5 +252,29 @@ pub fn decode_file(path: &std::path::Path) -> Result<(Vec<u8>, Coefficients)> {
             };
             bail!("{p}: {e}{detail}")
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::effect_spec::EffectSpec;
+    use crate::log::Plant;
+
+    /// One table fits the blob and decodes to itself; eight do not fit, and the error says
+    /// so in one line.
+    #[test]
+    fn tables_go_in_the_blob_while_they_fit() {
+        let mut m = Model::new(ModelKind::Lugre, Plant::Voltage, 0.012);
+        m.lugre = Some(crate::model::LugreParams::paper());
+        let spec = "table:var=omega,bins=32,lo=-50,hi=50,b0=0.01,b31=-0.02";
+        m.effects.push(EffectSpec::parse(spec).unwrap().to_effect());
+        let co = coefficients(&m, LoopSettings::default()).unwrap();
+        let bytes = encode(&co).unwrap();
+        assert_eq!(blob::decode(&bytes).unwrap(), co);
+        m.effects = vec![m.effects[0]; blob::MAX_EFFECTS];
+        let co = coefficients(&m, LoopSettings::default()).unwrap();
+        let e = encode(&co).unwrap_err().to_string();
+        assert!(e.contains("does not fit") && !e.contains('\n'), "{e}");
     }
 }

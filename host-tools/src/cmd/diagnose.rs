@@ -66,6 +66,8 @@ struct JsonUnexplained<'a> {
     p_value: f64,
     #[serde(skip_serializing_if = "Option::is_none")]
     hz: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    spec: Option<&'a str>,
 }
 
 #[derive(serde::Serialize)]
@@ -123,6 +125,7 @@ pub fn run(args: Args) -> Result<()> {
                 explanation: &u.explanation,
                 p_value: u.p_value,
                 hz: u.hz,
+                spec: u.spec.as_deref(),
             })
             .collect();
         let refit: Vec<serde_json::Value> = d

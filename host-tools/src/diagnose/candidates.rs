@@ -404,6 +404,32 @@ impl Signals {
         col
     }
 
+    /// The inertia torque a load engaged across a gap of `gap` rad no longer adds, per unit
+    /// of its inertia: minus the rotor's acceleration while the rotor travels the gap alone
+    /// after a reversal, zero while the load is engaged (a rigid model carries the load's
+    /// inertia in J; only the dead angle differs from it, so the column cannot stand in for
+    /// an inertia error). The load's side of the gap follows the measured angle through a
+    /// play operator of width `gap` (it moves only when the rotor pushes it); the load is
+    /// engaged at sample k when it moved. The acceleration is the central difference of ω.
+    pub fn backlash_acceleration(&self, gap: f64) -> Vec<f64> {
+        let n = self.len();
+        let mut out = vec![0.0; n];
+        if n < 3 || !(self.dt > 0.0 && gap.is_finite() && gap >= 0.0) {
+            return out;
+        }
+        let half = 0.5 * gap;
+        let mut load = self.theta_s[0];
+        for (k, &th) in self.theta_s.iter().enumerate() {
+            let pushed = load.clamp(th - half, th + half);
+            let engaged = pushed != load || (th - load).abs() >= half;
+            load = pushed;
+            if !engaged && k > 0 && k + 1 < n {
+                out[k] = -(self.omega[k + 1] - self.omega[k - 1]) / (2.0 * self.dt);
+            }
+        }
+        out
+    }
+
     /// Acceleration θ̈2 of a load on a spring-damper coupling driven by the measured rotor
     /// (natural frequency `fn_hz` against a fixed rotor, damping ratio `zeta`):
     /// `θ̈2 = ω_n²(θ1 − θ2) + 2ζω_n(ω1 − ω2)`. The coupling's torque on the rotor is
@@ -587,6 +613,31 @@ pub fn compliance_grid(s: &Signals) -> Vec<f64> {
     v
 }
 
+/// Gaps [rad] a backlash is tested at: from two angle quantisation steps (a gap of one step
+/// hides in the quantisation of the angle) upward by factors of 1.6, up to 21 steps.
+pub fn backlash_gaps(s: &Signals) -> Vec<f64> {
+    let step = s.angle_step();
+    if !(step.is_finite() && step > 0.0) {
+        return vec![];
+    }
+    (0..6).map(|k| 2.0 * step * 1.6f64.powi(k)).collect()
+}
+
+/// Variants of a missing backlash: one per gap of [`backlash_gaps`], the column
+/// [`Signals::backlash_acceleration`] (its coefficient is the load's inertia j2).
+fn backlash_variants(s: &Signals) -> Vec<Variant> {
+    backlash_gaps(s)
+        .into_iter()
+        .map(|gap| Variant {
+            kind: EffectKind::Backlash,
+            equation: Equation::Mechanical,
+            fixed: vec![("gap", gap)],
+            columns: vec![s.backlash_acceleration(gap)],
+            torque: None,
+        })
+        .collect()
+}
+
 /// Variants of a missing presliding on top of a static friction law `law` (its α0, α1, v0,
 /// α2; σ0 and σ1 are set here): one per breakaway deflection of
 /// [`PRESLIDING_DEFLECTION_GRID`], σ0 = s(0)/deflection, σ1 = 2·√(σ0·J) (critical damping
@@ -720,6 +771,10 @@ pub fn variants(kind: EffectKind, s: &Signals) -> Vec<Variant> {
                 .collect()
         }
         EffectKind::Deadtime | EffectKind::CurrentOffset | EffectKind::Thermal => vec![],
+        // A table is not a named physics: `diagnose` offers it where an `unexplained`
+        // carrier (θ, ω, I) holds structure no named effect explains (`carriers.rs`).
+        EffectKind::Table => vec![],
+        EffectKind::Backlash => backlash_variants(s),
     }
 }
 
@@ -849,6 +904,8 @@ pub fn spec_of(v: &Variant, beta: &[f64], units: Units) -> EffectSpec {
             values.insert("k".into(), b0 * wn * wn);
             values.insert("c".into(), 2.0 * z * wn * b0);
         }
+        EffectKind::Backlash => put("j2", b0),
+        EffectKind::Table => {}
     }
     EffectSpec {
         kind: v.kind,

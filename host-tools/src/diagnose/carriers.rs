@@ -46,6 +46,28 @@ pub struct Carrier {
     /// Centre of the band [Hz] (`frequency` only).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub hz: Option<f64>,
+    /// The term that takes this structure into the model where it is a torque over θ, ω or
+    /// I (`table:var=V,bins=N`, N the carrier's own basis size), for `fit --add`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub spec: Option<String>,
+}
+
+/// The `table` spec a carrier of the torque equation offers: over θ when its basis is the
+/// Fourier series of one revolution (`2·ANGLE_HARMONICS` nodes resolve its harmonics), over
+/// ω or I (the current of a voltage plant) with one node per knot of its hats.
+fn table_spec(variable: &str, knots: usize, label: &str, s: &Signals) -> Option<String> {
+    if label != super::candidates::Equation::Mechanical.label() {
+        return None;
+    }
+    let bins = match variable {
+        "theta" if knots == 0 => 2 * ANGLE_HARMONICS,
+        "omega" => knots,
+        "current" if s.plant == crate::log::Plant::Voltage && s.i.is_some() => knots,
+        _ => return None,
+    };
+    (2..=control::effects::TABLE_MAX_BINS)
+        .contains(&bins)
+        .then(|| format!("table:var={variable},bins={bins}"))
 }
 
 /// One equation's residual on its weak-form windows.
@@ -252,18 +274,26 @@ pub fn carriers(s: &Signals, rows: &Rows, level: f64, min_share: f64) -> Vec<Car
     let mut out: Vec<Carrier> = Vec::new();
     let mut push = |variable: &'static str, t: Tested, knots: Vec<f64>, hz: Option<f64>| {
         if t.p_value < level && t.share >= min_share {
+            let spec = table_spec(variable, knots.len(), rows.label, s);
             let shape = if knots.len() == t.beta.len() {
                 knots.into_iter().zip(t.beta).collect()
             } else {
                 vec![]
             };
+            let mut explanation = explanation(variable, t.share, hz, rows.label);
+            if let Some(spec) = &spec {
+                explanation.push_str(&format!(
+                    " Where no named effect fits, `motorid fit --add {spec}` adds a lookup table of torque over it."
+                ));
+            }
             out.push(Carrier {
                 variable,
                 share: t.share,
                 p_value: t.p_value,
-                explanation: explanation(variable, t.share, hz, rows.label),
+                explanation,
                 shape,
                 hz,
+                spec,
             });
         }
     };

@@ -45,6 +45,8 @@ pub fn experiment(a: &str, b: &str) -> String {
         "a run at zero voltage with the rotor still: a current-sensor offset reads a current where there is none"
     } else if pair("thermal", "time") || a == "thermal" || b == "thermal" {
         "a long run at high current followed by a rest with the same excitation: heating grows and decays with its time constant, wear or a supply sag does not"
+    } else if pair("backlash", "compliance") {
+        "slow reversals at low acceleration, then a step in one direction: backlash shows a dead angle after each reversal in which the rotor turns lighter, a compliant coupling rings at its resonance after the step"
     } else if pair("reversal", "frequency") {
         "steps in one direction only, without reversals: a resonance still rings after each step, backlash does not show"
     } else if pair("acceleration", "current") || pair("saturation", "acceleration") {
@@ -129,6 +131,7 @@ mod tests {
             ("load_friction", "deadtime"),
             ("reversal", "frequency"),
             ("acceleration", "current"),
+            ("backlash", "compliance"),
         ] {
             assert_eq!(experiment(a, b), experiment(b, a));
             assert!(!experiment(a, b).starts_with("a log that excites"));

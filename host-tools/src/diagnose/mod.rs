@@ -993,7 +993,7 @@ pub fn plausible(spec: &EffectSpec) -> bool {
         EffectKind::Thermal => g("k") > 0.0,
         EffectKind::LoadFriction => (0.0..=MAX_LOAD_FRICTION).contains(&g("mu")),
         EffectKind::Saturation => g("k") > 0.0,
-        EffectKind::Compliance => g("j2") > 0.0,
+        EffectKind::Compliance | EffectKind::Backlash => g("j2") > 0.0,
         EffectKind::Presliding => true,
         _ => true,
     }
@@ -1078,6 +1078,15 @@ pub fn explain(spec: &EffectSpec, score: f64, eq: Equation) -> String {
             "a second inertia of {:.2e} kg·m² follows the rotor through a compliant coupling resonating near {:.2} Hz against a fixed rotor (a flexible coupling, a long shaft, a belt)",
             g("j2"),
             (g("k") / g("j2")).sqrt() / (2.0 * std::f64::consts::PI)
+        ),
+        EffectKind::Backlash => format!(
+            "a load of {:.2e} kg·m² is dragged along only after the rotor has turned {:.3} rad alone past each reversal (backlash in a gear or coupling)",
+            g("j2"),
+            g("gap")
+        ),
+        EffectKind::Table => format!(
+            "a torque that depends on {} as the fitted lookup table describes",
+            spec.table_var().name()
         ),
         EffectKind::Saturation => format!(
             "the torque constant falls at high current (magnetic saturation, K_t/(1 + k·I²) with k = {:.2e}/A², {:.0}% lower at 20 A)",

@@ -162,6 +162,38 @@ impl EmulatorConfig {
                 "effect compliance: the emulator has no load state for a second inertia yet;                  `motorid diagnose` names a compliant coupling in measured logs"
             );
         }
+        for e in &self.effects {
+            match *e {
+                control::effects::Effect::Backlash { .. } => bail!(
+                    "effect backlash: the emulator has no load state for an inertia behind a \
+                     gap yet; `motorid diagnose` names a backlash in measured logs"
+                ),
+                control::effects::Effect::Table {
+                    var,
+                    bins,
+                    lo,
+                    hi,
+                    values,
+                } => {
+                    if values.iter().all(|v| *v == 0.0) {
+                        bail!(
+                            "effect table: give the torque at its nodes, b0 to b{} [N·m]; a \
+                             table of zeros adds nothing",
+                            bins.saturating_sub(1)
+                        );
+                    }
+                    if var != control::effects::TableVar::Theta
+                        && (hi.is_nan() || lo.is_nan() || hi <= lo)
+                    {
+                        bail!(
+                            "effect table:var={}: give the range its nodes span, lo < hi",
+                            var.name()
+                        );
+                    }
+                }
+                _ => {}
+            }
+        }
         let m = &self.motor;
         for (name, v) in [
             ("R", m.r),

@@ -139,6 +139,21 @@ pub fn effect_keys(kind: EffectKind) -> Vec<(&'static str, f64, f64)> {
         EffectKind::Saturation => vec![("k", 0.0, 1.0)],
         // A load from a hundredth to a hundred times a small rotor, couplings from 0.5 Hz up.
         EffectKind::Compliance => vec![("j2", 1e-6, 1.0), ("k", 1e-4, 1e4), ("c", 0.0, 10.0)],
+        // The gap is structural (a grid in `diagnose`, given by the spec).
+        EffectKind::Backlash => vec![("j2", 1e-6, 1.0)],
+        // The node values of a table depend on its `bins`: see [`table_keys`].
+        EffectKind::Table => vec![],
+    }
+}
+
+/// The estimable keys of effect `e` with bounds: [`effect_keys`], and for a table its node
+/// torques `b0..b<bins-1>` (± 10 N·m, as an offset).
+pub fn effect_keys_of(e: &control::effects::Effect<f64>) -> Vec<(&'static str, f64, f64)> {
+    match *e {
+        control::effects::Effect::Table { bins, .. } => (0..bins as usize)
+            .map(|k| (crate::effect_spec::table_value_key(k), -10.0, 10.0))
+            .collect(),
+        _ => effect_keys(e.kind()),
     }
 }
 

@@ -156,6 +156,11 @@ impl Library {
                 EffectKind::CurrentOffset => lib.add(Term::One, CUR, plant),
                 EffectKind::Thermal => lib.add(Term::ISquared, CUR, plant),
                 EffectKind::Saturation => lib.add(Term::ICubed, ACC, plant),
+                EffectKind::Backlash | EffectKind::Table => anyhow::bail!(
+                    "--add {}: a SINDYc library has no term for it; fit --model lugre --add {}",
+                    spec.kind.name(),
+                    spec
+                ),
                 EffectKind::Compliance => anyhow::bail!(
                     "--add compliance: a SINDYc library has no load state for a second inertia; fit --model lugre --add compliance"
                 ),

@@ -7,7 +7,7 @@
 //! Mechanical equation, with K_t = K_b (SI units; the data fixes only K_t/J otherwise):
 //! `K_t·∫φ·I = J·∫φ''·θ + b·(−∫φ'·θ) + Σ c_e·∫φ·g_e(θ, ω, I)`.
 //! Then every parameter is refined on the free-run simulation error.
-use super::free_params::{effect_keys, Free, Slot};
+use super::free_params::{effect_keys, effect_keys_of, Free, Slot};
 use super::weak_form::{self, least_squares};
 use super::{nlsq, sim_error, FitRequest};
 use crate::log::{MotorLog, Plant};
@@ -42,6 +42,10 @@ pub fn skeleton(req: &FitRequest, kind: ModelKind) -> Model {
             ),
             _ => false,
         };
+        let mut spec = spec.clone();
+        if spec.kind == EffectKind::Table {
+            set_table_range(&mut spec, req.logs, req.plant);
+        }
         if !dup && !m.effects.iter().any(|e| e == &spec.to_effect()) {
             m.effects.push(spec.to_effect());
         }
@@ -49,10 +53,68 @@ pub fn skeleton(req: &FitRequest, kind: ModelKind) -> Model {
     m
 }
 
+/// A table over ω or I spans the range the logs cover (from their 0.5th to their 99.5th
+/// percentile, so that a few outliers do not waste nodes) unless the spec gives `lo` and
+/// `hi`; a table over θ spans one revolution and needs no range.
+fn set_table_range(spec: &mut crate::effect_spec::EffectSpec, logs: &[MotorLog], plant: Plant) {
+    use control::effects::TableVar;
+    let var = spec.table_var();
+    if var == TableVar::Theta || (spec.values.contains_key("lo") && spec.values.contains_key("hi"))
+    {
+        return;
+    }
+    let mut xs: Vec<f64> = Vec::new();
+    for log in logs {
+        match var {
+            TableVar::Omega => xs.extend(weak_form::smooth_velocity(log, 5)),
+            _ if plant == Plant::Voltage => xs.extend(log.i.iter().flatten().copied()),
+            _ => xs.extend(log.u.iter().copied()),
+        }
+    }
+    xs.retain(|x| x.is_finite());
+    if xs.len() < 2 {
+        return;
+    }
+    xs.sort_by(f64::total_cmp);
+    let at = |q: f64| xs[((xs.len() - 1) as f64 * q).round() as usize];
+    let (lo, hi) = (at(0.005), at(0.995));
+    if hi > lo {
+        spec.values.insert("lo".into(), lo);
+        spec.values.insert("hi".into(), hi);
+    }
+}
+
+/// The hat functions of a table's nodes on one log: column k is `h_k(x)` (see
+/// [`control::effects::table_nodes`]), x the table's variable (θ, the smoothed velocity
+/// `ws`, or the current `cur`).
+pub fn table_columns(e: &Effect<f64>, theta: &[f64], ws: &[f64], cur: &[f64]) -> Vec<Vec<f64>> {
+    use control::effects::{table_nodes, TableVar};
+    let Effect::Table {
+        var, bins, lo, hi, ..
+    } = *e
+    else {
+        return vec![];
+    };
+    let x = match var {
+        TableVar::Theta => theta,
+        TableVar::Omega => ws,
+        TableVar::Current => cur,
+    };
+    let mut cols = vec![vec![0.0; x.len()]; bins as usize];
+    for (k, &v) in x.iter().enumerate() {
+        let (k0, k1, w) = table_nodes(var, bins, lo, hi, v);
+        cols[k0][k] += 1.0 - w;
+        cols[k1][k] += w;
+    }
+    cols
+}
+
 /// Mechanical regressors g_e of the linear-in-parameter effects: (effect index, key(s)).
 enum EffCols {
     One(usize, &'static str),
     SinCos(usize, f64),
+    /// A table's node torques, one column per node.
+    Table(usize, usize),
 }
 
 /// Weak-form estimate of the motor constants, the viscous (and, with `coulomb`, Coulomb)
@@ -126,13 +188,15 @@ pub fn weak_estimate(m: &mut Model, logs: &[MotorLog], coulomb: bool) -> (f64, f
             }
             Effect::Cogging { harmonic, .. } => map.push(EffCols::SinCos(k, harmonic as f64)),
             Effect::PositionLoad { .. } => map.push(EffCols::SinCos(k, 1.0)),
+            Effect::Table { bins, .. } => map.push(EffCols::Table(k, bins as usize)),
             _ => {}
         }
     }
     for c in &map {
-        cols.push(Vec::new());
-        if let EffCols::SinCos(..) = c {
-            cols.push(Vec::new());
+        match c {
+            EffCols::One(..) => cols.push(Vec::new()),
+            EffCols::SinCos(..) => cols.extend([Vec::new(), Vec::new()]),
+            EffCols::Table(_, n) => cols.extend(std::iter::repeat_n(Vec::new(), *n)),
         }
     }
     let offset = control::effects::total_sensor_offset(&m.effects);
@@ -172,6 +236,9 @@ pub fn weak_estimate(m: &mut Model, logs: &[MotorLog], coulomb: bool) -> (f64, f
                 EffCols::SinCos(_, h) => {
                     g.push(log.theta.iter().map(|t| (h * t).sin()).collect());
                     g.push(log.theta.iter().map(|t| (h * t).cos()).collect());
+                }
+                EffCols::Table(k, _) => {
+                    g.extend(table_columns(&m.effects[k], &log.theta, &ws, &cur));
                 }
             }
         }
@@ -219,6 +286,13 @@ pub fn weak_estimate(m: &mut Model, logs: &[MotorLog], coulomb: bool) -> (f64, f
                     Slot::Effect(k, "phase").set(m, bb.atan2(a));
                     c += 2;
                 }
+                EffCols::Table(k, n) => {
+                    for node in 0..n {
+                        let key = crate::effect_spec::table_value_key(node);
+                        Slot::Effect(k, key).set(m, x[c + node].clamp(-10.0, 10.0));
+                    }
+                    c += n;
+                }
             }
         }
     }
@@ -251,7 +325,7 @@ pub fn motor_free(plant: Plant) -> Vec<Free> {
 pub fn effect_free(m: &Model) -> Vec<Free> {
     let mut out = Vec::new();
     for (k, e) in m.effects.iter().enumerate() {
-        for (key, lo, hi) in effect_keys(e.kind()) {
+        for (key, lo, hi) in effect_keys_of(e) {
             out.push(Free {
                 slot: Slot::Effect(k, key),
                 lo,

@@ -152,6 +152,19 @@ pub fn fit(req: &FitRequest) -> Result<FitReport> {
             "--add compliance: the fitted models have no load state for a second inertia yet;              `motorid diagnose` names and sizes a compliant coupling (j2, k, c) from the log"
         );
     }
+    // A backlash needs the load's side of the gap as a state, as compliance does.
+    if req.adds.iter().any(|s| s.kind == EffectKind::Backlash) {
+        bail!(
+            "--add backlash: the fitted models have no load state for an inertia behind a gap \
+             yet; `motorid diagnose` names and sizes a backlash (j2, gap) from the log"
+        );
+    }
+    if req.kind == ModelKind::Sindyc && req.adds.iter().any(|s| s.kind == EffectKind::Table) {
+        bail!(
+            "--add table: a SINDYc library has no lookup-table terms; fit --model lugre \
+             (or linear) --add table:..."
+        );
+    }
     let mut model = fit_kind(req)?;
     if !req.adds.is_empty() && !req.validate.is_empty() && req.kind != ModelKind::Sindyc {
         model = guard_added_effects(req, model)?;

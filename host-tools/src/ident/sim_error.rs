@@ -175,7 +175,8 @@ pub fn scale_effect_magnitudes(model: &Model, f: f64) -> Model {
             Effect::Thermal { k, .. } => *k *= f,
             Effect::LoadFriction { mu } => *mu *= f,
             Effect::Saturation { k } => *k *= f,
-            Effect::Compliance { j2, .. } => *j2 *= f,
+            Effect::Compliance { j2, .. } | Effect::Backlash { j2, .. } => *j2 *= f,
+            Effect::Table { values, .. } => values.iter_mut().for_each(|v| *v *= f),
             Effect::Presliding { .. } => {}
         }
     }
