@@ -14,6 +14,8 @@
 //! * **Symbolic links are written through.** When the destination is a symbolic link, the
 //!   file it points to is replaced (the temporary file sits beside that target) and the link
 //!   stays a link; a link to a missing file is refused.
+//! * **Devices and pipes are written in place.** `-o /dev/null` or a named pipe is opened and
+//!   written, never renamed over.
 //! * **Missing parent folders are created**, and a `note: created directory DIR` line on
 //!   stderr says so once the file is written; when the write fails, the folders it created are
 //!   removed again.
@@ -136,6 +138,18 @@ pub fn write(path: &Path, bytes: &[u8]) -> Result<()> {
     let existing = std::fs::metadata(&target).ok();
     if existing.as_ref().is_some_and(|m| m.is_dir()) {
         bail!("{p}: is a directory; give a file name for the output");
+    }
+    // A device, pipe or socket (`-o /dev/null`, `-o /dev/stdout`): written in place, never
+    // replaced by a regular file.
+    if existing.as_ref().is_some_and(|m| !m.is_file()) {
+        let mut f = std::fs::OpenOptions::new()
+            .write(true)
+            .open(&target)
+            .with_context(|| format!("{p}: cannot open for writing"))?;
+        return f
+            .write_all(bytes)
+            .and_then(|()| f.flush())
+            .with_context(|| format!("{p}: cannot write"));
     }
     let dir = match target.parent() {
         Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
@@ -292,6 +306,18 @@ mod interrupt {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    #[cfg(unix)]
+    fn a_device_is_written_in_place_not_replaced() {
+        use std::os::unix::fs::FileTypeExt;
+        write(Path::new("/dev/null"), b"discarded").unwrap();
+        let m = std::fs::metadata("/dev/null").unwrap();
+        assert!(
+            m.file_type().is_char_device(),
+            "/dev/null is still a device"
+        );
+    }
 
     #[test]
     fn outputs_that_are_inputs_are_refused() {
