@@ -122,7 +122,7 @@ impl EffectKind {
 }
 
 /// Most bins a [`Effect::Table`] holds.
-pub const TABLE_MAX_BINS: usize = 32;
+pub const TABLE_MAX_BINS: usize = 16;
 
 /// The variable a [`Effect::Table`] looks its torque up by.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]

@@ -62,7 +62,7 @@ const TABLE_KEYS: &[Key] = &[
         0.0,
         "variable the torque is looked up by",
     ),
-    k("bins", "bins", 8.0, "number of table nodes (2 to 32)"),
+    k("bins", "bins", 8.0, "number of table nodes (2 to 16)"),
     k("lo", "rad/s or A", 0.0, "first node (omega, current)"),
     k("hi", "rad/s or A", 0.0, "last node (omega, current)"),
     k("b0", "N·m", 0.0, "table torque at node 0"),
