@@ -12,7 +12,8 @@
 //! | 16 | len | the blob ([`crate::blob`]), padded with `0xFF` to the write size |
 //!
 //! A slot is *valid* when its magic, length and CRC hold and its blob decodes
-//! ([`crate::blob::decode`]). Boot takes the valid slot with the highest sequence number.
+//! ([`crate::blob::decode`]). Boot takes the valid slot with the newest sequence number, compared in serial-number
+//! arithmetic so that the wrap from `u32::MAX` to 1 keeps the order.
 //!
 //! An update never touches the slot being used: it erases the *other* slot, writes the blob,
 //! and writes the header last, with a sequence number above every header found. Until the
@@ -78,7 +79,8 @@ impl<E: core::fmt::Debug> core::fmt::Display for SlotError<E> {
 pub struct Scan {
     /// The newest valid slot, if any.
     pub active: Option<SlotInfo>,
-    /// Highest sequence number of any slot whose header and CRC hold (0 if none).
+    /// Newest sequence number (serial arithmetic, [`seq_is_newer`]) of any slot whose header and
+    /// CRC hold (0 if none).
     pub max_seq: u32,
     /// Bit `k` set: slot `k` could not be read (a flash read error, e.g. an ECC error left
     /// by an interrupted write); it counts as invalid.
@@ -171,9 +173,11 @@ impl<F: NorFlash> Slots<F> {
                 }
             };
             if let Some((seq, len)) = read {
-                scan.max_seq = scan.max_seq.max(seq);
+                if scan.max_seq == 0 || seq_is_newer(seq, scan.max_seq) {
+                    scan.max_seq = seq;
+                }
                 let valid = blob::decode(&buf[..len]).is_ok();
-                let newer = scan.active.is_none_or(|a| seq > a.seq);
+                let newer = scan.active.is_none_or(|a| seq_is_newer(seq, a.seq));
                 if valid && newer {
                     scan.active = Some(SlotInfo { index, seq, len });
                 }
@@ -255,6 +259,13 @@ impl<F: NorFlash> Slots<F> {
             _ => Err(SlotError::Verify),
         }
     }
+}
+
+/// True when sequence number `a` was written after `b`, in serial-number arithmetic
+/// (RFC 1982): the numbers wrap from `u32::MAX` to 1, and the two slots never lie more than a
+/// few stores apart, so the forward distance from `b` to `a` decides.
+pub fn seq_is_newer(a: u32, b: u32) -> bool {
+    (a.wrapping_sub(b) as i32) > 0
 }
 
 #[cfg(test)]
@@ -500,6 +511,38 @@ mod tests {
         let next = s.store(&blob_of(&coeffs(0))).unwrap();
         assert_eq!((next.index, next.seq), (1, seq + 1));
         assert_eq!(loaded(&s.into_inner()).unwrap().1, coeffs(0));
+    }
+
+    #[test]
+    fn sequence_numbers_wrap_and_the_newer_slot_still_wins() {
+        // Slots written at u32::MAX - 1 and u32::MAX: the next store takes 1 (0 is never
+        // written), goes to the older slot and wins over u32::MAX.
+        let mut f = MemFlash::new(4);
+        let mut put = |index: usize, seq: u32, blob: &[u8]| {
+            let base = 2 * PAGE * index;
+            f.mem[base + SLOT_HEADER_LEN..base + SLOT_HEADER_LEN + blob.len()]
+                .copy_from_slice(blob);
+            let mut h = [0u8; SLOT_HEADER_LEN];
+            h[0..4].copy_from_slice(&SLOT_MAGIC);
+            h[4..8].copy_from_slice(&seq.to_le_bytes());
+            h[8..12].copy_from_slice(&(blob.len() as u32).to_le_bytes());
+            let mut d = CRC32.digest();
+            d.update(&h[4..12]);
+            d.update(blob);
+            h[12..16].copy_from_slice(&d.finalize().to_le_bytes());
+            f.mem[base..base + SLOT_HEADER_LEN].copy_from_slice(&h);
+        };
+        put(0, u32::MAX - 1, &blob_of(&coeffs(1)));
+        put(1, u32::MAX, &blob_of(&coeffs(2)));
+        let (info, got) = loaded(&f).unwrap();
+        assert_eq!((info.index, info.seq, got), (1, u32::MAX, coeffs(2)));
+
+        let mut s = slots(f.rebooted());
+        let next = s.store(&blob_of(&coeffs(3))).unwrap();
+        assert_eq!((next.index, next.seq), (0, 1));
+        let (info, got) = loaded(&s.into_inner()).unwrap();
+        assert_eq!((info.index, got), (0, coeffs(3)));
+        assert!(seq_is_newer(1, u32::MAX) && !seq_is_newer(u32::MAX, 1));
     }
 
     #[test]

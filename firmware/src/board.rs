@@ -48,7 +48,7 @@ pub fn config() -> embassy_stm32::Config {
     c
 }
 
-/// PWM carrier: 20 kHz, centre-aligned (issue 5: ≥ 20 kHz, inaudible).
+/// PWM carrier: 20 kHz, centre-aligned (at or above 20 kHz: inaudible).
 pub const PWM_HZ: u32 = 20_000;
 /// Dead time in TIM1 clock ticks: 85 × 5.88 ns = 500 ns, the value NuttX uses for this board
 /// (`PWM_DEADTIME_NS 500` in src/stm32_foc.c). The L6387ED adds its own ≈ 320 ns interlock.

@@ -1,4 +1,4 @@
-//! Hostile input (issue #17): numbers that would size allocations and loops, NaN/inf/absurd
+//! Hostile input: numbers that would size allocations and loops, NaN/inf/absurd
 //! parameters, outputs that are inputs, malformed flags. Every case must fail within a time
 //! cap with one `error:` line naming the file or flag, and leave the directory as it was.
 use std::collections::BTreeMap;

@@ -154,7 +154,7 @@ fn a_log_in_ms_and_degrees_fits_like_the_si_log() {
     }
 
     // The same numbers without the unit lines: read as seconds, the sample period is 12 s,
-    // outside the physical range (issue #17); fit refuses with one line that names the
+    // outside the physical range; fit refuses with one line that names the
     // metadata line and suggests the unit.
     let out = motorid(
         d,
