@@ -316,7 +316,7 @@ impl Signals {
     /// is the modelled drive itself, which differs from the base only by the weak form's
     /// errors (the angle leak of `J·∫φ''θ`, the smoothed acceleration of the modelled drive):
     /// on a correct model and 60 s of signal a it "explained" 15–50 % of the torque residual
-    /// with μ ≈ 1.3–1.4 (0.4–11 % with [`super::weakform::WeakForm::new_exact`]).
+    /// with μ ≈ 1.3–1.4.
     pub fn load_friction_column(&self) -> Vec<f64> {
         let guard = samples_for(LOAD_FRICTION_GUARD_S, self.dt, self.len());
         let near = self.near_reversal(guard);

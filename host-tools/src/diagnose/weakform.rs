@@ -10,25 +10,13 @@
 //! derivatives vanish at `s = ±1`, which is what the integrations by parts need.
 //!
 //! # Discrete integration by parts ([`WeakForm::new`])
-//! With the bump's central differences as derivative weights (what `diagnose` uses) instead
-//! of its sampled analytic derivatives ([`WeakForm::new_analytic`], kept for comparison),
+//! The derivative weights are the bump's central differences, not its sampled analytic
+//! derivatives: for a sequence φ that vanishes at the window's ends
 //! `Σφ_k·(x_{k+1} − x_{k−1})/2 = −Σ x_k·(φ_{k+1} − φ_{k−1})/2` and
-//! `Σφ_k·(x_{k+1} − 2x_k + x_{k−1}) = Σ x_k·(φ_{k+1} − 2φ_k + φ_{k−1})` hold *exactly* for a
-//! sequence φ that vanishes at the window's ends: the weak derivatives annihilate constants
-//! (and the second one linear ramps) to the last bit. The sampled analytic φ'' does not: on 17
-//! points its weights sum to −0.35/s² of `∫φ`, so `J·∫φ''θ` leaks `1.0e-4 N·m` per radian of
-//! *absolute* angle into the torque equation: with the true constants, a mean residual of
-//! +0.0060 N·m on 60 s of signal a, whose angle drifts by tens of radians (measured with
-//! `examples/weakform_truth.rs`); on 90 s `diagnose` then sees evidence for `offset` (p 5e-36),
-//! `asymmetry` (p 4e-21) and `current_offset` (p 3e-4) in a correct model, though none passes
-//! its relevance tests. The central differences cost nothing in accuracy at these rates:
-//! their relative error on a 1 Hz signal is `(2π·1 Hz·12 ms)²/12 ≈ 5e-4`. With them the
-//! refitted torque residual of a correct model has no mean (within 0.5 standard errors, seeds
-//! 1–3; the analytic weights left 3–14 standard errors, up to 0.005 N·m).
-//! `diagnose` once kept the analytic weights because with the exact ones its cogging search
-//! picked harmonic 16 for a hidden 7th on one seed: a high harmonic's column lives in the few
-//! slow windows and fitted one of them; harmonics now compete by leave-one-out
-//! ([`super::harmonics::leave_one_out_rss`]).
+//! `Σφ_k·(x_{k+1} − 2x_k + x_{k−1}) = Σ x_k·(φ_{k+1} − 2φ_k + φ_{k−1})` hold exactly, so the
+//! weak derivatives annihilate constants (and the second one linear ramps) to the last bit and
+//! the absolute angle never leaks into the torque equation. Their relative error on a signal
+//! of frequency f is `(2π·f·dt)²/12`. Why: docs/decisions/0003-exact-discrete-weights.md.
 
 /// Default half-width of a window in samples: 8 × 12 ms ≈ 0.1 s, short against the
 /// excitations (≤ 1 Hz) and long against the Hall quantisation (one step per 12 ms at 8 rad/s).
@@ -56,29 +44,6 @@ impl WeakForm {
     /// parts holds exactly, constants and ramps are annihilated (see the module doc). What
     /// `diagnose` uses.
     pub fn new(n: usize, dt: f64, half: usize, stride: usize) -> WeakForm {
-        WeakForm::new_exact(n, dt, half, stride)
-    }
-
-    /// The same windows with the *sampled analytic* derivatives `φ'`, `φ''` as weights, which
-    /// `diagnose` used before: their `φ''` weights do not sum to zero (−0.35/s² of `∫φ` at
-    /// half-width 8), so the second derivative leaks the absolute angle (see the module doc).
-    /// Kept only to measure that bias against [`WeakForm::new`].
-    pub fn new_analytic(n: usize, dt: f64, half: usize, stride: usize) -> WeakForm {
-        let mut wf = WeakForm::new_exact(n, dt, half, stride);
-        let half = wf.half;
-        let big_t = half as f64 * dt;
-        for (i, k) in (-(half as isize)..=(half as isize)).enumerate() {
-            let s = k as f64 / half as f64;
-            let q = 1.0 - s * s;
-            wf.w1[i] = -8.0 * s * q.powi(3) / big_t * dt;
-            wf.w2[i] = (-8.0 * q.powi(3) + 48.0 * s * s * q.powi(2)) / (big_t * big_t) * dt;
-        }
-        wf
-    }
-
-    /// The same as [`WeakForm::new`] (the name it had while `diagnose` still used
-    /// [`WeakForm::new_analytic`]'s weights).
-    pub fn new_exact(n: usize, dt: f64, half: usize, stride: usize) -> WeakForm {
         let half = half.max(2);
         // φ at offsets −half−1 ..= half+1 (zero at and beyond ±half).
         let phi: Vec<f64> = (-(half as isize) - 1..=(half as isize) + 1)
@@ -224,7 +189,7 @@ mod tests {
         let x: Vec<f64> = (0..n).map(|k| (1.3 * k as f64 * dt).sin()).collect();
         let dx: Vec<f64> = (0..n).map(|k| 1.3 * (1.3 * k as f64 * dt).cos()).collect();
         let ddx: Vec<f64> = x.iter().map(|v| -1.69 * v).collect();
-        let wf = WeakForm::new_exact(n, dt, 8, 8);
+        let wf = WeakForm::new(n, dt, 8, 8);
         assert!(wf.rows() > 40);
         let a = wf.derivative(&x);
         let b = wf.integral(&dx);
@@ -255,7 +220,7 @@ mod tests {
     fn weak_derivatives_annihilate_offsets_and_ramps() {
         let dt = 0.012;
         let n = 200;
-        let wf = WeakForm::new_exact(n, dt, 8, 8);
+        let wf = WeakForm::new(n, dt, 8, 8);
         let ones = vec![1.0; n];
         let norm = wf.integral(&ones);
         for (offset, slope) in [(0.0, 0.0), (300.0, 0.0), (-512.25, 3.5), (1e4, -40.0)] {
@@ -279,11 +244,8 @@ mod tests {
         }
     }
 
-    /// What `diagnose` sees of the bias: the torque-equation residual of the correct model
-    /// (the emulator's own LuGre structure, refitted) must have a mean within two standard
-    /// errors of zero, seeds 1–3 of 60 s of signal a. With [`WeakForm::new_analytic`]'s
-    /// weights it sat 3.4 to 14 standard errors off (+0.0044, −0.0050, −0.0012 N·m); with the
-    /// exact ones 0.05 to 0.5 (below 0.0002 N·m).
+    /// No bias reaches `diagnose`: the torque-equation residual of the correct model (the
+    /// emulator's own LuGre structure, refitted) has a mean within two standard errors of zero.
     #[test]
     fn diagnose_residual_of_a_correct_model_has_no_mean() {
         use crate::diagnose::candidates::Equation;
@@ -342,10 +304,8 @@ mod tests {
     /// The torque equation of the emulator's own motor, in weak form on its emulated log
     /// (Hall angle, measured current, held voltage), with the TRUE constants and the steady
     /// LuGre curve at the smoothed velocity, on windows where the rotor moves: what is left
-    /// must be small and carry no systematic part an effect could take for itself.
-    /// With [`WeakForm::new_analytic`]'s sampled analytic φ'' its mean here is +0.0060 N·m (7.5% of
-    /// α0, a hidden `offset` of that size) and it follows the absolute angle (corr +0.30);
-    /// with [`WeakForm::new`]: mean 0.0005 N·m (within its standard error), corr −0.06.
+    /// must be small and carry no systematic part an effect could take for itself (no mean
+    /// beyond its standard error, no following of the absolute angle).
     #[test]
     fn true_model_leaves_no_systematic_torque_residual() {
         use crate::emulator::{simulate_signal, EmulatorConfig, SignalKind};
@@ -356,7 +316,7 @@ mod tests {
         let n = log.len();
         let i = log.i.clone().unwrap();
         let omega = smoothed_derivative(&log.theta, dt, 4);
-        let wf = WeakForm::new_exact(n, dt, HALF_WIDTH, HALF_WIDTH);
+        let wf = WeakForm::new(n, dt, HALF_WIDTH, HALF_WIDTH);
         let q = m.kt / m.r;
         let (u, w, di) = (
             wf.integral_zoh(&log.u),

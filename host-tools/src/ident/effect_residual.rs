@@ -74,9 +74,7 @@ fn electrical(m: &mut Model, logs: &[MotorLog]) {
         return;
     }
     let (x, _) = least_squares(&cols, &y);
-    if std::env::var_os("MOTORID_DEBUG").is_some() {
-        eprintln!("electrical residual regression: {x:?} (was R {r}, L {l}, Kb {kb})");
-    }
+    tracing::debug!("electrical residual regression: {x:?} (was R {r}, L {l}, Kb {kb})");
     if x.iter().any(|v| !v.is_finite()) || x[1] <= 0.0 || x[2] <= 0.0 {
         return;
     }
@@ -179,9 +177,7 @@ fn mechanical(m: &mut Model, logs: &[MotorLog]) {
         return;
     }
     let (x, _) = least_squares(&cols, &y);
-    if std::env::var_os("MOTORID_DEBUG").is_some() {
-        eprintln!("mechanical residual regression: {x:?}");
-    }
+    tracing::debug!("mechanical residual regression: {x:?}");
     if x.iter().any(|v| !v.is_finite()) {
         return;
     }

@@ -299,9 +299,7 @@ pub fn fit(req: &FitRequest) -> Result<Model> {
         // soft start that costs a little less at the grid led the refinement to a worse
         // local minimum (offset hidden, 90 s of signal a, seed 1: validation i 98.6 % from
         // the stiff start, 94.9 % from the soft one); a visible soft bristle costs far less.
-        if std::env::var_os("MOTORID_DEBUG_IDENT").is_some() {
-            eprintln!("bristle start (cost, sigma0, sigma1): stiff {best:?}, soft {best_soft:?}");
-        }
+        tracing::debug!("bristle start (cost, sigma0, sigma1): stiff {best:?}, soft {best_soft:?}");
         if best_soft.0 < SOFT_START_RATIO * best.0 {
             best = best_soft;
         }

@@ -306,12 +306,10 @@ fn guard_added_effects(req: &FitRequest, with: Model) -> Result<Model> {
     let zeroed = sim_error::scale_effect_magnitudes(&with, 0.0);
     let mut best = (score_with, with.clone(), false);
     let s = validation_score(&zeroed, req.validate);
-    if std::env::var_os("MOTORID_DEBUG").is_some() {
-        eprintln!(
-            "guard: with {score_with:.2} ({:?}), zeroed {s:.2}",
-            with.effects
-        );
-    }
+    tracing::debug!(
+        "guard: with {score_with:.2} ({:?}), zeroed {s:.2}",
+        with.effects
+    );
     if s > best.0 {
         best = (s, zeroed, true);
     }
@@ -392,17 +390,13 @@ fn guard_added_effects(req: &FitRequest, with: Model) -> Result<Model> {
     if let Ok(mut base) = fit_kind(&base_req) {
         let cand = residual_candidate(&base);
         let s = validation_score(&cand, req.validate);
-        if std::env::var_os("MOTORID_DEBUG").is_some() {
-            eprintln!("guard: with {score_with:.2}, residual estimate on the base fit {s:.2}");
-        }
+        tracing::debug!("guard: with {score_with:.2}, residual estimate on the base fit {s:.2}");
         if s > best.0 && residual_best.as_ref().is_none_or(|(r, _)| s > *r) {
             residual_best = Some((s, cand));
         }
         base.effects = sim_error::scale_effect_magnitudes(&with, 0.0).effects;
         let s = validation_score(&base, req.validate);
-        if std::env::var_os("MOTORID_DEBUG").is_some() {
-            eprintln!("guard: base fitted afresh {s:.2}");
-        }
+        tracing::debug!("guard: base fitted afresh {s:.2}");
         if s > best.0 {
             let mut params = base.parameters.clone();
             params.extend(
@@ -417,9 +411,7 @@ fn guard_added_effects(req: &FitRequest, with: Model) -> Result<Model> {
     }
     if let Some((s, m)) = residual_best {
         if s > best.0 {
-            if std::env::var_os("MOTORID_DEBUG").is_some() {
-                eprintln!("residual estimate of the added effects: {:?}", m.effects);
-            }
+            tracing::debug!("residual estimate of the added effects: {:?}", m.effects);
             return Ok(m);
         }
     }

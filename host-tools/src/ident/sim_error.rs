@@ -199,9 +199,7 @@ pub fn better_effect_start(model: &mut Model, res: &Residuals) {
         .map(|&f| cost(res, &scale_effect_magnitudes(model, f)))
         .collect();
     for (&f, &c) in factors.iter().zip(&costs) {
-        if std::env::var_os("MOTORID_DEBUG_IDENT").is_some() {
-            eprintln!("effects {:?} x {f}: cost {c:.4e}", model.effects);
-        }
+        tracing::debug!("effects {:?} x {f}: cost {c:.4e}", model.effects);
         if c < best.0 {
             best = (c, f);
         }

@@ -178,9 +178,7 @@ fn refine_model(
         ..nlsq::Options::default()
     };
     let sol = nlsq::solve(&mut f, &x0, &lo, &hi, &scale, opts, &mut |it, cost| {
-        if std::env::var_os("MOTORID_DEBUG").is_some() {
-            eprintln!("SINDYc refinement: iteration {it}, cost {cost:.6e}");
-        }
+        tracing::debug!("SINDYc refinement: iteration {it}, cost {cost:.6e}");
     })?;
     Ok(with_values(m, &slots, uses_a, &sol.x))
 }
