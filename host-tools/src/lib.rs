@@ -20,6 +20,7 @@ pub mod diagnose;
 pub mod effect_spec;
 pub mod emulator;
 pub mod ident;
+pub mod input;
 pub mod log;
 pub mod matlab;
 pub mod model;

@@ -18,7 +18,7 @@
 //! are mapped with `--map STD=NAME,...`; extra columns are kept. Every error names the file
 //! and the line (1-based, as an editor shows it) and the column at fault, and echoes at most
 //! [`ECHO_MAX`] characters of the input, control characters removed.
-use anyhow::{anyhow, bail, Context, Result};
+use anyhow::{anyhow, bail, Result};
 use std::collections::BTreeMap;
 use std::f64::consts::PI;
 use std::path::{Path, PathBuf};
@@ -412,8 +412,7 @@ impl MotorLog {
         units: &Units,
         plant: Plant,
     ) -> Result<MotorLog> {
-        let text =
-            std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
+        let text = crate::input::read(path, crate::input::MAX_LOG_FILE, "log")?;
         if crate::matlab::is_mat_file(&text)
             || path
                 .extension()
@@ -844,6 +843,16 @@ impl StdColumns {
     /// Find them (mapped with `--map`); `t`, `u`, `theta` or `omega`, and for a voltage plant
     /// `i`, are required. `at` is the header's place for messages.
     fn find(headers: &[String], map: &ColumnMap, plant: Plant, at: &str) -> Result<StdColumns> {
+        for (k, h) in headers.iter().enumerate() {
+            if headers[..k].contains(h) {
+                bail!(
+                    "{at}: column '{}' appears twice (columns {} and {}); rename one",
+                    echo(h),
+                    headers[..k].iter().position(|o| o == h).unwrap_or(0) + 1,
+                    k + 1
+                );
+            }
+        }
         let find = |std: &str| headers.iter().position(|h| h == map.name_of(std));
         let need = |std: &str, also: &str| {
             find(std).ok_or_else(|| {

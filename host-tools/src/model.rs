@@ -344,8 +344,7 @@ impl Model {
 
     /// Read MODEL.toml.
     pub fn load(path: &Path) -> Result<Model> {
-        let text = std::fs::read_to_string(path)
-            .with_context(|| format!("{}: cannot read", path.display()))?;
+        let text = crate::input::read_text(path, crate::input::MAX_MODEL_FILE, "MODEL.toml")?;
         let m = Self::parse(&text, path)?;
         m.validate()
             .map_err(|e| anyhow!("{}: {e}", path.display()))?;

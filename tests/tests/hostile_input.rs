@@ -535,3 +535,35 @@ fn command_line_errors_are_one_line_and_help_is_not_an_error() {
     let r = run(d, &["simulate", "--help"]);
     assert!(r.stdout.contains("Usage:") && r.stdout.lines().count() > 10);
 }
+
+#[test]
+fn endless_or_duplicated_inputs_are_refused_before_reading() {
+    let dir = setup();
+    let d = dir.path();
+    for args in [
+        &["inspect", "/dev/zero"][..],
+        &["compare", "m.toml", "/dev/zero"][..],
+        &["compare", "/dev/zero", "data.csv"][..],
+    ] {
+        refused(d, args, &["/dev/zero", "not a regular file"]);
+    }
+    let text = log_text(300, 0.012, "# sample_period=0.012\n").replacen(
+        "t,u,i,theta\n",
+        "t,u,i,theta,theta\n",
+        1,
+    );
+    let text: String = text
+        .lines()
+        .enumerate()
+        .map(|(k, l)| match k {
+            0 | 1 => format!("{l}\n"),
+            _ => format!("{l},0\n"),
+        })
+        .collect();
+    std::fs::write(d.join("dup.csv"), text).unwrap();
+    refused(
+        d,
+        &["compare", "m.toml", "dup.csv"],
+        &["dup.csv", "'theta' appears twice"],
+    );
+}
