@@ -311,6 +311,9 @@ impl EffectSpec {
                 )
             })?;
             let k = k.trim();
+            if values.contains_key(k) {
+                bail!("effect '{}': key '{k}' is given twice", kind.name());
+            }
             if !known.iter().any(|key| key.name == k) {
                 bail!(
                     "effect '{}': unknown key '{}'; its keys are: {}",
@@ -718,6 +721,7 @@ mod tests {
         for (bad, why) in [
             ("table:var=speed", "not one of theta"),
             ("table:bins=33", "bins"),
+            ("coulomb:fc=1,fc=2", "given twice"),
             ("table:bins=1", "bins"),
             ("table:bins=2.5", "whole"),
             ("table:bins=4,b4=1", "beyond the table's 4 bins"),
