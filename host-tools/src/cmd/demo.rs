@@ -17,7 +17,7 @@ use std::path::PathBuf;
 
 /// Effects the demo may hide (`--random`): those a LuGre model lacks and `diagnose` can name,
 /// i.e. the effects after the four of its own friction law (coulomb, viscous, stribeck,
-/// presliding) in the contract's order, up to load friction (saturation is reported through
+/// presliding) in the effect list's order, up to load friction (saturation is reported through
 /// the variable that carries it, not by name).
 pub const RANDOM_EFFECTS: &[EffectKind] = EffectKind::ALL.split_at(12).0.split_at(4).1;
 

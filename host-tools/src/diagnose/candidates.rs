@@ -1,5 +1,5 @@
-//! The candidate regressors of every physical effect: what each effect of the contract's
-//! list adds to the mechanical (torque) or electrical (voltage) equation, sample by sample,
+//! The candidate regressors of every physical effect: what each effect of the
+//! effect list adds to the mechanical (torque) or electrical (voltage) equation, sample by sample,
 //! and how the fitted coefficients turn back into the effect's parameters (its spec).
 //!
 //! Equations, with the sign conventions of `control::effects` (load torques oppose motion,

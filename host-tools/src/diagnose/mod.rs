@@ -5,7 +5,7 @@
 //!    mechanical torque balance and, for a voltage plant, the electrical voltage balance.
 //!    The model's own structure (inertia, R, L, K_b and the effects it has) is refitted by
 //!    least squares in each equation, so a biased parameter cannot pass for a missing effect.
-//! 2. Every effect of the contract's list that the model lacks brings its regressors
+//! 2. Every effect of the list (`EffectKind::ALL`) that the model lacks brings its regressors
 //!    ([`candidates`]), over a grid for its nonlinear parameters (cogging harmonic, Stribeck
 //!    velocity, thermal time constant, bristle stiffness). Presliding is tested apart, on
 //!    every window of the torque equation (the reversals and standstills where it lives
