@@ -24,5 +24,6 @@ pub mod input;
 pub mod log;
 pub mod matlab;
 pub mod model;
+pub mod numerics;
 pub mod report;
 pub mod validate;

@@ -227,7 +227,7 @@ fn presliding_below_the_hall_step_makes_no_false_claim() {
 /// μ ≈ 1.4).
 #[test]
 fn load_friction_is_not_claimed_where_the_drive_never_brakes() {
-    let half = motorid::diagnose::weakform::HALF_WIDTH;
+    let half = motorid::numerics::weak_form::HALF_WIDTH;
     for seed in [1, 2, 3] {
         let r = simulate_signal(&hidden(&["load_friction"], seed), SignalKind::A, 60.0).unwrap();
         // The physics: the drive opposes the motion only next to a standstill.

@@ -8,11 +8,12 @@
 //!
 //! `cargo run --release -p host-tools --example weakform_truth -- [a|b|steady] [seconds]`
 use control::lugre::LugreParams;
-use motorid::diagnose::stats::rms;
 use motorid::emulator::{signal, EmulatorConfig, Plant, SignalKind, SAMPLE_PERIOD};
 use motorid::ident::sindyc::correlation as corr;
-use motorid::ident::weak_form::{smooth_velocity, windows, Window, HOP, WINDOW};
 use motorid::log::MotorLog;
+use motorid::numerics::differentiation::smooth_velocity;
+use motorid::numerics::statistics::rms;
+use motorid::numerics::weak_form::{windows, Window, HOP, WINDOW};
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
@@ -231,7 +232,7 @@ fn main() {
         .collect();
     let step_corr = |w: &Window| -> f64 {
         (w.start..w.end)
-            .map(|k| w.phi[k - w.start] * (0.5 * SAMPLE_PERIOD - tau) * du[k])
+            .map(|k| w.w0[k - w.start] / SAMPLE_PERIOD * (0.5 * SAMPLE_PERIOD - tau) * du[k])
             .sum()
     };
     report(
@@ -316,8 +317,7 @@ fn main() {
     let i_volt: Vec<f64> = wins
         .iter()
         .map(|w| {
-            kt / m.r
-                * (w.int_zoh(&log.t, &log.u) + m.kb * w.int_d(&log.theta) + m.l * w.int_d(&imeas))
+            kt / m.r * (w.int_zoh(&log.u) + m.kb * w.int_d(&log.theta) + m.l * w.int_d(&imeas))
         })
         .collect();
     report(
@@ -335,7 +335,7 @@ fn main() {
     // diagnose's bump (half-width 8 samples), torque form in N·m, rows as diagnose keeps them.
     {
         use motorid::diagnose::candidates::Signals;
-        use motorid::diagnose::weakform::WeakForm;
+        use motorid::numerics::weak_form::WeakForm;
         let h = 8usize;
         let wc = WeakForm::new(n, SAMPLE_PERIOD, h, h);
         let nfine = tf.len();
@@ -569,11 +569,11 @@ fn diagnose_true(kind: SignalKind, dur: f64) {
     let m = cfg.motor;
     let dt = SAMPLE_PERIOD;
     let h = motorid::diagnose::candidates::samples_for(
-        motorid::diagnose::weakform::HALF_WIDTH_S,
+        motorid::numerics::weak_form::HALF_WIDTH_S,
         dt,
         log.len() / 2,
     );
-    let wfm = motorid::diagnose::weakform::WeakForm::new(log.len(), dt, h, h);
+    let wfm = motorid::numerics::weak_form::WeakForm::new(log.len(), dt, h, h);
     let phi_int = wfm.integral(&vec![1.0; log.len()])[0];
     for e in &d.equations {
         let to_nm = if e.unit == "V·s" && format!("{:?}", e.equation) == "Mechanical" {

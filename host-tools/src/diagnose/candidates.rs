@@ -123,9 +123,10 @@ impl Signals {
     pub fn from_log(log: &MotorLog, plant: Plant, kt: f64) -> Signals {
         let dt = log.sample_period();
         let velocity_half = samples_for(VELOCITY_HALF_S, dt, log.len());
-        let omega = super::weakform::smoothed_derivative(&log.theta, dt, velocity_half);
+        let omega =
+            crate::numerics::differentiation::smoothed_derivative(&log.theta, dt, velocity_half);
         let vscale = velocity_scale(&omega);
-        let theta_s = super::weakform::moving_average(&log.theta, 2);
+        let theta_s = crate::numerics::differentiation::moving_average(&log.theta, 2);
         // The input u[k] is held over [t_k, t_k+1) while angle and current are sampled at t_k.
         // The winding settles within L/R ≈ 1.4 ms, so the current sampled at t_k is the
         // quasi-static response to the input held just before it, u[k−1]: on the sample grid
@@ -284,13 +285,13 @@ pub fn zoh_to_grid(x: &[f64]) -> Vec<f64> {
 pub const STICK_SPEED: f64 = 1.0;
 
 /// Time [s] around a reversal or a standstill where the load-friction column is left at zero:
-/// two weak-form half-widths (2 × [`super::weakform::HALF_WIDTH_S`]), so that no window that
+/// two weak-form half-widths (2 × [`crate::numerics::weak_form::HALF_WIDTH_S`]), so that no window that
 /// holds a reversal sees it. A fast reversal can skip the stick band between two samples, and
 /// its window keeps the friction's switch (the velocity estimate's sign lags the true one) and
 /// the drive's own braking right before it: with the column reaching into those windows a
 /// correct model got μ ≈ −0.12 to −0.16 (p down to 4e-26) on a 4–9 Hz speed-swing test signal
 /// that brakes 20 % of the time; with the guard −0.09 to +0.01 (p ≥ 0.03).
-pub const LOAD_FRICTION_GUARD_S: f64 = 2.0 * super::weakform::HALF_WIDTH_S;
+pub const LOAD_FRICTION_GUARD_S: f64 = 2.0 * crate::numerics::weak_form::HALF_WIDTH_S;
 
 impl Signals {
     /// `1` where the rotor is stuck (|ω| < [`STICK_SPEED`]), else `0`.
@@ -597,7 +598,7 @@ pub fn compliance_grid(s: &Signals) -> Vec<f64> {
     if span <= 0.0 || s.dt <= 0.0 {
         return vec![];
     }
-    let half_s = super::weakform::HALF_WIDTH_S.max(2.0 * s.dt);
+    let half_s = crate::numerics::weak_form::HALF_WIDTH_S.max(2.0 * s.dt);
     let f_u = super::carriers::rms_frequency(&s.raw_u, s.dt);
     let lo = 8.0 / span;
     let hi =

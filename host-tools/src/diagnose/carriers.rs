@@ -5,7 +5,7 @@
 //! functions on its quantiles, a Fourier series for the angle over one revolution, a band of
 //! sinusoids for a spectral peak), integrated against the same weak-form windows as the
 //! equation, and an F-test against a constant with the residual's effective sample size
-//! ([`stats::effective_n`]). A variable *carries* structure when the test is significant at
+//! ([`statistics::effective_n`]). A variable *carries* structure when the test is significant at
 //! the family level split over every test of the run (Bonferroni) and the function explains at
 //! least the same share of the residual an effect must ([`super::MIN_EXPLAINED`]).
 //!
@@ -19,8 +19,8 @@
 //! | `reversal` | hats over the time since the last reversal, signed by the direction | backlash, presliding |
 //! | `frequency` | a band of sinusoids around the best peak | a compliant coupling, a structural resonance |
 use super::candidates::Signals;
-use super::stats;
-use super::weakform::WeakForm;
+use crate::numerics::weak_form::WeakForm;
+use crate::numerics::{least_squares, statistics};
 use serde::Serialize;
 
 /// Hat functions per variable: 8 knots, a smooth curve with 7 free shapes beyond a constant.
@@ -174,14 +174,14 @@ fn test_rows(
         refs.push(&ones_w);
     }
     refs.extend(w.iter().map(|c| c.as_slice()));
-    let full = stats::lstsq(&refs, &resid);
-    let base = stats::lstsq(&[&ones_w], &resid);
+    let full = least_squares::lstsq(&refs, &resid);
+    let base = least_squares::lstsq(&[&ones_w], &resid);
     let q = if spans_constant {
         cols.len().saturating_sub(1)
     } else {
         cols.len()
     };
-    let t = stats::f_test(base.rss, full.rss, q.max(1), 1, n_eff);
+    let t = statistics::f_test(base.rss, full.rss, q.max(1), 1, n_eff);
     let beta = if spans_constant {
         full.beta
     } else {
@@ -250,9 +250,9 @@ pub fn rms_frequency(u: &[f64], dt: f64) -> f64 {
     let mean = u.iter().sum::<f64>() / u.len() as f64;
     let centred: Vec<f64> = u.iter().map(|v| v - mean).collect();
     let du: Vec<f64> = u.windows(2).map(|w| (w[1] - w[0]) / dt).collect();
-    let a = stats::rms(&centred);
+    let a = statistics::rms(&centred);
     if a > 0.0 {
-        stats::rms(&du) / (2.0 * std::f64::consts::PI * a)
+        statistics::rms(&du) / (2.0 * std::f64::consts::PI * a)
     } else {
         0.0
     }
@@ -270,7 +270,7 @@ pub fn carriers(s: &Signals, rows: &Rows, level: f64, min_share: f64) -> Vec<Car
         return vec![];
     }
     let mask = sample_mask(rows, n);
-    let n_eff = stats::effective_n(rows.resid);
+    let n_eff = statistics::effective_n(rows.resid);
     let mut out: Vec<Carrier> = Vec::new();
     let mut push = |variable: &'static str, t: Tested, knots: Vec<f64>, hz: Option<f64>| {
         if t.p_value < level && t.share >= min_share {
@@ -326,7 +326,8 @@ pub fn carriers(s: &Signals, rows: &Rows, level: f64, min_share: f64) -> Vec<Car
             push("theta", test_columns(rows, &cols, true, n_eff), knots, None);
         }
     }
-    let acc = super::weakform::smoothed_derivative(&s.omega, s.dt, s.velocity_half);
+    let acc =
+        crate::numerics::differentiation::smoothed_derivative(&s.omega, s.dt, s.velocity_half);
     let current: &[f64] = s.i.as_deref().unwrap_or(&s.raw_u);
     let reversal: Vec<f64> = since_reversal(s);
     let sgn: Vec<f64> = s.omega.iter().map(|w| w.signum()).collect();

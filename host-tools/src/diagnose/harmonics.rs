@@ -4,7 +4,7 @@
 //! Cogging torque repeats `h ≥ 2` times per revolution, a gravity or unbalanced load once. An
 //! error that is periodic in angle shows as a large fraction of its variance explained by
 //! `a·sin(hθ) + b·cos(hθ)` for one `h`.
-use super::stats::lstsq;
+use crate::numerics::least_squares::lstsq;
 
 /// Highest harmonic searched by default. Hall sensors quantise the angle: a harmonic is
 /// resolvable while its period spans at least four quantisation steps (`h·res ≤ π/2`); the

@@ -13,7 +13,7 @@
 //!    [`candidates::PRESLIDING_DEFLECTION_GRID`] and [`PRESLIDING_GAIN`].
 //! 3. Forward selection: the candidate that explains most of the residual is tested with a
 //!    nested-model F-test; the residual's autocorrelation shrinks the sample count to an
-//!    effective one ([`stats::effective_n`]) so that coloured noise is not taken for evidence.
+//!    effective one ([`statistics::effective_n`]) so that coloured noise is not taken for evidence.
 //!    It is kept when it is **significant** (p below [`FAMILY_ALPHA`] divided by the number of
 //!    candidate variants tested, Bonferroni, and a lower BIC) **and relevant** (it explains at
 //!    least [`MIN_EXPLAINED`] of the model's own residual sum of squares, and its torque is at
@@ -26,17 +26,17 @@ pub mod carriers;
 pub mod harmonics;
 pub mod lookalikes;
 pub mod regions;
-pub mod stats;
 pub mod verdict;
-pub mod weakform;
 
 use crate::effect_spec::EffectSpec;
 use crate::log::{MotorLog, Plant};
+use crate::numerics::least_squares::{self, Gram};
+use crate::numerics::statistics;
+use crate::numerics::weak_form;
 use candidates::{Equation, Signals, Units, Variant};
 use control::effects::{Effect, EffectKind};
 use control::motor::MotorParams;
 use serde::Serialize;
-use stats::Gram;
 
 /// Family-wise false-alarm probability of one `diagnose` run: the chance that a correct model
 /// gets any finding at all is at most 0.1 % (Bonferroni over every variant tested).
@@ -88,7 +88,7 @@ impl Structure {
 pub struct Options {
     pub alpha: f64,
     pub min_explained: f64,
-    /// Weak-form window half-width in samples; 0 (the default): [`weakform::HALF_WIDTH_S`]
+    /// Weak-form window half-width in samples; 0 (the default): [`weak_form::HALF_WIDTH_S`]
     /// seconds in the log's samples (8 samples at the paper's 12 ms).
     pub half_width: usize,
 }
@@ -149,7 +149,7 @@ pub struct EquationResidual {
     pub n_eff: f64,
     /// Whiteness of the base residual and its correlation with the input.
     #[serde(skip)]
-    pub whiteness: stats::Whiteness,
+    pub whiteness: statistics::Whiteness,
     /// Unit of the residual.
     pub unit: &'static str,
 }
@@ -207,12 +207,12 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
     let mut s = Signals::from_log(log, st.plant, st.kt);
     s.drive_model = modelled_drive(&s, st);
     let h = if opts.half_width == 0 {
-        candidates::samples_for(weakform::HALF_WIDTH_S, s.dt, s.len() / 2)
+        candidates::samples_for(weak_form::HALF_WIDTH_S, s.dt, s.len() / 2)
     } else {
         opts.half_width
     }
     .max(2);
-    let wf = weakform::WeakForm::new(s.len(), s.dt, h, h);
+    let wf = weak_form::WeakForm::new(s.len(), s.dt, h, h);
     let voltage = s.plant == Plant::Voltage && s.i.is_some();
     // The model's own equations with its own numbers, for the verdict.
     let given = st
@@ -328,7 +328,7 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
             base: out.2.clone(),
             after: out.3.clone(),
             n_eff: out.4,
-            whiteness: stats::whiteness(&out.2, &inp, 30),
+            whiteness: statistics::whiteness(&out.2, &inp, 30),
             unit,
         }
     };
@@ -498,7 +498,7 @@ struct Judged {
 /// The verdict on the model as given ([`verdict`], [`carriers`]).
 fn judge(
     s: &Signals,
-    wf: &weakform::WeakForm,
+    wf: &weak_form::WeakForm,
     st: &Structure,
     judged: &[Judged],
     findings: &[Finding],
@@ -622,7 +622,8 @@ fn presliding_candidates(s: &Signals, st: &Structure) -> (Vec<Vec<f64>>, Vec<Var
         return (vec![], vec![]);
     }
     // Inertia and Coulomb friction refitted on the moving samples.
-    let acc = weakform::smoothed_derivative(&s.omega, s.dt, s.velocity_half);
+    let acc =
+        crate::numerics::differentiation::smoothed_derivative(&s.omega, s.dt, s.velocity_half);
     let moving: Vec<usize> = (0..s.len())
         .filter(|&k| s.omega[k].abs() >= s.stick_speed())
         .collect();
@@ -637,7 +638,7 @@ fn presliding_candidates(s: &Signals, st: &Structure) -> (Vec<Vec<f64>>, Vec<Var
     ];
     let y: Vec<f64> = moving.iter().map(|&k| s.drive[k]).collect();
     let refs: Vec<&[f64]> = cols.iter().map(|c| c.as_slice()).collect();
-    let fit = stats::lstsq(&refs, &y);
+    let fit = least_squares::lstsq(&refs, &y);
     let (j, fc_fit) = (
         fit.beta.first().copied().unwrap_or(0.0),
         fit.beta.get(1).copied().unwrap_or(0.0),
@@ -673,7 +674,7 @@ fn presliding_pass(
     found: &[Finding],
     (y, mut base_cols): (Vec<f64>, Vec<Vec<f64>>),
     cand: Vec<(Variant, Vec<Vec<f64>>)>,
-    wf: &weakform::WeakForm,
+    wf: &weak_form::WeakForm,
 ) -> EqData {
     for f in found {
         let same = |v: &Variant| {
@@ -700,7 +701,8 @@ fn presliding_pass(
 /// by sample: a least-squares fit of the measured drive on inertia (smoothed acceleration)
 /// and the structure's friction columns, evaluated while moving.
 fn modelled_drive(s: &Signals, st: &Structure) -> Vec<f64> {
-    let acc = weakform::smoothed_derivative(&s.omega, s.dt, s.velocity_half);
+    let acc =
+        crate::numerics::differentiation::smoothed_derivative(&s.omega, s.dt, s.velocity_half);
     let mut cols = vec![acc];
     for e in &st.effects {
         if e.kind() == EffectKind::LoadFriction {
@@ -732,7 +734,7 @@ fn modelled_drive(s: &Signals, st: &Structure) -> Vec<f64> {
         .map(|c| moving.iter().map(|&k| c[k]).collect())
         .collect();
     let refs: Vec<&[f64]> = sub.iter().map(|c| c.as_slice()).collect();
-    let fit = stats::lstsq(&refs, &y);
+    let fit = least_squares::lstsq(&refs, &y);
     (0..s.len())
         .map(|k| cols.iter().zip(&fit.beta).map(|(c, b)| b * c[k]).sum())
         .collect()
@@ -771,7 +773,7 @@ fn forward_select(
         r
     };
     let base_resid = resid_of(&base, &beta0);
-    let n_eff_base = stats::effective_n(&base_resid);
+    let n_eff_base = statistics::effective_n(&base_resid);
     // Relevance threshold: from the model's Coulomb friction when it states one, else from the
     // Coulomb friction refitted here (a model whose fit left fc at 0 still has one) or, once
     // Coulomb friction is found, from the one found (see `MIN_TORQUE_FRACTION`).
@@ -789,8 +791,8 @@ fn forward_select(
     let mut rss_cur = rss0;
     let mut resid_cur = base_resid.clone();
     loop {
-        let n_eff = stats::effective_n(&resid_cur);
-        let mut best_by_kind: Vec<(usize, f64, stats::FTest)> = Vec::new();
+        let n_eff = statistics::effective_n(&resid_cur);
+        let mut best_by_kind: Vec<(usize, f64, statistics::FTest)> = Vec::new();
         let mut kind_score: Vec<f64> = Vec::new();
         for (ci, (v, _)) in data.cand.iter().enumerate() {
             if chosen_kinds.contains(&v.kind) {
@@ -808,7 +810,7 @@ fn forward_select(
             {
                 continue;
             }
-            let t = stats::f_test(rss_cur, rss1, cand_idx[ci].len(), base.len(), n_eff);
+            let t = statistics::f_test(rss_cur, rss1, cand_idx[ci].len(), base.len(), n_eff);
             // Cogging harmonics compete by leave-one-out: a high harmonic's column lives in
             // the few slow windows, where it can fit one window's error (see
             // `harmonics::leave_one_out_rss`).
@@ -964,7 +966,7 @@ fn min_torque(st: &Structure, s: &Signals) -> f64 {
         Effect::Coulomb { fc } if *fc > 0.0 => Some(*fc),
         _ => None,
     });
-    MIN_TORQUE_FRACTION * fc.unwrap_or_else(|| stats::rms(&s.drive))
+    MIN_TORQUE_FRACTION * fc.unwrap_or_else(|| statistics::rms(&s.drive))
 }
 
 /// Largest factor by which the fitted gain of a presliding column may differ from 1: 2. The

@@ -1,7 +1,7 @@
 //! Error by operating region: where in the motion a model fails (velocity bands, reversals,
 //! rotor angle, current level, time), and sentences that name the worst regions.
 use super::harmonics;
-use super::stats::rms;
+use crate::numerics::statistics::rms;
 use serde::Serialize;
 
 /// Velocity below which the motor counts as at standstill [rad/s]: about one Hall step

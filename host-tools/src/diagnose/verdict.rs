@@ -18,9 +18,9 @@
 //! the tests of one run. A model is *adequate* only when every check passes, no effect of the
 //! list is missing and no variable carries structure.
 use super::candidates::Signals;
-use super::stats;
-use super::weakform::WeakForm;
 use crate::log::Plant;
+use crate::numerics::weak_form::WeakForm;
+use crate::numerics::{least_squares, statistics};
 use control::effects::{total_sensor_offset, total_voltage_loss, Effect, EffectInputs, EffectKind};
 use control::lugre::{LugreObserver, LugreParams};
 use control::motor::MotorParams;
@@ -73,8 +73,8 @@ pub fn breusch_godfrey(x: &[f64], m: usize) -> (f64, f64, f64) {
     let lagged: Vec<Vec<f64>> = (1..=m).map(|l| x[m - l..x.len() - l].to_vec()).collect();
     let mut cols: Vec<&[f64]> = vec![&ones];
     cols.extend(lagged.iter().map(|c| c.as_slice()));
-    let full = stats::lstsq(&cols, &y);
-    let base = stats::lstsq(&[&ones], &y);
+    let full = least_squares::lstsq(&cols, &y);
+    let base = least_squares::lstsq(&[&ones], &y);
     let r2 = if base.rss > 0.0 {
         (1.0 - full.rss / base.rss).max(0.0)
     } else {
@@ -87,19 +87,19 @@ pub fn breusch_godfrey(x: &[f64], m: usize) -> (f64, f64, f64) {
 
 /// F-test of `x` on the input `u` at lags `0..=m` (same indexing as `x`), with an intercept.
 /// Returns the test and the share explained.
-pub fn input_test(x: &[f64], u: &[f64], m: usize) -> stats::FTest {
+pub fn input_test(x: &[f64], u: &[f64], m: usize) -> statistics::FTest {
     let n = x.len().min(u.len());
     if n <= 2 * m + 4 {
-        return stats::f_test(1.0, 1.0, 1, 1, 2.0);
+        return statistics::f_test(1.0, 1.0, 1, 1, 2.0);
     }
     let y: Vec<f64> = x[m..n].to_vec();
     let ones = vec![1.0; y.len()];
     let lagged: Vec<Vec<f64>> = (0..=m).map(|l| u[m - l..n - l].to_vec()).collect();
     let mut cols: Vec<&[f64]> = vec![&ones];
     cols.extend(lagged.iter().map(|c| c.as_slice()));
-    let full = stats::lstsq(&cols, &y);
-    let base = stats::lstsq(&[&ones], &y);
-    stats::f_test(base.rss, full.rss, m + 1, 1, y.len() as f64)
+    let full = least_squares::lstsq(&cols, &y);
+    let base = least_squares::lstsq(&[&ones], &y);
+    statistics::f_test(base.rss, full.rss, m + 1, 1, y.len() as f64)
 }
 
 /// The whiteness check of a structure residual (rows in time order, stride half a window).
@@ -161,8 +161,8 @@ pub fn parameter_check(given: &[f64], refit: &[f64], p: usize, level: f64) -> Ch
             detail: "the model's own equations give a non-finite residual on this log (a zero or non-finite constant): refit first".to_string(),
         };
     }
-    let n_eff = stats::effective_n(refit);
-    let t = stats::f_test(rss_g, rss_r, p.max(1), 0, n_eff);
+    let n_eff = statistics::effective_n(refit);
+    let t = statistics::f_test(rss_g, rss_r, p.max(1), 0, n_eff);
     let share = t.explained;
     let passed = !(t.p_value < level && share >= REFIT_SHARE);
     Check {
@@ -294,7 +294,7 @@ pub fn given_residuals(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::diagnose::stats::white_noise as noise;
+    use crate::numerics::statistics::white_noise as noise;
 
     #[test]
     fn white_noise_passes_whiteness_at_about_the_level() {

@@ -2,7 +2,7 @@
 //!
 //! Once the base model (motor constants and friction law) is known, the linear parameters of
 //! the added effects are regressed on what that model leaves unexplained in the equation each
-//! effect acts in, window by window (see [`super::weak_form`]):
+//! effect acts in, window by window (see [`crate::numerics::weak_form`]):
 //!
 //! - electrical (voltage plant): `∫φ·u − R·∫φ·I − L·(−∫φ'·I) − K_b·(−∫φ'·θ)` on
 //!   `v_d·∫φ·sgn(I − i0)` (deadtime) and `−R·i0·∫φ` (current offset: `i_meas = i + i0`);
@@ -11,9 +11,11 @@
 //!   position_load) and `∫φ` (offset).
 //!
 //! Only the added effects' magnitudes change; the base model's parameters are kept.
-use super::weak_form::{self, least_squares};
 use crate::log::{MotorLog, Plant};
 use crate::model::Model;
+use crate::numerics::differentiation::smooth_velocity;
+use crate::numerics::least_squares::lstsq;
+use crate::numerics::weak_form;
 use control::effects::{smooth_sign, Effect, CURRENT_EPS};
 
 /// `base` with the effects of `with` (structure) re-estimated on `base`'s residuals in `logs`.
@@ -58,7 +60,7 @@ fn electrical(m: &mut Model, logs: &[MotorLog]) {
             .collect();
         let ones = vec![1.0; log.len()];
         for w in weak_form::windows(&log.t, weak_form::WINDOW, weak_form::HOP) {
-            y.push(w.int_zoh(&log.t, &log.u));
+            y.push(w.int_zoh(&log.u));
             cols[0].push(-w.int_d(i));
             cols[1].push(w.int(i));
             cols[2].push(-w.int_d(&log.theta));
@@ -73,7 +75,8 @@ fn electrical(m: &mut Model, logs: &[MotorLog]) {
     if y.len() <= cols.len() {
         return;
     }
-    let (x, _) = least_squares(&cols, &y);
+    let refs: Vec<&[f64]> = cols.iter().map(|c| c.as_slice()).collect();
+    let x = lstsq(&refs, &y).beta;
     tracing::debug!("electrical residual regression: {x:?} (was R {r}, L {l}, Kb {kb})");
     if x.iter().any(|v| !v.is_finite()) || x[1] <= 0.0 || x[2] <= 0.0 {
         return;
@@ -138,7 +141,7 @@ fn mechanical(m: &mut Model, logs: &[MotorLog]) {
             (true, None) => continue,
             (false, _) => log.u.clone(),
         };
-        let ws = weak_form::smooth_velocity(log, 5);
+        let ws = smooth_velocity(log, 5);
         let fric: Vec<f64> = ws
             .iter()
             .map(|&w| match &m.lugre {
@@ -165,7 +168,7 @@ fn mechanical(m: &mut Model, logs: &[MotorLog]) {
             let drive = if voltage {
                 m.motor.kt * w.int(&cur)
             } else {
-                w.int_zoh(&log.t, &cur)
+                w.int_zoh(&cur)
             };
             y.push(drive - m.motor.j * w.int_dd(&log.theta) - w.int(&fric));
             for (c, gv) in g.iter().enumerate() {
@@ -176,7 +179,8 @@ fn mechanical(m: &mut Model, logs: &[MotorLog]) {
     if y.len() <= cols.len() {
         return;
     }
-    let (x, _) = least_squares(&cols, &y);
+    let refs: Vec<&[f64]> = cols.iter().map(|c| c.as_slice()).collect();
+    let x = lstsq(&refs, &y).beta;
     tracing::debug!("mechanical residual regression: {x:?}");
     if x.iter().any(|v| !v.is_finite()) {
         return;

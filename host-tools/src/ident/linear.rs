@@ -2,16 +2,18 @@
 //! regression that gives every model kind its first estimate of the motor constants and of
 //! the linear-in-parameter effects.
 //!
-//! Electrical equation, tested with φ over each window (see [`super::weak_form`]):
+//! Electrical equation, tested with φ over each window (see [`crate::numerics::weak_form`]):
 //! `∫φ·u = L·(−∫φ'·I) + R·∫φ·I + K_b·(−∫φ'·θ) + v_d·∫φ·sgn(I) − R·i0·∫φ`.
 //! Mechanical equation, with K_t = K_b (SI units; the data fixes only K_t/J otherwise):
 //! `K_t·∫φ·I = J·∫φ''·θ + b·(−∫φ'·θ) + Σ c_e·∫φ·g_e(θ, ω, I)`.
 //! Then every parameter is refined on the free-run simulation error.
 use super::free_params::{effect_keys, effect_keys_of, Free, Slot};
-use super::weak_form::{self, least_squares};
 use super::{nlsq, sim_error, FitRequest};
 use crate::log::{MotorLog, Plant};
 use crate::model::{Model, ModelKind, Parameter};
+use crate::numerics::differentiation::smooth_velocity;
+use crate::numerics::least_squares::lstsq;
+use crate::numerics::weak_form;
 use anyhow::Result;
 use control::effects::{smooth_sign, Effect, EffectKind, CURRENT_EPS, VELOCITY_EPS};
 
@@ -66,7 +68,7 @@ fn set_table_range(spec: &mut crate::effect_spec::EffectSpec, logs: &[MotorLog],
     let mut xs: Vec<f64> = Vec::new();
     for log in logs {
         match var {
-            TableVar::Omega => xs.extend(weak_form::smooth_velocity(log, 5)),
+            TableVar::Omega => xs.extend(smooth_velocity(log, 5)),
             _ if plant == Plant::Voltage => xs.extend(log.i.iter().flatten().copied()),
             _ => xs.extend(log.u.iter().copied()),
         }
@@ -137,7 +139,7 @@ pub fn weak_estimate(m: &mut Model, logs: &[MotorLog], coulomb: bool) -> (f64, f
             let sgn_i: Vec<f64> = i.iter().map(|&c| smooth_sign(c, CURRENT_EPS)).collect();
             let ones = vec![1.0; log.len()];
             for w in weak_form::windows(&log.t, weak_form::WINDOW, weak_form::HOP) {
-                y.push(w.int_zoh(&log.t, &log.u));
+                y.push(w.int_zoh(&log.u));
                 cols[0].push(-w.int_d(i));
                 cols[1].push(w.int(i));
                 cols[2].push(-w.int_d(&log.theta));
@@ -150,7 +152,8 @@ pub fn weak_estimate(m: &mut Model, logs: &[MotorLog], coulomb: bool) -> (f64, f
             }
         }
         if y.len() > cols.len() {
-            let (x, _) = least_squares(&cols, &y);
+            let refs: Vec<&[f64]> = cols.iter().map(|c| c.as_slice()).collect();
+            let x = lstsq(&refs, &y).beta;
             let fallback = control::motor::MotorParams::<f64>::paper();
             m.motor.l = if x[0] > 0.0 { x[0] } else { fallback.l };
             m.motor.r = if x[1] > 0.0 { x[1] } else { fallback.r };
@@ -202,7 +205,7 @@ pub fn weak_estimate(m: &mut Model, logs: &[MotorLog], coulomb: bool) -> (f64, f
     let offset = control::effects::total_sensor_offset(&m.effects);
     let mut y = Vec::new();
     for log in logs {
-        let ws = weak_form::smooth_velocity(log, 5);
+        let ws = smooth_velocity(log, 5);
         let sgn: Vec<f64> = ws.iter().map(|&w| smooth_sign(w, VELOCITY_EPS)).collect();
         let cur: Vec<f64> = match (voltage, &log.i) {
             (true, Some(i)) => i.iter().map(|c| c - offset).collect(),
@@ -246,7 +249,7 @@ pub fn weak_estimate(m: &mut Model, logs: &[MotorLog], coulomb: bool) -> (f64, f
             let lhs = if voltage {
                 m.motor.kt * w.int(&cur)
             } else {
-                w.int_zoh(&log.t, &cur)
+                w.int_zoh(&cur)
             };
             y.push(lhs);
             cols[0].push(w.int_dd(&log.theta));
@@ -262,7 +265,8 @@ pub fn weak_estimate(m: &mut Model, logs: &[MotorLog], coulomb: bool) -> (f64, f
     let mut b = 0.0;
     let mut fc = 0.0;
     if y.len() > cols.len() {
-        let (x, _) = least_squares(&cols, &y);
+        let refs: Vec<&[f64]> = cols.iter().map(|c| c.as_slice()).collect();
+        let x = lstsq(&refs, &y).beta;
         if x[0] > 0.0 {
             m.motor.j = x[0];
         }

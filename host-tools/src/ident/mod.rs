@@ -6,14 +6,14 @@
 //! | [`fitpct`] | the paper's fit percentage |
 //! | [`freerun`] | free-run simulation of a model with a log's input |
 //! | [`sensor_chain`] | Hall quantisation and the firmware's velocity estimator |
-//! | [`weak_form`] | integral (weak-form) regression features: no derivatives of noisy data |
 //! | [`linear`] | the linear model (viscous friction), paper eqs. 1–2 |
 //! | [`lugre_fit`] | LuGre static curve and dynamic parameters |
 //! | [`nlsq`] | bounded nonlinear least squares (Levenberg–Marquardt with projection) |
 //! | [`progress`] | progress of a running fit (stage, iteration, cost) for a progress bar |
 //! | [`hankel`], [`stlsq`], [`library`], [`sindyc`] | SINDYc |
 //!
-//! Entry points: [`fit`] and [`score`].
+//! Entry points: [`fit`] and [`score`]. Least squares, statistics, differentiation and the
+//! weak form are in [`crate::numerics`].
 pub mod effect_residual;
 pub mod fitpct;
 pub mod free_params;
@@ -28,7 +28,6 @@ pub mod sensor_chain;
 pub mod sim_error;
 pub mod sindyc;
 pub mod stlsq;
-pub mod weak_form;
 
 use crate::effect_spec::EffectSpec;
 use crate::log::{MotorLog, Plant};

@@ -12,10 +12,10 @@
 //! Constants come from the benchmark's `.mat` files and EMPS_Description.pdf, as quoted in
 //! `../shared/data/README.md`.
 use super::butterworth::LowPass;
-use super::regression::{ols, Ols};
 use super::static_curve::sgn;
 use anyhow::{bail, Result};
 use motorid::log::{ColumnMap, MotorLog, Plant};
+use motorid::numerics::least_squares::{ols, Ols};
 use std::path::Path;
 
 /// Force per volt of `vir`, gτ [N/V] (scalar `gtau` in both .mat files).
@@ -337,8 +337,8 @@ pub struct TermTest {
     /// What the smaller model is.
     pub against: &'static str,
     /// The test, with the effective sample size of the larger model's residual (the statistics
-    /// `diagnose` uses: [`motorid::diagnose::stats`]).
-    pub test: motorid::diagnose::stats::FTest,
+    /// `diagnose` uses: [`motorid::numerics::statistics`]).
+    pub test: motorid::numerics::statistics::FTest,
 }
 
 /// (name, smaller model, its columns, the larger model's columns).
@@ -348,7 +348,7 @@ type Nested = (&'static str, &'static str, Vec<Vec<f64>>, Vec<Vec<f64>>);
 /// observation matrix: Coulomb against (M, Fv); offset against (M, Fv, Fc); asymmetry
 /// (one Fv/Fc per direction) against the symmetric model with offset.
 pub fn term_tests(log: &MotorLog, gain: f64) -> Result<Vec<TermTest>> {
-    use motorid::diagnose::stats::{effective_n, f_test};
+    use motorid::numerics::statistics::{effective_n, f_test};
     let (sym, y) = observation(log, gain, false);
     let (asym, _) = observation(log, gain, true);
     let resid = |cols: &[Vec<f64>]| -> Result<(f64, Vec<f64>)> {

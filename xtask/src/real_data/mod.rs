@@ -7,7 +7,6 @@ pub mod emps;
 pub mod emps_loop;
 pub mod omni_dc;
 pub mod plots;
-pub mod regression;
 pub mod screw_drives;
 pub mod static_curve;
 pub mod table_csv;

@@ -9,11 +9,12 @@
 //! parameters, so `vs` is found by variable projection: a log-spaced scan of the residual, then
 //! golden-section refinement of the best bracket.
 //!
-//! Selection uses the extra-sum-of-squares F-test (see [`super::regression::f_test`]): starting
+//! Selection uses the extra-sum-of-squares F-test (see [`motorid::numerics::statistics::f_test`]): starting
 //! from Coulomb + viscous, the candidate with the smallest p-value is added while that p-value
 //! is below `alpha`; a Stribeck term must also have `Fs > 0` (breakaway above Coulomb).
-use super::regression::{f_test, ols, Ols};
 use anyhow::{bail, Result};
+use motorid::numerics::least_squares::{ols, Ols};
+use motorid::numerics::statistics::f_test;
 
 /// Significance level of the term selection (1 %); the p-values are reported beside it.
 pub const ALPHA: f64 = 0.01;
@@ -240,7 +241,8 @@ pub fn select(v: &[f64], tau: &[f64], alpha: f64) -> Result<Selection> {
                 Ok(c) => c,
                 Err(_) => continue,
             };
-            let (f, p) = f_test(cur.rss, c.rss, t.dof(), v.len(), c.dof());
+            let test = f_test(cur.rss, c.rss, t.dof(), c.dof() - t.dof(), v.len() as f64);
+            let (f, p) = (test.f, test.p_value);
             let rejected = (t == Term::Stribeck && c.get(Term::Stribeck).unwrap_or(0.0) <= 0.0)
                 .then(|| "fitted Stribeck level Fs ≤ 0 (no breakaway above Coulomb)".to_string());
             cands.push(Candidate {
@@ -385,7 +387,7 @@ pub fn one_sided_stribeck(v: &[f64], tau: &[f64]) -> Vec<OneSided> {
             let with = fit(&[Term::Offset, Term::Viscous, Term::Stribeck], &vv, &tt);
             match (base, with) {
                 (Ok(b), Ok(w)) => {
-                    let (_, p) = f_test(b.rss, w.rss, 2, vv.len(), w.dof());
+                    let p = f_test(b.rss, w.rss, 2, w.dof() - 2, vv.len() as f64).p_value;
                     let fs = w.get(Term::Stribeck);
                     let stribeck = p < ALPHA && fs.is_some_and(|f| f > 0.0);
                     OneSided {

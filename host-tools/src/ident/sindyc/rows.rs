@@ -1,13 +1,13 @@
 //! The regression-rows stage: each equation multiplied by the shared smooth test functions
-//! ([`crate::ident::weak_form`], 40-sample windows, hop 20) and integrated by parts, so no
+//! ([`crate::numerics::weak_form`], 40-sample windows, hop 20) and integrated by parts, so no
 //! derivative of quantised data is taken: `∫φ·dẋ/dt = ∫φ''·x`, `∫φ·dz/dt = −∫φ'·z`,
 //! `∫φ·dI/dt = −∫φ'·I`; the library columns become `∫φ·θ_j`. The rows of every fitting log
 //! are stacked into one set of normal equations per state equation.
 use super::embedding::HiddenState;
 use crate::ident::library::{Library, Signals, ACCEL, IDOT, ZDOT};
 use crate::ident::stlsq::Normal;
-use crate::ident::weak_form;
 use crate::log::{MotorLog, Plant};
+use crate::numerics::weak_form;
 use anyhow::{bail, Result};
 use faer::Mat;
 
@@ -173,8 +173,7 @@ pub fn weak_rows_uniform(lib: &Library, t: &[f64], s: &Signals) -> (Mat<f64>, Ma
     let segs = rows + Q - 1;
     // The kernels of the first window (all windows share them): φ·w, φ'·w, φ''·w.
     let w0 = &weak_form::windows(&t[..LEN], LEN, HOP)[0];
-    let kern = |f: &[f64]| -> Vec<f64> { f.iter().zip(&w0.w).map(|(a, b)| a * b).collect() };
-    let (k0, k1, k2) = (kern(&w0.phi), kern(&w0.dphi), kern(&w0.ddphi));
+    let (k0, k1, k2) = (&w0.w0, &w0.w1, &w0.w2);
     // Partial integrals of one signal: part[g·Q + q] = Σ_i k[q·HOP + i]·v[g·HOP + i].
     let pieces = |k: &[f64], v: &[f64], out: &mut [f64]| {
         for (g, chunk) in v.chunks_exact(HOP).enumerate() {
@@ -266,13 +265,7 @@ pub fn weak_rows_generic(lib: &Library, t: &[f64], s: &Signals) -> (Mat<f64>, Ma
         lib.matrix_into(&s.slice(w.start, w.end), &mut buf);
         for j in 0..p {
             let col = &buf.col_as_slice(j)[..w.end - w.start];
-            a[(r, j)] = w
-                .phi
-                .iter()
-                .zip(&w.w)
-                .zip(col)
-                .map(|((f, q), v)| f * q * v)
-                .sum();
+            a[(r, j)] = w.w0.iter().zip(col).map(|(q, v)| q * v).sum();
         }
     }
     let y = Mat::<f64>::from_fn(wins.len(), 3, |r, e| match e {
@@ -371,7 +364,16 @@ mod tests {
             .collect();
         let c = ne.solve(0, &sup);
         let at = |term| c[terms.iter().position(|t| *t == term).unwrap()];
-        assert!((at(control::sindy::Term::Xdot) + 4.0).abs() < 1e-3, "{c:?}");
-        assert!((at(control::sindy::Term::U) - 3.0).abs() < 1e-3, "{c:?}");
+        // The weak form's difference weights are exact for constants and ramps and carry a
+        // relative error of (ω·dt)²/12 = 4.1e-4 at the 7 rad/s component.
+        let tol = 1.5 * (7.0 * dt).powi(2) / 12.0;
+        assert!(
+            (at(control::sindy::Term::Xdot) + 4.0).abs() < 4.0 * tol,
+            "{c:?}"
+        );
+        assert!(
+            (at(control::sindy::Term::U) - 3.0).abs() < 3.0 * tol,
+            "{c:?}"
+        );
     }
 }

@@ -1,70 +1,172 @@
-//! Weak-form (integrated) equations: derivatives of measured signals without differentiating
-//! them.
+//! The weak form: derivatives of measured signals without differentiating them, once for
+//! fitting and diagnosis.
 //!
-//! Multiplying an equation such as `J·θ̈ = K_t·I − F` by a smooth bump `φ(t − t_c)` that
-//! vanishes with its derivatives at both ends and integrating moves every derivative onto the
-//! bump: `∫φ·θ̈ dt = ∫φ''·θ dt`, `∫φ·ω dt = −∫φ'·θ dt`. The Hall-quantised angle is then only
-//! ever *averaged*, never differentiated. One row per window centre; windows overlap by half.
+//! Multiplying an equation such as `J·θ̈ = K_t·I − F` by a smooth bump `φ(t)` that vanishes
+//! with its derivatives at both ends of a window and integrating moves every derivative onto
+//! the bump: `∫φ·θ̈ dt = ∫φ''·θ dt`, `∫φ·ω dt = −∫φ'·θ dt`. The Hall-quantised angle is then
+//! only ever *averaged*, never differentiated. One regression row per window.
 //!
-//! The bump is `φ(s) = (1 − s²)⁴` on `s ∈ [−1, 1]`, `s = (t − t_c)/T`: its value and first two
-//! derivatives vanish at `s = ±1`, which is what the integrations by parts need.
+//! The bump is `φ(s) = (1 − s²)⁴` on `s ∈ [−1, 1]`, mapped onto the window's first and last
+//! sample times: its value and first two derivatives vanish at `s = ±1`.
 //!
-//! # Discrete integration by parts ([`WeakForm::new`])
-//! The derivative weights are the bump's central differences, not its sampled analytic
-//! derivatives: for a sequence φ that vanishes at the window's ends
-//! `Σφ_k·(x_{k+1} − x_{k−1})/2 = −Σ x_k·(φ_{k+1} − φ_{k−1})/2` and
-//! `Σφ_k·(x_{k+1} − 2x_k + x_{k−1}) = Σ x_k·(φ_{k+1} − 2φ_k + φ_{k−1})` hold exactly, so the
-//! weak derivatives annihilate constants (and the second one linear ramps) to the last bit and
-//! the absolute angle never leaks into the torque equation. Their relative error on a signal
-//! of frequency f is `(2π·f·dt)²/12`. Why: docs/decisions/0003-exact-discrete-weights.md.
+//! # Discrete integration by parts
+//! The derivative weights are the bump's own differences, not its sampled analytic
+//! derivatives. For any sequence φ that vanishes at the window's ends, with steps
+//! `h_k = t_{k+1} − t_k` (uniform or not), summation by parts gives exactly
+//! `Σφ_k·(x_{k+1} − x_{k−1})/2 = −Σx_k·(φ_{k+1} − φ_{k−1})/2` and
+//! `Σφ_k·((x_{k+1} − x_k)/h_k − (x_k − x_{k−1})/h_{k−1}) = Σx_k·((φ_{k+1} − φ_k)/h_k − (φ_k − φ_{k−1})/h_{k−1})`,
+//! so the weak derivatives annihilate constants (and the second one linear ramps) to the last
+//! bit: the absolute angle never leaks into the torque equation. Their relative error on a
+//! signal of frequency f is `(2π·f·h)²/12`. Sampled analytic derivatives do leak: on a 40-sample
+//! window at 12 ms, `Σ w_k·φ''(t_k)` is −1.7·10⁻³ s⁻² of `∫φ dt` instead of 0, so an angle of
+//! 1000 rad reads as a torque of `J·1.7 rad/s²` (docs/decisions/0003-exact-discrete-weights.md).
+//!
+//! Two forms of the same operator: [`Window`]s over any time axis (the fits' regression rows)
+//! and [`WeakForm`], the same weights as one kernel convolved over a uniformly sampled log
+//! (what `diagnose` runs, many columns at a time).
 
-/// Default half-width of a window in samples: 8 × 12 ms ≈ 0.1 s, short against the
+/// Half-width of a diagnosis window in samples: 8 × 12 ms ≈ 0.1 s, short against the
 /// excitations (≤ 1 Hz) and long against the Hall quantisation (one step per 12 ms at 8 rad/s).
 pub const HALF_WIDTH: usize = 8;
 /// The same half-width in seconds (8 × 12 ms), used for logs at other sample rates.
 pub const HALF_WIDTH_S: f64 = 0.096;
 
-/// Weak-form operator on a uniformly sampled log.
+/// Length of a fitting window [samples]: 40 samples = 0.48 s at 12 ms, several Hall steps at
+/// moderate speed, short against the 1 Hz upper frequency of the paper's signals.
+pub const WINDOW: usize = 40;
+/// Hop between fitting windows [samples] (half overlap).
+pub const HOP: usize = 20;
+
+/// The bump `(1 − s²)⁴` on `|s| < 1`, zero outside.
+fn bump(s: f64) -> f64 {
+    let q = 1.0 - s * s;
+    if q > 0.0 {
+        q.powi(4)
+    } else {
+        0.0
+    }
+}
+
+/// Quadrature weights of one window over the sample times `t` (at least three):
+/// `(w0, w1, w2, wz)` with `Σ w0·g ≈ ∫φ·g dt` (trapezoid), `Σ w1·g ≈ ∫φ'·g dt` and
+/// `Σ w2·g ≈ ∫φ''·g dt` (the exact discrete differences of the module doc), and
+/// `Σ wz_k·u_k = ∫φ·u dt` for `u` held over `[t_k, t_{k+1})` (`len − 1` intervals; Simpson's
+/// rule per interval, exact for the bump's polynomial to about 1e-6).
+fn kernel(t: &[f64]) -> [Vec<f64>; 4] {
+    let n = t.len();
+    let (t0, span) = (t[0], t[n - 1] - t[0]);
+    let s_of = |tk: f64| 2.0 * (tk - t0) / span - 1.0;
+    let phi: Vec<f64> = t.iter().map(|&tk| bump(s_of(tk))).collect();
+    let at = |k: isize| -> f64 {
+        if k < 0 || k as usize >= n {
+            0.0
+        } else {
+            phi[k as usize]
+        }
+    };
+    let h = |k: isize| -> f64 {
+        // Step after sample k; outside the window φ is zero on both sides, any step will do.
+        let k = k.clamp(0, n as isize - 2) as usize;
+        t[k + 1] - t[k]
+    };
+    let mut w = [vec![0.0; n], vec![0.0; n], vec![0.0; n], vec![0.0; n - 1]];
+    for k in 0..n as isize {
+        let j = k as usize;
+        let left = if j > 0 { t[j] - t[j - 1] } else { 0.0 };
+        let right = if j + 1 < n { t[j + 1] - t[j] } else { 0.0 };
+        w[0][j] = phi[j] * 0.5 * (left + right);
+        w[1][j] = 0.5 * (at(k + 1) - at(k - 1));
+        w[2][j] = (at(k + 1) - at(k)) / h(k) - (at(k) - at(k - 1)) / h(k - 1);
+    }
+    for j in 0..n - 1 {
+        let (a, b) = (s_of(t[j]), s_of(t[j + 1]));
+        w[3][j] = (t[j + 1] - t[j]) / 6.0 * (bump(a) + 4.0 * bump(0.5 * (a + b)) + bump(b));
+    }
+    w
+}
+
+/// One window of the weak form over samples `start..end` of a log.
+#[derive(Debug, Clone)]
+pub struct Window {
+    pub start: usize,
+    pub end: usize,
+    /// `∫φ·g dt` weights.
+    pub w0: Vec<f64>,
+    /// `∫φ'·g dt` weights.
+    pub w1: Vec<f64>,
+    /// `∫φ''·g dt` weights.
+    pub w2: Vec<f64>,
+    /// `∫φ·u dt` weights for an input held between samples (one per interval).
+    pub wz: Vec<f64>,
+}
+
+impl Window {
+    /// `∫ φ·g dt` over the window (g sampled).
+    pub fn int(&self, g: &[f64]) -> f64 {
+        dot(&self.w0, &g[self.start..self.end])
+    }
+
+    /// `∫ φ'·g dt` (so `−int_d(x)` is `∫φ·ẋ dt`).
+    pub fn int_d(&self, g: &[f64]) -> f64 {
+        dot(&self.w1, &g[self.start..self.end])
+    }
+
+    /// `∫ φ''·g dt` (so `int_dd(x)` is `∫φ·ẍ dt`).
+    pub fn int_dd(&self, g: &[f64]) -> f64 {
+        dot(&self.w2, &g[self.start..self.end])
+    }
+
+    /// `∫ φ·u dt` for an input held constant between samples (zero-order hold, as the board
+    /// applies its voltage).
+    pub fn int_zoh(&self, u: &[f64]) -> f64 {
+        dot(&self.wz, &u[self.start..self.end - 1])
+    }
+}
+
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+/// The windows of `len` samples (at least three), one every `hop`, covering a log sampled at
+/// the times `t`.
+pub fn windows(t: &[f64], len: usize, hop: usize) -> Vec<Window> {
+    let len = len.max(3);
+    let mut out = Vec::new();
+    let mut start = 0;
+    while start + len <= t.len() {
+        let end = start + len;
+        let [w0, w1, w2, wz] = kernel(&t[start..end]);
+        out.push(Window {
+            start,
+            end,
+            w0,
+            w1,
+            w2,
+            wz,
+        });
+        start += hop.max(1);
+    }
+    out
+}
+
+/// The weak form on a uniformly sampled log: windows of `2·half + 1` samples centred on
+/// [`WeakForm::centres`], each with the same weights as a [`Window`] there.
 #[derive(Debug, Clone)]
 pub struct WeakForm {
     /// Sample index of each window centre.
     pub centres: Vec<usize>,
     /// Half-width of a window [samples].
     pub half: usize,
-    /// `φ` and its central first and second differences (standing for `φ'`, `φ''`) at
-    /// offsets `−half..=half`, times `dt` (quadrature weights).
-    w0: Vec<f64>,
-    w1: Vec<f64>,
-    w2: Vec<f64>,
+    kernel: Window,
 }
 
 impl WeakForm {
-    /// Windows of half-width `half` samples over `n` samples of period `dt`, one every `stride`,
-    /// with the bump's central differences as derivative weights: discrete integration by
-    /// parts holds exactly, constants and ramps are annihilated (see the module doc). What
-    /// `diagnose` uses.
+    /// Windows of half-width `half` samples (at least 2) over `n` samples of period `dt`, one
+    /// every `stride`.
     pub fn new(n: usize, dt: f64, half: usize, stride: usize) -> WeakForm {
         let half = half.max(2);
-        // φ at offsets −half−1 ..= half+1 (zero at and beyond ±half).
-        let phi: Vec<f64> = (-(half as isize) - 1..=(half as isize) + 1)
-            .map(|k| {
-                let s = k as f64 / half as f64;
-                let q = 1.0 - s * s;
-                if q > 0.0 {
-                    q.powi(4)
-                } else {
-                    0.0
-                }
-            })
-            .collect();
-        // Offset k of the window is phi[k + 1]; see the module doc for why differences.
-        let w0: Vec<f64> = (1..=2 * half + 1).map(|j| phi[j] * dt).collect();
-        let w1: Vec<f64> = (1..=2 * half + 1)
-            .map(|j| (phi[j + 1] - phi[j - 1]) / (2.0 * dt) * dt)
-            .collect();
-        let w2: Vec<f64> = (1..=2 * half + 1)
-            .map(|j| (phi[j + 1] - 2.0 * phi[j] + phi[j - 1]) / (dt * dt) * dt)
-            .collect();
+        let t: Vec<f64> = (0..=2 * half).map(|k| k as f64 * dt).collect();
+        let kernel = windows(&t, 2 * half + 1, 1).remove(0);
         let centres = if n > 2 * half {
             (half..n - half).step_by(stride.max(1)).collect()
         } else {
@@ -73,9 +175,7 @@ impl WeakForm {
         WeakForm {
             centres,
             half,
-            w0,
-            w1,
-            w2,
+            kernel,
         }
     }
 
@@ -87,100 +187,80 @@ impl WeakForm {
     fn conv(&self, w: &[f64], x: &[f64]) -> Vec<f64> {
         self.centres
             .iter()
-            .map(|&c| {
-                let start = c - self.half;
-                w.iter().zip(&x[start..]).map(|(a, b)| a * b).sum()
-            })
+            .map(|&c| dot(w, &x[c - self.half..]))
             .collect()
     }
 
     /// `∫φ·x dt` per window.
     pub fn integral(&self, x: &[f64]) -> Vec<f64> {
-        self.conv(&self.w0, x)
+        self.conv(&self.kernel.w0, x)
     }
 
     /// `∫φ·x dt` for a signal held constant over each sample interval `[t_k, t_k+1)`
-    /// (zero-order hold, as the board applies its voltage): exact interval weights
-    /// `∫φ` over each interval (Simpson's rule, exact for the bump's polynomial to 1e-6).
+    /// (zero-order hold, as the board applies its voltage).
     pub fn integral_zoh(&self, x: &[f64]) -> Vec<f64> {
-        let h = self.half as f64;
-        let dt = self.w0[self.half] / 1.0; // φ(0)·dt = dt
-        let phi = |s: f64| {
-            let q = 1.0 - s * s;
-            if q > 0.0 {
-                q.powi(4)
-            } else {
-                0.0
-            }
-        };
-        let w: Vec<f64> = (-(self.half as isize)..(self.half as isize))
-            .map(|k| {
-                let a = k as f64 / h;
-                let b = (k + 1) as f64 / h;
-                dt / 6.0 * (phi(a) + 4.0 * phi(0.5 * (a + b)) + phi(b))
-            })
-            .collect();
-        self.centres
-            .iter()
-            .map(|&c| {
-                let start = c - self.half;
-                w.iter().zip(&x[start..]).map(|(a, b)| a * b).sum()
-            })
-            .collect()
+        self.conv(&self.kernel.wz, x)
     }
 
     /// `∫φ·ẋ dt = −∫φ'·x dt` per window (the weak first derivative).
     pub fn derivative(&self, x: &[f64]) -> Vec<f64> {
-        self.conv(&self.w1, x).into_iter().map(|v| -v).collect()
+        self.conv(&self.kernel.w1, x)
+            .into_iter()
+            .map(|v| -v)
+            .collect()
     }
 
     /// `∫φ·ẍ dt = ∫φ''·x dt` per window (the weak second derivative).
     pub fn second_derivative(&self, x: &[f64]) -> Vec<f64> {
-        self.conv(&self.w2, x)
+        self.conv(&self.kernel.w2, x)
     }
-}
-
-/// Least-squares slope over `±m` samples (Savitzky–Golay, first order): a smoothed derivative
-/// of a quantised signal; the window shrinks at the ends.
-pub fn smoothed_derivative(x: &[f64], dt: f64, m: usize) -> Vec<f64> {
-    let n = x.len();
-    (0..n)
-        .map(|j| {
-            let mm = m.min(j).min(n.saturating_sub(1) - j);
-            if mm == 0 {
-                return if n < 2 {
-                    0.0
-                } else if j == 0 {
-                    (x[1] - x[0]) / dt
-                } else {
-                    (x[j] - x[j - 1]) / dt
-                };
-            }
-            let mut num = 0.0;
-            let mut den = 0.0;
-            for k in 1..=mm {
-                num += k as f64 * (x[j + k] - x[j - k]);
-                den += 2.0 * (k * k) as f64;
-            }
-            num / (den * dt)
-        })
-        .collect()
-}
-
-/// Centred moving average over `±m` samples (shrinking at the ends).
-pub fn moving_average(x: &[f64], m: usize) -> Vec<f64> {
-    let n = x.len();
-    (0..n)
-        .map(|j| {
-            let mm = m.min(j).min(n.saturating_sub(1) - j);
-            x[j - mm..=j + mm].iter().sum::<f64>() / (2 * mm + 1) as f64
-        })
-        .collect()
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// On a uniform axis a [`Window`] and the [`WeakForm`] row centred on it agree.
+    #[test]
+    fn windows_and_the_uniform_form_agree() {
+        let dt = 0.012;
+        let n = 100;
+        let t: Vec<f64> = (0..n).map(|k| k as f64 * dt).collect();
+        let x: Vec<f64> = t.iter().map(|t| (2.0 * t).sin() + 0.3 * t).collect();
+        let wf = WeakForm::new(n, dt, 8, 8);
+        let w = &windows(&t, 17, 8)[0];
+        assert_eq!(wf.centres[0], 8);
+        for (a, b) in [
+            (wf.integral(&x)[0], w.int(&x)),
+            (wf.derivative(&x)[0], -w.int_d(&x)),
+            (wf.second_derivative(&x)[0], w.int_dd(&x)),
+            (wf.integral_zoh(&x)[0], w.int_zoh(&x)),
+        ] {
+            assert!((a - b).abs() < 1e-12 * (1.0 + b.abs()), "{a} {b}");
+        }
+    }
+
+    /// Integration by parts holds on a smooth signal, and exactly for constants and ramps on
+    /// a jittered (non-uniform) time axis.
+    #[test]
+    fn integration_by_parts_holds_on_any_time_axis() {
+        // θ = sin(t): ∫φ''θ = ∫φ·θ'' = −∫φ·sin, ∫φ'θ = −∫φ·cos.
+        let t: Vec<f64> = (0..2000).map(|k| k as f64 * 0.001).collect();
+        let th: Vec<f64> = t.iter().map(|t| t.sin()).collect();
+        let cos: Vec<f64> = t.iter().map(|t| t.cos()).collect();
+        let w = &windows(&t, 1000, 500)[1];
+        assert!((w.int_dd(&th) + w.int(&th)).abs() < 1e-6 * w.int(&th).abs());
+        assert!((w.int(&cos) + w.int_d(&th)).abs() < 1e-6 * w.int(&cos).abs());
+        let jitter: Vec<f64> = (0..200)
+            .map(|k| k as f64 * 0.01 + 0.003 * ((k * 7919 % 13) as f64 / 13.0))
+            .collect();
+        for w in windows(&jitter, 40, 20) {
+            let c = vec![1000.0; jitter.len()];
+            let ramp: Vec<f64> = jitter.iter().map(|t| 500.0 + 3.0 * t).collect();
+            assert!(w.int_d(&c).abs() < 1e-9 && w.int_dd(&c).abs() < 1e-7);
+            assert!(w.int_dd(&ramp).abs() < 1e-7, "{}", w.int_dd(&ramp));
+        }
+    }
 
     #[test]
     fn weak_derivatives_match_analytic_ones() {
@@ -279,16 +359,6 @@ mod tests {
         }
     }
 
-    #[test]
-    fn smoothed_derivative_of_a_ramp() {
-        let x: Vec<f64> = (0..50).map(|k| 2.0 * k as f64 * 0.01).collect();
-        for v in smoothed_derivative(&x, 0.01, 4) {
-            assert!((v - 2.0).abs() < 1e-9);
-        }
-        let m = moving_average(&x, 2);
-        assert!((m[10] - x[10]).abs() < 1e-12);
-    }
-
     fn corr(a: &[f64], b: &[f64]) -> f64 {
         let n = a.len() as f64;
         let (ma, mb) = (a.iter().sum::<f64>() / n, b.iter().sum::<f64>() / n);
@@ -315,7 +385,7 @@ mod tests {
         let dt = log.sample_period();
         let n = log.len();
         let i = log.i.clone().unwrap();
-        let omega = smoothed_derivative(&log.theta, dt, 4);
+        let omega = crate::numerics::differentiation::smoothed_derivative(&log.theta, dt, 4);
         let wf = WeakForm::new(n, dt, HALF_WIDTH, HALF_WIDTH);
         let q = m.kt / m.r;
         let (u, w, di) = (

@@ -1,88 +1,10 @@
-//! Statistics of the model-error workbench: least squares, the nested-model F-test with an
-//! effective sample size, information criteria, residual whiteness and the cross-correlation
-//! of the residual with the input, with confidence bands (as MATLAB's `resid`).
+//! Statistics of model errors: the nested-model F-test with an effective sample size,
+//! information criteria, residual whiteness and the cross-correlation of the residual with the
+//! input, with confidence bands (as MATLAB's `resid`).
 //!
-//! Least squares uses faer's QR; the F and normal distributions come from `statrs`.
-use faer::linalg::solvers::SolveLstsq;
-use faer::Mat;
+//! The F and normal distributions come from `statrs`; least squares is in
+//! [`super::least_squares`].
 use statrs::distribution::{ContinuousCDF, FisherSnedecor, Normal};
-
-/// Result of a least-squares fit `y ≈ Σ beta_j·col_j`.
-#[derive(Debug, Clone)]
-pub struct LinFit {
-    /// Coefficients, one per column (0 for a column that is identically zero).
-    pub beta: Vec<f64>,
-    /// Residual sum of squares.
-    pub rss: f64,
-    /// Residual `y − X·beta`.
-    pub resid: Vec<f64>,
-}
-
-/// Relative ridge added to the (column-scaled) normal problem so that collinear columns give
-/// finite coefficients instead of a blow-up: 1e-9 of a unit-RMS column's energy. It changes a
-/// well-posed fit by less than a part per billion.
-const RIDGE: f64 = 1e-9;
-
-/// Least squares `y ≈ X·beta` with X given by columns. Columns are scaled to unit RMS and a
-/// tiny ridge keeps collinear columns finite.
-pub fn lstsq(cols: &[&[f64]], y: &[f64]) -> LinFit {
-    let n = y.len();
-    let p = cols.len();
-    if p == 0 || n == 0 {
-        let rss = y.iter().map(|v| v * v).sum();
-        return LinFit {
-            beta: vec![0.0; p],
-            rss,
-            resid: y.to_vec(),
-        };
-    }
-    let scale: Vec<f64> = cols
-        .iter()
-        .map(|c| {
-            let ms = c.iter().map(|v| v * v).sum::<f64>() / n as f64;
-            if ms > 0.0 && ms.is_finite() {
-                ms.sqrt()
-            } else {
-                0.0
-            }
-        })
-        .collect();
-    let ridge = (RIDGE * n as f64).sqrt();
-    let a = Mat::<f64>::from_fn(n + p, p, |r, c| {
-        if r < n {
-            if scale[c] > 0.0 {
-                cols[c][r] / scale[c]
-            } else {
-                0.0
-            }
-        } else if r - n == c {
-            ridge
-        } else {
-            0.0
-        }
-    });
-    let b = Mat::<f64>::from_fn(n + p, 1, |r, _| if r < n { y[r] } else { 0.0 });
-    let x = a.qr().solve_lstsq(&b);
-    let beta: Vec<f64> = (0..p)
-        .map(|c| {
-            if scale[c] > 0.0 {
-                x[(c, 0)] / scale[c]
-            } else {
-                0.0
-            }
-        })
-        .collect();
-    let mut resid = y.to_vec();
-    for (c, col) in cols.iter().enumerate() {
-        if beta[c] != 0.0 {
-            for (r, v) in resid.iter_mut().enumerate() {
-                *v -= beta[c] * col[r];
-            }
-        }
-    }
-    let rss = resid.iter().map(|v| v * v).sum();
-    LinFit { beta, rss, resid }
-}
 
 /// Outcome of a nested-model F-test.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -254,32 +176,10 @@ pub(crate) fn white_noise(n: usize, seed: u64) -> Vec<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::numerics::least_squares::lstsq;
 
     fn noise(n: usize, seed: u64) -> Vec<f64> {
         white_noise(n, seed)
-    }
-
-    #[test]
-    fn lstsq_recovers_coefficients() {
-        let n = 500;
-        let x1: Vec<f64> = (0..n).map(|k| (k as f64 * 0.1).sin()).collect();
-        let x2: Vec<f64> = (0..n).map(|k| k as f64 / n as f64).collect();
-        let e = noise(n, 1);
-        let y: Vec<f64> = (0..n)
-            .map(|k| 2.0 * x1[k] - 0.5 * x2[k] + 1e-3 * e[k])
-            .collect();
-        let fit = lstsq(&[&x1, &x2], &y);
-        assert!((fit.beta[0] - 2.0).abs() < 1e-3);
-        assert!((fit.beta[1] + 0.5).abs() < 1e-3);
-        // A duplicated column stays finite.
-        let fit2 = lstsq(&[&x1, &x1, &x2], &y);
-        assert!(fit2.beta.iter().all(|b| b.is_finite()));
-        assert!(
-            fit2.rss <= fit.rss * 1.01 + 1e-12,
-            "{} vs {}",
-            fit2.rss,
-            fit.rss
-        );
     }
 
     #[test]
@@ -325,104 +225,16 @@ mod tests {
         assert!(w.xcf[25] > 0.3);
         assert!((correlation_band(10_000, 0.99) - 0.02576).abs() < 1e-4);
     }
-}
 
-/// Gram matrix of a set of columns and a target, for many nested least-squares fits over
-/// subsets of the same columns (each fit then costs O(p³) instead of O(n·p²)).
-#[derive(Debug, Clone)]
-pub struct Gram {
-    /// `XᵀX` of the unit-RMS-scaled columns.
-    xtx: Vec<Vec<f64>>,
-    /// `Xᵀy` of the scaled columns.
-    xty: Vec<f64>,
-    /// `yᵀy`.
-    yty: f64,
-    /// RMS of each column (its scale; 0 for a zero column).
-    scale: Vec<f64>,
-    /// Number of rows.
-    pub n: usize,
-}
-
-impl Gram {
-    /// Gram matrix of `cols` (all of length `y.len()`) and `y`.
-    pub fn new(cols: &[Vec<f64>], y: &[f64]) -> Gram {
-        let n = y.len();
-        let p = cols.len();
-        let scale: Vec<f64> = cols
-            .iter()
-            .map(|c| {
-                let ms = c.iter().map(|v| v * v).sum::<f64>() / n.max(1) as f64;
-                if ms > 0.0 && ms.is_finite() {
-                    ms.sqrt()
-                } else {
-                    0.0
-                }
-            })
-            .collect();
-        let scaled: Vec<Vec<f64>> = cols
-            .iter()
-            .zip(&scale)
-            .map(|(c, s)| {
-                if *s > 0.0 {
-                    c.iter().map(|v| v / s).collect()
-                } else {
-                    vec![0.0; n]
-                }
-            })
-            .collect();
-        let mut xtx = vec![vec![0.0; p]; p];
-        for a in 0..p {
-            for b in a..p {
-                let d: f64 = scaled[a].iter().zip(&scaled[b]).map(|(x, y)| x * y).sum();
-                xtx[a][b] = d;
-                xtx[b][a] = d;
-            }
-        }
-        let xty = scaled
-            .iter()
-            .map(|c| c.iter().zip(y).map(|(x, y)| x * y).sum())
-            .collect();
-        let yty = y.iter().map(|v| v * v).sum();
-        Gram {
-            xtx,
-            xty,
-            yty,
-            scale,
-            n,
-        }
-    }
-
-    /// Least squares on the columns `subset`: returns (coefficients in the original units,
-    /// residual sum of squares).
-    pub fn fit(&self, subset: &[usize]) -> (Vec<f64>, f64) {
-        let p = subset.len();
-        if p == 0 {
-            return (vec![], self.yty);
-        }
-        let ridge = RIDGE * self.n as f64;
-        let a = Mat::<f64>::from_fn(p, p, |r, c| {
-            self.xtx[subset[r]][subset[c]] + if r == c { ridge } else { 0.0 }
-        });
-        let b = Mat::<f64>::from_fn(p, 1, |r, _| self.xty[subset[r]]);
-        let x = match a.llt(faer::Side::Lower) {
-            Ok(llt) => {
-                use faer::linalg::solvers::Solve;
-                llt.solve(&b)
-            }
-            Err(_) => a.qr().solve_lstsq(&b),
-        };
-        let mut fitted = 0.0;
-        let mut beta = Vec::with_capacity(p);
-        for r in 0..p {
-            fitted += x[(r, 0)] * self.xty[subset[r]];
-            let s = self.scale[subset[r]];
-            beta.push(if s > 0.0 { x[(r, 0)] / s } else { 0.0 });
-        }
-        (beta, (self.yty - fitted).max(0.0))
-    }
-
-    /// `yᵀy`, the residual sum of squares of the empty model.
-    pub fn yty(&self) -> f64 {
-        self.yty
+    /// Upper-tail p-values at tabulated quantiles: F(1, 10) 5 % point 4.9646, F(2, 30) 1 %
+    /// point 5.3903, and F(1, 20) = t(20)² at the two-sided 5 % point 2.0860.
+    #[test]
+    fn f_test_p_values_match_tabulated_quantiles() {
+        // With rss1 = d2 the statistic is rss0 − rss1 per added column.
+        let p =
+            |f: f64, q: usize, d2: f64| f_test(d2 + q as f64 * f, d2, q, 0, d2 + q as f64).p_value;
+        assert!((p(4.9646, 1, 10.0) - 0.05).abs() < 1e-4);
+        assert!((p(5.3903, 2, 30.0) - 0.01).abs() < 1e-4);
+        assert!((p(2.0860f64.powi(2), 1, 20.0) - 0.05).abs() < 1e-4);
     }
 }

@@ -1,0 +1,75 @@
+//! Smoothed derivatives of sampled signals, for evaluating nonlinear terms (the sign of ω,
+//! |ω|, an acceleration carrier) — never as a regression target, which the weak form
+//! ([`super::weak_form`]) handles without differentiating.
+use crate::log::MotorLog;
+
+/// Least-squares slope over `±m` samples (Savitzky–Golay, first order) of a signal sampled
+/// every `dt`: a smoothed derivative of a quantised signal; the window shrinks at the ends.
+pub fn smoothed_derivative(x: &[f64], dt: f64, m: usize) -> Vec<f64> {
+    let n = x.len();
+    (0..n)
+        .map(|j| {
+            let mm = m.min(j).min(n.saturating_sub(1) - j);
+            if mm == 0 {
+                return if n < 2 {
+                    0.0
+                } else if j == 0 {
+                    (x[1] - x[0]) / dt
+                } else {
+                    (x[j] - x[j - 1]) / dt
+                };
+            }
+            let mut num = 0.0;
+            let mut den = 0.0;
+            for k in 1..=mm {
+                num += k as f64 * (x[j + k] - x[j - k]);
+                den += 2.0 * (k * k) as f64;
+            }
+            num / (den * dt)
+        })
+        .collect()
+}
+
+/// The rotor velocity of a log [rad/s]: [`smoothed_derivative`] of its angle over `±half`
+/// samples at the log's sample period.
+pub fn smooth_velocity(log: &MotorLog, half: usize) -> Vec<f64> {
+    smoothed_derivative(&log.theta, log.sample_period(), half)
+}
+
+/// Centred moving average over `±m` samples (shrinking at the ends).
+pub fn moving_average(x: &[f64], m: usize) -> Vec<f64> {
+    let n = x.len();
+    (0..n)
+        .map(|j| {
+            let mm = m.min(j).min(n.saturating_sub(1) - j);
+            x[j - mm..=j + mm].iter().sum::<f64>() / (2 * mm + 1) as f64
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn smoothed_derivative_of_a_ramp() {
+        let x: Vec<f64> = (0..50).map(|k| 2.0 * k as f64 * 0.01).collect();
+        for v in smoothed_derivative(&x, 0.01, 4) {
+            assert!((v - 2.0).abs() < 1e-9);
+        }
+        let m = moving_average(&x, 2);
+        assert!((m[10] - x[10]).abs() < 1e-12);
+    }
+
+    /// The slope of a parabola `x = t²` at an interior sample is exactly `2t` (a symmetric
+    /// least-squares slope is exact for quadratics).
+    #[test]
+    fn smoothed_derivative_is_exact_for_a_parabola() {
+        let dt = 0.012;
+        let x: Vec<f64> = (0..40).map(|k| (k as f64 * dt).powi(2)).collect();
+        let d = smoothed_derivative(&x, dt, 5);
+        for j in 5..35 {
+            assert!((d[j] - 2.0 * j as f64 * dt).abs() < 1e-12, "{j}");
+        }
+    }
+}

@@ -1,0 +1,6 @@
+//! Numerical methods, each once for the whole tool: linear least squares, the statistics of
+//! model errors, smoothed differentiation and the weak form.
+pub mod differentiation;
+pub mod least_squares;
+pub mod statistics;
+pub mod weak_form;
