@@ -27,3 +27,4 @@ pub mod model;
 pub mod numerics;
 pub mod report;
 pub mod validate;
+pub mod workflow;

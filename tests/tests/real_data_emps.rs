@@ -102,7 +102,7 @@ fn generic_diagnosis_finds_coulomb_friction() {
     .unwrap();
     let d = motorid::diagnose::diagnose(
         &prepared,
-        &emps_loop::structure_of(&rep.model),
+        &motorid::diagnose::Structure::from_model(&rep.model),
         &motorid::diagnose::Options::default(),
     );
     let names: Vec<&str> = d.effects.iter().map(|f| f.name.as_str()).collect();

@@ -198,7 +198,7 @@ pub fn weak_rows_uniform(lib: &Library, t: &[f64], s: &Signals) -> (Mat<f64>, Ma
         lib.matrix_into(&s.slice(start, end), &mut buf);
         for (j, cp) in col_parts.iter_mut().enumerate() {
             let col = &buf.col_as_slice(j)[..end - start];
-            pieces(&k0, col, &mut cp[g0 * Q..g1 * Q]);
+            pieces(k0, col, &mut cp[g0 * Q..g1 * Q]);
         }
         g0 = g1;
     }
@@ -209,21 +209,21 @@ pub fn weak_rows_uniform(lib: &Library, t: &[f64], s: &Signals) -> (Mat<f64>, Ma
     }
     let mut y = Mat::<f64>::zeros(rows, 3);
     let end = segs * HOP;
-    pieces(&k2, &s.x[..end], &mut part);
+    pieces(k2, &s.x[..end], &mut part);
     for r in 0..rows {
         y[(r, ACCEL)] = assemble(&part, r);
     }
-    pieces(&k1, &s.z[..end], &mut part);
+    pieces(k1, &s.z[..end], &mut part);
     for r in 0..rows {
         y[(r, ZDOT)] = -assemble(&part, r);
     }
-    pieces(&k0, &s.u[..end], &mut part);
+    pieces(k0, &s.u[..end], &mut part);
     for r in 0..rows {
         y[(r, IDOT)] = assemble(&part, r);
     }
     let mut d = Mat::<f64>::zeros(rows, 1);
     if let Some(i) = s.i {
-        pieces(&k1, &i[..end], &mut part);
+        pieces(k1, &i[..end], &mut part);
         for r in 0..rows {
             d[(r, 0)] = -assemble(&part, r);
         }
