@@ -38,6 +38,7 @@ use crate::frame::{
 use crate::hall::{HallTable, INVALID};
 use crate::slots::Slots;
 use crate::step::{ControlStep, Faults, HallEdge, StepInputs, MAX_EDGES};
+use crate::telemetry::{LoopStats, PeriodTiming, Telemetry};
 
 /// Phase current at which the hardware stops the bridge within a PWM period [A]: the
 /// B-G431B-ESC1's 40 A peak rating (ST UM2516). The firmware sets its comparators' threshold
@@ -113,6 +114,12 @@ pub struct Measurements {
     pub edges: heapless::Vec<HallEdge, MAX_EDGES>,
     /// More edges than `edges` holds came.
     pub edges_overflow: bool,
+    /// Hall edges lost since boot (the capture queue's running overflow count).
+    pub edges_lost: u32,
+    /// Time since the previous period started [µs] (not finite: unknown).
+    pub period_us: f32,
+    /// Cycles the previous period's work took (0: no cycle counter).
+    pub step_cycles: u32,
     /// Capture-timer count now.
     pub now_ticks: u32,
     /// Current along the applied bridge vector [A], positive when it flows the way the
@@ -163,6 +170,9 @@ pub struct Board {
     commission: CommissionOutcome,
     commission_seq: u32,
     store_request: bool,
+    stats: LoopStats,
+    /// A telemetry window completed in the last period (see [`Board::take_report`]).
+    report: Option<Telemetry>,
 }
 
 fn table_of(c: &Coefficients) -> HallTable {
@@ -214,6 +224,8 @@ impl Board {
             commission: CommissionOutcome::NotRun,
             commission_seq: 0,
             store_request: false,
+            stats: LoopStats::new(),
+            report: None,
         };
         b.coeff_seq = seq;
         if seq != 0 {
@@ -361,6 +373,7 @@ impl Board {
             }
             HostMsg::Heartbeat => return true,
             HostMsg::ReadCommission => self.commission_msg(),
+            HostMsg::ReadTelemetry => BoardMsg::Telemetry(self.stats.latest()),
             _ if self.latched.is_some() => BoardMsg::Nack(Nack::Faulted),
             HostMsg::SetMode {
                 mode: Mode::Commission,
@@ -449,10 +462,29 @@ impl Board {
         }
     }
 
+    /// The telemetry window that completed in the last [`Board::tick`], once (the firmware
+    /// prints it through defmt).
+    pub fn take_report(&mut self) -> Option<Telemetry> {
+        self.report.take()
+    }
+
     /// One control period.
     pub fn tick(&mut self, m: &Measurements, send: &mut impl FnMut(BoardMsg)) -> Drive {
         let dt = crate::CONTROL_PERIOD_S;
         self.quiet = self.quiet.saturating_add(1);
+        let timing = PeriodTiming {
+            period_us: m.period_us,
+            step_cycles: m.step_cycles,
+            overrun: m.overrun,
+            edges_lost: m.edges_lost,
+        };
+        self.report = self.stats.record(timing, dt * 1.0e6);
+        if let Some(t) = self.report {
+            // While a run streams samples the host logs the telemetry beside them.
+            if self.run != Run::Idle {
+                send(BoardMsg::Telemetry(t));
+            }
+        }
         let v_bus = self.v_bus_of(m.v_bus);
         let u_lim = self.u_limit(v_bus);
         let lim = self.coeffs.limits;

@@ -131,9 +131,18 @@ impl BoardSim {
         }
     }
 
-    /// One 12 ms control period: measure, run the board logic, drive the motor.
+    /// One 12 ms control period: measure, run the board logic, drive the motor. The loop
+    /// period the telemetry reports is the nominal one (see [`BoardSim::tick_timed`]).
     pub fn tick(&mut self) {
-        let m = self.hw.measure();
+        self.tick_timed(control::CONTROL_PERIOD_S * 1.0e6);
+    }
+
+    /// [`BoardSim::tick`] with the time since the previous period started [µs] of board
+    /// time, for the telemetry's loop period and jitter (`motorid board` measures it on the
+    /// host's clock). The emulated board has no cycle counter: its `step_cycles_max` is 0.
+    pub fn tick_timed(&mut self, period_us: f32) {
+        let mut m = self.hw.measure();
+        m.period_us = period_us;
         let out = &mut self.out;
         let drive = self.board.tick(&m, &mut |msg| put(out, msg));
         store_coefficients(&mut self.board, &mut self.slots, &mut |msg| put(out, msg));
