@@ -41,6 +41,7 @@ use core::sync::atomic::Ordering;
 use control::board::{store_coefficients, Board, Drive, Measurements};
 use control::frame::{BoardMsg, Mode, Warning};
 use control::slots::Slots;
+use cortex_m::peripheral::DWT;
 use defmt_rtt as _;
 use embassy_executor::Spawner;
 use embassy_stm32::adc::{Adc, AdcConfig, SampleTime};
@@ -54,7 +55,7 @@ use embassy_stm32::timer::simple_pwm::PwmPin;
 use embassy_stm32::usart::{self, BufferedUart};
 use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_stm32::{bind_interrupts, pac, peripherals};
-use embassy_time::{Duration, Instant, Ticker};
+use embassy_time::{Duration, Ticker};
 use static_cell::StaticCell;
 
 use crate::bridge::Bridge;
@@ -208,19 +209,30 @@ async fn main(spawner: Spawner) {
 
     wdg.pet();
 
+    // Loop telemetry from the DWT cycle counter (170 MHz; it wraps after 25 s, far beyond
+    // one period, so wrapping differences are exact).
+    // SAFETY: only DCB and DWT are touched, and nothing else in the firmware uses them.
+    let mut core = unsafe { cortex_m::Peripherals::steal() };
+    core.DCB.enable_trace();
+    core.DWT.enable_cycle_counter();
+    const CYCLES_PER_US: f32 = (board::SYSCLK_HZ / 1_000_000) as f32;
+    const PERIOD_CYCLES: u32 = (control::CONTROL_PERIOD_S * board::SYSCLK_HZ as f32) as u32;
+
     let mut ticker = Ticker::every(Duration::from_micros(
         (control::CONTROL_PERIOD_S * 1.0e6) as u64,
     ));
-    let period = Duration::from_micros((control::CONTROL_PERIOD_S * 1.0e6) as u64);
-    let mut last_tick = Instant::now();
+    let mut last_start: Option<u32> = None;
+    let mut step_cycles = 0u32;
     let mut send = |m: BoardMsg| link::send(m);
     loop {
         ticker.next().await;
+        let start = DWT::cycle_count();
         wdg.pet();
         // A tick more than one period late means the loop overran (the ticker catches up).
-        let tick = Instant::now();
-        let overrun = tick - last_tick > period + period;
-        last_tick = tick;
+        let period_cycles = last_start.map(|s| start.wrapping_sub(s));
+        last_start = Some(start);
+        let overrun = period_cycles.is_some_and(|c| c > 2 * PERIOD_CYCLES);
+        let period_us = period_cycles.map_or(f32::NAN, |c| c as f32 / CYCLES_PER_US);
 
         // New coefficients (only committed in Idle).
         if let Some((c, seq)) = NEW_COEFFS.try_take() {
@@ -254,11 +266,14 @@ async fn main(spawner: Spawner) {
         } else {
             0.0
         };
-        let (edges, edges_overflow) = hall_capture::take_edges();
+        let (edges, edges_overflow, edges_lost) = hall_capture::take_edges();
         let m = Measurements {
             hall: hall_capture::hall_state(),
             edges,
             edges_overflow,
+            edges_lost,
+            period_us,
+            step_cycles,
             now_ticks: hall_capture::now_ticks(),
             i_vector,
             v_bus,
@@ -288,7 +303,7 @@ async fn main(spawner: Spawner) {
                     table: table.sector,
                     hold: None,
                 });
-                bridge::commutate(hall_capture::hall_state());
+                bridge::commutate();
             }
             Drive::Vector { step, volts } => {
                 let d = bridge::duty(volts, v_bus);
@@ -299,7 +314,7 @@ async fn main(spawner: Spawner) {
                     table: [-1; 8],
                     hold: Some(step),
                 });
-                bridge::commutate(hall_capture::hall_state());
+                bridge::commutate();
             }
         }
         MODE.store(
@@ -315,6 +330,17 @@ async fn main(spawner: Spawner) {
         } else {
             Level::Low
         });
+        if let Some(t) = board.take_report() {
+            defmt::info!(
+                "loop: period {=f32} us, jitter {=f32} us, overruns {=u32}, step cycles max {=u32}, Hall edges lost {=u32}",
+                t.period_us,
+                t.jitter_us,
+                t.overruns,
+                t.step_cycles_max,
+                t.edges_lost
+            );
+        }
+        step_cycles = DWT::cycle_count().wrapping_sub(start);
     }
 }
 
@@ -337,6 +363,7 @@ fn panic(info: &core::panic::PanicInfo) -> ! {
 /// HardFault: bridge off, then wait for the watchdog.
 #[cortex_m_rt::exception]
 unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
+    cortex_m::interrupt::disable();
     bridge::force_off();
     loop {
         cortex_m::asm::nop();
@@ -347,6 +374,8 @@ unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
 /// bridge off, then wait for the watchdog.
 #[cortex_m_rt::exception]
 unsafe fn DefaultHandler(_irqn: i16) -> ! {
+    // No interrupt of higher priority may commutate again (TIM1's update interrupt sets MOE).
+    cortex_m::interrupt::disable();
     bridge::force_off();
     loop {
         cortex_m::asm::nop();
