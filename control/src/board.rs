@@ -728,6 +728,64 @@ mod tests {
     }
 
     #[test]
+    fn lost_hall_edges_stop_a_run_and_are_reported() {
+        let (mut b, mut out) = running_board();
+        let m = Measurements {
+            edges_overflow: true,
+            edges_lost: 3,
+            ..at(25.0)
+        };
+        assert_eq!(b.tick(&m, &mut |m| out.push(m)), Drive::Off);
+        assert_eq!(b.fault(), Some(Fault::ImpossibleTransition));
+        out.clear();
+        b.handle(&HostMsg::ReadTelemetry, &mut |m| out.push(m));
+        match out.as_slice() {
+            [BoardMsg::Telemetry(t)] => assert_eq!((t.edges_lost, t.periods), (3, 1)),
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn a_run_streams_telemetry_every_window() {
+        let (mut b, mut out) = running_board();
+        let mut m = at(25.0);
+        m.period_us = 12_010.0;
+        m.step_cycles = 4321;
+        for k in 0..3 * crate::telemetry::WINDOW_PERIODS {
+            if k % 50 == 0 {
+                // A listening host's sign of life.
+                b.handle(&HostMsg::Heartbeat, &mut |m| out.push(m));
+            }
+            b.tick(&m, &mut |m| out.push(m));
+        }
+        assert_eq!(b.mode(), Mode::Speed);
+        let reports: Vec<_> = out
+            .iter()
+            .filter_map(|m| match m {
+                BoardMsg::Telemetry(t) => Some(*t),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(reports.len(), 3);
+        for t in &reports {
+            assert_eq!(t.periods, crate::telemetry::WINDOW_PERIODS);
+            assert!((t.period_us - 12_010.0).abs() < 0.1, "{}", t.period_us);
+            assert!((t.jitter_us - 10.0).abs() < 0.1, "{}", t.jitter_us);
+            assert_eq!(t.step_cycles_max, 4321);
+        }
+        // Idle, the windows go on (for the firmware's defmt line) but nothing is sent.
+        b.handle(&HostMsg::Stop, &mut |m| out.push(m));
+        out.clear();
+        let mut reports = 0;
+        for _ in 0..crate::telemetry::WINDOW_PERIODS {
+            b.tick(&m, &mut |m| out.push(m));
+            reports += usize::from(b.take_report().is_some());
+        }
+        assert_eq!(reports, 1);
+        assert!(out.is_empty(), "{out:?}");
+    }
+
+    #[test]
     fn a_hardware_stop_latches_even_when_idle() {
         let mut b = Board::new(Some((Coefficients::default(), 1)), "test", 22.2);
         let mut out = Vec::new();

@@ -516,6 +516,52 @@ mod tests {
     }
 
     #[test]
+    fn a_corrupted_blob_in_flash_boots_without_coefficients_and_refuses_runs() {
+        // One valid slot, then a bit of its blob flipped in the flash file (a cell that lost
+        // its charge, not an ECC error): the slot's CRC fails, the board boots without
+        // coefficients, warns, and allows identify and commissioning only.
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("flash.bin");
+        let page = super::super::flash::PAGE as u32;
+        let mut slots = Slots::new(RamFlash::new(Some(path.clone())), 0, page).unwrap();
+        slots
+            .store(&crate::board::coeffs::encode(&Coefficients::default()).unwrap())
+            .unwrap();
+        drop(slots);
+        let mut bytes = std::fs::read(&path).unwrap();
+        bytes[control::slots::SLOT_HEADER_LEN + 30] ^= 0x01;
+        std::fs::write(&path, &bytes).unwrap();
+
+        let mut sim = BoardSim::new(
+            EmulatorConfig::paper(),
+            Wiring::default(),
+            RamFlash::new(Some(path)),
+        )
+        .unwrap();
+        assert_eq!(
+            replies(&mut sim),
+            [BoardMsg::Warning(Warning::NoCoefficients)]
+        );
+        assert_eq!(sim.coeff_seq(), 0);
+        sim.receive(&frame(&HostMsg::SetMode { mode: Mode::Speed }));
+        sim.receive(&frame(&HostMsg::StartExperiment {
+            signal: Excitation::C,
+            duration_s: 1.0,
+        }));
+        sim.receive(&frame(&HostMsg::Identify));
+        sim.receive(&frame(&HostMsg::Commission));
+        let r = replies(&mut sim);
+        assert_eq!(r[0], BoardMsg::Nack(Nack::NoCoefficients));
+        assert_eq!(r[1], BoardMsg::Nack(Nack::NoCoefficients));
+        assert!(
+            matches!(r[2], BoardMsg::Identity { coeff_seq: 0, .. }),
+            "{r:?}"
+        );
+        assert_eq!(r[3], BoardMsg::Ack);
+        assert!(sim.is_running());
+    }
+
+    #[test]
     fn silence_on_the_link_stops_a_run_and_heartbeats_keep_it() {
         let mut sim = sim_with(EmulatorConfig::paper(), Some(&Coefficients::default()));
         sim.receive(&frame(&HostMsg::SetSpeed { omega_ref: 20.0 }));
