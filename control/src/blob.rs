@@ -74,7 +74,10 @@ pub const MAX_COMP_GAIN: f32 = 1.0;
 pub const HALL_INVALID: u8 = 0xFF;
 
 /// CRC used by the blob, the slot header and the serial frames: CRC-32/ISO-HDLC.
-pub static CRC32: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
+/// Computed bit by bit, without the 1 KiB lookup table: the firmware checks at most a 1 KiB
+/// blob at boot and 128-byte frames, and its flash is tight.
+pub static CRC32: crc::Crc<u32, crc::NoTable> =
+    crc::Crc::<u32, crc::NoTable>::new(&crc::CRC_32_ISO_HDLC);
 
 /// Which friction model the coefficients describe.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]

@@ -468,8 +468,9 @@ impl Board {
         self.report.take()
     }
 
-    /// One control period.
-    pub fn tick(&mut self, m: &Measurements, send: &mut impl FnMut(BoardMsg)) -> Drive {
+    /// One control period (the measurements are moved in: their Hall edges go to the step
+    /// without a copy).
+    pub fn tick(&mut self, m: Measurements, send: &mut impl FnMut(BoardMsg)) -> Drive {
         let dt = crate::CONTROL_PERIOD_S;
         self.quiet = self.quiet.saturating_add(1);
         let timing = PeriodTiming {
@@ -557,7 +558,7 @@ impl Board {
         };
         let inp = StepInputs {
             hall: m.hall,
-            edges: m.edges.clone(),
+            edges: m.edges,
             edges_overflow: m.edges_overflow,
             now_ticks: m.now_ticks,
             i_meas: i,
@@ -705,25 +706,25 @@ mod tests {
     fn a_hot_board_lowers_the_current_limit_then_stops() {
         let (mut b, mut out) = running_board();
         let full = blob::DERATE_FRACTION * b.coefficients().limits.i_max;
-        b.tick(&at(40.0), &mut |m| out.push(m));
+        b.tick(at(40.0), &mut |m| out.push(m));
         assert_eq!(b.control().current_limit(), full);
         let mid = 0.5 * (TEMP_DERATE_C + TEMP_MAX_C);
-        b.tick(&at(mid), &mut |m| out.push(m));
+        b.tick(at(mid), &mut |m| out.push(m));
         assert!((b.control().current_limit() - 0.5 * full).abs() < 1e-4);
         assert_eq!(b.fault(), None);
         assert_eq!(b.mode(), Mode::Speed);
 
-        let d = b.tick(&at(TEMP_MAX_C + 1.0), &mut |m| out.push(m));
+        let d = b.tick(at(TEMP_MAX_C + 1.0), &mut |m| out.push(m));
         assert_eq!(d, Drive::Off);
         assert_eq!(b.fault(), Some(Fault::OverTemperature));
         assert_eq!(b.mode(), Mode::Idle);
         assert!(out.contains(&BoardMsg::Fault(Fault::OverTemperature)));
         // Clearing while still hot latches again at the next period; once cool it holds.
         b.handle(&HostMsg::ClearFault, &mut |m| out.push(m));
-        b.tick(&at(TEMP_MAX_C + 1.0), &mut |m| out.push(m));
+        b.tick(at(TEMP_MAX_C + 1.0), &mut |m| out.push(m));
         assert_eq!(b.fault(), Some(Fault::OverTemperature));
         b.handle(&HostMsg::ClearFault, &mut |m| out.push(m));
-        b.tick(&at(60.0), &mut |m| out.push(m));
+        b.tick(at(60.0), &mut |m| out.push(m));
         assert_eq!(b.fault(), None);
     }
 
@@ -735,7 +736,7 @@ mod tests {
             edges_lost: 3,
             ..at(25.0)
         };
-        assert_eq!(b.tick(&m, &mut |m| out.push(m)), Drive::Off);
+        assert_eq!(b.tick(m.clone(), &mut |m| out.push(m)), Drive::Off);
         assert_eq!(b.fault(), Some(Fault::ImpossibleTransition));
         out.clear();
         b.handle(&HostMsg::ReadTelemetry, &mut |m| out.push(m));
@@ -756,7 +757,7 @@ mod tests {
                 // A listening host's sign of life.
                 b.handle(&HostMsg::Heartbeat, &mut |m| out.push(m));
             }
-            b.tick(&m, &mut |m| out.push(m));
+            b.tick(m.clone(), &mut |m| out.push(m));
         }
         assert_eq!(b.mode(), Mode::Speed);
         let reports: Vec<_> = out
@@ -778,7 +779,7 @@ mod tests {
         out.clear();
         let mut reports = 0;
         for _ in 0..crate::telemetry::WINDOW_PERIODS {
-            b.tick(&m, &mut |m| out.push(m));
+            b.tick(m.clone(), &mut |m| out.push(m));
             reports += usize::from(b.take_report().is_some());
         }
         assert_eq!(reports, 1);
@@ -793,7 +794,7 @@ mod tests {
             hw_overcurrent: true,
             ..at(25.0)
         };
-        assert_eq!(b.tick(&m, &mut |m| out.push(m)), Drive::Off);
+        assert_eq!(b.tick(m.clone(), &mut |m| out.push(m)), Drive::Off);
         assert_eq!(b.fault(), Some(Fault::HardwareOverCurrent));
         assert_eq!(out, [BoardMsg::Fault(Fault::HardwareOverCurrent)]);
         b.handle(&HostMsg::SetMode { mode: Mode::Speed }, &mut |m| {

@@ -235,7 +235,7 @@ async fn main(spawner: Spawner) {
         let period_us = period_cycles.map_or(f32::NAN, |c| c as f32 / CYCLES_PER_US);
 
         // New coefficients (only committed in Idle).
-        if let Some((c, seq)) = NEW_COEFFS.try_take() {
+        if let Ok((c, seq)) = NEW_COEFFS.try_receive() {
             board.load(c, seq);
         }
         // Host commands: the board logic answers them. A cleared fault re-arms the
@@ -281,7 +281,7 @@ async fn main(spawner: Spawner) {
             hw_overcurrent: bridge::hw_tripped(),
             temperature_c,
         };
-        let drive = board.tick(&m, &mut send);
+        let drive = board.tick(m, &mut send);
         if board.mode() == Mode::Idle {
             // A commissioning result to store (the bridge is off: erasing stalls the CPU).
             SLOTS.lock(|cell| {
@@ -292,27 +292,21 @@ async fn main(spawner: Spawner) {
         }
 
         // Actuation: set the drive; the Hall-edge interrupt commutates between samples.
-        match drive {
-            Drive::Off => bridge.off(),
-            Drive::SixStep { volts, table } => {
-                let d = bridge::duty(volts, v_bus);
+        // (volts, reverse, Hall table, held step) of a drive that turns the bridge on.
+        let on = match drive {
+            Drive::Off => None,
+            Drive::SixStep { volts, table } => Some((volts, volts < 0.0, table.sector, None)),
+            Drive::Vector { step, volts } => Some((volts, false, [-1; 8], Some(step))),
+        };
+        match on {
+            None => bridge.off(),
+            Some((volts, reverse, table, hold)) => {
                 bridge::set_drive(bridge::Drive {
                     on: true,
-                    reverse: volts < 0.0,
-                    duty: bridge.duty_counts(d),
-                    table: table.sector,
-                    hold: None,
-                });
-                bridge::commutate();
-            }
-            Drive::Vector { step, volts } => {
-                let d = bridge::duty(volts, v_bus);
-                bridge::set_drive(bridge::Drive {
-                    on: true,
-                    reverse: false,
-                    duty: bridge.duty_counts(d),
-                    table: [-1; 8],
-                    hold: Some(step),
+                    reverse,
+                    duty: bridge.duty_counts(bridge::duty(volts, v_bus)),
+                    table,
+                    hold,
                 });
                 bridge::commutate();
             }
