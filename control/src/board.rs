@@ -21,6 +21,10 @@
 //! - link loss (a stop, not a fault): no frame for [`LINK_TIMEOUT_PERIODS`] in speed or
 //!   experiment mode.
 //!
+//! Telemetry ([`crate::telemetry`]): the transport reports each period's length, its work in
+//! cycles and the lost Hall edges in [`Measurements`]; the board sends one report a second
+//! while a run streams samples, and on `ReadTelemetry`.
+//!
 //! The voltage never exceeds `min(pi.u_max, MAX_DUTY·V_bus)`; speed and experiment modes
 //! need valid coefficients (identify and commissioning do not); experiment amplitudes are
 //! relative to `u_max` ([`crate::excitation`]) and durations are bounded.

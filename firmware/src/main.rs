@@ -1,9 +1,10 @@
 //! Firmware for ST's B-G431B-ESC1 (STM32G431CB): thin board glue around `control`.
 //!
 //! - [`board`]: clocks (170 MHz), pins and analog gains, with their sources.
-//! - [`bridge`]: TIM1 centre-aligned complementary PWM, six-step commutation, duty = V/V_bus.
+//! - [`bridge`]: TIM1 centre-aligned complementary PWM, six-step commutation applied on the
+//!   PWM update event (all six gates at once), duty = V/V_bus.
 //! - [`hall_capture`]: Hall edges time-stamped by TIM4 input capture (1 MHz); the capture
-//!   interrupt commutates the bridge at every edge.
+//!   interrupt commutates the bridge at every edge; edges beyond the queue are counted.
 //! - [`link`]: the serial protocol of `control::frame` on USART2 (ST-LINK virtual COM port),
 //!   coefficient uploads into the two flash slots of `control::slots`.
 //! - [`storage`]: the flash behind those slots, a double ECC error (NMI) turned into a
@@ -12,7 +13,9 @@
 //!   bridge turns off within a PWM period above the board's 40 A rating.
 //! - this file: start-up and the 12 ms control loop: measurements in, `control::board::Board`
 //!   (the board's logic: commands, modes, limits, faults, commissioning, shared with the
-//!   emulated board) in the middle, the bridge drive out.
+//!   emulated board) in the middle, the bridge drive out. The loop's period and work are
+//!   timed with the DWT cycle counter; the board logic turns them into one telemetry report
+//!   a second (`control::telemetry`), printed through defmt and sent to the host during runs.
 //!
 //! Safety (in `control::board`): an invalid Hall state or impossible transition,
 //! over-current, over-temperature (the board's NTC, which also lowers the current limit from
