@@ -97,6 +97,24 @@ pub fn commutation_step(sector: u8, reverse: bool) -> u8 {
     (sector % 6 + if reverse { 4 } else { 1 }) % 6
 }
 
+/// (high phase, low phase) of each bridge step, phases U, V, W numbered 0, 1, 2: the high
+/// phase switches with the duty (its low side conducts in the off time), the low phase has
+/// its low side on all the time, the third floats (both outputs off). Step `k + 3` is step
+/// `k` reversed; neighbouring steps share one phase, in the same role.
+pub const BRIDGE_STEPS: [(usize, usize); 6] = [(0, 1), (0, 2), (1, 2), (1, 0), (2, 0), (2, 1)];
+
+/// The gate pattern of bridge step `k` (0..5) at compare value `duty`: per phase U, V, W its
+/// compare value and whether its outputs are enabled.
+pub fn six_step_pattern(k: u8, duty: u16) -> ([u16; 3], [bool; 3]) {
+    let (hi, lo) = BRIDGE_STEPS[usize::from(k % 6)];
+    let mut ccr = [0; 3];
+    let mut enable = [false; 3];
+    ccr[hi] = duty;
+    enable[hi] = true;
+    enable[lo] = true;
+    (ccr, enable)
+}
+
 /// What the bridge does until the next period.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Drive {
@@ -676,6 +694,35 @@ mod tests {
     extern crate std;
     use super::*;
     use std::vec::Vec;
+
+    #[test]
+    fn neighbouring_bridge_steps_switch_one_leg_off_and_one_on() {
+        let duty = 1234;
+        for k in 0..6u8 {
+            let (ccr, en) = six_step_pattern(k, duty);
+            // One phase switches with the duty, one is held low, one floats.
+            assert_eq!(en.iter().filter(|&&e| e).count(), 2, "step {k}");
+            assert_eq!(ccr.iter().filter(|&&c| c == duty).count(), 1, "step {k}");
+            let (hi, lo) = BRIDGE_STEPS[usize::from(k)];
+            assert!(en[hi] && en[lo] && ccr[hi] == duty && ccr[lo] == 0);
+            // Reversed: the same pair with the roles swapped.
+            assert_eq!(BRIDGE_STEPS[usize::from(k + 3) % 6], (lo, hi));
+            // To the next step (either direction): the shared phase keeps its role and
+            // compare value, one leg turns off, one turns on.
+            for next in [(k + 1) % 6, (k + 5) % 6] {
+                let (ccr2, en2) = six_step_pattern(next, duty);
+                let kept: Vec<usize> = (0..3).filter(|&p| en[p] && en2[p]).collect();
+                assert_eq!(kept.len(), 1, "{k} -> {next}");
+                assert_eq!(ccr[kept[0]], ccr2[kept[0]], "{k} -> {next}");
+            }
+        }
+        // The forward commutation of consecutive sectors walks the steps one by one.
+        for sector in 0..6u8 {
+            let a = commutation_step(sector, false);
+            let b = commutation_step((sector + 1) % 6, false);
+            assert_eq!(b, (a + 1) % 6);
+        }
+    }
 
     #[test]
     fn temperature_derating_falls_from_the_derate_point_to_the_trip() {

@@ -3,7 +3,8 @@
 //! Commutation step `k` (0..5) powers one phase pair: the "high" phase switches with duty
 //! `d` (complementary, so its low side conducts in the off time: synchronous rectification),
 //! the "low" phase has its low side on all the time (duty 0), the third phase floats (both
-//! outputs disabled). Step `k + 3` is step `k` with the polarity reversed. Which step drives
+//! outputs disabled). Step `k + 3` is step `k` with the polarity reversed
+//! (`control::board::six_step_pattern`, tested on the host). Which step drives
 //! a rotor in a Hall sector is `control::board::commutation_step` (sector + 1 forward,
 //! sector + 4 for a negative voltage), the same rule the emulated board uses; commissioning
 //! holds one step whatever the Hall state ([`Drive::hold`]).
@@ -68,12 +69,9 @@ struct Pattern {
 /// The pattern the next update event applies.
 static PENDING: Mutex<Cell<Option<Pattern>>> = Mutex::new(Cell::new(None));
 
-/// (high phase, low phase) of each commutation step.
-const STEPS: [(usize, usize); 6] = [(0, 1), (0, 2), (1, 2), (1, 0), (2, 0), (2, 1)];
-
 /// The phase whose low-side switch is on in step `k`: the one whose shunt to read.
 pub fn low_phase(k: u8) -> usize {
-    STEPS[k as usize % 6].1
+    control::board::BRIDGE_STEPS[k as usize % 6].1
 }
 
 /// Duty cycle for a voltage magnitude and the bus voltage: `|V|/V_bus`, saturated at
@@ -130,16 +128,12 @@ fn pattern(d: &Drive, state: u8) -> Option<Pattern> {
         None if sector < 0 => return None,
         None => control::board::commutation_step(sector as u8, d.reverse),
     };
-    let (hi, lo) = STEPS[k as usize];
-    let mut p = Pattern {
-        ccr: [0; 3],
-        enable: [false; 3],
+    let (ccr, enable) = control::board::six_step_pattern(k, d.duty);
+    Some(Pattern {
+        ccr,
+        enable,
         step: k,
-    };
-    p.ccr[hi] = d.duty;
-    p.enable[hi] = true;
-    p.enable[lo] = true;
-    Some(p)
+    })
 }
 
 /// Commutates for the Hall state now: schedules the step of its sector for the next PWM
