@@ -41,7 +41,7 @@ use crate::frame::{
 };
 use crate::hall::{HallTable, INVALID};
 use crate::slots::Slots;
-use crate::step::{ControlStep, Faults, HallEdge, StepInputs, MAX_EDGES};
+use crate::step::{ControlStep, Faults, HallEdge, StepInputs, StepOutputs, MAX_EDGES};
 use crate::telemetry::{LoopStats, PeriodTiming, Telemetry};
 
 /// Phase current at which the hardware stops the bridge within a PWM period [A]: the
@@ -195,6 +195,11 @@ pub struct Board {
     stats: LoopStats,
     /// A telemetry window completed in the last period (see [`Board::take_report`]).
     report: Option<Telemetry>,
+    /// What the control step returned in the last period.
+    last_out: StepOutputs<f32>,
+    /// The control step's inputs, filled in place every period: building them anew would
+    /// copy the whole edge queue (`MAX_EDGES` edges), not only the edges that came.
+    inp: StepInputs<f32>,
 }
 
 fn table_of(c: &Coefficients) -> HallTable {
@@ -248,6 +253,8 @@ impl Board {
             store_request: false,
             stats: LoopStats::new(),
             report: None,
+            last_out: StepOutputs::default(),
+            inp: StepInputs::default(),
         };
         b.coeff_seq = seq;
         if seq != 0 {
@@ -300,6 +307,12 @@ impl Board {
     /// The control step (decoder, PI).
     pub fn control(&self) -> &ControlStep<f32> {
         &self.step
+    }
+
+    /// What the control step returned in the last [`Board::tick`] that ran it (every period
+    /// but commissioning's).
+    pub fn last_step_outputs(&self) -> &StepOutputs<f32> {
+        &self.last_out
     }
 
     /// The voltage limit [V]: `min(u_max, MAX_DUTY·V_bus)`.
@@ -490,9 +503,8 @@ impl Board {
         self.report.take()
     }
 
-    /// One control period (the measurements are moved in: their Hall edges go to the step
-    /// without a copy).
-    pub fn tick(&mut self, m: Measurements, send: &mut impl FnMut(BoardMsg)) -> Drive {
+    /// One control period.
+    pub fn tick(&mut self, m: &Measurements, send: &mut impl FnMut(BoardMsg)) -> Drive {
         let dt = crate::CONTROL_PERIOD_S;
         self.quiet = self.quiet.saturating_add(1);
         let timing = PeriodTiming {
@@ -578,17 +590,19 @@ impl Board {
             }
             _ => None,
         };
-        let inp = StepInputs {
-            hall: m.hall,
-            edges: m.edges,
-            edges_overflow: m.edges_overflow,
-            now_ticks: m.now_ticks,
-            i_meas: i,
-            v_bus: u_lim,
-            omega_ref: self.omega_ref,
-            v_override,
-        };
-        let out = self.step.step(&inp);
+        let inp = &mut self.inp;
+        inp.hall = m.hall;
+        inp.edges.clear();
+        // Both hold MAX_EDGES: never fails.
+        let _ = inp.edges.extend_from_slice(&m.edges);
+        inp.edges_overflow = m.edges_overflow;
+        inp.now_ticks = m.now_ticks;
+        inp.i_meas = i;
+        inp.v_bus = u_lim;
+        inp.omega_ref = self.omega_ref;
+        inp.v_override = v_override;
+        let out = self.step.step(&self.inp);
+        self.last_out = out;
 
         if self.run != Run::Idle {
             // Stall: a large voltage and the rotor does not step.
@@ -757,25 +771,25 @@ mod tests {
     fn a_hot_board_lowers_the_current_limit_then_stops() {
         let (mut b, mut out) = running_board();
         let full = blob::DERATE_FRACTION * b.coefficients().limits.i_max;
-        b.tick(at(40.0), &mut |m| out.push(m));
+        b.tick(&at(40.0), &mut |m| out.push(m));
         assert_eq!(b.control().current_limit(), full);
         let mid = 0.5 * (TEMP_DERATE_C + TEMP_MAX_C);
-        b.tick(at(mid), &mut |m| out.push(m));
+        b.tick(&at(mid), &mut |m| out.push(m));
         assert!((b.control().current_limit() - 0.5 * full).abs() < 1e-4);
         assert_eq!(b.fault(), None);
         assert_eq!(b.mode(), Mode::Speed);
 
-        let d = b.tick(at(TEMP_MAX_C + 1.0), &mut |m| out.push(m));
+        let d = b.tick(&at(TEMP_MAX_C + 1.0), &mut |m| out.push(m));
         assert_eq!(d, Drive::Off);
         assert_eq!(b.fault(), Some(Fault::OverTemperature));
         assert_eq!(b.mode(), Mode::Idle);
         assert!(out.contains(&BoardMsg::Fault(Fault::OverTemperature)));
         // Clearing while still hot latches again at the next period; once cool it holds.
         b.handle(&HostMsg::ClearFault, &mut |m| out.push(m));
-        b.tick(at(TEMP_MAX_C + 1.0), &mut |m| out.push(m));
+        b.tick(&at(TEMP_MAX_C + 1.0), &mut |m| out.push(m));
         assert_eq!(b.fault(), Some(Fault::OverTemperature));
         b.handle(&HostMsg::ClearFault, &mut |m| out.push(m));
-        b.tick(at(60.0), &mut |m| out.push(m));
+        b.tick(&at(60.0), &mut |m| out.push(m));
         assert_eq!(b.fault(), None);
     }
 
@@ -787,7 +801,7 @@ mod tests {
             edges_lost: 3,
             ..at(25.0)
         };
-        assert_eq!(b.tick(m.clone(), &mut |m| out.push(m)), Drive::Off);
+        assert_eq!(b.tick(&m, &mut |m| out.push(m)), Drive::Off);
         assert_eq!(b.fault(), Some(Fault::ImpossibleTransition));
         out.clear();
         b.handle(&HostMsg::ReadTelemetry, &mut |m| out.push(m));
@@ -808,7 +822,7 @@ mod tests {
                 // A listening host's sign of life.
                 b.handle(&HostMsg::Heartbeat, &mut |m| out.push(m));
             }
-            b.tick(m.clone(), &mut |m| out.push(m));
+            b.tick(&m, &mut |m| out.push(m));
         }
         assert_eq!(b.mode(), Mode::Speed);
         let reports: Vec<_> = out
@@ -830,7 +844,7 @@ mod tests {
         out.clear();
         let mut reports = 0;
         for _ in 0..crate::telemetry::WINDOW_PERIODS {
-            b.tick(m.clone(), &mut |m| out.push(m));
+            b.tick(&m, &mut |m| out.push(m));
             reports += usize::from(b.take_report().is_some());
         }
         assert_eq!(reports, 1);
@@ -845,7 +859,7 @@ mod tests {
             hw_overcurrent: true,
             ..at(25.0)
         };
-        assert_eq!(b.tick(m.clone(), &mut |m| out.push(m)), Drive::Off);
+        assert_eq!(b.tick(&m, &mut |m| out.push(m)), Drive::Off);
         assert_eq!(b.fault(), Some(Fault::HardwareOverCurrent));
         assert_eq!(out, [BoardMsg::Fault(Fault::HardwareOverCurrent)]);
         b.handle(&HostMsg::SetMode { mode: Mode::Speed }, &mut |m| {

@@ -148,7 +148,7 @@ proptest! {
                 }
                 Event::Ticks(m, n) => {
                     for _ in 0..n {
-                        let drive = board.tick(Measurements::clone(&m), &mut sink);
+                        let drive = board.tick(&m, &mut sink);
                         if board.fault().is_some() {
                             prop_assert_eq!(drive, Drive::Off, "fault {:?}", board.fault());
                         }

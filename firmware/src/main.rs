@@ -284,7 +284,7 @@ async fn main(spawner: Spawner) {
             hw_overcurrent: bridge::hw_tripped(),
             temperature_c,
         };
-        let drive = board.tick(m, &mut send);
+        let drive = board.tick(&m, &mut send);
         if board.mode() == Mode::Idle {
             // A commissioning result to store (the bridge is off: erasing stalls the CPU).
             SLOTS.lock(|cell| {

@@ -144,7 +144,7 @@ impl BoardSim {
         let mut m = self.hw.measure();
         m.period_us = period_us;
         let out = &mut self.out;
-        let drive = self.board.tick(m, &mut |msg| put(out, msg));
+        let drive = self.board.tick(&m, &mut |msg| put(out, msg));
         store_coefficients(&mut self.board, &mut self.slots, &mut |msg| put(out, msg));
         self.hw.apply(drive, f64::from(control::CONTROL_PERIOD_S));
     }
