@@ -139,7 +139,9 @@ impl BoardSim {
 
     /// [`BoardSim::tick`] with the time since the previous period started [µs] of board
     /// time, for the telemetry's loop period and jitter (`motorid board` measures it on the
-    /// host's clock). The emulated board has no cycle counter: its `step_cycles_max` is 0.
+    /// host's clock). The emulated board has no cycle counter: its `step_cycles_max` is 0;
+    /// and it never overruns: a late host thread stretches a period (jitter), the step still
+    /// runs whole.
     pub fn tick_timed(&mut self, period_us: f32) {
         let mut m = self.hw.measure();
         m.period_us = period_us;
