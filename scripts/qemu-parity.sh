@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
-# QEMU parity: run the control step (crate qemu-parity, built for thumbv7em-none-eabihf) on an
-# emulated Cortex-M4F (QEMU mps2-an386, semihosting) over the recorded input trace
-# qemu-parity/trace/closed_loop.qpt, run the same code on the host, and compare the f32 outputs
-# bit for bit. Then count the instructions each control step takes, per observer
+# QEMU parity: run the board logic with its control step (crate qemu-parity, built for
+# thumbv7em-none-eabihf) on an emulated Cortex-M4F (QEMU mps2-an386, semihosting) over the
+# recorded input trace qemu-parity/trace/closed_loop.qpt, run the same code on the host, and
+# compare the f32 outputs bit for bit. Then count the instructions each 12 ms period of the
+# board logic (limits, faults, telemetry and the control step) takes, per observer
 # (none / LuGre / SINDYc), from QEMU's per-instruction exec log.
 #
 # Installs qemu-system-arm (Debian) and the thumbv7em-none-eabihf target when missing.

@@ -26,6 +26,12 @@ step "Building the firmware for the B-G431B-ESC1 (thumbv7em-none-eabihf)"
 cargo build --release -p firmware --target thumbv7em-none-eabihf
 if [ -x scripts/firmware-size.sh ]; then bash scripts/firmware-size.sh; fi
 
+# `motorid flash` (the debug-probe path of docs/bring-up.md) is behind the `probe` feature,
+# which no other build here turns on: type-check it so that it cannot rot. `check` does no
+# code generation, so probe-rs and its USB stack cost about 1.5 CPU-minutes, not a build.
+step "Checking that motorid compiles with --features probe (motorid flash)"
+cargo check -q -p host-tools --features probe --lib
+
 step "Formatting"
 cargo fmt --all -- --check
 

@@ -5,7 +5,7 @@
 //! | offset | size | field |
 //! |---|---|---|
 //! | 0 | 4 | magic `b"MIDC"` |
-//! | 4 | 2 | format version ([`VERSION`]; version 1, without `commission`, is still read) |
+//! | 4 | 2 | format version ([`VERSION`]; versions 1 and 2 are still read, see [`VERSION`]) |
 //! | 6 | 2 | payload length `n` |
 //! | 8 | n | postcard encoding of [`Coefficients`] |
 //! | 8+n | 4 | CRC-32 (ISO-HDLC, the zip/Ethernet CRC) of bytes `0..8+n` |
@@ -35,10 +35,13 @@ use crate::velocity::EstimatorConfig;
 
 /// First four bytes of every blob.
 pub const MAGIC: [u8; 4] = *b"MIDC";
-/// Blob format version; bump on any change of [`Coefficients`].
+/// Blob format version; bump on any change of [`Coefficients`] or of a field's meaning.
 /// 2: adds [`Coefficients::commission`] at the end. Version 1 blobs are read as version 2
 /// without a commissioning result.
-pub const VERSION: u16 = 2;
+/// 3: [`PiGains::comp_gain`] is a weight (0 none, 1 full compensation, values between scale
+/// it); in versions 1 and 2 any positive value meant full compensation, so [`decode`] reads
+/// their positive gains as 1.
+pub const VERSION: u16 = 3;
 /// The oldest format version [`decode`] reads.
 pub const OLDEST_VERSION: u16 = 1;
 /// Header size: magic, version, payload length.
@@ -64,13 +67,17 @@ pub const RATED_VBUS_MAX: f32 = 28.0;
 pub const MAX_KP: f32 = 1e3;
 /// Largest speed-loop integral gain [V/rad].
 pub const MAX_KI: f32 = 1e4;
-/// Largest weight of the friction compensation voltage.
-pub const MAX_COMP_GAIN: f32 = 10.0;
+/// Largest weight of the friction compensation voltage: 1, full compensation (a larger
+/// weight would over-compensate the identified friction and drive a limit cycle).
+pub const MAX_COMP_GAIN: f32 = 1.0;
 /// Marker in a Hall table for a state that must never occur (000 and 111 on 120° sensors).
 pub const HALL_INVALID: u8 = 0xFF;
 
 /// CRC used by the blob, the slot header and the serial frames: CRC-32/ISO-HDLC.
-pub static CRC32: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
+/// Computed bit by bit, without the 1 KiB lookup table: the firmware checks at most a 1 KiB
+/// blob at boot and 128-byte frames, and its flash is tight.
+pub static CRC32: crc::Crc<u32, crc::NoTable> =
+    crc::Crc::<u32, crc::NoTable>::new(&crc::CRC_32_ISO_HDLC);
 
 /// Which friction model the coefficients describe.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -105,8 +112,8 @@ pub struct PiGains {
     pub ki: f32,
     /// Voltage limit of the loop output (anti-windup clamp) [V].
     pub u_max: f32,
-    /// Weight of the friction compensation voltage V_c added to the PI output (0 = off,
-    /// 1 = full compensation as in the paper's eq. 40).
+    /// Weight of the friction compensation voltage V_c added to the PI output, 0..=1:
+    /// 0 = off, 1 = full compensation as in the paper's eq. 40, 0.5 = half of V_c.
     pub comp_gain: f32,
 }
 
@@ -336,7 +343,7 @@ impl Coefficients {
             && within(p.comp_gain, 0.0, MAX_COMP_GAIN))
         {
             return Err(BlobError::Invalid(
-                "PI gains must lie in kp 0..1e3, ki 0..1e4, comp_gain 0..10",
+                "PI gains must lie in kp 0..1e3, ki 0..1e4, comp_gain 0..1",
             ));
         }
         if !(within(p.u_max, 0.0, RATED_VBUS_MAX) && p.u_max > 0.0) {
@@ -426,7 +433,11 @@ impl Coefficients {
         cfg.u_max = self.pi.u_max;
         cfg.i_limit = DERATE_FRACTION * self.limits.i_max;
         cfg.v_bus = v_bus;
-        cfg.compensate = self.pi.comp_gain > 0.0 && self.model != ModelKind::None;
+        cfg.comp_gain = if self.model == ModelKind::None {
+            0.0
+        } else {
+            self.pi.comp_gain
+        };
         cfg
     }
 }
@@ -506,10 +517,14 @@ pub fn decode(bytes: &[u8]) -> Result<Coefficients, BlobError> {
     } else {
         payload
     };
-    let (c, rest): (Coefficients, &[u8]) =
+    let (mut c, rest): (Coefficients, &[u8]) =
         postcard::take_from_bytes(payload).map_err(|_| BlobError::Payload)?;
     if !rest.is_empty() {
         return Err(BlobError::Payload);
+    }
+    if version < 3 && c.pi.comp_gain > 0.0 {
+        // Before version 3 any positive gain meant full compensation.
+        c.pi.comp_gain = 1.0;
     }
     c.validate()?;
     Ok(c)
@@ -605,7 +620,10 @@ mod tests {
         assert_eq!(cfg.hall_table, HallTable::DEFAULT_120);
         let none = Coefficients::default().step_config(12.0);
         assert!(matches!(none.observer, ObserverConfig::None));
-        assert!(!none.compensate);
+        assert_eq!(none.comp_gain, 0.0);
+        let mut half = full();
+        half.pi.comp_gain = 0.5;
+        assert_eq!(half.step_config(24.0).comp_gain, 0.5);
         assert_eq!(none.pi.out_max, 12.0);
     }
 
@@ -682,10 +700,38 @@ mod tests {
         let mut buf = [0u8; MAX_BLOB_LEN];
         let blob = encode(&Coefficients::default(), &mut buf).unwrap().to_vec();
         let mut b = blob.clone();
-        b[4] = 3;
-        assert_eq!(decode(&b), Err(BlobError::UnsupportedVersion(3)));
+        b[4] = 4;
+        assert_eq!(decode(&b), Err(BlobError::UnsupportedVersion(4)));
         b[4] = 0;
         assert_eq!(decode(&b), Err(BlobError::UnsupportedVersion(0)));
+    }
+
+    /// Before version 3 a positive `comp_gain` meant full compensation: such a blob still
+    /// compensates fully; a version-3 blob keeps its weight.
+    #[test]
+    fn comp_gain_of_older_blobs_reads_as_full_compensation() {
+        let mut buf = [0u8; MAX_BLOB_LEN];
+        let mut c = Coefficients {
+            model: ModelKind::Lugre,
+            lugre: Some(LugreParams::paper()),
+            ..Coefficients::default()
+        };
+        c.pi.comp_gain = 0.5;
+        let v3 = encode(&c, &mut buf).unwrap().to_vec();
+        assert_eq!(decode(&v3).unwrap().pi.comp_gain, 0.5);
+        let relabel = |version: u16, gain: f32| {
+            let mut c = c.clone();
+            c.pi.comp_gain = gain;
+            let mut b = encode(&c, &mut [0u8; MAX_BLOB_LEN]).unwrap().to_vec();
+            b[4..6].copy_from_slice(&version.to_le_bytes());
+            let end = b.len() - CRC_LEN;
+            let crc = CRC32.checksum(&b[..end]);
+            b[end..].copy_from_slice(&crc.to_le_bytes());
+            b
+        };
+        assert_eq!(decode(&relabel(2, 0.5)).unwrap().pi.comp_gain, 1.0);
+        assert_eq!(decode(&relabel(2, 0.0)).unwrap().pi.comp_gain, 0.0);
+        assert_eq!(decode(&relabel(3, 0.25)).unwrap().pi.comp_gain, 0.25);
     }
 
     /// A version-1 blob (no `commission` field) still decodes, as having no result.

@@ -21,6 +21,10 @@
 //! - link loss (a stop, not a fault): no frame for [`LINK_TIMEOUT_PERIODS`] in speed or
 //!   experiment mode.
 //!
+//! Telemetry ([`crate::telemetry`]): the transport reports each period's length, its work in
+//! cycles and the lost Hall edges in [`Measurements`]; the board sends one report a second
+//! while a run streams samples, and on `ReadTelemetry`.
+//!
 //! The voltage never exceeds `min(pi.u_max, MAX_DUTY·V_bus)`; speed and experiment modes
 //! need valid coefficients (identify and commissioning do not); experiment amplitudes are
 //! relative to `u_max` ([`crate::excitation`]) and durations are bounded.
@@ -37,7 +41,8 @@ use crate::frame::{
 };
 use crate::hall::{HallTable, INVALID};
 use crate::slots::Slots;
-use crate::step::{ControlStep, Faults, HallEdge, StepInputs, MAX_EDGES};
+use crate::step::{ControlStep, Faults, HallEdge, StepInputs, StepOutputs, MAX_EDGES};
+use crate::telemetry::{LoopStats, PeriodTiming, Telemetry};
 
 /// Phase current at which the hardware stops the bridge within a PWM period [A]: the
 /// B-G431B-ESC1's 40 A peak rating (ST UM2516). The firmware sets its comparators' threshold
@@ -92,6 +97,24 @@ pub fn commutation_step(sector: u8, reverse: bool) -> u8 {
     (sector % 6 + if reverse { 4 } else { 1 }) % 6
 }
 
+/// (high phase, low phase) of each bridge step, phases U, V, W numbered 0, 1, 2: the high
+/// phase switches with the duty (its low side conducts in the off time), the low phase has
+/// its low side on all the time, the third floats (both outputs off). Step `k + 3` is step
+/// `k` reversed; neighbouring steps share one phase, in the same role.
+pub const BRIDGE_STEPS: [(usize, usize); 6] = [(0, 1), (0, 2), (1, 2), (1, 0), (2, 0), (2, 1)];
+
+/// The gate pattern of bridge step `k` (0..5) at compare value `duty`: per phase U, V, W its
+/// compare value and whether its outputs are enabled.
+pub fn six_step_pattern(k: u8, duty: u16) -> ([u16; 3], [bool; 3]) {
+    let (hi, lo) = BRIDGE_STEPS[usize::from(k % 6)];
+    let mut ccr = [0; 3];
+    let mut enable = [false; 3];
+    ccr[hi] = duty;
+    enable[hi] = true;
+    enable[lo] = true;
+    (ccr, enable)
+}
+
 /// What the bridge does until the next period.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Drive {
@@ -113,6 +136,12 @@ pub struct Measurements {
     pub edges: heapless::Vec<HallEdge, MAX_EDGES>,
     /// More edges than `edges` holds came.
     pub edges_overflow: bool,
+    /// Hall edges lost since boot (the capture queue's running overflow count).
+    pub edges_lost: u32,
+    /// Time since the previous period started [µs] (not finite: unknown).
+    pub period_us: f32,
+    /// Cycles the previous period's work took (0: no cycle counter).
+    pub step_cycles: u32,
     /// Capture-timer count now.
     pub now_ticks: u32,
     /// Current along the applied bridge vector [A], positive when it flows the way the
@@ -163,6 +192,14 @@ pub struct Board {
     commission: CommissionOutcome,
     commission_seq: u32,
     store_request: bool,
+    stats: LoopStats,
+    /// A telemetry window completed in the last period (see [`Board::take_report`]).
+    report: Option<Telemetry>,
+    /// What the control step returned in the last period.
+    last_out: StepOutputs<f32>,
+    /// The control step's inputs, filled in place every period: building them anew would
+    /// copy the whole edge queue (`MAX_EDGES` edges), not only the edges that came.
+    inp: StepInputs<f32>,
 }
 
 fn table_of(c: &Coefficients) -> HallTable {
@@ -214,6 +251,10 @@ impl Board {
             commission: CommissionOutcome::NotRun,
             commission_seq: 0,
             store_request: false,
+            stats: LoopStats::new(),
+            report: None,
+            last_out: StepOutputs::default(),
+            inp: StepInputs::default(),
         };
         b.coeff_seq = seq;
         if seq != 0 {
@@ -266,6 +307,12 @@ impl Board {
     /// The control step (decoder, PI).
     pub fn control(&self) -> &ControlStep<f32> {
         &self.step
+    }
+
+    /// What the control step returned in the last [`Board::tick`] that ran it (every period
+    /// but commissioning's).
+    pub fn last_step_outputs(&self) -> &StepOutputs<f32> {
+        &self.last_out
     }
 
     /// The voltage limit [V]: `min(u_max, MAX_DUTY·V_bus)`.
@@ -361,6 +408,7 @@ impl Board {
             }
             HostMsg::Heartbeat => return true,
             HostMsg::ReadCommission => self.commission_msg(),
+            HostMsg::ReadTelemetry => BoardMsg::Telemetry(self.stats.latest()),
             _ if self.latched.is_some() => BoardMsg::Nack(Nack::Faulted),
             HostMsg::SetMode {
                 mode: Mode::Commission,
@@ -449,10 +497,29 @@ impl Board {
         }
     }
 
+    /// The telemetry window that completed in the last [`Board::tick`], once (the firmware
+    /// prints it through defmt).
+    pub fn take_report(&mut self) -> Option<Telemetry> {
+        self.report.take()
+    }
+
     /// One control period.
     pub fn tick(&mut self, m: &Measurements, send: &mut impl FnMut(BoardMsg)) -> Drive {
         let dt = crate::CONTROL_PERIOD_S;
         self.quiet = self.quiet.saturating_add(1);
+        let timing = PeriodTiming {
+            period_us: m.period_us,
+            step_cycles: m.step_cycles,
+            overrun: m.overrun,
+            edges_lost: m.edges_lost,
+        };
+        self.report = self.stats.record(timing, dt * 1.0e6);
+        if let Some(t) = self.report {
+            // While a run streams samples the host logs the telemetry beside them.
+            if self.run != Run::Idle {
+                send(BoardMsg::Telemetry(t));
+            }
+        }
         let v_bus = self.v_bus_of(m.v_bus);
         let u_lim = self.u_limit(v_bus);
         let lim = self.coeffs.limits;
@@ -523,17 +590,19 @@ impl Board {
             }
             _ => None,
         };
-        let inp = StepInputs {
-            hall: m.hall,
-            edges: m.edges.clone(),
-            edges_overflow: m.edges_overflow,
-            now_ticks: m.now_ticks,
-            i_meas: i,
-            v_bus: u_lim,
-            omega_ref: self.omega_ref,
-            v_override,
-        };
-        let out = self.step.step(&inp);
+        let inp = &mut self.inp;
+        inp.hall = m.hall;
+        inp.edges.clear();
+        // Both hold MAX_EDGES: never fails.
+        let _ = inp.edges.extend_from_slice(&m.edges);
+        inp.edges_overflow = m.edges_overflow;
+        inp.now_ticks = m.now_ticks;
+        inp.i_meas = i;
+        inp.v_bus = u_lim;
+        inp.omega_ref = self.omega_ref;
+        inp.v_override = v_override;
+        let out = self.step.step(&self.inp);
+        self.last_out = out;
 
         if self.run != Run::Idle {
             // Stall: a large voltage and the rotor does not step.
@@ -641,6 +710,35 @@ mod tests {
     use std::vec::Vec;
 
     #[test]
+    fn neighbouring_bridge_steps_switch_one_leg_off_and_one_on() {
+        let duty = 1234;
+        for k in 0..6u8 {
+            let (ccr, en) = six_step_pattern(k, duty);
+            // One phase switches with the duty, one is held low, one floats.
+            assert_eq!(en.iter().filter(|&&e| e).count(), 2, "step {k}");
+            assert_eq!(ccr.iter().filter(|&&c| c == duty).count(), 1, "step {k}");
+            let (hi, lo) = BRIDGE_STEPS[usize::from(k)];
+            assert!(en[hi] && en[lo] && ccr[hi] == duty && ccr[lo] == 0);
+            // Reversed: the same pair with the roles swapped.
+            assert_eq!(BRIDGE_STEPS[usize::from(k + 3) % 6], (lo, hi));
+            // To the next step (either direction): the shared phase keeps its role and
+            // compare value, one leg turns off, one turns on.
+            for next in [(k + 1) % 6, (k + 5) % 6] {
+                let (ccr2, en2) = six_step_pattern(next, duty);
+                let kept: Vec<usize> = (0..3).filter(|&p| en[p] && en2[p]).collect();
+                assert_eq!(kept.len(), 1, "{k} -> {next}");
+                assert_eq!(ccr[kept[0]], ccr2[kept[0]], "{k} -> {next}");
+            }
+        }
+        // The forward commutation of consecutive sectors walks the steps one by one.
+        for sector in 0..6u8 {
+            let a = commutation_step(sector, false);
+            let b = commutation_step((sector + 1) % 6, false);
+            assert_eq!(b, (a + 1) % 6);
+        }
+    }
+
+    #[test]
     fn temperature_derating_falls_from_the_derate_point_to_the_trip() {
         assert_eq!(temperature_derating(25.0), 1.0);
         assert_eq!(temperature_derating(TEMP_DERATE_C), 1.0);
@@ -693,6 +791,64 @@ mod tests {
         b.handle(&HostMsg::ClearFault, &mut |m| out.push(m));
         b.tick(&at(60.0), &mut |m| out.push(m));
         assert_eq!(b.fault(), None);
+    }
+
+    #[test]
+    fn lost_hall_edges_stop_a_run_and_are_reported() {
+        let (mut b, mut out) = running_board();
+        let m = Measurements {
+            edges_overflow: true,
+            edges_lost: 3,
+            ..at(25.0)
+        };
+        assert_eq!(b.tick(&m, &mut |m| out.push(m)), Drive::Off);
+        assert_eq!(b.fault(), Some(Fault::ImpossibleTransition));
+        out.clear();
+        b.handle(&HostMsg::ReadTelemetry, &mut |m| out.push(m));
+        match out.as_slice() {
+            [BoardMsg::Telemetry(t)] => assert_eq!((t.edges_lost, t.periods), (3, 1)),
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn a_run_streams_telemetry_every_window() {
+        let (mut b, mut out) = running_board();
+        let mut m = at(25.0);
+        m.period_us = 12_010.0;
+        m.step_cycles = 4321;
+        for k in 0..3 * crate::telemetry::WINDOW_PERIODS {
+            if k % 50 == 0 {
+                // A listening host's sign of life.
+                b.handle(&HostMsg::Heartbeat, &mut |m| out.push(m));
+            }
+            b.tick(&m, &mut |m| out.push(m));
+        }
+        assert_eq!(b.mode(), Mode::Speed);
+        let reports: Vec<_> = out
+            .iter()
+            .filter_map(|m| match m {
+                BoardMsg::Telemetry(t) => Some(*t),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(reports.len(), 3);
+        for t in &reports {
+            assert_eq!(t.periods, crate::telemetry::WINDOW_PERIODS);
+            assert!((t.period_us - 12_010.0).abs() < 0.1, "{}", t.period_us);
+            assert!((t.jitter_us - 10.0).abs() < 0.1, "{}", t.jitter_us);
+            assert_eq!(t.step_cycles_max, 4321);
+        }
+        // Idle, the windows go on (for the firmware's defmt line) but nothing is sent.
+        b.handle(&HostMsg::Stop, &mut |m| out.push(m));
+        out.clear();
+        let mut reports = 0;
+        for _ in 0..crate::telemetry::WINDOW_PERIODS {
+            b.tick(&m, &mut |m| out.push(m));
+            reports += usize::from(b.take_report().is_some());
+        }
+        assert_eq!(reports, 1);
+        assert!(out.is_empty(), "{out:?}");
     }
 
     #[test]

@@ -33,9 +33,10 @@
 //! | `Heartbeat` | nothing (any frame keeps a speed or experiment run alive) |
 //! | `Commission` | `Ack`, then `Commission { outcome, seq }` when done |
 //! | `ReadCommission` | `Commission { outcome, seq }` (the last run, or the stored one) |
-//! | (nothing) | `Sample { .. }` every 12 ms while running, `Fault`, `Warning` |
+//! | `ReadTelemetry` | `Telemetry(..)`: the last complete window of [`crate::telemetry`] |
+//! | (nothing) | `Sample { .. }` every 12 ms while running, `Telemetry(..)` every second while running, `Fault`, `Warning` |
 //!
-//! Refusals of version 2: `SetMode { Speed }` and `StartExperiment` without valid
+//! Version 3 adds `ReadTelemetry` and `Telemetry`. Refusals (since version 2): `SetMode { Speed }` and `StartExperiment` without valid
 //! coefficients (`Nack(NoCoefficients)`); an experiment whose duration is not finite, not
 //! positive or above [`crate::board::MAX_EXPERIMENT_S`], or a steady voltage beyond `u_max`
 //! (`Nack(OutOfRange)`); any start while a fault is latched (`Nack(Faulted)`). A speed or
@@ -61,7 +62,7 @@ use serde::{Deserialize, Serialize};
 use crate::blob::{self, Coefficients, ModelKind, CRC32, MAX_BLOB_LEN};
 
 /// Protocol version reported by `Identity`.
-pub const PROTOCOL_VERSION: u16 = 2;
+pub const PROTOCOL_VERSION: u16 = 3;
 /// Largest upload chunk.
 pub const CHUNK_LEN: usize = 64;
 /// Largest body (postcard message + CRC).
@@ -134,6 +135,8 @@ pub enum HostMsg {
     Commission,
     /// Ask for [`BoardMsg::Commission`].
     ReadCommission,
+    /// Ask for [`BoardMsg::Telemetry`].
+    ReadTelemetry,
 }
 
 /// Why a request was refused.
@@ -259,6 +262,8 @@ pub enum BoardMsg {
         outcome: crate::commission::CommissionOutcome,
         seq: u32,
     },
+    /// Loop timing and lost Hall edges ([`crate::telemetry`]).
+    Telemetry(crate::telemetry::Telemetry),
 }
 
 /// Why a frame could not be built or read.

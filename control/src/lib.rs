@@ -20,6 +20,7 @@
 //! | [`blob`] | the coefficient blob (postcard + magic + version + CRC32) |
 //! | [`frame`] | the serial frame codec (COBS + postcard + CRC) |
 //! | [`slots`] | two-slot flash storage of coefficients, power-cut safe |
+//! | [`telemetry`] | loop period, jitter, overruns, cycles per step, lost Hall edges |
 #![no_std]
 #![forbid(unsafe_code)]
 
@@ -37,6 +38,7 @@ pub mod pi;
 pub mod sindy;
 pub mod slots;
 pub mod step;
+pub mod telemetry;
 pub mod velocity;
 
 /// Control period of the paper and of the firmware: 12 ms.

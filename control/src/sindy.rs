@@ -102,7 +102,9 @@ pub enum Term {
 /// What a term may depend on at one instant.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct TermInputs<F> {
-    /// Angle x [rad].
+    /// Angle x [rad], unwrapped: the angle as the log carries it (on the board, Hall steps
+    /// since the run started times the step angle), never reduced to one revolution, so that
+    /// the board evaluates `x` and `sin(k*x)` on the angle the fit saw.
     pub x: F,
     /// Velocity ẋ [rad/s].
     pub xdot: F,

@@ -4,8 +4,11 @@
 //! 1. Hall decoding of the edges captured since the last step (each edge through the
 //!    [`HallDecoder`], its direction and timestamp to the velocity estimator), then of the
 //!    present Hall state; faults are flagged.
-//! 2. Angle θ = steps·2π/(6·pole_pairs); velocity ω from the chosen estimator. Position
-//!    terms (cogging, position load, the SINDYc model's x) see θ within one revolution.
+//! 2. Angle θ = steps·2π/(6·pole_pairs); velocity ω from the chosen estimator. Periodic
+//!    position terms (cogging, position load) see θ within one revolution (exact in f32).
+//!    The SINDYc model's angle x is θ itself, unwrapped: the angle the board logs (Hall
+//!    steps since the run started), which is the angle the fit's library sees
+//!    ([`crate::sindy::TermInputs::x`]).
 //! 3. Current: the measured current corrected by `current_offset` effects.
 //! 4. Friction F_f: the observer (none / LuGre / SINDYc), driven by the speed reference
 //!    ([`observer_velocity`]: reference-based compensation; the LuGre torque without its
@@ -13,7 +16,8 @@
 //!    effect of the configuration.
 //! 5. Compensation `V_c = L·dI_c/dt + R·I_c`, `I_c = F_f/K_t` (R scaled by the heat state of
 //!    a `thermal` effect), plus the voltage lost to `deadtime`.
-//! 6. `V = PI(ω_ref − ω) + V_c + V_deadtime`, saturated at ±min(u_max, V_bus) (the PI's
+//! 6. `V = PI(ω_ref − ω) + g·V_c + V_deadtime` (`g` the compensation weight
+//!    [`StepConfig::comp_gain`]), saturated at ±min(u_max, V_bus) (the PI's
 //!    anti-windup sees the saturation of the total), or the open-loop override in experiment
 //!    mode, saturated the same way. While |I| exceeds the soft current limit `i_limit` the
 //!    window narrows to the steady-state current limit around the back-EMF,
@@ -33,9 +37,22 @@ use crate::pi::{saturate, Pi, PiParams};
 use crate::sindy::{SindyModel, SindyObserver};
 use crate::velocity::{Estimator, EstimatorConfig, VelocityEstimator};
 
-/// Hall edges one step can take: 32 edges per 12 ms is 2667 steps/s, 280 rad/s with 11 pole
-/// pairs (the paper's motor reaches ≈ 170 rad/s at 12 V).
-pub const MAX_EDGES: usize = 32;
+/// Top speed the Hall edge queue is sized for [rad/s]: the paper's motor unloaded at the
+/// board's largest voltage, `MAX_DUTY·RATED_VBUS_MAX/K_b` = 0.95 · 28 V / 0.0713 V·s/rad
+/// = 373 rad/s (3560 rpm).
+pub const RATED_SPEED_RAD_S: f32 =
+    crate::board::MAX_DUTY * crate::blob::RATED_VBUS_MAX / (7.91 / 111.0);
+/// Pole pairs the Hall edge queue is sized for: the paper's motor.
+pub const RATED_POLE_PAIRS: u16 = crate::hall::PAPER_POLE_PAIRS;
+/// Hall edges per second at [`RATED_SPEED_RAD_S`]: `ω/(2π)·pole pairs·6` = 3920 /s.
+pub const RATED_EDGE_RATE: f32 =
+    RATED_SPEED_RAD_S / core::f32::consts::TAU * RATED_POLE_PAIRS as f32 * 6.0;
+/// Hall edges one step can take: the edges of one 12 ms period at [`RATED_EDGE_RATE`]
+/// (47.0) with half again as margin for speed ripple and a late period, 71. A motor with
+/// more pole pairs reaches the same edge rate at a lower speed, `RATED_EDGE_RATE·2π/(6·pp)`.
+/// More edges in one period are counted as lost (`crate::telemetry::Telemetry::edges_lost`)
+/// and stop a run ([`Faults::EDGE_OVERFLOW`]).
+pub const MAX_EDGES: usize = (RATED_EDGE_RATE * crate::CONTROL_PERIOD_S * 1.5) as usize + 1;
 /// Effects a configuration can carry.
 pub const MAX_EFFECTS: usize = 8;
 /// The velocity estimator's angle reference moves after this many Hall steps (4096 steps are
@@ -83,9 +100,10 @@ pub struct StepConfig<F> {
     pub tau_d: F,
     /// Control period [s].
     pub dt: F,
-    /// Add the friction compensation voltage (false: friction is estimated and reported but
-    /// not compensated, the paper's uncompensated baseline).
-    pub compensate: bool,
+    /// Weight of the friction compensation voltage added to the loop output: 0 = none
+    /// (friction is estimated and reported but not compensated, the paper's uncompensated
+    /// baseline), 1 = full compensation `V_c` of eq. 40, values between scale it.
+    pub comp_gain: F,
 }
 
 impl<F: Float> StepConfig<F> {
@@ -109,7 +127,7 @@ impl<F: Float> StepConfig<F> {
             v_bus: c(24.0),
             tau_d: c(0.024),
             dt: F::from(crate::CONTROL_PERIOD_S).unwrap(),
-            compensate: true,
+            comp_gain: F::one(),
         }
     }
 }
@@ -179,7 +197,8 @@ pub struct StepOutputs<F> {
     pub omega: F,
     /// Estimated friction torque F_f [N·m] (observer + torque effects).
     pub friction: F,
-    /// Compensation voltage V_c [V] (0 when compensation is off).
+    /// Compensation voltage added to the loop output, `g·V_c` [V] (`g` =
+    /// [`StepConfig::comp_gain`]; 0 when compensation is off).
     pub v_comp: F,
     /// Observer state z (0 without observer).
     pub z: F,
@@ -203,7 +222,8 @@ pub struct ControlStep<F> {
     i_limit: F,
     /// Voltage derating active (hysteresis state of the soft current limit).
     derating: bool,
-    compensate: bool,
+    /// Weight of the compensation voltage (see [`StepConfig::comp_gain`]).
+    comp_gain: F,
     decoder: HallDecoder,
     estimator: Estimator<F>,
     observer: Observer<F>,
@@ -283,7 +303,11 @@ impl<F: Float> ControlStep<F> {
                 F::infinity()
             },
             derating: false,
-            compensate: cfg.compensate,
+            comp_gain: if cfg.comp_gain.is_finite() && cfg.comp_gain > F::zero() {
+                cfg.comp_gain
+            } else {
+                F::zero()
+            },
             decoder: HallDecoder::new(cfg.hall_table, cfg.pole_pairs),
             estimator: Estimator::from_config(&cfg.estimator, step, dt),
             observer,
@@ -395,7 +419,8 @@ impl<F: Float> ControlStep<F> {
         }
         let theta_rel = F::from(steps.wrapping_sub(self.steps_ref)).unwrap() * self.step_angle;
         let omega = self.estimator.update(theta_rel, inp.now_ticks);
-        // Position-dependent terms see the angle within one revolution (exact in f32).
+        // Periodic position terms see the angle within one revolution (exact in f32); the
+        // SINDYc model sees the unwrapped angle, as the fit does (module docs).
         let theta_rev: F = self.decoder.angle_in_rev();
 
         // 3. Current corrected for the sensor offset (measured = I + i0).
@@ -414,7 +439,7 @@ impl<F: Float> ControlStep<F> {
         let (f_obs, z) = match &mut self.observer {
             Observer::None => (F::zero(), F::zero()),
             Observer::Lugre(o) => (o.step_compensation(v_obs, dt), o.z),
-            Observer::Sindy(o) => (o.step(theta_rev, v_obs, current, self.u_prev, dt), o.z),
+            Observer::Sindy(o) => (o.step(theta, v_obs, current, self.u_prev, dt), o.z),
         };
         let ex = EffectInputs {
             theta: theta_rev,
@@ -445,8 +470,8 @@ impl<F: Float> ControlStep<F> {
             }
         }
         self.comp.params.r = self.motor.r * (F::one() + heat);
-        let v_comp = if self.compensate {
-            self.comp.step(friction, dt, v_bus).v_c
+        let v_comp = if self.comp_gain > F::zero() {
+            self.comp_gain * self.comp.step(friction, dt, v_bus).v_c
         } else {
             F::zero()
         };
@@ -520,11 +545,13 @@ impl<F: Float> ControlStep<F> {
 
 #[cfg(test)]
 mod tests {
+    extern crate std;
     use super::*;
     use crate::hall::hall_state_for_angle;
     use crate::lugre;
     use crate::sindy::{SparseEq, Term};
     use proptest::prelude::*;
+    use std::vec::Vec;
 
     /// A DC motor with LuGre friction, integrated finely (exact LuGre update, 0.1 ms steps),
     /// producing Hall states and edges for the control step.
@@ -651,10 +678,51 @@ mod tests {
         assert!((out.v_comp - m.r * out.friction / m.kt).abs() < 0.05);
         // With compensation off, v_comp is 0 but friction is still reported.
         let mut off = cfg.clone();
-        off.compensate = false;
+        off.comp_gain = 0.0;
         let mut ctl = ControlStep::new(&off);
         let o = ctl.step(&motor.run(v, 40.0, &off.hall_table));
         assert_eq!(o.v_comp, 0.0);
+    }
+
+    #[test]
+    fn comp_gain_weights_the_compensation_voltage() {
+        // The same inputs through a full and a weighted compensation: the added voltage
+        // scales with the weight, the friction estimate does not.
+        let inputs: Vec<StepInputs<f64>> = {
+            let cfg = StepConfig::<f64>::paper();
+            let mut ctl = ControlStep::new(&cfg);
+            let mut motor = Motor::new();
+            let mut v = 0.0;
+            (0..300)
+                .map(|_| {
+                    let inp = motor.run(v, 40.0, &cfg.hall_table);
+                    v = ctl.step(&inp).v_cmd;
+                    inp
+                })
+                .collect()
+        };
+        let run = |g: f64| {
+            let mut cfg = StepConfig::<f64>::paper();
+            cfg.comp_gain = g;
+            let mut ctl = ControlStep::new(&cfg);
+            let mut last = StepOutputs::default();
+            for inp in &inputs {
+                last = ctl.step(inp);
+            }
+            last
+        };
+        let full = run(1.0);
+        assert!(full.v_comp.abs() > 0.1, "{}", full.v_comp);
+        for g in [0.0, 0.25, 0.5, 0.75] {
+            let o = run(g);
+            assert!((o.friction - full.friction).abs() < 1e-12 * full.friction.abs().max(1.0));
+            assert!(
+                (o.v_comp - g * full.v_comp).abs() < 1e-9,
+                "g = {g}: {} vs {}",
+                o.v_comp,
+                g * full.v_comp
+            );
+        }
     }
 
     #[test]
@@ -764,6 +832,18 @@ mod tests {
         };
         let out = ctl.step(&inp);
         assert!((out.v_cmd - (v_c - 0.4)).abs() < 1e-9);
+    }
+
+    #[test]
+    fn edge_queue_holds_a_period_at_the_rated_speed() {
+        let per_period = RATED_EDGE_RATE * crate::CONTROL_PERIOD_S;
+        assert!(
+            (RATED_SPEED_RAD_S - 373.0).abs() < 1.0,
+            "{RATED_SPEED_RAD_S}"
+        );
+        assert!((per_period - 47.0).abs() < 0.5, "{per_period}");
+        assert!(MAX_EDGES as f32 >= 1.5 * per_period, "{MAX_EDGES}");
+        assert!((MAX_EDGES as f32) < 1.5 * per_period + 2.0, "{MAX_EDGES}");
     }
 
     #[test]

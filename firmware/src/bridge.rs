@@ -3,7 +3,8 @@
 //! Commutation step `k` (0..5) powers one phase pair: the "high" phase switches with duty
 //! `d` (complementary, so its low side conducts in the off time: synchronous rectification),
 //! the "low" phase has its low side on all the time (duty 0), the third phase floats (both
-//! outputs disabled). Step `k + 3` is step `k` with the polarity reversed. Which step drives
+//! outputs disabled). Step `k + 3` is step `k` with the polarity reversed
+//! (`control::board::six_step_pattern`, tested on the host). Which step drives
 //! a rotor in a Hall sector is `control::board::commutation_step` (sector + 1 forward,
 //! sector + 4 for a negative voltage), the same rule the emulated board uses; commissioning
 //! holds one step whatever the Hall state ([`Drive::hold`]).
@@ -13,10 +14,23 @@
 //! reads that phase's op-amp at any time, without synchronising the ADC to the PWM.
 //!
 //! Commutation follows the rotor at every Hall edge: the TIM4 capture interrupt calls
-//! [`commutate`] with the new Hall state (`hall_capture`), and the 12 ms control loop only
-//! sets the drive (on/off, direction, duty) with [`set_drive`] and commutates once itself so
-//! a new duty applies at once. Commutating only every 12 ms would energise the wrong phase
-//! pair for most of each period above a few rad/s.
+//! [`commutate`] (`hall_capture`), and the 12 ms control loop only sets the drive (on/off,
+//! direction, duty) with [`set_drive`] and commutates once itself so a new duty applies at
+//! once. Commutating only every 12 ms would energise the wrong phase pair for most of each
+//! period above a few rad/s.
+//!
+//! A commutation is applied on TIM1's update event, atomically. [`commutate`] reads the
+//! drive and the Hall state and stores the new pattern (compare values and output enables)
+//! in one critical section, so the Hall interrupt and the loop cannot interleave a stale
+//! state, and arms TIM1's update interrupt. That interrupt (the highest priority) runs at
+//! the next counter extreme, within 25 µs (centre-aligned, an update at every overflow and
+//! underflow): it writes the output enables into their preload registers (TIM1_CR2.CCPC =
+//! 1), the three compare values (compare preload off, so they take effect at once), and
+//! generates the commutation event (TIM1_EGR.COMG) that switches all six enables at once
+//! (RM0440, "Six-step PWM generation"). The pattern therefore changes within a few
+//! nanoseconds, at the counter's extreme, far from any compare match: an output enabled
+//! with the compare value of the previous step (both low sides of two legs on, or the old
+//! duty on the new low phase) never lasts longer than those few instructions.
 //!
 //! [`Bridge::off`] clears MOE with OSSI = idle level and OIS = 0, which forces all six gate
 //! signals low (RM0440, "TIMx_BDTR", off-state selection); [`force_off`] does the same from
@@ -29,6 +43,8 @@ use core::cell::Cell;
 use core::sync::atomic::{AtomicU8, Ordering};
 
 use critical_section::Mutex;
+use embassy_stm32::interrupt;
+use embassy_stm32::interrupt::InterruptExt;
 use embassy_stm32::pac;
 use embassy_stm32::peripherals::TIM1;
 use embassy_stm32::timer::complementary_pwm::{ComplementaryPwm, Ossi, Ossr};
@@ -39,12 +55,23 @@ use crate::board::MAX_DUTY;
 /// Phase order U, V, W as TIM1 channels 1, 2, 3.
 const PHASES: [Channel; 3] = [Channel::Ch1, Channel::Ch2, Channel::Ch3];
 
-/// (high phase, low phase) of each commutation step.
-const STEPS: [(usize, usize); 6] = [(0, 1), (0, 2), (1, 2), (1, 0), (2, 0), (2, 1)];
+/// A six-step pattern ready to apply on the next update event.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Pattern {
+    /// Compare values of phases U, V, W.
+    ccr: [u16; 3],
+    /// Outputs (both sides) enabled, per phase.
+    enable: [bool; 3],
+    /// The commutation step (0..5).
+    step: u8,
+}
+
+/// The pattern the next update event applies.
+static PENDING: Mutex<Cell<Option<Pattern>>> = Mutex::new(Cell::new(None));
 
 /// The phase whose low-side switch is on in step `k`: the one whose shunt to read.
 pub fn low_phase(k: u8) -> usize {
-    STEPS[k as usize % 6].1
+    control::board::BRIDGE_STEPS[k as usize % 6].1
 }
 
 /// Duty cycle for a voltage magnitude and the bus voltage: `|V|/V_bus`, saturated at
@@ -91,25 +118,55 @@ pub fn last_step() -> u8 {
     LAST_STEP.load(Ordering::Relaxed)
 }
 
-/// Applies the drive for Hall state `state`: the step of its sector, or all off when the
-/// drive is off or the state is invalid. Called from the TIM4 interrupt and the control loop.
-pub fn commutate(state: u8) {
-    let d = critical_section::with(|cs| DRIVE.borrow(cs).get());
+/// The pattern of drive `d` for Hall state `state`; `None`: all off (drive off, invalid
+/// state).
+fn pattern(d: &Drive, state: u8) -> Option<Pattern> {
     let sector = d.table[(state & 7) as usize];
     let k = match d.hold {
-        _ if !d.on => {
-            force_off();
-            return;
-        }
+        _ if !d.on => return None,
         Some(k) => k % 6,
-        None if sector < 0 => {
-            force_off();
-            return;
-        }
+        None if sector < 0 => return None,
         None => control::board::commutation_step(sector as u8, d.reverse),
     };
-    let (hi, lo) = STEPS[k as usize];
+    let (ccr, enable) = control::board::six_step_pattern(k, d.duty);
+    Some(Pattern {
+        ccr,
+        enable,
+        step: k,
+    })
+}
+
+/// Commutates for the Hall state now: schedules the step of its sector for the next PWM
+/// update event, or turns the bridge off at once when the drive is off or the state is
+/// invalid. Called from the TIM4 interrupt and the control loop; the drive and the Hall
+/// state are read in the same critical section as the pattern is stored.
+pub fn commutate() {
+    critical_section::with(|cs| {
+        let d = DRIVE.borrow(cs).get();
+        match pattern(&d, crate::hall_capture::hall_state()) {
+            None => {
+                PENDING.borrow(cs).set(None);
+                force_off();
+            }
+            Some(p) => {
+                PENDING.borrow(cs).set(Some(p));
+                // A stale update flag would fire the interrupt now, between two updates.
+                clear_flags(|v| v.set_uif(false));
+                pac::TIM1.dier().modify(|w| w.set_uie(true));
+            }
+        }
+    });
+}
+
+/// TIM1 update (a counter extreme): applies the pending pattern, then disarms itself.
+#[interrupt]
+fn TIM1_UP_TIM16() {
     let t = pac::TIM1;
+    t.dier().modify(|w| w.set_uie(false));
+    clear_flags(|v| v.set_uif(false));
+    let Some(p) = critical_section::with(|cs| PENDING.borrow(cs).take()) else {
+        return;
+    };
     if hw_tripped() {
         // The hardware stop cut the bridge: it stays off until the fault is cleared.
         force_off();
@@ -117,19 +174,20 @@ pub fn commutate(state: u8) {
     }
     // Register access beside the ComplementaryPwm driver, which owns TIM1 but is only used
     // for the configuration: CCR1-3, CCER and MOE are written here and in `force_off` only.
-    for p in 0..3 {
-        t.ccr(p)
-            .write(|w| w.set_ccr(if p == hi { d.duty } else { 0 }));
-    }
+    // Enables into their preload registers, compare values at once, then the commutation
+    // event switches the enables together.
     t.ccer().modify(|w| {
-        for p in 0..3 {
-            let en = p == hi || p == lo;
-            w.set_cce(p, en);
-            w.set_ccne(p, en);
+        for (ph, &en) in p.enable.iter().enumerate() {
+            w.set_cce(ph, en);
+            w.set_ccne(ph, en);
         }
     });
+    for (ph, &c) in p.ccr.iter().enumerate() {
+        t.ccr(ph).write(|w| w.set_ccr(c));
+    }
+    t.egr().write(|w| w.set_comg(true));
     t.bdtr().modify(|w| w.set_moe(true));
-    LAST_STEP.store(k, Ordering::Relaxed);
+    LAST_STEP.store(p.step, Ordering::Relaxed);
 }
 
 /// The bridge: owns TIM1 and its six pins, configured by embassy's `ComplementaryPwm`.
@@ -143,6 +201,20 @@ impl<'d> Bridge<'d> {
         // A debugger halt stops TIM1 with its outputs disabled (RM0440, "DBGMCU_APB2FZR":
         // for advanced timers the outputs behave as with MOE = 0 while frozen).
         pac::DBGMCU.apb2fzr().modify(|w| w.set_tim1(true));
+        // Commutation on the update event (module docs): output enables preloaded and
+        // switched by the commutation event, generated by software only (CCUS = 0); compare
+        // values written directly (compare preload off), at the counter's extreme.
+        let t = pac::TIM1;
+        t.cr2().modify(|w| {
+            w.set_ccpc(true);
+            w.set_ccus(false);
+        });
+        for ph in 0..3 {
+            t.ccmr_output(ph / 2).modify(|w| w.set_ocpe(ph % 2, false));
+        }
+        interrupt::TIM1_UP_TIM16.set_priority(interrupt::Priority::P0);
+        // SAFETY: the handler touches TIM1 and the critical-section pattern only.
+        unsafe { interrupt::TIM1_UP_TIM16.enable() };
         pwm.set_off_state_selection_idle(Ossi::IDLE_LEVEL);
         pwm.set_off_state_selection_run(Ossr::IDLE_LEVEL);
         let mut b = Bridge { pwm };
@@ -152,9 +224,12 @@ impl<'d> Bridge<'d> {
 
     /// All gates off, and no commutation until the drive is set again.
     pub fn off(&mut self) {
-        let mut d = critical_section::with(|cs| DRIVE.borrow(cs).get());
-        d.on = false;
-        set_drive(d);
+        critical_section::with(|cs| {
+            let mut d = DRIVE.borrow(cs).get();
+            d.on = false;
+            DRIVE.borrow(cs).set(d);
+            PENDING.borrow(cs).set(None);
+        });
         self.pwm.set_master_output_enable(false);
         for ch in PHASES {
             self.pwm.set_duty(ch, 0);
@@ -184,9 +259,15 @@ pub fn hw_tripped() -> bool {
     pac::TIM1.sr().read().bif(0)
 }
 
-/// Clears the break flag, so that [`commutate`] may turn the bridge on again. Write-zero-
-/// to-clear: every other flag of TIM1_SR is written 1, which leaves it as it is.
+/// Clears the break flag, so that [`commutate`] may turn the bridge on again.
 pub fn rearm() {
+    clear_flags(|v| v.set_bif(0, false));
+}
+
+/// Clears the TIM1_SR flags that `clear` sets false, leaving the others: the register is
+/// write-zero-to-clear, so every other flag is written 1 (a read-modify-write would clear a
+/// flag set between its read and its write).
+fn clear_flags(clear: impl FnOnce(&mut pac::timer::regs::SrAdv)) {
     let mut v = pac::timer::regs::SrAdv(0);
     v.set_uif(true);
     for n in 0..4 {
@@ -195,6 +276,7 @@ pub fn rearm() {
     }
     v.set_comif(true);
     v.set_tif(true);
+    v.set_bif(0, true);
     v.set_bif(1, true);
     v.set_sbif(true);
     v.set_ccif5(true);
@@ -203,5 +285,6 @@ pub fn rearm() {
     v.set_dirif(true);
     v.set_ierrif(true);
     v.set_terrif(true);
+    clear(&mut v);
     pac::TIM1.sr().write_value(v);
 }

@@ -6,7 +6,10 @@
 //! to 32 bits with the overflow count, reads the Hall state from GPIOB and queues
 //! `(ticks, state)`; the control task takes the queue every 12 ms and hands it to
 //! `control::step` (which decodes and counts the edges and runs the edge-timing estimator),
-//! and commutates the bridge for the new Hall state (`bridge::commutate`).
+//! and commutates the bridge for the new Hall state (`bridge::commutate`, applied at the
+//! next PWM update). The queue holds `control::step::MAX_EDGES` edges, one period at the
+//! rated speed with margin; edges beyond are counted ([`take_edges`]) and reported in the
+//! telemetry.
 //! An input filter of 8 samples at f_DTS/8 rejects switching noise shorter than ≈ 0.4 µs.
 //!
 //! Register access goes through the PAC (`unstable-pac`): embassy-stm32 0.6 has no
@@ -30,12 +33,15 @@ struct Queue {
     high: u32,
     edges: heapless::Vec<HallEdge, MAX_EDGES>,
     overflow: bool,
+    /// Edges dropped since boot because the queue was full (`MAX_EDGES` in one period).
+    lost: u32,
 }
 
 static QUEUE: Mutex<RefCell<Queue>> = Mutex::new(RefCell::new(Queue {
     high: 0,
     edges: heapless::Vec::new(),
     overflow: false,
+    lost: 0,
 }));
 
 /// Present Hall state: bit 0 = H1 (PB6), bit 1 = H2 (PB7), bit 2 = H3 (PB8).
@@ -117,13 +123,14 @@ pub fn now_ticks() -> u32 {
     })
 }
 
-/// Takes the edges captured since the last call, and whether some were lost.
-pub fn take_edges() -> (heapless::Vec<HallEdge, MAX_EDGES>, bool) {
+/// Takes the edges captured since the last call, whether some were lost since, and how
+/// many were lost since boot.
+pub fn take_edges() -> (heapless::Vec<HallEdge, MAX_EDGES>, bool, u32) {
     critical_section::with(|cs| {
         let mut q = QUEUE.borrow_ref_mut(cs);
         let edges = core::mem::take(&mut q.edges);
         let overflow = core::mem::replace(&mut q.overflow, false);
-        (edges, overflow)
+        (edges, overflow, q.lost)
     })
 }
 
@@ -138,11 +145,12 @@ fn TIM4() {
             let low = t.ccr(0).read().ccr();
             let ticks = extend(q.high, low, sr.uif());
             let state = hall_state();
-            // Commutate at once: the next phase pair for the new sector.
-            crate::bridge::commutate(state);
+            // Commutate at the next PWM update: the next phase pair for the new sector.
+            crate::bridge::commutate();
             let edge = HallEdge { ticks, state };
             if q.edges.push(edge).is_err() {
                 q.overflow = true;
+                q.lost = q.lost.saturating_add(1);
             }
         }
         if sr.uif() {

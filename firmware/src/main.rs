@@ -1,9 +1,10 @@
 //! Firmware for ST's B-G431B-ESC1 (STM32G431CB): thin board glue around `control`.
 //!
 //! - [`board`]: clocks (170 MHz), pins and analog gains, with their sources.
-//! - [`bridge`]: TIM1 centre-aligned complementary PWM, six-step commutation, duty = V/V_bus.
+//! - [`bridge`]: TIM1 centre-aligned complementary PWM, six-step commutation applied on the
+//!   PWM update event (all six gates at once), duty = V/V_bus.
 //! - [`hall_capture`]: Hall edges time-stamped by TIM4 input capture (1 MHz); the capture
-//!   interrupt commutates the bridge at every edge.
+//!   interrupt commutates the bridge at every edge; edges beyond the queue are counted.
 //! - [`link`]: the serial protocol of `control::frame` on USART2 (ST-LINK virtual COM port),
 //!   coefficient uploads into the two flash slots of `control::slots`.
 //! - [`storage`]: the flash behind those slots, a double ECC error (NMI) turned into a
@@ -12,7 +13,9 @@
 //!   bridge turns off within a PWM period above the board's 40 A rating.
 //! - this file: start-up and the 12 ms control loop: measurements in, `control::board::Board`
 //!   (the board's logic: commands, modes, limits, faults, commissioning, shared with the
-//!   emulated board) in the middle, the bridge drive out.
+//!   emulated board) in the middle, the bridge drive out. The loop's period and work are
+//!   timed with the DWT cycle counter; the board logic turns them into one telemetry report
+//!   a second (`control::telemetry`), printed through defmt and sent to the host during runs.
 //!
 //! Safety (in `control::board`): an invalid Hall state or impossible transition,
 //! over-current, over-temperature (the board's NTC, which also lowers the current limit from
@@ -41,6 +44,7 @@ use core::sync::atomic::Ordering;
 use control::board::{store_coefficients, Board, Drive, Measurements};
 use control::frame::{BoardMsg, Mode, Warning};
 use control::slots::Slots;
+use cortex_m::peripheral::DWT;
 use defmt_rtt as _;
 use embassy_executor::Spawner;
 use embassy_stm32::adc::{Adc, AdcConfig, SampleTime};
@@ -54,7 +58,7 @@ use embassy_stm32::timer::simple_pwm::PwmPin;
 use embassy_stm32::usart::{self, BufferedUart};
 use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_stm32::{bind_interrupts, pac, peripherals};
-use embassy_time::{Duration, Instant, Ticker};
+use embassy_time::{Duration, Ticker};
 use static_cell::StaticCell;
 
 use crate::bridge::Bridge;
@@ -208,22 +212,33 @@ async fn main(spawner: Spawner) {
 
     wdg.pet();
 
+    // Loop telemetry from the DWT cycle counter (170 MHz; it wraps after 25 s, far beyond
+    // one period, so wrapping differences are exact).
+    // SAFETY: only DCB and DWT are touched, and nothing else in the firmware uses them.
+    let mut core = unsafe { cortex_m::Peripherals::steal() };
+    core.DCB.enable_trace();
+    core.DWT.enable_cycle_counter();
+    const CYCLES_PER_US: f32 = (board::SYSCLK_HZ / 1_000_000) as f32;
+    const PERIOD_CYCLES: u32 = (control::CONTROL_PERIOD_S * board::SYSCLK_HZ as f32) as u32;
+
     let mut ticker = Ticker::every(Duration::from_micros(
         (control::CONTROL_PERIOD_S * 1.0e6) as u64,
     ));
-    let period = Duration::from_micros((control::CONTROL_PERIOD_S * 1.0e6) as u64);
-    let mut last_tick = Instant::now();
+    let mut last_start: Option<u32> = None;
+    let mut step_cycles = 0u32;
     let mut send = |m: BoardMsg| link::send(m);
     loop {
         ticker.next().await;
+        let start = DWT::cycle_count();
         wdg.pet();
         // A tick more than one period late means the loop overran (the ticker catches up).
-        let tick = Instant::now();
-        let overrun = tick - last_tick > period + period;
-        last_tick = tick;
+        let period_cycles = last_start.map(|s| start.wrapping_sub(s));
+        last_start = Some(start);
+        let overrun = period_cycles.is_some_and(|c| c > 2 * PERIOD_CYCLES);
+        let period_us = period_cycles.map_or(f32::NAN, |c| c as f32 / CYCLES_PER_US);
 
         // New coefficients (only committed in Idle).
-        if let Some((c, seq)) = NEW_COEFFS.try_take() {
+        if let Ok((c, seq)) = NEW_COEFFS.try_receive() {
             board.load(c, seq);
         }
         // Host commands: the board logic answers them. A cleared fault re-arms the
@@ -254,11 +269,14 @@ async fn main(spawner: Spawner) {
         } else {
             0.0
         };
-        let (edges, edges_overflow) = hall_capture::take_edges();
+        let (edges, edges_overflow, edges_lost) = hall_capture::take_edges();
         let m = Measurements {
             hall: hall_capture::hall_state(),
             edges,
             edges_overflow,
+            edges_lost,
+            period_us,
+            step_cycles,
             now_ticks: hall_capture::now_ticks(),
             i_vector,
             v_bus,
@@ -277,29 +295,23 @@ async fn main(spawner: Spawner) {
         }
 
         // Actuation: set the drive; the Hall-edge interrupt commutates between samples.
-        match drive {
-            Drive::Off => bridge.off(),
-            Drive::SixStep { volts, table } => {
-                let d = bridge::duty(volts, v_bus);
+        // (volts, reverse, Hall table, held step) of a drive that turns the bridge on.
+        let on = match drive {
+            Drive::Off => None,
+            Drive::SixStep { volts, table } => Some((volts, volts < 0.0, table.sector, None)),
+            Drive::Vector { step, volts } => Some((volts, false, [-1; 8], Some(step))),
+        };
+        match on {
+            None => bridge.off(),
+            Some((volts, reverse, table, hold)) => {
                 bridge::set_drive(bridge::Drive {
                     on: true,
-                    reverse: volts < 0.0,
-                    duty: bridge.duty_counts(d),
-                    table: table.sector,
-                    hold: None,
+                    reverse,
+                    duty: bridge.duty_counts(bridge::duty(volts, v_bus)),
+                    table,
+                    hold,
                 });
-                bridge::commutate(hall_capture::hall_state());
-            }
-            Drive::Vector { step, volts } => {
-                let d = bridge::duty(volts, v_bus);
-                bridge::set_drive(bridge::Drive {
-                    on: true,
-                    reverse: false,
-                    duty: bridge.duty_counts(d),
-                    table: [-1; 8],
-                    hold: Some(step),
-                });
-                bridge::commutate(hall_capture::hall_state());
+                bridge::commutate();
             }
         }
         MODE.store(
@@ -315,6 +327,17 @@ async fn main(spawner: Spawner) {
         } else {
             Level::Low
         });
+        if let Some(t) = board.take_report() {
+            defmt::info!(
+                "loop: period {=f32} us, jitter {=f32} us, overruns {=u32}, step cycles max {=u32}, Hall edges lost {=u32}",
+                t.period_us,
+                t.jitter_us,
+                t.overruns,
+                t.step_cycles_max,
+                t.edges_lost
+            );
+        }
+        step_cycles = DWT::cycle_count().wrapping_sub(start);
     }
 }
 
@@ -337,6 +360,7 @@ fn panic(info: &core::panic::PanicInfo) -> ! {
 /// HardFault: bridge off, then wait for the watchdog.
 #[cortex_m_rt::exception]
 unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
+    cortex_m::interrupt::disable();
     bridge::force_off();
     loop {
         cortex_m::asm::nop();
@@ -347,6 +371,8 @@ unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
 /// bridge off, then wait for the watchdog.
 #[cortex_m_rt::exception]
 unsafe fn DefaultHandler(_irqn: i16) -> ! {
+    // No interrupt of higher priority may commutate again (TIM1's update interrupt sets MOE).
+    cortex_m::interrupt::disable();
     bridge::force_off();
     loop {
         cortex_m::asm::nop();

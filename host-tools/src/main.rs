@@ -66,6 +66,8 @@ enum Command {
     Board(cmd::board::Args),
     /// Run the board's Hall commissioning and store the result.
     Commission(cmd::commission::Args),
+    /// Clear the board's latched fault.
+    ClearFault(cmd::clear_fault::Args),
     /// Closed-loop speed control with friction compensation on the emulated motor.
     Emulate(cmd::emulate::Args),
 }
@@ -139,6 +141,7 @@ fn main() -> ExitCode {
         Command::Record(a) => cmd::record::run(a),
         Command::Board(a) => cmd::board::run(a),
         Command::Commission(a) => cmd::commission::run(a),
+        Command::ClearFault(a) => cmd::clear_fault::run(a),
         Command::Emulate(a) => cmd::emulate::run(a),
     };
     match result {

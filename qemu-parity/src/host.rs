@@ -239,7 +239,7 @@ fn count(qemu_out: &str) -> Result<(), String> {
             ));
         }
         println!(
-            "instructions per control step, {:<6}: mean {:.0}, min {}, max {} over {} steps (budget 2000)",
+            "instructions per control period (board logic + step), {:<6}: mean {:.0}, min {}, max {} over {} steps (budget 2000)",
             obs.name(),
             s.1 as f64 / s.0 as f64,
             s.2,

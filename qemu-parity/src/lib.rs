@@ -1,5 +1,7 @@
 //! Shared by the bare-metal (QEMU) and the host run: the recorded input trace, the three
-//! observer configurations, and one pass of the control step over the trace.
+//! observer configurations, and one pass of the board's logic over the trace: every period
+//! is one `control::board::Board::tick` in speed mode (fault and limit checks, telemetry,
+//! stall and link supervision, and the control step), the period the firmware runs.
 //!
 //! Both runs call [`run_trace`] with the same bytes, so any difference in their outputs comes
 //! from code generation and floating point on the two machines, which is what the parity check
@@ -18,7 +20,9 @@
 #![no_std]
 
 use control::blob::{self, Coefficients};
-use control::step::{ControlStep, HallEdge, StepInputs, StepOutputs};
+use control::board::{Board, Measurements};
+use control::frame::{HostMsg, Mode};
+use control::step::{HallEdge, StepInputs, StepOutputs};
 
 /// Magic at the head of a trace file.
 pub const TRACE_MAGIC: [u8; 4] = *b"QPT2";
@@ -163,9 +167,31 @@ pub fn output_words(o: &StepOutputs<f32>) -> [u32; N_OUTPUTS] {
     ]
 }
 
+/// The board's measurements for one traced step: the step's inputs as the transport reports
+/// them. The current along the applied vector is signed by the previous voltage `last_v`
+/// (the board signs it back, `Measurements::i_vector`).
+pub fn measurements(inp: StepInputs<f32>, last_v: f32) -> Measurements {
+    Measurements {
+        hall: inp.hall,
+        edges: inp.edges,
+        edges_overflow: inp.edges_overflow,
+        now_ticks: inp.now_ticks,
+        i_vector: if last_v < 0.0 {
+            -inp.i_meas
+        } else {
+            inp.i_meas
+        },
+        v_bus: inp.v_bus,
+        period_us: control::CONTROL_PERIOD_S * 1.0e6,
+        temperature_c: f32::NAN,
+        ..Measurements::default()
+    }
+}
+
 /// Run every observer over the whole trace; `emit(observer, step, outputs)` receives each
-/// step's outputs, `mark(observer, begin)` is called right before and after each step (the
-/// bare-metal run uses it to count instructions).
+/// step's outputs, `mark(observer, begin)` is called right before and after each period of
+/// the board logic (the bare-metal run uses it to count instructions). The speed reference
+/// reaches the board as a `SetSpeed` message before each period, outside the marks.
 pub fn run_trace(
     trace: &Trace<'_>,
     lugre_blob: &[u8],
@@ -175,12 +201,19 @@ pub fn run_trace(
 ) -> Result<(), blob::BlobError> {
     for obs in Observer::ALL {
         let co = coefficients(obs, lugre_blob, sindyc_blob)?;
-        let mut step = ControlStep::new(&co.step_config(V_BUS));
+        let mut board = Board::new(Some((co, 1)), "qemu-parity", V_BUS);
+        board.handle(&HostMsg::SetMode { mode: Mode::Speed }, &mut |_| {});
+        let mut last_v = 0.0f32;
         for (k, inp) in trace.inputs().enumerate() {
+            let omega_ref = inp.omega_ref;
+            board.handle(&HostMsg::SetSpeed { omega_ref }, &mut |_| {});
+            let m = measurements(inp, last_v);
             mark(obs, true);
-            let out = step.step(&inp);
+            let _ = board.tick(&m, &mut |_| {});
             mark(obs, false);
-            emit(obs, k, &output_words(&out));
+            let out = board.last_step_outputs();
+            last_v = out.v_cmd;
+            emit(obs, k, &output_words(out));
         }
     }
     Ok(())

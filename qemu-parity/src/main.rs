@@ -1,10 +1,11 @@
-//! `qemu-parity`: the control step over a recorded input trace, on two machines.
+//! `qemu-parity`: the board logic and its control step over a recorded input trace, on two
+//! machines.
 //!
 //! * Built for `thumbv7em-none-eabihf`, it is a bare-metal program for QEMU's `mps2-an386`
 //!   (Cortex-M4F): it runs [`qemu_parity::run_trace`] on the embedded trace and prints every
 //!   output as raw `f32` bits through semihosting, then exits QEMU.
 //! * Built for the host, it runs the same code on the same trace and compares (`compare`), or
-//!   counts instructions per control step from QEMU's `-d exec` log (`count`).
+//!   counts instructions per period of the board logic from QEMU's `-d exec` log (`count`).
 //!
 //! Printed lines (both runs): `markers <begin_none> <begin_lugre> <begin_sindyc> <end>`
 //! (code addresses of the step markers), `out <observer> <step> <word>...` (the step's

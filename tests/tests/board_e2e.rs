@@ -330,3 +330,77 @@ fn assert_runs_at_30(d: &Path, port: &str, what: &str) {
     let mean = tail.iter().sum::<f64>() / tail.len() as f64;
     assert!((mean - 30.0).abs() < 3.0, "{what}: mean speed {mean}");
 }
+
+/// A fault stops a run and latches: runs are refused until `motorid clear-fault`, after
+/// which the board records again, with its loop telemetry in the log's metadata.
+#[test]
+fn clear_fault_lets_a_faulted_board_run_again() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("m.toml"), PAPER_LUGRE_MODEL).unwrap();
+    // u_max 24 V: signal d's steps of up to 10 V on the 0.22 Ω winding draw about the
+    // board's 40 A within a millisecond: the hardware stop (or the 12 ms current trip) acts.
+    ok(&motorid(d, &["export", "m.toml", "-o", "c.bin"]));
+    let board = Board::start(d, "50");
+    ok(&motorid(d, &["upload", "c.bin", "--port", &board.port]));
+    let record = |signal: &str, duration: &str, out: &str| {
+        motorid(
+            d,
+            &[
+                "record",
+                "--port",
+                &board.port,
+                "--signal",
+                signal,
+                "--duration",
+                duration,
+                "-o",
+                out,
+            ],
+        )
+    };
+    let out = record("d", "20", "d.csv");
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("stopped with a fault") && err.contains("OverCurrent"),
+        "{err}"
+    );
+    assert!(!d.join("d.csv").exists());
+    // Latched: the next run is refused.
+    let out = record("c", "2", "c.csv");
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("fault is latched"), "{err}");
+
+    let out = motorid(d, &["clear-fault", "--port", &board.port]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(String::from_utf8_lossy(&out.stderr).contains("fault cleared"));
+    ok(&record("c", "2", "c.csv"));
+    let (_, rows, meta) = read_log(&d.join("c.csv"));
+    assert_eq!(rows.len(), 167);
+    let value = |key: &str| -> f64 {
+        let prefix = format!("# {key}=");
+        meta.iter()
+            .find_map(|m| m.strip_prefix(&prefix))
+            .unwrap_or_else(|| panic!("no {key} in {meta:?}"))
+            .parse()
+            .unwrap()
+    };
+    // The emulated board's period in its own time: 12 ms on average, whatever the host's
+    // scheduling adds as jitter.
+    let period = value("loop_period_us");
+    assert!(period > 6_000.0 && period < 60_000.0, "{period}");
+    assert!(value("loop_jitter_us") >= 0.0);
+    assert_eq!(value("loop_overruns"), 0.0);
+    assert_eq!(
+        value("step_cycles_max"),
+        0.0,
+        "no cycle counter on the emulated board"
+    );
+    assert_eq!(value("hall_edges_lost"), 0.0);
+}

@@ -19,7 +19,8 @@ pub struct LoopSettings {
     pub ki: f32,
     /// PI output limit [V].
     pub u_max: f32,
-    /// Weight of the compensation voltage (1 = the paper's eq. 40, 0 = off).
+    /// Weight of the compensation voltage, 0..=1 (1 = the paper's eq. 40, 0 = off, values
+    /// between scale it).
     pub comp_gain: f32,
     /// Velocity estimator: `None` = the model's moving average (the paper's, window from
     /// MODEL.toml), `Some(timeout)` = Hall-edge timing with this standstill timeout [s].

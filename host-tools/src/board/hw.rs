@@ -103,6 +103,8 @@ pub struct Hardware {
     last_sign: f64,
     /// The hardware over-current stop tripped (bridge held off).
     tripped: bool,
+    /// Hall edges dropped because a period brought more than the queue holds.
+    edges_lost: u32,
 }
 
 impl Hardware {
@@ -117,6 +119,7 @@ impl Hardware {
             pending: Vec::new(),
             last_sign: 1.0,
             tripped: false,
+            edges_lost: 0,
         })
     }
 
@@ -144,8 +147,10 @@ impl Hardware {
         for e in self.pending.drain(..) {
             if m.edges.push(e).is_err() {
                 m.edges_overflow = true;
+                self.edges_lost = self.edges_lost.saturating_add(1);
             }
         }
+        m.edges_lost = self.edges_lost;
         m
     }
 

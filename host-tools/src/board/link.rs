@@ -3,8 +3,10 @@
 use anyhow::{anyhow, bail, Context, Result};
 use control::commission::CommissionOutcome;
 use control::frame::{
-    self, BoardMsg, Excitation, FrameDecoder, HostMsg, Nack, Sample, CHUNK_LEN, MAX_ENCODED_LEN,
+    self, BoardMsg, Excitation, Fault, FrameDecoder, HostMsg, Nack, Sample, CHUNK_LEN,
+    MAX_ENCODED_LEN,
 };
+use control::telemetry::Telemetry;
 use std::io::{Read, Write};
 use std::time::{Duration, Instant};
 
@@ -32,6 +34,8 @@ pub struct Link {
     decoder: FrameDecoder,
     /// Samples that arrived while waiting for an answer.
     pub pending_samples: Vec<Sample>,
+    /// Telemetry reports that arrived while waiting for an answer.
+    pub pending_telemetry: Vec<Telemetry>,
 }
 
 impl Link {
@@ -47,6 +51,7 @@ impl Link {
             name: path.to_string(),
             decoder: FrameDecoder::new(),
             pending_samples: Vec::new(),
+            pending_telemetry: Vec::new(),
         })
     }
 
@@ -88,15 +93,19 @@ impl Link {
         }
     }
 
-    /// Send `msg` and return the board's answer (not a sample or a warning), resending on
-    /// silence.
+    /// Send `msg` and return the board's answer (not a sample, a warning or a periodic
+    /// telemetry report), resending on silence.
     pub fn request(&mut self, msg: &HostMsg) -> Result<BoardMsg> {
+        let wants_telemetry = matches!(msg, HostMsg::ReadTelemetry);
         for _ in 0..ATTEMPTS {
             self.send(msg)?;
             let deadline = Instant::now() + ANSWER_TIMEOUT;
             while let Some(left) = deadline.checked_duration_since(Instant::now()) {
                 match self.recv(left)? {
                     Some(BoardMsg::Sample(s)) => self.pending_samples.push(s),
+                    Some(BoardMsg::Telemetry(t)) if !wants_telemetry => {
+                        self.pending_telemetry.push(t)
+                    }
                     Some(BoardMsg::Warning(_)) => {}
                     Some(BoardMsg::Fault(f)) => {
                         bail!("{}: the board reports a fault: {f:?}", self.name)
@@ -239,6 +248,56 @@ impl Link {
             "{}: no commissioning result within {} s",
             self.name,
             timeout.as_secs()
+        )
+    }
+
+    /// The board's loop telemetry (its last complete one-second window).
+    pub fn read_telemetry(&mut self) -> Result<Telemetry> {
+        match self.request(&HostMsg::ReadTelemetry)? {
+            BoardMsg::Telemetry(t) => Ok(t),
+            BoardMsg::Nack(n) => bail!("{}: the board refused: {}", self.name, nack_text(n)),
+            other => bail!(
+                "{}: unexpected answer to ReadTelemetry: {other:?}",
+                self.name
+            ),
+        }
+    }
+
+    /// Clears a latched fault, then listens for `settle`: the fault the board latches again
+    /// in that time (its cause persists), if any.
+    pub fn clear_fault(&mut self, settle: Duration) -> Result<Option<Fault>> {
+        // Not `request`: it turns a fault report into an error, and here it is the answer.
+        for _ in 0..ATTEMPTS {
+            self.send(&HostMsg::ClearFault)?;
+            let deadline = Instant::now() + ANSWER_TIMEOUT;
+            let mut acked = false;
+            while let Some(left) = deadline.checked_duration_since(Instant::now()) {
+                match self.recv(left)? {
+                    Some(BoardMsg::Ack) => {
+                        acked = true;
+                        break;
+                    }
+                    Some(_) => {}
+                    None => break,
+                }
+            }
+            if !acked {
+                continue;
+            }
+            let deadline = Instant::now() + settle;
+            while let Some(left) = deadline.checked_duration_since(Instant::now()) {
+                match self.recv(left)? {
+                    Some(BoardMsg::Fault(f)) => return Ok(Some(f)),
+                    Some(_) => {}
+                    None => break,
+                }
+            }
+            return Ok(None);
+        }
+        bail!(
+            "{}: no answer from the board after {ATTEMPTS} attempts (is it connected, powered and \
+             running the motorid firmware?)",
+            self.name
         )
     }
 

@@ -120,3 +120,74 @@ impl Rig {
         sample
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use crate::ident::library::{Library, Signals};
+    use crate::log::Plant;
+    use control::hall::HallTable;
+    use control::sindy::{SindyModel, SparseEq, Term};
+    use control::step::{ControlStep, HallEdge, ObserverConfig, StepConfig, StepInputs};
+
+    /// The board's SINDYc observer and the fit's library evaluate the angle terms on the
+    /// same angle: the unwrapped one the board logs. Thirty revolutions forward, where an
+    /// angle reduced to one revolution would differ by up to 30·2π in `x`.
+    #[test]
+    fn board_and_fit_evaluate_sindyc_angle_terms_on_the_same_angle() {
+        let (b_x, b_sin) = (-0.5f32, 40.0f32);
+        let mut m = SindyModel::<f32>::empty(20.0, 3.0, 3.0e-4);
+        m.accel =
+            SparseEq::from_slice(&[(Term::X, b_x), (Term::SinTheta(3), b_sin), (Term::I, 237.0)])
+                .unwrap();
+        let mut cfg = StepConfig::<f32>::paper();
+        cfg.observer = ObserverConfig::Sindy(m.clone());
+        let mut ctl = ControlStep::new(&cfg);
+        let table = HallTable::DEFAULT_120;
+        let (mut sector, mut ticks) = (0u8, 0u32);
+        let (mut theta, mut friction) = (Vec::new(), Vec::new());
+        for _ in 0..400 {
+            let mut inp = StepInputs::<f32> {
+                v_bus: 24.0,
+                omega_ref: 40.0,
+                ..Default::default()
+            };
+            for _ in 0..5 {
+                sector = (sector + 1) % 6;
+                ticks = ticks.wrapping_add(2400);
+                let state = table.state_of(sector).unwrap();
+                inp.edges.push(HallEdge { ticks, state }).unwrap();
+            }
+            inp.hall = table.state_of(sector).unwrap();
+            inp.now_ticks = ticks;
+            let out = ctl.step(&inp);
+            theta.push(f64::from(out.theta));
+            friction.push(f64::from(out.friction));
+        }
+        let revs = theta.last().unwrap() / std::f64::consts::TAU;
+        assert!(revs > 25.0, "{revs} revolutions");
+
+        // The fit's side: library columns on the logged angle, friction −J·Σ b_k·θ_k (eq. 47).
+        let n = theta.len();
+        let zeros = vec![0.0; n];
+        let s = Signals {
+            x: &theta,
+            xdot: &zeros,
+            z: &zeros,
+            i: Some(&zeros),
+            u: &zeros,
+        };
+        let lib = Library::paper(Plant::Voltage, 20.0, 3.0);
+        let (mut cx, mut cs) = (vec![0.0; n], vec![0.0; n]);
+        lib.column(Term::X, &s, &mut cx);
+        lib.column(Term::SinTheta(3), &s, &mut cs);
+        for k in 0..n {
+            let fit = -3.0e-4 * (f64::from(b_x) * cx[k] + f64::from(b_sin) * cs[k]);
+            assert!(
+                (friction[k] - fit).abs() <= 1e-4 * fit.abs().max(1e-2),
+                "sample {k}, θ = {}: board {} vs fit {fit}",
+                theta[k],
+                friction[k]
+            );
+        }
+    }
+}

@@ -131,9 +131,20 @@ impl BoardSim {
         }
     }
 
-    /// One 12 ms control period: measure, run the board logic, drive the motor.
+    /// One 12 ms control period: measure, run the board logic, drive the motor. The loop
+    /// period the telemetry reports is the nominal one (see [`BoardSim::tick_timed`]).
     pub fn tick(&mut self) {
-        let m = self.hw.measure();
+        self.tick_timed(control::CONTROL_PERIOD_S * 1.0e6);
+    }
+
+    /// [`BoardSim::tick`] with the time since the previous period started [µs] of board
+    /// time, for the telemetry's loop period and jitter (`motorid board` measures it on the
+    /// host's clock). The emulated board has no cycle counter: its `step_cycles_max` is 0;
+    /// and it never overruns: a late host thread stretches a period (jitter), the step still
+    /// runs whole.
+    pub fn tick_timed(&mut self, period_us: f32) {
+        let mut m = self.hw.measure();
+        m.period_us = period_us;
         let out = &mut self.out;
         let drive = self.board.tick(&m, &mut |msg| put(out, msg));
         store_coefficients(&mut self.board, &mut self.slots, &mut |msg| put(out, msg));
@@ -504,6 +515,52 @@ mod tests {
         // The unreadable slot's sequence number is lost: the rewrite outranks slot 0.
         upload(&mut sim, &new);
         assert_eq!((sim.coeff_seq(), sim.coefficients()), (2, &new));
+    }
+
+    #[test]
+    fn a_corrupted_blob_in_flash_boots_without_coefficients_and_refuses_runs() {
+        // One valid slot, then a bit of its blob flipped in the flash file (a cell that lost
+        // its charge, not an ECC error): the slot's CRC fails, the board boots without
+        // coefficients, warns, and allows identify and commissioning only.
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("flash.bin");
+        let page = super::super::flash::PAGE as u32;
+        let mut slots = Slots::new(RamFlash::new(Some(path.clone())), 0, page).unwrap();
+        slots
+            .store(&crate::board::coeffs::encode(&Coefficients::default()).unwrap())
+            .unwrap();
+        drop(slots);
+        let mut bytes = std::fs::read(&path).unwrap();
+        bytes[control::slots::SLOT_HEADER_LEN + 30] ^= 0x01;
+        std::fs::write(&path, &bytes).unwrap();
+
+        let mut sim = BoardSim::new(
+            EmulatorConfig::paper(),
+            Wiring::default(),
+            RamFlash::new(Some(path)),
+        )
+        .unwrap();
+        assert_eq!(
+            replies(&mut sim),
+            [BoardMsg::Warning(Warning::NoCoefficients)]
+        );
+        assert_eq!(sim.coeff_seq(), 0);
+        sim.receive(&frame(&HostMsg::SetMode { mode: Mode::Speed }));
+        sim.receive(&frame(&HostMsg::StartExperiment {
+            signal: Excitation::C,
+            duration_s: 1.0,
+        }));
+        sim.receive(&frame(&HostMsg::Identify));
+        sim.receive(&frame(&HostMsg::Commission));
+        let r = replies(&mut sim);
+        assert_eq!(r[0], BoardMsg::Nack(Nack::NoCoefficients));
+        assert_eq!(r[1], BoardMsg::Nack(Nack::NoCoefficients));
+        assert!(
+            matches!(r[2], BoardMsg::Identity { coeff_seq: 0, .. }),
+            "{r:?}"
+        );
+        assert_eq!(r[3], BoardMsg::Ack);
+        assert!(sim.is_running());
     }
 
     #[test]

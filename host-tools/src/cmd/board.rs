@@ -105,6 +105,7 @@ pub fn run(args: Args) -> Result<()> {
 
     let period = Duration::from_secs_f64(f64::from(control::CONTROL_PERIOD_S) / args.speed);
     let mut next = Instant::now() + period;
+    let mut last_tick: Option<Instant> = None;
     loop {
         // Wait for host bytes until the next period starts.
         loop {
@@ -119,7 +120,13 @@ pub fn run(args: Args) -> Result<()> {
             }
             flush(&mut sim, &out_tx);
         }
-        sim.tick();
+        // The loop period in board time (host time × the time factor), for the telemetry.
+        let now = Instant::now();
+        let period_us = last_tick.map_or(f32::NAN, |t| {
+            ((now - t).as_secs_f64() * args.speed * 1.0e6) as f32
+        });
+        last_tick = Some(now);
+        sim.tick_timed(period_us);
         flush(&mut sim, &out_tx);
         next += period;
         let now = Instant::now();

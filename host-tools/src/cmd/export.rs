@@ -35,7 +35,8 @@ pub struct Args {
     /// Voltage limit of the speed loop [V].
     #[arg(long, value_parser = crate::validate::parse_u_max, allow_hyphen_values = true, default_value_t = LoopSettings::default().u_max)]
     pub u_max: f32,
-    /// Weight of the friction compensation voltage: 1 = full (the paper's eq. 40), 0 = off.
+    /// Weight of the friction compensation voltage, 0..1: 1 = full (the paper's eq. 40),
+    /// 0 = off, 0.5 = half the compensation voltage.
     #[arg(long, value_parser = crate::validate::parse_comp_gain, allow_hyphen_values = true, default_value_t = LoopSettings::default().comp_gain)]
     pub comp_gain: f32,
     /// Estimate the velocity from Hall-edge timing (standstill after this many seconds

@@ -42,7 +42,7 @@ pub fn effect_specs(co: &Coefficients) -> Vec<EffectSpec> {
 }
 
 /// The JSON object `inspect --json` prints.
-/// The format version in a (decoded, so well-formed) blob's header: 1 or 2, see
+/// The format version in a (decoded, so well-formed) blob's header: 1, 2 or 3, see
 /// [`blob::VERSION`].
 fn format_version(bytes: &[u8]) -> u16 {
     bytes

@@ -1,5 +1,6 @@
 //! One file per `motorid` subcommand. Each has `Args` (its `--help`) and `run`.
 pub mod board;
+pub mod clear_fault;
 pub mod commission;
 pub mod compare;
 pub mod demo;

@@ -4,6 +4,7 @@ use crate::emulator::SignalKind;
 use crate::log::MotorLog;
 use anyhow::{bail, Result};
 use control::frame::{BoardMsg, Excitation, HostMsg, Mode, Sample};
+use control::telemetry::Telemetry;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -14,7 +15,11 @@ use std::time::Duration;
 ///
 /// The board plays the voltage signal for the given duration and streams a sample every
 /// 12 ms; the log holds the voltage actually applied, the measured current, the
-/// Hall-quantised angle and the firmware's velocity estimate.
+/// Hall-quantised angle and the firmware's velocity estimate. The board's loop telemetry
+/// during the run goes into metadata lines: `loop_period_us` (mean control period),
+/// `loop_jitter_us` (largest deviation of one period from 12 ms), `loop_overruns` (periods
+/// that overran), `step_cycles_max` (most CPU cycles one period's work took; 0 on the
+/// emulated board) and `hall_edges_lost` (Hall edges the capture queue dropped).
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// Serial device of the board (e.g. /dev/ttyACM0, or what `motorid board --pty` printed).
@@ -79,6 +84,8 @@ pub fn run(args: Args) -> Result<()> {
     let mut link = Link::open(&args.port)?;
     let id = link.identify()?;
     link.command(&HostMsg::Stop, "stop")?;
+    let before = link.read_telemetry()?;
+    link.pending_telemetry.clear();
     match (signal, args.speed_ref) {
         (Some((sig, _)), _) => link.start_experiment(sig, duration as f32)?,
         (None, w) => {
@@ -101,6 +108,7 @@ pub fn run(args: Args) -> Result<()> {
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
     let mut samples: Vec<Sample> = std::mem::take(&mut link.pending_samples);
+    let mut windows: Vec<Telemetry> = Vec::new();
     loop {
         if samples.len() as u64 >= expected {
             break;
@@ -115,6 +123,7 @@ pub fn run(args: Args) -> Result<()> {
                     link.send(&HostMsg::Heartbeat)?;
                 }
             }
+            Some(BoardMsg::Telemetry(t)) => windows.push(t),
             Some(BoardMsg::Fault(f)) => {
                 bar.finish_and_clear();
                 bail!("{}: the board stopped with a fault: {f:?}", args.port)
@@ -133,6 +142,8 @@ pub fn run(args: Args) -> Result<()> {
     if samples.is_empty() {
         bail!("{}: the board sent no sample", args.port);
     }
+    windows.append(&mut link.pending_telemetry);
+    let after = link.read_telemetry()?;
     let lost = samples
         .windows(2)
         .map(|w| u64::from(w[1].seq.wrapping_sub(w[0].seq).saturating_sub(1)))
@@ -153,6 +164,9 @@ pub fn run(args: Args) -> Result<()> {
         format!("board {} firmware {}", args.port, id.firmware),
     );
     meta.insert("lost_samples".to_string(), lost.to_string());
+    for (k, v) in telemetry_meta(&before, &windows, &after) {
+        meta.insert(k.to_string(), v);
+    }
     // Each f32 as the f64 of its shortest decimal form (0.012, not 0.012000000104).
     let f = |g: fn(&Sample) -> f32| {
         samples
@@ -186,4 +200,75 @@ pub fn run(args: Args) -> Result<()> {
         args.output.display()
     );
     Ok(())
+}
+
+/// The log's telemetry metadata: period, jitter and cycles over the one-second windows the
+/// board reported during the run (the board's last window when the run was shorter than
+/// one), overruns and lost Hall edges as the increase of the board's counts over the run.
+fn telemetry_meta(
+    before: &Telemetry,
+    windows: &[Telemetry],
+    after: &Telemetry,
+) -> Vec<(&'static str, String)> {
+    let seen: &[Telemetry] = if windows.is_empty() {
+        std::slice::from_ref(after)
+    } else {
+        windows
+    };
+    let timed: Vec<&Telemetry> = seen.iter().filter(|t| t.period_us > 0.0).collect();
+    let period = if timed.is_empty() {
+        f64::NAN
+    } else {
+        timed.iter().map(|t| f64::from(t.period_us)).sum::<f64>() / timed.len() as f64
+    };
+    let jitter = seen.iter().map(|t| t.jitter_us).fold(0.0f32, f32::max);
+    let cycles = seen.iter().map(|t| t.step_cycles_max).max().unwrap_or(0);
+    vec![
+        ("loop_period_us", format!("{period:.1}")),
+        ("loop_jitter_us", format!("{jitter:.1}")),
+        (
+            "loop_overruns",
+            after.overruns.saturating_sub(before.overruns).to_string(),
+        ),
+        ("step_cycles_max", cycles.to_string()),
+        (
+            "hall_edges_lost",
+            after
+                .edges_lost
+                .saturating_sub(before.edges_lost)
+                .to_string(),
+        ),
+    ]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn telemetry_meta_summarises_the_windows_of_the_run() {
+        let w = |period_us, jitter_us, overruns, step_cycles_max, edges_lost| Telemetry {
+            periods: 83,
+            period_us,
+            jitter_us,
+            overruns,
+            step_cycles_max,
+            edges_lost,
+        };
+        let before = w(12_000.0, 1.0, 2, 900, 5);
+        let windows = [w(12_000.0, 3.0, 2, 1000, 5), w(12_002.0, 7.5, 3, 1400, 9)];
+        let after = w(12_001.0, 2.0, 4, 1200, 9);
+        let m: BTreeMap<_, _> = telemetry_meta(&before, &windows, &after)
+            .into_iter()
+            .collect();
+        assert_eq!(m["loop_period_us"], "12001.0");
+        assert_eq!(m["loop_jitter_us"], "7.5");
+        assert_eq!(m["loop_overruns"], "2");
+        assert_eq!(m["step_cycles_max"], "1400");
+        assert_eq!(m["hall_edges_lost"], "4");
+        // A run shorter than a window: the board's latest window.
+        let m: BTreeMap<_, _> = telemetry_meta(&before, &[], &after).into_iter().collect();
+        assert_eq!(m["loop_period_us"], "12001.0");
+        assert_eq!(m["step_cycles_max"], "1200");
+    }
 }
