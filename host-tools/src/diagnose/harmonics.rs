@@ -101,14 +101,10 @@ pub fn sample_average_gain(harmonic: f64, omega: f64, dt: f64) -> f64 {
 /// harmonic's column is non-zero only in the few windows where the rotor runs slowly, those
 /// that start from or pass near a standstill. There the Hall angle steps only every few
 /// samples and whatever the model misses near a standstill is largest, and a harmonic's two
-/// columns can fit one such window's error: on 60 s of signal a (seed 1), with exact weak-form
-/// weights and an earlier version of `diagnose`'s base columns, one window starting at
-/// 1.5 rad/s held a 10σ residual of the *correct* model, and harmonics fitting it
-/// "explained" 4 % (h = 16) to 14 % (h = 23) of the residual, as much as a hidden
-/// `cogging:harmonic=7,amp=0.03` (9.9 % for h = 16 against 9.5 % for the true 7th).
-/// Left out in turn, that window is predicted no better: h = 16's gain fell to 4.9 %, the true
-/// 7th's stayed at 7.0 %. The test `a_glitch_in_one_slow_window_is_not_a_high_harmonic` keeps
-/// this mechanism honest.
+/// columns can fit one such window's error, "explaining" as large a share of the residual as
+/// a real cogging torque does. Left out in turn, that window is predicted no better by the
+/// high harmonic, while a real harmonic predicts the windows it was not fitted on. The test
+/// `a_glitch_in_one_slow_window_is_not_a_high_harmonic` holds this mechanism.
 pub fn leave_one_out_rss(cols: &[&[f64]], y: &[f64]) -> f64 {
     let n = y.len();
     let scaled: Vec<Vec<f64>> = cols
@@ -234,7 +230,7 @@ mod tests {
         assert!((leave_one_out_rss(&[&zero], &y) - yy).abs() < 1e-12 * yy);
     }
 
-    /// On emulated logs (60 s of signal a, seeds 1–3) the harmonic search names the hidden
+    /// On emulated logs (60 s of signal a, three noise draws) the harmonic search names the hidden
     /// `cogging:harmonic=7,amp=0.03` with its harmonic and amplitude, and on the correct
     /// model no harmonic (the slow-window harmonics 16–23 included) claims a relevant share
     /// of the torque residual.
@@ -288,8 +284,8 @@ mod tests {
     /// One disturbance the model cannot explain, in one window where the rotor runs slowly
     /// (a 1 V glitch over 7 samples at 1.4–3 rad/s: a knock, a stick-slip event, a log
     /// error), must not turn the search to a high harmonic, whose column lives in such
-    /// windows. Ranked by in-sample residual, the search picked harmonic 15 (amp 0.064 N·m,
-    /// seed 1) and 12 (0.073 N·m, seed 3) here and kept them; by leave-one-out it names 7.
+    /// windows: ranked by in-sample residual a high harmonic wins here; by leave-one-out the
+    /// search names the true 7th.
     #[test]
     fn a_glitch_in_one_slow_window_is_not_a_high_harmonic() {
         use crate::diagnose::{diagnose, Options, Structure};

@@ -259,9 +259,7 @@ pub fn fit(req: &FitRequest) -> Result<Model> {
     // at the paper's friction) is a geared axis's compliance seen at the rotor
     // (`presliding`'s default); soft bristles are tried critically damped with the rotor,
     // σ1 = 2·√(σ0·J) (0.02 at σ0 = 0.4, which the decade grid of σ1 misses), and at 0.1 and
-    // 1. From the old grid alone (30, 300, 3000) with the bound lowered, emulated data with
-    // σ0 = 0.4 gave 0.41 on one seed and a local minimum at 10.3 on another (validation
-    // x 97.45 % instead of 99.94 %).
+    // 1. A stiff grid alone can leave a soft bristle in the local minimum near σ0 ≈ 10.
     {
         super::progress::report("bristle start grid", 0, f64::NAN);
         let res = sim_error::Residuals::new(req.logs, m.sensor.velocity_window);
@@ -296,9 +294,8 @@ pub fn fit(req: &FitRequest) -> Result<Model> {
             }
         }
         // A soft start only when it is clearly better: with stiff bristles in the data a
-        // soft start that costs a little less at the grid led the refinement to a worse
-        // local minimum (offset hidden, 90 s of signal a, seed 1: validation i 98.6 % from
-        // the stiff start, 94.9 % from the soft one); a visible soft bristle costs far less.
+        // soft start that costs a little less at the grid can lead the refinement to a
+        // worse local minimum; a soft bristle the data really shows costs far less.
         tracing::debug!("bristle start (cost, sigma0, sigma1): stiff {best:?}, soft {best_soft:?}");
         if best_soft.0 < SOFT_START_RATIO * best.0 {
             best = best_soft;
@@ -317,9 +314,8 @@ pub fn fit(req: &FitRequest) -> Result<Model> {
         ("alpha0", 0.0, 10.0),
         // α1 = F_s − F_c, the Stribeck excess of static over Coulomb friction: physically
         // ≥ 0. With it free to go negative, a hidden cogging is mimicked by a friction dip
-        // at low speed (α1 −0.3 … −0.8 with v0 at its 0.05 bound), and `fit --add cogging`
-        // started from that base could not get back: gap closed 0 % -> 63 % with the bound
-        // (emulated paper motor, 0.03 N·m 7th-harmonic cogging, tests/tests/fit_add_effects.rs).
+        // at low speed (α1 < 0 with v0 at its lower bound), from which `fit --add cogging`
+        // cannot get back (tests/tests/fit_add_effects.rs).
         ("alpha1", 0.0, 10.0),
         ("alpha2", 0.0, 10.0),
         ("v0", 0.05, 500.0),
