@@ -25,4 +25,5 @@ pub mod log;
 pub mod matlab;
 pub mod model;
 pub mod report;
+pub mod scales;
 pub mod validate;

@@ -57,7 +57,7 @@ fn electrical(m: &mut Model, logs: &[MotorLog]) {
             .map(|&c| smooth_sign(c - i0, CURRENT_EPS))
             .collect();
         let ones = vec![1.0; log.len()];
-        for w in weak_form::windows(&log.t, weak_form::WINDOW, weak_form::HOP) {
+        for w in weak_form::log_windows(log) {
             y.push(w.int_zoh(&log.t, &log.u));
             cols[0].push(-w.int_d(i));
             cols[1].push(w.int(i));
@@ -138,7 +138,7 @@ fn mechanical(m: &mut Model, logs: &[MotorLog]) {
             (true, None) => continue,
             (false, _) => log.u.clone(),
         };
-        let ws = weak_form::smooth_velocity(log, 5);
+        let ws = weak_form::smooth_velocity_of(log);
         let fric: Vec<f64> = ws
             .iter()
             .map(|&w| match &m.lugre {
@@ -161,7 +161,7 @@ fn mechanical(m: &mut Model, logs: &[MotorLog]) {
                 _ => g.push(vec![1.0; log.len()]),
             }
         }
-        for w in weak_form::windows(&log.t, weak_form::WINDOW, weak_form::HOP) {
+        for w in weak_form::log_windows(log) {
             let drive = if voltage {
                 m.motor.kt * w.int(&cur)
             } else {

@@ -50,6 +50,9 @@ pub struct FitRequest<'a> {
     /// Effects to add to the model's structure (`fit --add`).
     pub adds: &'a [EffectSpec],
     pub plant: Plant,
+    /// Parameters the user knows (`fit --fix`, `--bound`); [`free_params::Constraints::NONE`]
+    /// when none.
+    pub constraints: &'a free_params::Constraints,
 }
 
 /// The result of [`fit`].
@@ -136,6 +139,7 @@ pub fn fit(req: &FitRequest) -> Result<FitReport> {
     for log in req.logs {
         check_log(log, req.plant)?;
     }
+    free_params::check_constraints(req.constraints, req.kind, req.plant, req.adds)?;
     // Presliding is a state (the bristle deflection), not a term a linear model can carry:
     // the LuGre model is the static friction law with that state.
     if req.kind == ModelKind::Linear && req.adds.iter().any(|s| s.kind == EffectKind::Presliding) {
@@ -239,6 +243,12 @@ fn fit_fingerprint(req: &FitRequest) -> u64 {
     let mut h = std::collections::hash_map::DefaultHasher::new();
     req.kind.name().hash(&mut h);
     (req.plant == Plant::Voltage).hash(&mut h);
+    for (k, v) in &req.constraints.fixed {
+        (k, v.to_bits()).hash(&mut h);
+    }
+    for (k, (lo, hi)) in &req.constraints.bounds {
+        (k, lo.to_bits(), hi.to_bits()).hash(&mut h);
+    }
     for log in req.logs {
         log.source.hash(&mut h);
         log.meta.hash(&mut h);

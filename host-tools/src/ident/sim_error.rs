@@ -220,7 +220,9 @@ pub fn refine(
     refine_on(model, free, &res, opts, progress)
 }
 
-/// [`refine`] on given residuals (free run or multiple shooting).
+/// [`refine`] on given residuals (free run or multiple shooting). The bounds of `free` are
+/// widened to the logs' scales and the model's `--fix`/`--bound` constraints
+/// (`model.data.fixed`, `model.data.bounds`) applied ([`super::free_params::constrain`]).
 pub fn refine_on(
     model: &mut Model,
     free: &[Free],
@@ -228,6 +230,10 @@ pub fn refine_on(
     opts: nlsq::Options,
     progress: &mut dyn FnMut(usize, f64),
 ) -> Result<Vec<Parameter>> {
+    let (v, d) = data_scales(model, res.targets.iter().map(|t| t.log));
+    let user = model.data.constraints();
+    let (free, fixed_rows) = super::free_params::constrain(model, free, &user, v, d);
+    let free = &free[..];
     let x0: Vec<f64> = free.iter().map(|f| f.slot.get(model)).collect();
     let lo: Vec<f64> = free.iter().map(|f| f.lo).collect();
     let hi: Vec<f64> = free.iter().map(|f| f.hi).collect();
@@ -249,7 +255,32 @@ pub fn refine_on(
         fr.slot.set(model, *v);
     }
     let se: Vec<Option<f64>> = sol.std_err.iter().map(|v| Some(*v)).collect();
-    Ok(parameter_rows(model, free, &se))
+    let mut rows = parameter_rows(model, free, &se);
+    for (row, f) in rows.iter_mut().zip(free) {
+        if let Some((lo, hi)) = user.bounds.get(&row.name) {
+            let sep = if row.note.is_empty() { "" } else { "; " };
+            row.note = format!("{}{sep}bounded by --bound {lo}..{hi}", row.note);
+            debug_assert_eq!((f.lo, f.hi), (*lo, *hi));
+        }
+    }
+    rows.extend(fixed_rows);
+    Ok(rows)
+}
+
+/// The velocity and drive scales of `logs` for the bounds of a fit of `model`
+/// ([`super::free_params::widen_to_data`]): the velocity scale its smooth-sign width was set
+/// from, and [`crate::scales::drive_scale`] of the torque command or of `K_t·I`.
+pub fn data_scales<'a>(model: &Model, logs: impl Iterator<Item = &'a MotorLog>) -> (f64, f64) {
+    let v = (model.sign_width / control::effects::VELOCITY_EPS).clamp(1e-12, 1.0);
+    let drive: Vec<f64> = logs
+        .flat_map(|l| match (model.plant, &l.i) {
+            (crate::log::Plant::Voltage, Some(i)) => {
+                i.iter().map(|c| model.motor.kt * c).collect::<Vec<_>>()
+            }
+            _ => l.u.clone(),
+        })
+        .collect();
+    (v, crate::scales::drive_scale(&drive))
 }
 
 /// Refine in two stages when the model has effects: first the base model (effects at zero

@@ -9,11 +9,35 @@
 //! φ(s) = s⁴(1 − s)⁴ on s ∈ [0, 1] (smooth enough that φ, φ' vanish at both ends).
 use crate::log::MotorLog;
 
-/// Window length [samples]. 40 samples = 0.48 s at 12 ms: several Hall steps at moderate
-/// speed, short against the 1 Hz upper frequency of the paper's signals.
+/// Window length [s] of the grey-box regressions ([`log_windows`]): several Hall steps at
+/// moderate speed, short against the 1 Hz upper frequency of the paper's signals.
+pub const WINDOW_S: f64 = 0.48;
+/// Window length [samples] at the paper's 12 ms ([`WINDOW_S`]): the SINDYc rows, whose
+/// fast path builds its windows in fixed-size blocks.
 pub const WINDOW: usize = 40;
 /// Hop between windows [samples] (half overlap).
 pub const HOP: usize = 20;
+/// Fewest samples in a window: φ'' of the bump needs a few points to integrate.
+const MIN_WINDOW: usize = 8;
+
+/// Half-width [s] of [`smooth_velocity_of`]: ±5 samples at the paper's 12 ms, about one Hall
+/// step at 1.6 rad/s.
+pub const VELOCITY_HALF_S: f64 = 0.06;
+
+/// The windows of [`WINDOW_S`] (half overlap) covering a log, in samples at its own period.
+pub fn log_windows(log: &MotorLog) -> Vec<Window> {
+    let n = log.len();
+    let len = crate::scales::samples_for(WINDOW_S, log.sample_period(), n)
+        .max(MIN_WINDOW)
+        .min(n);
+    windows(&log.t, len, (len / 2).max(1))
+}
+
+/// [`smooth_velocity`] over ±[`VELOCITY_HALF_S`] at the log's own period.
+pub fn smooth_velocity_of(log: &MotorLog) -> Vec<f64> {
+    let half = crate::scales::samples_for(VELOCITY_HALF_S, log.sample_period(), log.len());
+    smooth_velocity(log, half)
+}
 
 /// φ, φ', φ'' (derivatives with respect to s) at s.
 fn phi(s: f64) -> (f64, f64, f64) {

@@ -152,6 +152,7 @@ fn fit_round(train: &MotorLog, test: &MotorLog, adds: &[EffectSpec]) -> Result<R
         validate: &[],
         adds,
         plant: Plant::Torque,
+        constraints: &motorid::ident::free_params::Constraints::NONE,
     })?;
     let model = rep.model;
     let diagnosis = diagnose::diagnose(train, &structure_of(&model), &diagnose::Options::default());
