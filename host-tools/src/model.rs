@@ -130,6 +130,11 @@ pub struct Provenance {
     /// Parameters kept inside a known range (`fit --bound KEY=LO..HI`): `[LO, HI]`.
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub bounds: BTreeMap<String, [f64; 2]>,
+    /// Factor the standard errors of `parameters` were multiplied by for the autocorrelation
+    /// of the fit's residual (`ident::sim_error::autocorrelation_factor`): the white-noise
+    /// errors σ²·(JᵀJ)⁻¹ are this many times too small.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub std_err_factor: Option<f64>,
 }
 
 impl Provenance {

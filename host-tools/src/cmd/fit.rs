@@ -226,8 +226,10 @@ pub fn progress_message(u: &ident::progress::Update) -> String {
 
 /// The `--json` object: `{"model", "plant", "effects", "parameters": [{"name", "value",
 /// "unit", "std_error", "identifiable", "note"}], "fit": {"x", "xdot", "i"}, "fit_sensor",
-/// "samples", "sample_period", "units", "logs": [{"file", "role", "fit", "fit_sensor",
-/// "samples", "error"}]}`. `fit` and `fit_sensor` are the scores on the first DATA.csv (the
+/// "samples", "sample_period", "units", "std_error_factor", "fixed", "bounds", "logs":
+/// [{"file", "role", "fit", "fit_sensor", "samples", "error"}]}`. `std_error_factor` is the
+/// factor the standard errors carry for the residual's autocorrelation; `fixed` and `bounds`
+/// the parameters given by `--fix` and `--bound`. `fit` and `fit_sensor` are the scores on the first DATA.csv (the
 /// summary's first line; `logs` has every file's); null when it could not be scored.
 pub fn json_report(report: &ident::FitReport) -> serde_json::Value {
     use serde_json::json;
@@ -276,6 +278,9 @@ pub fn json_report(report: &ident::FitReport) -> serde_json::Value {
         "samples": m.data.samples,
         "sample_period": m.sample_period,
         "units": m.data.units,
+        "std_error_factor": m.data.std_err_factor.and_then(finite),
+        "fixed": m.data.fixed,
+        "bounds": m.data.bounds,
         "logs": logs,
     })
 }

@@ -617,6 +617,13 @@ pub fn parameter_table(model: &Model) -> String {
             p.name, p.value, p.unit, se, note
         );
     }
+    if let Some(f) = model.data.std_err_factor {
+        let _ = writeln!(
+            s,
+            "  (standard errors include a factor {f:.1} for the residual's autocorrelation: \
+             white-noise errors would be that many times too small)"
+        );
+    }
     s
 }
 

@@ -255,7 +255,17 @@ pub fn refine_on(
         fr.slot.set(model, *v);
     }
     let se: Vec<Option<f64>> = sol.std_err.iter().map(|v| Some(*v)).collect();
+    // Identifiability is judged on the curvature of the cost (the white-noise errors);
+    // the errors printed carry the residual's autocorrelation.
     let mut rows = parameter_rows(model, free, &se);
+    let factor = res
+        .eval(model)
+        .map(|r| autocorrelation_factor(&r))
+        .unwrap_or(1.0);
+    for row in &mut rows {
+        row.std_err = row.std_err.map(|e| e * factor);
+    }
+    model.data.std_err_factor = Some(factor);
     for (row, f) in rows.iter_mut().zip(free) {
         if let Some((lo, hi)) = user.bounds.get(&row.name) {
             let sep = if row.note.is_empty() { "" } else { "; " };
@@ -265,6 +275,23 @@ pub fn refine_on(
     }
     rows.extend(fixed_rows);
     Ok(rows)
+}
+
+/// Factor by which white-noise standard errors σ²·(JᵀJ)⁻¹ understate the spread of the
+/// estimates when the residual `r` is autocorrelated: `√(n/n_eff)` with
+/// [`crate::diagnose::stats::effective_n`] (AR(1) with lag-1 correlation ρ: `n_eff =
+/// n·(1 − ρ)/(1 + ρ)`). For a least-squares estimate `β̂ = (JᵀJ)⁻¹Jᵀr`, `Var(β̂) =
+/// (JᵀJ)⁻¹·JᵀΣJ·(JᵀJ)⁻¹`; with AR(1) errors and regressors that vary slowly against the
+/// correlation time (a free run's sensitivities do), `JᵀΣJ ≈ σ²·JᵀJ·(1 + ρ)/(1 − ρ)`, i.e. the
+/// variance of a mean of n correlated samples: the errors grow by `√((1 + ρ)/(1 − ρ))`.
+/// At least 1; at most `√1999 ≈ 45` (ρ is capped at 0.999, so the factor is a lower bound
+/// when the residual is smoother still).
+pub fn autocorrelation_factor(r: &[f64]) -> f64 {
+    if r.len() < 3 {
+        return 1.0;
+    }
+    let ne = crate::diagnose::stats::effective_n(r);
+    (r.len() as f64 / ne).sqrt().max(1.0)
 }
 
 /// The velocity and drive scales of `logs` for the bounds of a fit of `model`
