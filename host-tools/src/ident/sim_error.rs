@@ -278,20 +278,15 @@ pub fn refine_on(
 }
 
 /// Factor by which white-noise standard errors σ²·(JᵀJ)⁻¹ understate the spread of the
-/// estimates when the residual `r` is autocorrelated: `√(n/n_eff)` with
-/// [`crate::diagnose::stats::effective_n`] (AR(1) with lag-1 correlation ρ: `n_eff =
-/// n·(1 − ρ)/(1 + ρ)`). For a least-squares estimate `β̂ = (JᵀJ)⁻¹Jᵀr`, `Var(β̂) =
-/// (JᵀJ)⁻¹·JᵀΣJ·(JᵀJ)⁻¹`; with AR(1) errors and regressors that vary slowly against the
-/// correlation time (a free run's sensitivities do), `JᵀΣJ ≈ σ²·JᵀJ·(1 + ρ)/(1 − ρ)`, i.e. the
-/// variance of a mean of n correlated samples: the errors grow by `√((1 + ρ)/(1 − ρ))`.
-/// At least 1; at most `√1999 ≈ 45` (ρ is capped at 0.999, so the factor is a lower bound
-/// when the residual is smoother still).
+/// estimates when the residual `r` is autocorrelated: `√τ`, τ the residual's integrated
+/// autocorrelation time ([`crate::diagnose::stats::correlation_time`]). For a least-squares
+/// estimate `β̂ = (JᵀJ)⁻¹Jᵀr`, `Var(β̂) = (JᵀJ)⁻¹·JᵀΣJ·(JᵀJ)⁻¹` with Σ the residual's
+/// covariance; where the sensitivities in J vary slowly against the residual's correlation
+/// time (a free run's do), `JᵀΣJ ≈ σ²·τ·JᵀJ`, the variance of a mean of n correlated samples
+/// (n/τ independent ones): the errors grow by `√τ`. Where a sensitivity varies faster, the
+/// factor overstates its error, so the corrected errors are conservative. At least 1.
 pub fn autocorrelation_factor(r: &[f64]) -> f64 {
-    if r.len() < 3 {
-        return 1.0;
-    }
-    let ne = crate::diagnose::stats::effective_n(r);
-    (r.len() as f64 / ne).sqrt().max(1.0)
+    crate::diagnose::stats::correlation_time(r).sqrt().max(1.0)
 }
 
 /// The velocity and drive scales of `logs` for the bounds of a fit of `model`
