@@ -364,7 +364,7 @@ pub fn check_constraints(
         }
     }
     for (key, &(lo, hi)) in &user.bounds {
-        if !(lo < hi) {
+        if lo >= hi || lo.is_nan() || hi.is_nan() {
             anyhow::bail!("--bound {key}={lo}..{hi}: the range is empty (LO must be below HI)");
         }
         if user.fixed.contains_key(key) {
