@@ -147,22 +147,27 @@ fn known_parameters_are_fixed_or_bounded_and_recorded() {
     run(&["--bound", "J=1"], &["--bound J=1", "LO..HI"]);
     run(&["--fix", "R=abc"], &["--fix R=abc", "not a finite number"]);
     run(&["--fix", "R=1", "--bound", "R=0..2"], &["R", "give one"]);
-    // An added effect's keys can be fixed.
-    ok(
+    // An added effect's keys can be fixed, and a validation log does not undo it.
+    let c: Value = serde_json::from_str(&ok(
         d,
         &[
             "fit",
+            "--json",
             "--model",
             "linear",
             "--add",
             "coulomb",
             "--fix",
             "coulomb.fc=0.01",
+            "--validate",
+            "d.csv",
             "-o",
             "c.toml",
             "d.csv",
         ],
-    );
-    let c = std::fs::read_to_string(d.join("c.toml")).unwrap();
-    assert!(c.contains("\"coulomb.fc\" = 0.01"), "{c}");
+    ))
+    .unwrap();
+    assert_eq!(c["effects"][0], "coulomb:fc=0.01", "{c}");
+    let toml = std::fs::read_to_string(d.join("c.toml")).unwrap();
+    assert!(toml.contains("\"coulomb.fc\" = 0.01"), "{toml}");
 }

@@ -170,7 +170,13 @@ pub fn fit(req: &FitRequest) -> Result<FitReport> {
         );
     }
     let mut model = fit_kind(req)?;
-    if !req.adds.is_empty() && !req.validate.is_empty() && req.kind != ModelKind::Sindyc {
+    // The guard's other candidates (effects at zero, weak-form re-estimates of the motor
+    // constants and effects) would not hold what --fix and --bound assert.
+    if !req.adds.is_empty()
+        && !req.validate.is_empty()
+        && req.kind != ModelKind::Sindyc
+        && req.constraints.is_empty()
+    {
         model = guard_added_effects(req, model)?;
     }
     model.data.files = req
