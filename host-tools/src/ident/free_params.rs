@@ -373,3 +373,51 @@ pub fn check_constraints(
     }
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bounds_widen_with_the_data_and_only_widen() {
+        // The paper's motor: unchanged.
+        assert_eq!(widen_to_data(-10.0, 10.0, "N·m", 1.0, 1.0), (-10.0, 10.0));
+        assert_eq!(widen_to_data(0.05, 500.0, "rad/s", 1.0, 1.0), (0.05, 500.0));
+        // A drive a hundred times larger, speeds a hundred times smaller (a linear axis).
+        assert_eq!(
+            widen_to_data(-10.0, 10.0, "u", 0.01, 100.0),
+            (-1000.0, 1000.0)
+        );
+        let (lo, hi) = widen_to_data(0.05, 500.0, "rad/s", 0.01, 100.0);
+        assert!((lo - 5e-4).abs() < 1e-15 && hi == 500.0);
+        let (lo, hi) = widen_to_data(0.0, 100.0, "u·s/rad", 0.01, 100.0);
+        assert!(lo == 0.0 && (hi - 1e6).abs() < 1e-6);
+        let (lo, hi) = widen_to_data(1e-9, 1e6, "u·s²/rad", 0.01, 100.0);
+        assert!((lo - 1e-13).abs() < 1e-25 && (hi - 1e10).abs() < 1.0);
+        // Electrical constants keep their SI bounds.
+        assert_eq!(widen_to_data(1e-4, 1e3, "Ω", 0.01, 100.0), (1e-4, 1e3));
+    }
+
+    #[test]
+    fn constraints_name_only_parameters_of_the_fit() {
+        use crate::log::Plant;
+        use crate::model::ModelKind;
+        let adds = [EffectSpec::parse("coulomb").unwrap()];
+        let keys = constrainable_keys(ModelKind::Linear, Plant::Torque, &adds);
+        assert_eq!(keys, ["J", "b", "coulomb.fc"]);
+        let mut c = Constraints::default();
+        c.fixed.insert("R".into(), 1.0);
+        let e = check_constraints(&c, ModelKind::Linear, Plant::Torque, &adds)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("--fix R") && e.contains("J, b, coulomb.fc"),
+            "{e}"
+        );
+        let e = check_constraints(&c, ModelKind::Sindyc, Plant::Voltage, &[])
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("sindyc"), "{e}");
+        assert_eq!(canonical_key("Kt"), "Kb");
+    }
+}
