@@ -285,9 +285,16 @@ impl<F: Float> Effect<F> {
         }
     }
 
-    /// Load torque [N·m] opposing motion; zero for effects that act elsewhere.
+    /// Load torque [N·m] opposing motion; zero for effects that act elsewhere. The sign of
+    /// the velocity is smoothed over [`VELOCITY_EPS`].
     pub fn torque(&self, x: &EffectInputs<F>) -> F {
-        let veps = F::from(VELOCITY_EPS).unwrap();
+        self.torque_with_width(x, F::from(VELOCITY_EPS).unwrap())
+    }
+
+    /// [`Self::torque`] with the sign of the velocity smoothed over `veps` [rad/s] instead of
+    /// [`VELOCITY_EPS`]: a model identified on a log in other velocity units (m/s of a linear
+    /// axis) carries the width that means the same there.
+    pub fn torque_with_width(&self, x: &EffectInputs<F>, veps: F) -> F {
         let sgn = smooth_sign(x.omega, veps);
         match *self {
             Effect::Coulomb { fc } => fc * sgn,
@@ -365,6 +372,14 @@ impl<F: Float> Effect<F> {
 /// Sum of the load torques of a list of effects.
 pub fn total_torque<F: Float>(effects: &[Effect<F>], x: &EffectInputs<F>) -> F {
     effects.iter().fold(F::zero(), |acc, e| acc + e.torque(x))
+}
+
+/// [`total_torque`] with the sign of the velocity smoothed over `veps` (see
+/// [`Effect::torque_with_width`]).
+pub fn total_torque_with_width<F: Float>(effects: &[Effect<F>], x: &EffectInputs<F>, veps: F) -> F {
+    effects
+        .iter()
+        .fold(F::zero(), |acc, e| acc + e.torque_with_width(x, veps))
 }
 
 /// Sum of the voltage losses of a list of effects.

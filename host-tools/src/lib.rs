@@ -26,5 +26,6 @@ pub mod matlab;
 pub mod model;
 pub mod numerics;
 pub mod report;
+pub mod scales;
 pub mod validate;
 pub mod workflow;

@@ -123,6 +123,32 @@ pub struct Provenance {
     /// existed.
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub units: BTreeMap<String, String>,
+    /// Parameters held at a known value (`fit --fix KEY=VALUE`), by the parameter table's name,
+    /// in its units: the fit did not estimate them.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub fixed: BTreeMap<String, f64>,
+    /// Parameters kept inside a known range (`fit --bound KEY=LO..HI`): `[LO, HI]`.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub bounds: BTreeMap<String, [f64; 2]>,
+    /// Factor the standard errors of `parameters` were multiplied by for the autocorrelation
+    /// of the fit's residual (`ident::sim_error::autocorrelation_factor`): the white-noise
+    /// errors σ²·(JᵀJ)⁻¹ are this many times too small.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub std_err_factor: Option<f64>,
+}
+
+impl Provenance {
+    /// The `fixed` and `bounds` of this model as fit constraints.
+    pub fn constraints(&self) -> crate::ident::free_params::Constraints {
+        crate::ident::free_params::Constraints {
+            fixed: self.fixed.clone(),
+            bounds: self
+                .bounds
+                .iter()
+                .map(|(k, v)| (k.clone(), (v[0], v[1])))
+                .collect(),
+        }
+    }
 }
 
 /// The measurement chain the data went through (needed for `fit_sensor`).
@@ -292,6 +318,16 @@ pub struct Model {
     /// Extra physical effects, added with `fit --add`.
     #[serde(default, with = "effects_serde")]
     pub effects: Vec<Effect<f64>>,
+    /// Width [rad/s, or the log's velocity unit] of the smooth sign `tanh(ω/ε)` of the
+    /// Coulomb-like effects: `control::effects::VELOCITY_EPS` for a log as fast as the paper's
+    /// motor, that times [`crate::scales::velocity_scale`] for a slower one (a linear axis in
+    /// m/s), so that the friction switches as sharply relative to the data's speeds. Written
+    /// only when it differs from `VELOCITY_EPS`.
+    #[serde(
+        default = "default_sign_width",
+        skip_serializing_if = "is_default_sign_width"
+    )]
+    pub sign_width: f64,
     /// The measurement chain.
     #[serde(default)]
     pub sensor: Sensor,
@@ -302,6 +338,14 @@ pub struct Model {
     /// reads the sections above).
     #[serde(default)]
     pub parameters: Vec<Parameter>,
+}
+
+fn default_sign_width() -> f64 {
+    control::effects::VELOCITY_EPS
+}
+
+fn is_default_sign_width(w: &f64) -> bool {
+    *w == control::effects::VELOCITY_EPS
 }
 
 impl Model {
@@ -316,6 +360,7 @@ impl Model {
             lugre: None,
             sindy: None,
             effects: Vec::new(),
+            sign_width: default_sign_width(),
             sensor: Sensor::default(),
             data: Provenance::default(),
             parameters: Vec::new(),
@@ -415,7 +460,7 @@ impl Model {
             crate::ident::sindyc::from_table(t)?;
         }
         pos("motor.j", self.motor.j)?;
-        pos("motor.j", self.motor.j)?;
+        pos("sign_width", self.sign_width)?;
         pos("motor.kt", self.motor.kt)?;
         if self.plant == Plant::Voltage {
             pos("motor.r", self.motor.r)?;

@@ -23,6 +23,7 @@
 //! owns (the demo scores a fresh test log no choice was made on).
 use crate::diagnose::{self, Diagnosis, Structure};
 use crate::effect_spec::EffectSpec;
+use crate::ident::free_params::Constraints;
 use crate::ident::{self, FitRequest};
 use crate::log::{MotorLog, Plant};
 use crate::model::{Model, ModelKind};
@@ -40,6 +41,8 @@ pub struct Config<'a> {
     pub select_logs: &'a [MotorLog],
     /// Effects in the model from the first round on.
     pub start: Vec<EffectSpec>,
+    /// Parameters the user knows (`fit --fix`, `--bound`).
+    pub constraints: &'a Constraints,
     /// Refits after the first fit, at most.
     pub max_rounds: usize,
     pub diagnose: diagnose::Options,
@@ -193,6 +196,7 @@ pub fn run(
             validate: cfg.select_logs,
             adds: &adds,
             plant: cfg.plant,
+            constraints: cfg.constraints,
         })
         .with_context(|| format!("round {round} of the identification loop"))?;
         let score = selection_fit(&model, select);
@@ -263,6 +267,7 @@ mod tests {
             fit_logs: &logs,
             select_logs: &[],
             start: Vec::new(),
+            constraints: &Constraints::NONE,
             max_rounds: 2,
             diagnose: diagnose::Options::default(),
         };

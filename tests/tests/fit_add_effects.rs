@@ -86,6 +86,7 @@ fn case(effect: EffectKind) -> Row {
             validate: &val,
             adds,
             plant: Plant::Voltage,
+            constraints: &motorid::ident::free_params::Constraints::NONE,
         })
         .unwrap();
         scores(&rep.model, &val[0], &omega_true)

@@ -98,6 +98,7 @@ fn generic_diagnosis_finds_coulomb_friction() {
         validate: &[],
         adds: &[],
         plant: motorid::log::Plant::Torque,
+        constraints: &motorid::ident::free_params::Constraints::NONE,
     })
     .unwrap();
     let d = motorid::diagnose::diagnose(

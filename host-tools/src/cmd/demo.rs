@@ -107,6 +107,7 @@ fn fit(
         validate,
         adds,
         plant: Plant::Voltage,
+        constraints: &crate::ident::free_params::Constraints::NONE,
     };
     bar.set_message(what.to_string());
     let b = bar.clone();

@@ -66,6 +66,24 @@ pub fn run(args: Args) -> Result<()> {
         comp_gain: args.comp_gain,
         edge_timing: args.edge_timing,
     };
+    // The board smooths the sign of the velocity over its own fixed width.
+    if model.sign_width != control::effects::VELOCITY_EPS
+        && model.effects.iter().any(|e| {
+            use control::effects::EffectKind as K;
+            matches!(
+                e.kind(),
+                K::Coulomb | K::Stribeck | K::Asymmetry | K::LoadFriction
+            )
+        })
+    {
+        eprintln!(
+            "warning: {}: the model's friction sign is smoothed over {:.3e} rad/s (sign_width, \
+             from its slow log); the board compensates with {} rad/s",
+            args.model.display(),
+            model.sign_width,
+            control::effects::VELOCITY_EPS
+        );
+    }
     let co = coeffs::coefficients(&model, settings)
         .with_context(|| format!("{}", args.model.display()))?;
     let bytes = coeffs::encode(&co).with_context(|| format!("{}", args.model.display()))?;

@@ -1,6 +1,7 @@
 //! `motorid fit`: identify a linear, LuGre or SINDYc model from motor logs and write
 //! MODEL.toml.
 use crate::effect_spec::EffectSpec;
+use crate::ident::free_params::Constraints;
 use crate::ident::{self, FitRequest};
 use crate::log::{column_options, MotorLog, Plant};
 use crate::model::ModelKind;
@@ -36,6 +37,18 @@ pub struct Args {
     /// keys such as cogging's harmonic stay fixed). Repeatable.
     #[arg(long = "add", value_name = "SPEC")]
     pub adds: Vec<String>,
+    /// Hold a known parameter at a value instead of estimating it: KEY=VALUE, KEY a name of
+    /// the parameter table in its units: R [Ω], L [H], Kt (= Kb) [N·m/A = V·s/rad], J [kg·m²;
+    /// torque plant: u·s²/rad], b [N·m·s/rad] (linear), alpha0, alpha1 [N·m], alpha2,
+    /// sigma1 [N·m·s/rad], v0 [rad/s], sigma0 [N·m/rad] (lugre), and the keys of added
+    /// effects as NAME.KEY (coulomb.fc [N·m], ...). Recorded in MODEL.toml ([data.fixed]).
+    /// Repeatable.
+    #[arg(long = "fix", value_name = "KEY=VALUE")]
+    pub fix: Vec<String>,
+    /// Keep a parameter inside a known range: KEY=LO..HI (keys and units as --fix; LO < HI).
+    /// Recorded in MODEL.toml ([data.bounds]). Repeatable.
+    #[arg(long = "bound", value_name = "KEY=LO..HI")]
+    pub bound: Vec<String>,
     /// A log to validate on (not fitted); its fit percentages are printed. Repeatable.
     #[arg(long = "validate", value_name = "VAL.csv")]
     pub validate: Vec<PathBuf>,
@@ -75,6 +88,7 @@ pub fn run(args: Args) -> Result<()> {
         .collect();
     crate::atomic::check_outputs(&[&args.output], &inputs)?;
     let (map, units) = column_options(args.map.as_deref(), args.units.as_deref())?;
+    parse_constraints(&args.fix, &args.bound)?;
     let adds: Vec<EffectSpec> = args
         .adds
         .iter()
@@ -100,12 +114,14 @@ pub fn run(args: Args) -> Result<()> {
         args.quiet,
         &format!("fitting the {} model", args.model.name()),
     );
+    let constraints = parse_constraints(&args.fix, &args.bound)?;
     let req = FitRequest {
         kind: args.model,
         logs: &logs,
         validate: &validate,
         adds: &adds,
         plant: args.plant,
+        constraints: &constraints,
     };
     let report = ident::progress::observe(show_on(&bar), || ident::fit(&req));
     bar.finish_and_clear();
@@ -119,6 +135,57 @@ pub fn run(args: Args) -> Result<()> {
         println!("wrote {}", args.output.display());
     }
     Ok(())
+}
+
+/// `--fix KEY=VALUE` and `--bound KEY=LO..HI` flags as fit constraints (keys as the
+/// parameter table names them, `Kt` for `Kb`); an error names the flag and what is wrong.
+pub fn parse_constraints(fix: &[String], bound: &[String]) -> Result<Constraints> {
+    use crate::ident::free_params::canonical_key;
+    let echo = crate::log::echo;
+    let number = |flag: &str, arg: &str, text: &str| -> Result<f64> {
+        match text.trim().parse::<f64>() {
+            Ok(v) if v.is_finite() => Ok(v),
+            _ => anyhow::bail!(
+                "{flag} {}: '{}' is not a finite number",
+                echo(arg),
+                echo(text)
+            ),
+        }
+    };
+    let split = |flag: &str, arg: &str| -> Result<(String, String)> {
+        match arg.split_once('=') {
+            Some((k, v)) if !k.trim().is_empty() => Ok((canonical_key(k.trim()), v.to_string())),
+            _ => anyhow::bail!("{flag} {}: expected KEY=VALUE", echo(arg)),
+        }
+    };
+    let mut c = Constraints::default();
+    for arg in fix {
+        let (key, value) = split("--fix", arg)?;
+        let v = number("--fix", arg, &value)?;
+        if c.fixed.insert(key.clone(), v).is_some() {
+            anyhow::bail!("--fix {key}: given twice");
+        }
+    }
+    for arg in bound {
+        let (key, range) = split("--bound", arg)?;
+        let Some((lo, hi)) = range.split_once("..") else {
+            anyhow::bail!("--bound {}: expected KEY=LO..HI", echo(arg));
+        };
+        let (lo, hi) = (number("--bound", arg, lo)?, number("--bound", arg, hi)?);
+        if lo >= hi {
+            anyhow::bail!(
+                "--bound {}: the range is empty (LO must be below HI)",
+                echo(arg)
+            );
+        }
+        if c.bounds.insert(key.clone(), (lo, hi)).is_some() {
+            anyhow::bail!("--bound {key}: given twice");
+        }
+        if c.fixed.contains_key(&key) {
+            anyhow::bail!("--fix and --bound both give {key}: give one");
+        }
+    }
+    Ok(c)
 }
 
 /// A spinner on stderr with the elapsed time and `what`, hidden with `quiet` (indicatif
@@ -159,8 +226,10 @@ pub fn progress_message(u: &ident::progress::Update) -> String {
 
 /// The `--json` object: `{"model", "plant", "effects", "parameters": [{"name", "value",
 /// "unit", "std_error", "identifiable", "note"}], "fit": {"x", "xdot", "i"}, "fit_sensor",
-/// "samples", "sample_period", "units", "logs": [{"file", "role", "fit", "fit_sensor",
-/// "samples", "error"}]}`. `fit` and `fit_sensor` are the scores on the first DATA.csv (the
+/// "samples", "sample_period", "units", "std_error_factor", "fixed", "bounds", "logs":
+/// [{"file", "role", "fit", "fit_sensor", "samples", "error"}]}`. `std_error_factor` is the
+/// factor the standard errors carry for the residual's autocorrelation; `fixed` and `bounds`
+/// the parameters given by `--fix` and `--bound`. `fit` and `fit_sensor` are the scores on the first DATA.csv (the
 /// summary's first line; `logs` has every file's); null when it could not be scored.
 pub fn json_report(report: &ident::FitReport) -> serde_json::Value {
     use serde_json::json;
@@ -209,6 +278,9 @@ pub fn json_report(report: &ident::FitReport) -> serde_json::Value {
         "samples": m.data.samples,
         "sample_period": m.sample_period,
         "units": m.data.units,
+        "std_error_factor": m.data.std_err_factor.and_then(finite),
+        "fixed": m.data.fixed,
+        "bounds": m.data.bounds,
         "logs": logs,
     })
 }

@@ -23,18 +23,34 @@ use std::time::Duration;
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// Serial device of the board (e.g. /dev/ttyACM0, or what `motorid board --pty` printed).
+    /// Default: the only serial port of this computer (an error lists them when there are
+    /// several).
     #[arg(long, value_name = "P")]
-    pub port: String,
-    /// Excitation, open loop: a (fitting, up to 12 V), b (up to 6 V), c (low speed, up to
-    /// 0.5 V), d (steps up to 10 V).
-    #[arg(long, value_parser = ["a", "b", "c", "d"], required_unless_present = "speed_ref", conflicts_with = "speed_ref")]
+    pub port: Option<String>,
+    /// Excitation, open loop, with amplitudes relative to the board's voltage limit u_max (the
+    /// uploaded coefficients'; the paper's values at u_max = 24 V): a (fitting, up to u_max/2),
+    /// b (up to u_max/4), c (low speed, up to u_max/48), d (steps up to 5/12·u_max); steady
+    /// (constant levels from 2/3 to all of --amplitude, both signs, 3 s each: the static
+    /// friction curve `fit --model lugre` asks for) and ramp (slow ramps from rest to ±2/3 of
+    /// --amplitude at two slopes: breakaway).
+    #[arg(long, value_parser = ["a", "b", "c", "d", "steady", "ramp"], required_unless_present = "speed_ref", conflicts_with = "speed_ref")]
     pub signal: Option<String>,
+    /// Largest voltage of steady and ramp as a fraction of u_max (0 < F <= 1). Default 0.05:
+    /// 0.6 V at u_max = 12 V, the paper's levels for its motor; raise it for a motor with
+    /// more friction.
+    #[arg(long, value_name = "F")]
+    pub amplitude: Option<f64>,
+    /// The board's loop voltage limit u_max [V] as uploaded (`motorid export --u-max`), for
+    /// --amplitude; at most the board's rated bus voltage.
+    #[arg(long, value_name = "V", default_value_t = 12.0)]
+    pub u_max: f64,
     /// Instead of an excitation: closed-loop speed control at this reference [rad/s], with
     /// the board's friction compensation (the uploaded coefficients).
     #[arg(long, value_name = "RAD_S", allow_hyphen_values = true)]
     pub speed_ref: Option<f32>,
-    /// Duration [s]. Default: the signal's (a, b: 90 s; c, d: see `motorid simulate --help`),
-    /// 10 s with --speed-ref.
+    /// Duration [s] of a-d or --speed-ref. Default: the signal's (a, b: 90 s; c, d: see
+    /// `motorid simulate --help`), 10 s with --speed-ref. Steady and ramp are programs of
+    /// fixed length (66 s, 155 s).
     #[arg(long)]
     pub duration: Option<f64>,
     /// Motor pole pairs, for the log's Hall resolution 2π/(6·pole pairs). Default 11: the
@@ -44,6 +60,68 @@ pub struct Args {
     /// Output log (CSV, written atomically).
     #[arg(short, long, value_name = "LOG.csv")]
     pub output: PathBuf,
+}
+
+/// Default largest voltage of steady and ramp as a fraction of u_max: the paper's 0.6 V at
+/// the default u_max of 12 V.
+pub const DEFAULT_AMPLITUDE: f64 = 0.05;
+
+/// Seconds each level of the steady program is held: the emulator's `steady` signal.
+const STEADY_BLOCK_S: f64 = 3.0;
+
+/// The board runs of a steady or ramp program: (excitation, seconds), the voltages those
+/// of the emulator's `steady` and `ramp` signals ([`crate::emulator::signals`]) scaled so
+/// that the largest steady level is `peak` volts.
+pub fn program(kind: &str, peak: f64) -> Vec<(Excitation, f64)> {
+    use crate::emulator::signals::{RAMP_END, RAMP_REST, RAMP_SLOPES, STEADY_LEVELS};
+    let top = STEADY_LEVELS.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+    let g = peak / top;
+    match kind {
+        "steady" => STEADY_LEVELS
+            .iter()
+            .copied()
+            .chain(STEADY_LEVELS.iter().map(|v| -v))
+            .map(|v| {
+                let volts = (v * g) as f32;
+                (Excitation::Steady { volts }, STEADY_BLOCK_S)
+            })
+            .collect(),
+        _ => {
+            let mut runs = Vec::new();
+            for s in RAMP_SLOPES {
+                for sign in [1.0, -1.0] {
+                    runs.push((Excitation::Steady { volts: 0.0 }, RAMP_REST));
+                    let volts_per_s = (sign * s * g) as f32;
+                    runs.push((Excitation::Ramp { volts_per_s }, RAMP_END / s));
+                }
+            }
+            runs
+        }
+    }
+}
+
+/// The serial port to use when none is given: the only candidate, else an error that lists
+/// them (or says there is none).
+pub fn pick_port(candidates: &[String]) -> Result<String> {
+    match candidates {
+        [one] => Ok(one.clone()),
+        [] => bail!(
+            "no serial port found; connect the board or give --port (for the emulated \
+             board, the device `motorid board --pty` printed)"
+        ),
+        many => bail!(
+            "{} serial ports found ({}); give the board's with --port",
+            many.len(),
+            many.join(", ")
+        ),
+    }
+}
+
+/// The serial ports of this computer, by device name.
+fn serial_ports() -> Result<Vec<String>> {
+    let ports = serialport::available_ports()
+        .map_err(|e| anyhow::anyhow!("cannot list the serial ports ({e}); give --port"))?;
+    Ok(ports.into_iter().map(|p| p.port_name).collect())
 }
 
 /// Longest silence during a run before giving up [s]: the board sends a sample every
@@ -59,95 +137,125 @@ pub fn run(args: Args) -> Result<()> {
         (None, Some(w)) => format!("speed {w} rad/s"),
         (None, None) => bail!("give --signal or --speed-ref"),
     };
-    let signal = match args.signal.as_deref() {
-        Some("a") => Some((Excitation::A, SignalKind::A)),
-        Some("b") => Some((Excitation::B, SignalKind::B)),
-        Some("c") => Some((Excitation::C, SignalKind::C)),
-        Some(_) => Some((Excitation::D, SignalKind::D)),
-        None => None,
-    };
+    let program_kind = matches!(args.signal.as_deref(), Some("steady" | "ramp"));
     if let Some(w) = args.speed_ref {
         if !w.is_finite() {
             bail!("--speed-ref: must be a number of rad/s (got {w})");
         }
     }
-    let duration = args
-        .duration
-        .unwrap_or(signal.map_or(10.0, |(_, k)| k.default_duration()));
-    if !(duration.is_finite() && duration > 0.0 && duration <= 3600.0) {
-        bail!("--duration: must be between 0 and 3600 s (got {duration})");
+    let rated = f64::from(control::blob::RATED_VBUS_MAX);
+    if !(args.u_max.is_finite() && args.u_max > 0.0 && args.u_max <= rated) {
+        bail!(
+            "--u-max: must be positive and at most the board's rated {rated} V (got {})",
+            args.u_max
+        );
+    }
+    if args.amplitude.is_some() && !program_kind {
+        bail!("--amplitude: only for --signal steady or ramp (the board scales a-d to its u_max)");
+    }
+    let amplitude = args.amplitude.unwrap_or(DEFAULT_AMPLITUDE);
+    if !(amplitude.is_finite() && amplitude > 0.0 && amplitude <= 1.0) {
+        bail!("--amplitude: must be a fraction of u_max above 0 and at most 1 (got {amplitude})");
+    }
+    if program_kind && args.duration.is_some() {
+        bail!("--duration: steady and ramp are programs of fixed length; leave it out");
+    }
+    // The board runs: one excitation (a-d), a program (steady, ramp), or speed control.
+    let runs: Vec<(Option<Excitation>, f64)> = match args.signal.as_deref() {
+        Some(k @ ("steady" | "ramp")) => program(k, amplitude * args.u_max)
+            .into_iter()
+            .map(|(e, d)| (Some(e), d))
+            .collect(),
+        Some(k) => {
+            let (sig, kind) = match k {
+                "a" => (Excitation::A, SignalKind::A),
+                "b" => (Excitation::B, SignalKind::B),
+                "c" => (Excitation::C, SignalKind::C),
+                _ => (Excitation::D, SignalKind::D),
+            };
+            vec![(Some(sig), args.duration.unwrap_or(kind.default_duration()))]
+        }
+        None => vec![(None, args.duration.unwrap_or(10.0))],
+    };
+    for (_, duration) in &runs {
+        if !(duration.is_finite() && *duration > 0.0 && *duration <= 3600.0) {
+            bail!("--duration: must be between 0 and 3600 s (got {duration})");
+        }
     }
     if args.pole_pairs == 0 {
         bail!("--pole-pairs: must be at least 1");
     }
-    crate::atomic::check_outputs(&[&args.output], &[std::path::Path::new(&args.port)])?;
-    let mut link = Link::open(&args.port)?;
+    let port = match &args.port {
+        Some(p) => p.clone(),
+        None => {
+            let p = pick_port(&serial_ports()?)?;
+            eprintln!("using serial port {p} (the only one found)");
+            p
+        }
+    };
+    crate::atomic::check_outputs(&[&args.output], &[std::path::Path::new(&port)])?;
+    let mut link = Link::open(&port)?;
     let id = link.identify()?;
     link.command(&HostMsg::Stop, "stop")?;
     let before = link.read_telemetry()?;
     link.pending_telemetry.clear();
-    match (signal, args.speed_ref) {
-        (Some((sig, _)), _) => link.start_experiment(sig, duration as f32)?,
-        (None, w) => {
-            link.command(
-                &HostMsg::SetSpeed {
-                    omega_ref: w.unwrap_or(0.0),
-                },
-                "the speed reference",
-            )?;
-            link.pending_samples.clear();
-            link.command(&HostMsg::SetMode { mode: Mode::Speed }, "speed mode")?;
-        }
-    }
 
     let ts = f64::from(control::CONTROL_PERIOD_S);
-    let expected = (duration / ts).round() as u64;
-    let bar = ProgressBar::new(expected);
+    let total: f64 = runs.iter().map(|(_, d)| d).sum();
+    let bar = ProgressBar::new((total / ts).round() as u64);
     bar.set_style(
         ProgressStyle::with_template("recording {bar:30} {pos}/{len} samples ({elapsed})")
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
-    let mut samples: Vec<Sample> = std::mem::take(&mut link.pending_samples);
+    let mut samples: Vec<Sample> = Vec::new();
     let mut windows: Vec<Telemetry> = Vec::new();
-    loop {
-        if samples.len() as u64 >= expected {
-            break;
-        }
-        match link.recv(SILENCE)? {
-            Some(BoardMsg::Sample(s)) => {
-                samples.push(s);
-                bar.set_position(samples.len() as u64);
-                // The board stops a run that hears nothing (link loss): a sign of life
-                // every HEARTBEAT_SAMPLES samples, in the board's time whatever its speed.
-                if samples.len().is_multiple_of(HEARTBEAT_SAMPLES) {
-                    link.send(&HostMsg::Heartbeat)?;
-                }
+    let mut lost = 0u64;
+    for (excitation, duration) in &runs {
+        match excitation {
+            Some(sig) => link.start_experiment(*sig, *duration as f32)?,
+            None => {
+                link.command(
+                    &HostMsg::SetSpeed {
+                        omega_ref: args.speed_ref.unwrap_or(0.0),
+                    },
+                    "the speed reference",
+                )?;
+                link.pending_samples.clear();
+                link.command(&HostMsg::SetMode { mode: Mode::Speed }, "speed mode")?;
             }
-            Some(BoardMsg::Telemetry(t)) => windows.push(t),
-            Some(BoardMsg::Fault(f)) => {
-                bar.finish_and_clear();
-                bail!("{}: the board stopped with a fault: {f:?}", args.port)
-            }
-            Some(_) => {}
-            // Silence: the run ended (the board stops on its own at the duration).
-            None => break,
         }
+        let expected = (duration / ts).round() as usize;
+        let run = collect(
+            &mut link,
+            expected,
+            &port,
+            &bar,
+            samples.len(),
+            &mut windows,
+        )?;
+        if excitation.is_none() {
+            // Speed mode runs until told otherwise.
+            link.command(&HostMsg::Stop, "stop")?;
+        }
+        lost += run
+            .windows(2)
+            .map(|w| u64::from(w[1].seq.wrapping_sub(w[0].seq).saturating_sub(1)))
+            .sum::<u64>();
+        // Each run's time starts at 0 on the board: continue the log's clock.
+        let t0 = samples
+            .last()
+            .map_or(0.0, |s| s.t + control::CONTROL_PERIOD_S);
+        samples.extend(run.into_iter().map(|mut s| {
+            s.t += t0;
+            s
+        }));
     }
     bar.finish_and_clear();
-    if args.speed_ref.is_some() {
-        // Speed mode runs until told otherwise.
-        link.command(&HostMsg::Stop, "stop")?;
-    }
-    samples.truncate(expected as usize);
-    if samples.is_empty() {
-        bail!("{}: the board sent no sample", args.port);
-    }
     windows.append(&mut link.pending_telemetry);
     let after = link.read_telemetry()?;
-    let lost = samples
-        .windows(2)
-        .map(|w| u64::from(w[1].seq.wrapping_sub(w[0].seq).saturating_sub(1)))
-        .sum::<u64>();
+    if samples.is_empty() {
+        bail!("{port}: the board sent no sample");
+    }
     let mut meta = BTreeMap::new();
     meta.insert(
         "sample_period".to_string(),
@@ -159,9 +267,15 @@ pub fn run(args: Args) -> Result<()> {
         (Some(s), _) => meta.insert("signal".to_string(), s.clone()),
         (None, w) => meta.insert("speed_ref".to_string(), w.unwrap_or(0.0).to_string()),
     };
+    if program_kind {
+        meta.insert(
+            "amplitude_v".to_string(),
+            format!("{}", amplitude * args.u_max),
+        );
+    }
     meta.insert(
         "source".to_string(),
-        format!("board {} firmware {}", args.port, id.firmware),
+        format!("board {port} firmware {}", id.firmware),
     );
     meta.insert("lost_samples".to_string(), lost.to_string());
     for (k, v) in telemetry_meta(&before, &windows, &after) {
@@ -196,10 +310,47 @@ pub fn run(args: Args) -> Result<()> {
         } else {
             String::new()
         },
-        args.port,
+        port,
         args.output.display()
     );
     Ok(())
+}
+
+/// The samples of one board run: up to `expected` of them, until the board falls silent
+/// (it stops on its own at the run's duration). `before` samples are already on the bar;
+/// the board's telemetry windows are appended to `windows`.
+fn collect(
+    link: &mut Link,
+    expected: usize,
+    port: &str,
+    bar: &ProgressBar,
+    before: usize,
+    windows: &mut Vec<Telemetry>,
+) -> Result<Vec<Sample>> {
+    let mut samples: Vec<Sample> = std::mem::take(&mut link.pending_samples);
+    while samples.len() < expected {
+        match link.recv(SILENCE)? {
+            Some(BoardMsg::Sample(s)) => {
+                samples.push(s);
+                bar.set_position((before + samples.len()) as u64);
+                // The board stops a run that hears nothing (link loss): a sign of life
+                // every HEARTBEAT_SAMPLES samples, in the board's time whatever its speed.
+                if samples.len().is_multiple_of(HEARTBEAT_SAMPLES) {
+                    link.send(&HostMsg::Heartbeat)?;
+                }
+            }
+            Some(BoardMsg::Fault(f)) => {
+                bar.finish_and_clear();
+                bail!("{port}: the board stopped with a fault: {f:?}")
+            }
+            Some(BoardMsg::Telemetry(t)) => windows.push(t),
+            Some(_) => {}
+            // Silence: the run ended.
+            None => break,
+        }
+    }
+    samples.truncate(expected);
+    Ok(samples)
 }
 
 /// The log's telemetry metadata: period, jitter and cycles over the one-second windows the
@@ -244,6 +395,42 @@ fn telemetry_meta(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn one_port_is_picked_and_several_are_listed() {
+        assert_eq!(pick_port(&["/dev/ttyACM0".into()]).unwrap(), "/dev/ttyACM0");
+        let e = pick_port(&["/dev/ttyACM0".into(), "/dev/ttyUSB0".into()])
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("2 serial ports") && e.contains("/dev/ttyUSB0"),
+            "{e}"
+        );
+        assert!(pick_port(&[]).unwrap_err().to_string().contains("--port"));
+    }
+
+    #[test]
+    fn programs_scale_with_the_amplitude() {
+        let steady = program("steady", 1.2);
+        assert_eq!(steady.len(), 22);
+        let top = steady
+            .iter()
+            .map(|(e, _)| match e {
+                Excitation::Steady { volts } => volts.abs(),
+                _ => panic!("{e:?}"),
+            })
+            .fold(0.0f32, f32::max);
+        assert!((top - 1.2).abs() < 1e-6, "{top}");
+        let ramp = program("ramp", 0.6);
+        let slopes: Vec<f32> = ramp
+            .iter()
+            .filter_map(|(e, _)| match e {
+                Excitation::Ramp { volts_per_s } => Some(*volts_per_s),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(slopes, [9.5e-3, -9.5e-3, 12e-3, -12e-3]);
+    }
 
     #[test]
     fn telemetry_meta_summarises_the_windows_of_the_run() {

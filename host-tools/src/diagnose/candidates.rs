@@ -77,42 +77,7 @@ pub struct Signals {
 /// Half-width of the velocity estimate in seconds: ±4 samples at the paper's 12 ms.
 pub const VELOCITY_HALF_S: f64 = 0.048;
 
-/// Speed [rad/s] the velocity constants (stick speed, smooth-sign width, Stribeck grid) were
-/// chosen for: rotary logs whose 99th-percentile speed reaches at least this (the paper's
-/// signal a reaches about 125 rad/s). Slower logs (a linear axis in m/s, a slow test) scale
-/// those constants down by `q99(|ω|)/REFERENCE_SPEED`.
-pub const REFERENCE_SPEED: f64 = 50.0;
-
-/// Samples closest to `seconds` at period `dt`, at least 1 and at most `n` (the samples the
-/// data has): a window never outgrows the data, whatever the period says.
-pub fn samples_for(seconds: f64, dt: f64, n: usize) -> usize {
-    let k = if dt > 0.0 && dt.is_finite() && seconds.is_finite() {
-        (seconds / dt).round().clamp(1.0, n.max(1) as f64) as usize
-    } else {
-        1
-    };
-    k.clamp(1, n.max(1))
-}
-
-/// `min(1, q99(|ω|)/REFERENCE_SPEED)`: 1 for logs as fast as the paper's motor (so emulated
-/// results keep the documented constants), smaller for slow logs or other units.
-pub fn velocity_scale(omega: &[f64]) -> f64 {
-    let mut a: Vec<f64> = omega
-        .iter()
-        .map(|w| w.abs())
-        .filter(|w| w.is_finite())
-        .collect();
-    if a.is_empty() {
-        return 1.0;
-    }
-    a.sort_by(|x, y| x.total_cmp(y));
-    let q = a[((a.len() - 1) as f64 * 0.99) as usize];
-    if q > 0.0 {
-        (q / REFERENCE_SPEED).min(1.0)
-    } else {
-        1.0
-    }
-}
+pub use crate::scales::{samples_for, velocity_scale, REFERENCE_SPEED};
 
 /// Half-width (samples) of the velocity estimate: ±4 × 12 ms. The slope over 9 samples of a
 /// Hall angle (0.095 rad steps) resolves about 0.8 rad/s and lags nothing (centred).

@@ -5,13 +5,24 @@ use crate::numerics::statistics::rms;
 use serde::Serialize;
 
 /// Velocity below which the motor counts as at standstill [rad/s]: about one Hall step
-/// (0.095 rad) per 100 ms, below what the velocity estimate resolves reliably.
+/// (0.095 rad) per 100 ms, below what the velocity estimate resolves reliably. Scaled by
+/// [`crate::scales::velocity_scale`] of the log's velocity (a slower log or other units).
 pub const STANDSTILL: f64 = 0.5;
 /// Upper edge of the "low speed" band [rad/s]: the Stribeck region of the paper's motor
-/// (v0 = 3.7 rad/s) with margin.
+/// (v0 = 3.7 rad/s) with margin. Scaled as [`STANDSTILL`].
 pub const LOW_SPEED: f64 = 5.0;
-/// Samples either side of a velocity sign change that count as "reversal": ±5 × 12 ms.
-pub const REVERSAL_HALF: usize = 5;
+/// Time either side of a velocity sign change that counts as "reversal" [s]: ±5 × 12 ms,
+/// in samples at the log's own period.
+pub const REVERSAL_HALF_S: f64 = 0.06;
+
+/// `x` rounded to 3 significant digits, for labels (0.5 prints as 0.5).
+fn sig3(x: f64) -> f64 {
+    if x == 0.0 || !x.is_finite() {
+        return x;
+    }
+    let p = 10f64.powi(2 - x.abs().log10().floor() as i32);
+    (x * p).round() / p
+}
 /// A region is named in words when its RMS error is at least this many times the overall.
 pub const WORSE_FACTOR: f64 = 1.5;
 
@@ -77,12 +88,20 @@ pub fn breakdown(x: &RegionInputs) -> Breakdown {
         (0..n).filter(|&k| f(k)).map(|k| e[k]).collect()
     };
 
-    // Velocity bands and reversals.
+    // Velocity bands and reversals, in the log's velocity units and sample period.
+    let vscale = crate::scales::velocity_scale(&x.omega[..n]);
+    let (standstill, low_speed) = (sig3(STANDSTILL * vscale), sig3(LOW_SPEED * vscale));
+    let dt = if x.t.len() > 1 {
+        (x.t[x.t.len() - 1] - x.t[0]) / (x.t.len() - 1) as f64
+    } else {
+        0.0
+    };
+    let reversal_half = crate::scales::samples_for(REVERSAL_HALF_S, dt, n);
     let mut near_rev = vec![false; n];
     for k in 1..n {
         if x.omega[k].signum() != x.omega[k - 1].signum() && x.omega[k] != 0.0 {
             for v in
-                near_rev[k.saturating_sub(REVERSAL_HALF)..(k + REVERSAL_HALF).min(n)].iter_mut()
+                near_rev[k.saturating_sub(reversal_half)..(k + reversal_half).min(n)].iter_mut()
             {
                 *v = true;
             }
@@ -94,30 +113,30 @@ pub fn breakdown(x: &RegionInputs) -> Breakdown {
         v.get(n * 3 / 4)
             .copied()
             .unwrap_or(0.0)
-            .max(LOW_SPEED * 2.0)
+            .max(low_speed * 2.0)
     };
     let bands: [Band; 5] = [
         (
             "standstill",
-            Box::new(|k| x.omega[k].abs() < STANDSTILL && !near_rev[k]),
+            Box::new(|k| x.omega[k].abs() < standstill && !near_rev[k]),
         ),
         ("reversals", Box::new(|k| near_rev[k])),
         (
             "low speed",
-            Box::new(|k| (STANDSTILL..LOW_SPEED).contains(&x.omega[k].abs()) && !near_rev[k]),
+            Box::new(|k| (standstill..low_speed).contains(&x.omega[k].abs()) && !near_rev[k]),
         ),
         (
             "medium speed",
-            Box::new(|k| (LOW_SPEED..high).contains(&x.omega[k].abs())),
+            Box::new(|k| (low_speed..high).contains(&x.omega[k].abs())),
         ),
         ("high speed", Box::new(|k| x.omega[k].abs() >= high)),
     ];
     for (label, f) in bands.iter() {
         let label = match *label {
-            "standstill" => format!("standstill (|ω| < {STANDSTILL} rad/s)"),
-            "low speed" => format!("low speed ({STANDSTILL}–{LOW_SPEED} rad/s)"),
-            "medium speed" => format!("medium speed ({LOW_SPEED}–{high:.0} rad/s)"),
-            "high speed" => format!("high speed (> {high:.0} rad/s)"),
+            "standstill" => format!("standstill (|ω| < {standstill} rad/s)"),
+            "low speed" => format!("low speed ({standstill}–{low_speed} rad/s)"),
+            "medium speed" => format!("medium speed ({low_speed}–{} rad/s)", sig3(high)),
+            "high speed" => format!("high speed (> {} rad/s)", sig3(high)),
             other => other.to_string(),
         };
         regions.extend(region("velocity", label, &pick(f.as_ref()), overall));
@@ -126,13 +145,13 @@ pub fn breakdown(x: &RegionInputs) -> Breakdown {
     regions.extend(region(
         "direction",
         "forward (ω > 0)".into(),
-        &pick(&|k| x.omega[k] > STANDSTILL),
+        &pick(&|k| x.omega[k] > standstill),
         overall,
     ));
     regions.extend(region(
         "direction",
         "backward (ω < 0)".into(),
-        &pick(&|k| x.omega[k] < -STANDSTILL),
+        &pick(&|k| x.omega[k] < -standstill),
         overall,
     ));
     // Angle bins over one revolution.

@@ -216,7 +216,7 @@ pub fn model_torque(effects: &[Effect<f64>], s: &Signals, current: &[f64], kt: f
             law + effects
                 .iter()
                 .filter(|e| observer.is_none() || !law_kinds.contains(&e.kind()))
-                .map(|e| e.torque(&x))
+                .map(|e| e.torque_with_width(&x, s.velocity_eps()))
                 .sum::<f64>()
         })
         .collect()

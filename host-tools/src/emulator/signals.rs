@@ -93,15 +93,15 @@ impl SignalKind {
 }
 
 /// Levels of the `steady` experiment: the paper's 0.4-0.6 V constant commands.
-const STEADY_LEVELS: [f64; 11] = [
+pub const STEADY_LEVELS: [f64; 11] = [
     0.40, 0.42, 0.44, 0.46, 0.48, 0.50, 0.52, 0.54, 0.56, 0.58, 0.60,
 ];
 /// Ramp slopes [V/s] of the `ramp` experiment: the paper's 9.5 to 12 mV/s.
-const RAMP_SLOPES: [f64; 2] = [9.5e-3, 12e-3];
+pub const RAMP_SLOPES: [f64; 2] = [9.5e-3, 12e-3];
 /// End voltage of each ramp [V]: above breakaway (s(0)·R/K_t ≈ 0.3 V for the paper's motor).
-const RAMP_END: f64 = 0.4;
+pub const RAMP_END: f64 = 0.4;
 /// Rest at 0 V before each ramp [s].
-const RAMP_REST: f64 = 1.0;
+pub const RAMP_REST: f64 = 1.0;
 
 fn ramp_program_duration() -> f64 {
     RAMP_SLOPES

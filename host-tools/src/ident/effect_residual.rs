@@ -13,7 +13,7 @@
 //! Only the added effects' magnitudes change; the base model's parameters are kept.
 use crate::log::{MotorLog, Plant};
 use crate::model::Model;
-use crate::numerics::differentiation::smooth_velocity;
+use crate::numerics::differentiation::smooth_velocity_of;
 use crate::numerics::least_squares::lstsq;
 use crate::numerics::weak_form;
 use control::effects::{smooth_sign, Effect, CURRENT_EPS};
@@ -59,7 +59,7 @@ fn electrical(m: &mut Model, logs: &[MotorLog]) {
             .map(|&c| smooth_sign(c - i0, CURRENT_EPS))
             .collect();
         let ones = vec![1.0; log.len()];
-        for w in weak_form::windows(&log.t, weak_form::WINDOW, weak_form::HOP) {
+        for w in weak_form::log_windows(log) {
             y.push(w.int_zoh(&log.u));
             cols[0].push(-w.int_d(i));
             cols[1].push(w.int(i));
@@ -141,7 +141,7 @@ fn mechanical(m: &mut Model, logs: &[MotorLog]) {
             (true, None) => continue,
             (false, _) => log.u.clone(),
         };
-        let ws = smooth_velocity(log, 5);
+        let ws = smooth_velocity_of(log);
         let fric: Vec<f64> = ws
             .iter()
             .map(|&w| match &m.lugre {
@@ -164,7 +164,7 @@ fn mechanical(m: &mut Model, logs: &[MotorLog]) {
                 _ => g.push(vec![1.0; log.len()]),
             }
         }
-        for w in weak_form::windows(&log.t, weak_form::WINDOW, weak_form::HOP) {
+        for w in weak_form::log_windows(log) {
             let drive = if voltage {
                 m.motor.kt * w.int(&cur)
             } else {

@@ -63,7 +63,7 @@ impl Dynamics<'_> {
             current: cur,
             kt: m.motor.kt,
         };
-        friction + effects::total_torque(&m.effects, &inputs)
+        friction + effects::total_torque_with_width(&m.effects, &inputs, m.sign_width)
     }
 
     /// dx/dt at state x with input u and heat state h.
@@ -140,7 +140,7 @@ impl Dynamics<'_> {
                 current: i,
                 kt: p.kt,
             };
-            let load = effects::total_torque(&m.effects, &inputs);
+            let load = effects::total_torque_with_width(&m.effects, &inputs, m.sign_width);
             let resid = p.j * (w - x[1]) / h - p.kt * i + fric + load;
             (resid, [theta, w, i, z])
         };

@@ -11,9 +11,10 @@ use super::free_params::{effect_keys, effect_keys_of, Free, Slot};
 use super::{nlsq, sim_error, FitRequest};
 use crate::log::{MotorLog, Plant};
 use crate::model::{Model, ModelKind, Parameter};
-use crate::numerics::differentiation::smooth_velocity;
+use crate::numerics::differentiation::smooth_velocity_of;
 use crate::numerics::least_squares::lstsq;
 use crate::numerics::weak_form;
+use crate::scales;
 use anyhow::Result;
 use control::effects::{smooth_sign, Effect, EffectKind, CURRENT_EPS, VELOCITY_EPS};
 
@@ -25,6 +26,14 @@ pub fn skeleton(req: &FitRequest, kind: ModelKind) -> Model {
     if let Some(pp) = first.meta_f64("pole_pairs") {
         m.sensor.pole_pairs = Some(pp as u32);
     }
+    m.sign_width = sign_width(req.logs);
+    m.data.fixed = req.constraints.fixed.clone();
+    m.data.bounds = req
+        .constraints
+        .bounds
+        .iter()
+        .map(|(k, &(lo, hi))| (k.clone(), [lo, hi]))
+        .collect();
     if req.plant == Plant::Torque {
         m.motor.r = 0.0;
         m.motor.l = 0.0;
@@ -55,6 +64,16 @@ pub fn skeleton(req: &FitRequest, kind: ModelKind) -> Model {
     m
 }
 
+/// Width of the smooth sign of the Coulomb-like terms for these logs: the control crate's
+/// [`VELOCITY_EPS`] (chosen for the paper's motor, below what one Hall step per sample
+/// resolves) times the logs' [`scales::velocity_scale`], so that on a slow log or one in other
+/// velocity units (a linear axis in m/s) the friction switches as sharply relative to the
+/// speeds the data reaches.
+pub fn sign_width(logs: &[MotorLog]) -> f64 {
+    let w: Vec<f64> = logs.iter().flat_map(smooth_velocity_of).collect();
+    VELOCITY_EPS * scales::velocity_scale(&w)
+}
+
 /// A table over ω or I spans the range the logs cover (from their 0.5th to their 99.5th
 /// percentile, so that a few outliers do not waste nodes) unless the spec gives `lo` and
 /// `hi`; a table over θ spans one revolution and needs no range.
@@ -68,7 +87,7 @@ fn set_table_range(spec: &mut crate::effect_spec::EffectSpec, logs: &[MotorLog],
     let mut xs: Vec<f64> = Vec::new();
     for log in logs {
         match var {
-            TableVar::Omega => xs.extend(smooth_velocity(log, 5)),
+            TableVar::Omega => xs.extend(smooth_velocity_of(log)),
             _ if plant == Plant::Voltage => xs.extend(log.i.iter().flatten().copied()),
             _ => xs.extend(log.u.iter().copied()),
         }
@@ -138,7 +157,7 @@ pub fn weak_estimate(m: &mut Model, logs: &[MotorLog], coulomb: bool) -> (f64, f
             let Some(i) = &log.i else { continue };
             let sgn_i: Vec<f64> = i.iter().map(|&c| smooth_sign(c, CURRENT_EPS)).collect();
             let ones = vec![1.0; log.len()];
-            for w in weak_form::windows(&log.t, weak_form::WINDOW, weak_form::HOP) {
+            for w in weak_form::log_windows(log) {
                 y.push(w.int_zoh(&log.u));
                 cols[0].push(-w.int_d(i));
                 cols[1].push(w.int(i));
@@ -205,8 +224,8 @@ pub fn weak_estimate(m: &mut Model, logs: &[MotorLog], coulomb: bool) -> (f64, f
     let offset = control::effects::total_sensor_offset(&m.effects);
     let mut y = Vec::new();
     for log in logs {
-        let ws = smooth_velocity(log, 5);
-        let sgn: Vec<f64> = ws.iter().map(|&w| smooth_sign(w, VELOCITY_EPS)).collect();
+        let ws = smooth_velocity_of(log);
+        let sgn: Vec<f64> = ws.iter().map(|&w| smooth_sign(w, m.sign_width)).collect();
         let cur: Vec<f64> = match (voltage, &log.i) {
             (true, Some(i)) => i.iter().map(|c| c - offset).collect(),
             (true, None) => continue,
@@ -245,7 +264,7 @@ pub fn weak_estimate(m: &mut Model, logs: &[MotorLog], coulomb: bool) -> (f64, f
                 }
             }
         }
-        for w in weak_form::windows(&log.t, weak_form::WINDOW, weak_form::HOP) {
+        for w in weak_form::log_windows(log) {
             let lhs = if voltage {
                 m.motor.kt * w.int(&cur)
             } else {

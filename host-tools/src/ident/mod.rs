@@ -49,6 +49,9 @@ pub struct FitRequest<'a> {
     /// Effects to add to the model's structure (`fit --add`).
     pub adds: &'a [EffectSpec],
     pub plant: Plant,
+    /// Parameters the user knows (`fit --fix`, `--bound`); [`free_params::Constraints::NONE`]
+    /// when none.
+    pub constraints: &'a free_params::Constraints,
 }
 
 /// The result of [`fit`].
@@ -135,6 +138,7 @@ pub fn fit(req: &FitRequest) -> Result<FitReport> {
     for log in req.logs {
         check_log(log, req.plant)?;
     }
+    free_params::check_constraints(req.constraints, req.kind, req.plant, req.adds)?;
     // Presliding is a state (the bristle deflection), not a term a linear model can carry:
     // the LuGre model is the static friction law with that state.
     if req.kind == ModelKind::Linear && req.adds.iter().any(|s| s.kind == EffectKind::Presliding) {
@@ -165,7 +169,13 @@ pub fn fit(req: &FitRequest) -> Result<FitReport> {
         );
     }
     let mut model = fit_kind(req)?;
-    if !req.adds.is_empty() && !req.validate.is_empty() && req.kind != ModelKind::Sindyc {
+    // The guard's other candidates (effects at zero, weak-form re-estimates of the motor
+    // constants and effects) would not hold what --fix and --bound assert.
+    if !req.adds.is_empty()
+        && !req.validate.is_empty()
+        && req.kind != ModelKind::Sindyc
+        && req.constraints.is_empty()
+    {
         model = guard_added_effects(req, model)?;
     }
     model.data.files = req
@@ -238,6 +248,12 @@ fn fit_fingerprint(req: &FitRequest) -> u64 {
     let mut h = std::collections::hash_map::DefaultHasher::new();
     req.kind.name().hash(&mut h);
     (req.plant == Plant::Voltage).hash(&mut h);
+    for (k, v) in &req.constraints.fixed {
+        (k, v.to_bits()).hash(&mut h);
+    }
+    for (k, (lo, hi)) in &req.constraints.bounds {
+        (k, lo.to_bits(), hi.to_bits()).hash(&mut h);
+    }
     for log in req.logs {
         log.source.hash(&mut h);
         log.meta.hash(&mut h);
@@ -604,6 +620,13 @@ pub fn parameter_table(model: &Model) -> String {
             s,
             "  {:<18} {:>13.6e} {:<12} {:>11}  {}",
             p.name, p.value, p.unit, se, note
+        );
+    }
+    if let Some(f) = model.data.std_err_factor {
+        let _ = writeln!(
+            s,
+            "  (standard errors include a factor {f:.1} for the residual's autocorrelation: \
+             white-noise errors would be that many times too small)"
         );
     }
     s

@@ -220,7 +220,9 @@ pub fn refine(
     refine_on(model, free, &res, opts, progress)
 }
 
-/// [`refine`] on given residuals (free run or multiple shooting).
+/// [`refine`] on given residuals (free run or multiple shooting). The bounds of `free` are
+/// widened to the logs' scales and the model's `--fix`/`--bound` constraints
+/// (`model.data.fixed`, `model.data.bounds`) applied ([`super::free_params::constrain`]).
 pub fn refine_on(
     model: &mut Model,
     free: &[Free],
@@ -228,6 +230,10 @@ pub fn refine_on(
     opts: nlsq::Options,
     progress: &mut dyn FnMut(usize, f64),
 ) -> Result<Vec<Parameter>> {
+    let (v, d) = data_scales(model, res.targets.iter().map(|t| t.log));
+    let user = model.data.constraints();
+    let (free, fixed_rows) = super::free_params::constrain(model, free, &user, v, d);
+    let free = &free[..];
     let x0: Vec<f64> = free.iter().map(|f| f.slot.get(model)).collect();
     let lo: Vec<f64> = free.iter().map(|f| f.lo).collect();
     let hi: Vec<f64> = free.iter().map(|f| f.hi).collect();
@@ -249,7 +255,56 @@ pub fn refine_on(
         fr.slot.set(model, *v);
     }
     let se: Vec<Option<f64>> = sol.std_err.iter().map(|v| Some(*v)).collect();
-    Ok(parameter_rows(model, free, &se))
+    // Identifiability is judged on the curvature of the cost (the white-noise errors);
+    // the errors printed carry the residual's autocorrelation.
+    let mut rows = parameter_rows(model, free, &se);
+    let factor = res
+        .eval(model)
+        .map(|r| autocorrelation_factor(&r))
+        .unwrap_or(1.0);
+    for row in &mut rows {
+        row.std_err = row.std_err.map(|e| e * factor);
+    }
+    model.data.std_err_factor = Some(factor);
+    for (row, f) in rows.iter_mut().zip(free) {
+        if let Some((lo, hi)) = user.bounds.get(&row.name) {
+            let sep = if row.note.is_empty() { "" } else { "; " };
+            row.note = format!("{}{sep}bounded by --bound {lo}..{hi}", row.note);
+            debug_assert_eq!((f.lo, f.hi), (*lo, *hi));
+        }
+    }
+    rows.extend(fixed_rows);
+    Ok(rows)
+}
+
+/// Factor by which white-noise standard errors σ²·(JᵀJ)⁻¹ understate the spread of the
+/// estimates when the residual `r` is autocorrelated: `√τ`, τ the residual's integrated
+/// autocorrelation time ([`crate::numerics::statistics::correlation_time`]). For a least-squares
+/// estimate `β̂ = (JᵀJ)⁻¹Jᵀr`, `Var(β̂) = (JᵀJ)⁻¹·JᵀΣJ·(JᵀJ)⁻¹` with Σ the residual's
+/// covariance; where the sensitivities in J vary slowly against the residual's correlation
+/// time (a free run's do), `JᵀΣJ ≈ σ²·τ·JᵀJ`, the variance of a mean of n correlated samples
+/// (n/τ independent ones): the errors grow by `√τ`. Where a sensitivity varies faster, the
+/// factor overstates its error, so the corrected errors are conservative. At least 1.
+pub fn autocorrelation_factor(r: &[f64]) -> f64 {
+    crate::numerics::statistics::correlation_time(r)
+        .sqrt()
+        .max(1.0)
+}
+
+/// The velocity and drive scales of `logs` for the bounds of a fit of `model`
+/// ([`super::free_params::widen_to_data`]): the velocity scale its smooth-sign width was set
+/// from, and [`crate::scales::drive_scale`] of the torque command or of `K_t·I`.
+pub fn data_scales<'a>(model: &Model, logs: impl Iterator<Item = &'a MotorLog>) -> (f64, f64) {
+    let v = (model.sign_width / control::effects::VELOCITY_EPS).clamp(1e-12, 1.0);
+    let drive: Vec<f64> = logs
+        .flat_map(|l| match (model.plant, &l.i) {
+            (crate::log::Plant::Voltage, Some(i)) => {
+                i.iter().map(|c| model.motor.kt * c).collect::<Vec<_>>()
+            }
+            _ => l.u.clone(),
+        })
+        .collect();
+    (v, crate::scales::drive_scale(&drive))
 }
 
 /// Refine in two stages when the model has effects: first the base model (effects at zero

@@ -36,6 +36,16 @@ pub fn smooth_velocity(log: &MotorLog, half: usize) -> Vec<f64> {
     smoothed_derivative(&log.theta, log.sample_period(), half)
 }
 
+/// Half-width [s] of [`smooth_velocity_of`]: ±5 samples at the paper's 12 ms, about one Hall
+/// step at 1.6 rad/s.
+pub const VELOCITY_HALF_S: f64 = 0.06;
+
+/// [`smooth_velocity`] over ±[`VELOCITY_HALF_S`] at the log's own period.
+pub fn smooth_velocity_of(log: &MotorLog) -> Vec<f64> {
+    let half = crate::scales::samples_for(VELOCITY_HALF_S, log.sample_period(), log.len());
+    smooth_velocity(log, half)
+}
+
 /// Centred moving average over `±m` samples (shrinking at the ends).
 pub fn moving_average(x: &[f64], m: usize) -> Vec<f64> {
     let n = x.len();

@@ -76,6 +76,43 @@ pub fn autocorr(x: &[f64], max_lag: usize) -> Vec<f64> {
         .collect()
 }
 
+/// Integrated autocorrelation time `τ = 1 + 2·Σ_{k≥1} ρ_k` of a series [samples]: the factor
+/// by which its autocorrelation inflates the variance of a mean (`Var = σ²·τ/n`), so `n/τ` is
+/// its effective number of independent samples. `ρ_k` (as [`autocorr`]) is evaluated on lags
+/// growing by about √2 (1, 2, 3, 4, 6, 8, 11, ...) up to its first value ≤ 0 (the initial
+/// positive sequence) and summed as a piecewise-linear curve between them: O(n·log τ) work
+/// whether the series decorrelates in one sample or in thousands. Between 1 and `n`.
+pub fn correlation_time(x: &[f64]) -> f64 {
+    let n = x.len();
+    if n < 3 {
+        return 1.0;
+    }
+    let m = x.iter().sum::<f64>() / n as f64;
+    let c0: f64 = x.iter().map(|v| (v - m) * (v - m)).sum();
+    if c0 <= 0.0 {
+        return 1.0;
+    }
+    let rho = |k: usize| (0..n - k).map(|t| (x[t] - m) * (x[t + k] - m)).sum::<f64>() / c0;
+    // Σ_{k≥1} ρ_k, with ρ_0 = 1 as the curve's first point.
+    let (mut sum, mut k0, mut r0) = (0.0, 0usize, 1.0f64);
+    let mut k = 1usize;
+    while k < n / 2 {
+        let r = rho(k);
+        if r <= 0.0 {
+            // The curve reaches 0 between k0 and k: the triangle up to that crossing.
+            let cross = (k - k0) as f64 * r0 / (r0 - r);
+            sum += 0.5 * r0 * cross;
+            break;
+        }
+        // Lags k0+1 ..= k on the straight line from (k0, r0) to (k, r).
+        let d = (k - k0) as f64;
+        sum += d * 0.5 * (r0 + r) + 0.5 * (r - r0);
+        (k0, r0) = (k, r);
+        k = (k + 1).max((k as f64 * std::f64::consts::SQRT_2).round() as usize);
+    }
+    (1.0 + 2.0 * sum).clamp(1.0, n as f64)
+}
+
 /// Cross-correlation `r_xu(k)` for `k = −max_lag..=max_lag` (index `k + max_lag`):
 /// correlation of `x(t)` with `u(t − k)`, means removed, normalised by both energies.
 pub fn xcorr(x: &[f64], u: &[f64], max_lag: usize) -> Vec<f64> {
@@ -199,6 +236,24 @@ mod tests {
             t.p_value < 1e-10 && t.explained > 0.05 && t.delta_bic < 0.0,
             "{t:?}"
         );
+    }
+
+    #[test]
+    fn correlation_time_of_white_noise_and_ar1() {
+        let e = noise(20000, 3);
+        let tw = correlation_time(&e);
+        assert!((0.8..1.3).contains(&tw), "white noise τ = {tw}");
+        // AR(1) with φ = 0.99: τ = (1 + φ)/(1 − φ) = 199.
+        let mut y = 0.0;
+        let ar: Vec<f64> = e
+            .iter()
+            .map(|v| {
+                y = 0.99 * y + v;
+                y
+            })
+            .collect();
+        let t = correlation_time(&ar);
+        assert!((120.0..300.0).contains(&t), "AR(1) τ = {t}");
     }
 
     #[test]

@@ -24,6 +24,7 @@
 //! Two forms of the same operator: [`Window`]s over any time axis (the fits' regression rows)
 //! and [`WeakForm`], the same weights as one kernel convolved over a uniformly sampled log
 //! (what `diagnose` runs, many columns at a time).
+use crate::log::MotorLog;
 
 /// Half-width of a diagnosis window in samples: 8 × 12 ms ≈ 0.1 s, short against the
 /// excitations (≤ 1 Hz) and long against the Hall quantisation (one step per 12 ms at 8 rad/s).
@@ -31,11 +32,16 @@ pub const HALF_WIDTH: usize = 8;
 /// The same half-width in seconds (8 × 12 ms), used for logs at other sample rates.
 pub const HALF_WIDTH_S: f64 = 0.096;
 
-/// Length of a fitting window [samples]: 40 samples = 0.48 s at 12 ms, several Hall steps at
-/// moderate speed, short against the 1 Hz upper frequency of the paper's signals.
+/// Length of a fitting window [s] ([`log_windows`]): several Hall steps at moderate speed,
+/// short against the 1 Hz upper frequency of the paper's signals.
+pub const WINDOW_S: f64 = 0.48;
+/// Length of a fitting window [samples] at the paper's 12 ms ([`WINDOW_S`]): the SINDYc rows,
+/// whose fast path builds its windows in fixed-size blocks.
 pub const WINDOW: usize = 40;
 /// Hop between fitting windows [samples] (half overlap).
 pub const HOP: usize = 20;
+/// Fewest samples in a fitting window: φ'' of the bump needs a few points to integrate.
+const MIN_WINDOW: usize = 8;
 
 /// The bump `(1 − s²)⁴` on `|s| < 1`, zero outside.
 fn bump(s: f64) -> f64 {
@@ -147,6 +153,16 @@ pub fn windows(t: &[f64], len: usize, hop: usize) -> Vec<Window> {
         start += hop.max(1);
     }
     out
+}
+
+/// The fitting windows of [`WINDOW_S`] (half overlap) covering a log, in samples at its own
+/// period.
+pub fn log_windows(log: &MotorLog) -> Vec<Window> {
+    let n = log.len();
+    let len = crate::scales::samples_for(WINDOW_S, log.sample_period(), n)
+        .max(MIN_WINDOW)
+        .min(n);
+    windows(&log.t, len, (len / 2).max(1))
 }
 
 /// The weak form on a uniformly sampled log: windows of `2·half + 1` samples centred on

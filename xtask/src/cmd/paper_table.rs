@@ -106,6 +106,7 @@ pub fn run(args: Args) -> Result<()> {
             validate: &[],
             adds: &[],
             plant: Plant::Voltage,
+            constraints: &motorid::ident::free_params::Constraints::NONE,
         });
         bar.inc(1);
         let name = match kind {

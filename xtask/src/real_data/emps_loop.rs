@@ -139,6 +139,7 @@ fn fit_round(train: &MotorLog, test: &MotorLog, adds: &[EffectSpec]) -> Result<R
         validate: &[],
         adds,
         plant: Plant::Torque,
+        constraints: &motorid::ident::free_params::Constraints::NONE,
     })?;
     let model = rep.model;
     let diagnosis = diagnose::diagnose(
@@ -215,6 +216,7 @@ pub fn run(
         fit_logs: std::slice::from_ref(train),
         select_logs: &[],
         start: Vec::new(),
+        constraints: &motorid::ident::free_params::Constraints::NONE,
         max_rounds: MAX_ROUNDS,
         diagnose: diagnose::Options::default(),
     };

@@ -1,0 +1,173 @@
+//! `fit --fix KEY=VALUE` and `--bound KEY=LO..HI`: a known parameter is held or kept in its
+//! range, the model file says so, and a key the fit does not have or an empty range is one
+//! clear error. The standard errors carry the residual's autocorrelation.
+use serde_json::Value;
+use std::path::Path;
+use tests::motorid;
+
+fn ok(dir: &Path, args: &[&str]) -> String {
+    let out = motorid(dir, args);
+    assert!(
+        out.status.success(),
+        "motorid {args:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout).unwrap()
+}
+
+fn fails_with(dir: &Path, args: &[&str], want: &[&str]) {
+    let out = motorid(dir, args);
+    assert!(!out.status.success(), "motorid {args:?} succeeded");
+    let err = String::from_utf8_lossy(&out.stderr);
+    let lines: Vec<&str> = err.lines().filter(|l| !l.trim().is_empty()).collect();
+    assert_eq!(lines.len(), 1, "one line expected: {err}");
+    assert!(lines[0].starts_with("error: "), "{err}");
+    for w in want {
+        assert!(lines[0].contains(w), "'{w}' missing in: {err}");
+    }
+    assert!(!dir.join("bad.toml").exists(), "an output was written");
+}
+
+fn param(fit: &Value, name: &str) -> Value {
+    fit["parameters"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|p| p["name"] == name)
+        .unwrap_or_else(|| panic!("no {name} in {fit}"))
+        .clone()
+}
+
+#[test]
+fn known_parameters_are_fixed_or_bounded_and_recorded() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    ok(
+        d,
+        &[
+            "simulate",
+            "--signal",
+            "d",
+            "--duration",
+            "20",
+            "-o",
+            "d.csv",
+        ],
+    );
+    let free: Value = serde_json::from_str(&ok(
+        d,
+        &[
+            "fit",
+            "--json",
+            "--model",
+            "linear",
+            "-o",
+            "free.toml",
+            "d.csv",
+        ],
+    ))
+    .unwrap();
+    let r_free = param(&free, "R")["value"].as_f64().unwrap();
+    let j_free = param(&free, "J")["value"].as_f64().unwrap();
+    // The errors are widened for the autocorrelated free-run residual, and say by how much.
+    let factor = free["std_error_factor"].as_f64().unwrap();
+    assert!(factor > 1.0, "factor {factor}");
+
+    // R held at 1.5 times its estimate, J kept below 80 % of it (Kt spelled as users do).
+    let (r_fixed, j_hi) = (1.5 * r_free, 0.8 * j_free);
+    let fix = format!("R={r_fixed}");
+    let bound = format!("J={}..{j_hi}", 0.1 * j_free);
+    let held: Value = serde_json::from_str(&ok(
+        d,
+        &[
+            "fit",
+            "--json",
+            "--model",
+            "linear",
+            "--fix",
+            &fix,
+            "--bound",
+            &bound,
+            "-o",
+            "held.toml",
+            "d.csv",
+        ],
+    ))
+    .unwrap();
+    // Equal up to the last digit of a JSON number's round trip.
+    let same = |v: &Value, want: f64| (v.as_f64().unwrap() - want).abs() <= 1e-12 * want.abs();
+    let r = param(&held, "R");
+    assert!(same(&r["value"], r_fixed), "{r}");
+    assert!(r["note"].as_str().unwrap().contains("--fix"), "{r}");
+    let j = param(&held, "J");
+    let jv = j["value"].as_f64().unwrap();
+    assert!(
+        jv <= j_hi * (1.0 + 1e-12),
+        "J = {jv} above its bound {j_hi}"
+    );
+    assert!(j["note"].as_str().unwrap().contains("--bound"), "{j}");
+    // The model file records them for a reader.
+    let toml = std::fs::read_to_string(d.join("held.toml")).unwrap();
+    assert!(
+        toml.contains("[data.fixed]") && toml.contains("[data.bounds]"),
+        "{toml}"
+    );
+    assert!(toml.contains(&format!("R = {r_fixed}")), "{toml}");
+    assert!(same(&held["fixed"]["R"], r_fixed), "{held}");
+
+    // Kt is the table's Kb (tied to it).
+    let kt: Value = serde_json::from_str(&ok(
+        d,
+        &[
+            "fit", "--json", "--model", "linear", "--fix", "Kt=0.07", "-o", "kt.toml", "d.csv",
+        ],
+    ))
+    .unwrap();
+    assert!(same(&param(&kt, "Kb")["value"], 0.07), "{kt}");
+
+    // Errors: a key this fit does not have, an empty range, a value that is no number.
+    let fit = |extra: &[&str]| -> Vec<String> {
+        let mut a: Vec<String> = ["fit", "--model", "linear", "-o", "bad.toml"]
+            .map(String::from)
+            .to_vec();
+        a.extend(extra.iter().map(|s| s.to_string()));
+        a.push("d.csv".into());
+        a
+    };
+    let run = |extra: &[&str], want: &[&str]| {
+        let a = fit(extra);
+        let a: Vec<&str> = a.iter().map(String::as_str).collect();
+        fails_with(d, &a, want);
+    };
+    run(
+        &["--fix", "coulomb.fc=0.1"],
+        &["--fix coulomb.fc", "R, L, Kb, J, b"],
+    );
+    run(&["--bound", "J=2..1"], &["--bound J=2..1", "empty"]);
+    run(&["--bound", "J=1"], &["--bound J=1", "LO..HI"]);
+    run(&["--fix", "R=abc"], &["--fix R=abc", "not a finite number"]);
+    run(&["--fix", "R=1", "--bound", "R=0..2"], &["R", "give one"]);
+    // An added effect's keys can be fixed, and a validation log does not undo it.
+    let c: Value = serde_json::from_str(&ok(
+        d,
+        &[
+            "fit",
+            "--json",
+            "--model",
+            "linear",
+            "--add",
+            "coulomb",
+            "--fix",
+            "coulomb.fc=0.01",
+            "--validate",
+            "d.csv",
+            "-o",
+            "c.toml",
+            "d.csv",
+        ],
+    ))
+    .unwrap();
+    assert_eq!(c["effects"][0], "coulomb:fc=0.01", "{c}");
+    let toml = std::fs::read_to_string(d.join("c.toml")).unwrap();
+    assert!(toml.contains("\"coulomb.fc\" = 0.01"), "{toml}");
+}
