@@ -16,9 +16,13 @@
 //!   stays a link; a link to a missing file is refused.
 //! * **Devices and pipes are written in place.** `-o /dev/null` or a named pipe is opened and
 //!   written, never renamed over.
-//! * **Missing parent folders are created**, and a `note: created directory DIR` line on
-//!   stderr says so once the file is written; when the write fails, the folders it created are
-//!   removed again.
+//! * **One missing folder level is created, never at the root.** When the output's own
+//!   folder is missing but its parent exists and is not the root directory, the folder is
+//!   created and a `note: created directory DIR` line on stderr says so once the file is
+//!   written (when the write fails, the folder is removed again): `-o models/m.toml`,
+//!   `--report /tmp/run/report`. Two missing levels (`-o a/b/m.toml` without `a`) or a new
+//!   folder at the root (`-o /nonexistent/x.csv`) are refused, naming the folder: they are
+//!   typos far more often than wishes.
 use anyhow::{anyhow, bail, Context, Result};
 use std::io::Write;
 use std::path::{Component, Path, PathBuf};
@@ -64,7 +68,7 @@ fn resolve(path: &Path) -> PathBuf {
 }
 
 /// True when `a` and `b` name the same file (same resolved path, or same inode).
-fn same_file(a: &Path, b: &Path) -> bool {
+pub fn same_file(a: &Path, b: &Path) -> bool {
     if resolve(a) == resolve(b) {
         return true;
     }
@@ -156,9 +160,17 @@ pub fn write(path: &Path, bytes: &[u8]) -> Result<()> {
         _ => PathBuf::from("."),
     };
     let created = missing_dirs(&dir);
-    if !created.is_empty() {
-        std::fs::create_dir_all(&dir)
-            .with_context(|| format!("{p}: cannot create directory {}", dir.display()))?;
+    if let Some(first) = created.first() {
+        let parent = resolve(first).parent().map(Path::to_path_buf);
+        if created.len() > 1 || parent.is_none_or(|p| p.parent().is_none()) {
+            bail!(
+                "{p}: folder {} does not exist; create it first (motorid creates only the \
+                 output's own folder, inside one that exists, not at the root)",
+                first.display()
+            );
+        }
+        std::fs::create_dir(first)
+            .with_context(|| format!("{p}: cannot create directory {}", first.display()))?;
     }
     let result = write_in(&dir, &target, existing.as_ref(), bytes);
     match result {
@@ -364,8 +376,11 @@ mod tests {
         let dangling = d.path().join("dangling");
         std::os::unix::fs::symlink(d.path().join("missing"), &dangling).unwrap();
         assert!(write_str(&dangling, "x").is_err());
-        write_str(&d.path().join("new/sub/x.txt"), "x").unwrap();
-        assert!(d.path().join("new/sub/x.txt").is_file());
+        write_str(&d.path().join("new/x.txt"), "x").unwrap();
+        assert!(d.path().join("new/x.txt").is_file());
+        let e = write_str(&d.path().join("a/b/x.txt"), "x").unwrap_err();
+        assert!(format!("{e:#}").contains("does not exist"), "{e:#}");
+        assert!(!d.path().join("a").exists());
         assert!(write_str(d.path(), "x").is_err());
         let names: Vec<String> = std::fs::read_dir(d.path())
             .unwrap()

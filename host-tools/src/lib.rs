@@ -12,6 +12,8 @@
 //! | [`report`] | self-contained HTML reports with inline SVG plots (compare, diagnose, demo) |
 //! | [`emulator`] | the built-in motor emulator: the paper's motor, effects, sensors, signals |
 //! | [`validate`] | finite, physical numbers: sample periods, ranges, clap value parsers |
+//! | [`input`] | input files: regular files only, size and line-length caps, no file twice |
+//! | [`warnings`] | `warning:` lines about the inputs, held until the inputs are checked |
 pub mod atomic;
 pub mod board;
 pub mod closed_loop;
@@ -26,3 +28,4 @@ pub mod matlab;
 pub mod model;
 pub mod report;
 pub mod validate;
+pub mod warnings;

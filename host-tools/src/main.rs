@@ -13,7 +13,9 @@ use std::process::ExitCode;
         Typical loop: `simulate` (or record) a log, `fit` a model, `compare` it with the data, \
         `diagnose` what physical effect is missing, `fit --add` it, then `export` the \
         coefficients and `flash` or `upload` them to the board. `demo` runs the whole loop \
-        on the built-in emulator."
+        on the built-in emulator.\n\n\
+        Outputs are written whole or not at all and never over an input; a missing folder of \
+        an output is created (and announced) only inside the current directory."
 )]
 struct Cli {
     /// Print what the command does on stderr: -v for the steps of the fits and the
@@ -142,8 +144,12 @@ fn main() -> ExitCode {
         Command::Emulate(a) => cmd::emulate::run(a),
     };
     match result {
-        Ok(()) => ExitCode::SUCCESS,
+        Ok(()) => {
+            motorid::warnings::flush();
+            ExitCode::SUCCESS
+        }
         Err(e) => {
+            motorid::warnings::discard();
             let msg = format!("{e:#}").replace('\n', " ");
             eprintln!("error: {msg}");
             ExitCode::FAILURE

@@ -75,7 +75,26 @@ pub fn sample_period(v: f64) -> Result<f64, String> {
     Ok(v)
 }
 
-fn number(s: &str) -> Result<f64, String> {
+/// `s` as a whole number `lo ..= hi` (`'abc' is not a whole number`, `300 is outside 1 .. 255`).
+pub fn whole_number(s: &str, lo: u64, hi: u64) -> Result<u64, String> {
+    let n: u64 = s.trim().parse().map_err(|_| {
+        format!(
+            "'{}' is not a whole number {lo} .. {hi}",
+            crate::log::echo(s)
+        )
+    })?;
+    if !(lo..=hi).contains(&n) {
+        return Err(format!("{n} is outside {lo} .. {hi}"));
+    }
+    Ok(n)
+}
+
+/// `s` as a finite number.
+pub fn number(s: &str) -> Result<f64, String> {
+    finite(plain_number(s)?)
+}
+
+fn plain_number(s: &str) -> Result<f64, String> {
     s.trim()
         .parse::<f64>()
         .map_err(|_| format!("'{}' is not a number", crate::log::echo(s)))
@@ -86,7 +105,7 @@ macro_rules! range_parser {
     ($(#[$doc:meta])* $name:ident, $t:ty, $check:expr) => {
         $(#[$doc])*
         pub fn $name(s: &str) -> Result<$t, String> {
-            let v = number(s)?;
+            let v = plain_number(s)?;
             let check: fn(f64) -> Result<f64, String> = $check;
             check(v)?;
             Ok(v as $t)

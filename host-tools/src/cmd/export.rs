@@ -18,7 +18,8 @@ use std::path::PathBuf;
 pub struct Args {
     /// The identified model (written by `motorid fit`).
     pub model: PathBuf,
-    /// Output file (written atomically).
+    /// Output file (written atomically; a missing folder is created only inside the current
+    /// directory).
     #[arg(short, long, value_name = "COEFFS.bin")]
     pub output: PathBuf,
     /// What to write: the binary blob the firmware loads, a JSON object (every coefficient
