@@ -70,7 +70,16 @@ impl ColumnMap {
                     Self::STANDARD.join(", ")
                 );
             }
-            m.insert(k.to_string(), v.trim().to_string());
+            let v = v.trim();
+            if let Some((other, _)) = m.iter().find(|(_, name)| *name == v) {
+                bail!(
+                    "--map: column '{}' is mapped to both {other} and {k}",
+                    echo(v)
+                );
+            }
+            if m.insert(k.to_string(), v.to_string()).is_some() {
+                bail!("--map: '{k}' is mapped twice; map each standard column once");
+            }
         }
         Ok(ColumnMap(m))
     }
@@ -271,7 +280,12 @@ impl Units {
                     known_units()
                 );
             }
-            m.insert(k.to_string(), v.to_string());
+            if m.insert(k.to_string(), v.to_string()).is_some() {
+                bail!(
+                    "--units: '{}' is given twice; give each column's unit once",
+                    echo(k)
+                );
+            }
         }
         Ok(Units(m))
     }
@@ -293,19 +307,7 @@ pub const ECHO_MAX: usize = 40;
 /// sequence is visible and never reaches the terminal as such; cut to [`ECHO_MAX`] characters
 /// with `…`.
 pub fn echo(s: &str) -> String {
-    let pieces: Vec<String> = s
-        .chars()
-        .map(|c| match c {
-            '\0' => "\\0".to_string(),
-            '\t' => "\\t".to_string(),
-            '\n' => "\\n".to_string(),
-            '\r' => "\\r".to_string(),
-            '\u{feff}' => "\\u{feff}".to_string(),
-            c if (c as u32) < 0x100 && c.is_control() => format!("\\x{:02x}", c as u32),
-            c if c.is_control() => format!("\\u{{{:x}}}", c as u32),
-            c => c.to_string(),
-        })
-        .collect();
+    let pieces: Vec<String> = s.chars().map(escape_char).collect();
     let total: usize = pieces.iter().map(|p| p.chars().count()).sum();
     if total <= ECHO_MAX {
         return pieces.concat();
@@ -322,6 +324,26 @@ pub fn echo(s: &str) -> String {
     }
     out.push('…');
     out
+}
+
+/// `s` with every control character shown as an escape (as [`echo`] does, without the cut):
+/// for a whole message line, whose paths and names come from outside.
+pub fn escape_controls(s: &str) -> String {
+    s.chars().map(escape_char).collect()
+}
+
+/// One character as a message shows it: a control character as `\0`, `\t`, `\x1b`, ...
+fn escape_char(c: char) -> String {
+    match c {
+        '\0' => "\\0".to_string(),
+        '\t' => "\\t".to_string(),
+        '\n' => "\\n".to_string(),
+        '\r' => "\\r".to_string(),
+        '\u{feff}' => "\\u{feff}".to_string(),
+        c if (c as u32) < 0x100 && c.is_control() => format!("\\x{:02x}", c as u32),
+        c if c.is_control() => format!("\\u{{{:x}}}", c as u32),
+        c => c.to_string(),
+    }
 }
 
 /// A motor log in memory. All series have the same length.
@@ -946,10 +968,9 @@ type MetaCheck = fn(&str) -> std::result::Result<(), String>;
 pub const METADATA_KEYS: &[(&str, MetaCheck)] = &[
     // Seconds, or the unit of `t`: its range is checked after conversion.
     ("sample_period", |v| crate::validate::number(v).map(drop)),
-    // 0 = not quantised; the coarsest angle sensor steps once a revolution (2π rad).
+    // 0 = not quantised, else 1e-12 .. 2π rad (validate::angle_quantum).
     ("hall_resolution_rad", |v| {
-        let r = crate::validate::number(v)?;
-        crate::validate::in_range(r, 0.0, std::f64::consts::TAU).map(drop)
+        crate::validate::angle_quantum(crate::validate::number(v)?).map(drop)
     }),
     // The coefficient blob stores it in a byte; real motors have 1 to about 100.
     ("pole_pairs", |v| {

@@ -150,7 +150,8 @@ fn main() -> ExitCode {
         }
         Err(e) => {
             motorid::warnings::discard();
-            let msg = format!("{e:#}").replace('\n', " ");
+            // One line, and no control character from a path or a name reaches the terminal.
+            let msg = motorid::log::escape_controls(&format!("{e:#}").replace('\n', " "));
             eprintln!("error: {msg}");
             ExitCode::FAILURE
         }

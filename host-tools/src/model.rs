@@ -67,6 +67,7 @@ pub fn lugre_friction(l: &LugreParams, omega: f64, z: f64) -> f64 {
 
 /// One identified number.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Parameter {
     /// Name, as in the equations (`R`, `alpha0`, `cogging.amp`, ...).
     pub name: String,
@@ -103,6 +104,7 @@ impl Parameter {
 
 /// Where the model's data came from.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
 pub struct Provenance {
     /// The logs it was fitted on.
     pub files: Vec<String>,
@@ -127,6 +129,7 @@ pub struct Provenance {
 
 /// The measurement chain the data went through (needed for `fit_sensor`).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Sensor {
     /// Angle quantum of the Hall sensors [rad] (0 = not quantised).
     pub hall_resolution_rad: f64,
@@ -248,6 +251,24 @@ fn field_at(text: &str, start: usize) -> String {
     }
 }
 
+/// A key of table `[name]` that is not one of `known` is an error naming it (the tables whose
+/// structs live in the `control` crate, which cannot refuse unknown keys themselves).
+fn unknown_keys(text: &str, name: &str, known: &[&str]) -> Result<()> {
+    let Ok(doc) = toml::from_str::<toml::Table>(text) else {
+        return Ok(());
+    };
+    if let Some(toml::Value::Table(t)) = doc.get(name) {
+        if let Some(k) = t.keys().find(|k| !known.contains(&k.as_str())) {
+            anyhow::bail!(
+                "field '{name}.{}': unknown field; the fields are {}",
+                echo(k),
+                known.join(", ")
+            );
+        }
+    }
+    Ok(())
+}
+
 /// Every float in a TOML value is finite (`field 'sindy.accel...': NaN is not a finite
 /// number`).
 fn check_toml_numbers(path: &str, v: &toml::Value) -> Result<()> {
@@ -343,10 +364,6 @@ pub mod ranges {
     /// Bristle stiffness σ0 [N·m/rad or N/m]: above 0 (it divides the deflection) to 1e9
     /// (a stiff ball-screw axis has about 1e8 N/m).
     pub const STIFFNESS: Range = range(0.0, 1e9, true, "bristle stiffness [N·m/rad]");
-    /// Hall (angle sensor) quantum [rad]: 0 (not quantised) to 2π (one step a revolution,
-    /// the coarsest sensor there is).
-    pub const HALL_RESOLUTION: Range =
-        range(0.0, std::f64::consts::TAU, false, "angle quantum [rad]");
     /// Moving-average window [samples]: 1 to the firmware estimator's capacity
     /// (`control::velocity::MAX_WINDOW`); a longer window would be cut short on the board.
     pub const VELOCITY_WINDOW: Range = range(
@@ -355,13 +372,19 @@ pub mod ranges {
         false,
         "moving-average window [samples]",
     );
+    /// Most effects a model carries: 32, four times what the board's blob holds
+    /// (`control::blob::MAX_EFFECTS`), room for every effect kind and a few cogging
+    /// harmonics; each effect costs every simulation step, so the count bounds their time.
+    pub const MAX_EFFECTS: usize = 32;
     /// Pole pairs: 1 to 255, the byte the coefficient blob stores (real motors have 1 to
     /// about 100).
     pub const POLE_PAIRS: Range = range(1.0, 255.0, false, "pole pairs");
 }
 
-/// An identified model (MODEL.toml).
+/// An identified model (MODEL.toml). A key the model does not have (a typo, a key in the
+/// wrong table) is an error, not ignored.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Model {
     /// `linear`, `lugre` or `sindyc`.
     pub kind: ModelKind,
@@ -417,7 +440,7 @@ impl Model {
     /// Parse MODEL.toml text; `path` names the file in errors (with line and column).
     pub fn parse(text: &str, path: &Path) -> Result<Model> {
         let p = path.display();
-        toml::from_str::<Model>(text).map_err(|e| {
+        let model = toml::from_str::<Model>(text).map_err(|e| {
             // One line, and no word of the input echoed whole (a 300-digit number, escapes).
             let msg: Vec<String> = e.message().split_whitespace().map(echo).collect();
             let msg = msg.join(" ");
@@ -431,7 +454,14 @@ impl Model {
                 }
                 None => anyhow!("{p}: {msg}"),
             }
-        })
+        })?;
+        unknown_keys(text, "motor", &["r", "l", "kt", "kb", "j"])
+            .and_then(|()| {
+                let lugre = ["alpha0", "alpha1", "alpha2", "v0", "sigma0", "sigma1"];
+                unknown_keys(text, "lugre", &lugre)
+            })
+            .map_err(|e| anyhow!("{p}: {e}"))?;
+        Ok(model)
     }
 
     /// Read MODEL.toml.
@@ -468,12 +498,15 @@ impl Model {
         check("motor.kb", m.kb, &KB)?;
         check("motor.j", m.j, &J)?;
         check("viscous", self.viscous, &DAMPING)?;
+        if self.effects.len() > MAX_EFFECTS {
+            anyhow::bail!(
+                "field 'effects': {} effects; a model carries at most {MAX_EFFECTS}",
+                self.effects.len()
+            );
+        }
         let sensor = &self.sensor;
-        check(
-            "sensor.hall_resolution_rad",
-            sensor.hall_resolution_rad,
-            &HALL_RESOLUTION,
-        )?;
+        crate::validate::angle_quantum(sensor.hall_resolution_rad)
+            .map_err(|e| anyhow!("field 'sensor.hall_resolution_rad': {e}"))?;
         check(
             "sensor.velocity_window",
             sensor.velocity_window as f64,

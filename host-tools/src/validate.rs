@@ -63,6 +63,23 @@ pub fn positive_at_most(v: f64, hi: f64) -> Result<f64, String> {
     Ok(v)
 }
 
+/// Finest nonzero angle quantum [rad]: 1e-12, finer than any encoder's (2^32 counts a turn
+/// is 1.5e-9 rad).
+pub const MIN_ANGLE_QUANTUM: f64 = 1e-12;
+
+/// Ok when `v` is an angle sensor's quantum [rad]: 0 (not quantised) or
+/// [`MIN_ANGLE_QUANTUM`] .. 2π (one step a revolution, the coarsest sensor there is).
+pub fn angle_quantum(v: f64) -> Result<f64, String> {
+    in_range(v, 0.0, std::f64::consts::TAU)?;
+    if v > 0.0 && v < MIN_ANGLE_QUANTUM {
+        return Err(format!(
+            "{} rad is finer than any angle sensor (at least 1e-12 rad, or 0 for none)",
+            show(v)
+        ));
+    }
+    Ok(v)
+}
+
 /// Ok when `v` (seconds) is a sample period a motor log can have.
 pub fn sample_period(v: f64) -> Result<f64, String> {
     finite(v)?;

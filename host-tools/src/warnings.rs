@@ -19,7 +19,7 @@ pub fn hold(msg: String) {
 pub fn flush() {
     let held = HELD.lock().map(|mut h| std::mem::take(&mut *h));
     for w in held.unwrap_or_default() {
-        eprintln!("warning: {w}");
+        eprintln!("warning: {}", crate::log::escape_controls(&w));
     }
 }
 

@@ -891,3 +891,79 @@ fn only_the_outputs_own_missing_folder_is_created() {
     assert!(r.stderr.contains("note: created directory"), "{}", r.stderr);
     assert!(own.is_file());
 }
+
+#[test]
+fn typos_duplicates_and_endless_side_files_are_refused() {
+    let dir = setup();
+    let d = dir.path();
+    // A key in the wrong table or misspelt is not silently ignored.
+    std::fs::write(
+        d.join("typo.toml"),
+        format!("{PAPER_LUGRE_MODEL}kind = \"linear\"\n"),
+    )
+    .unwrap();
+    refused(
+        d,
+        &["compare", "typo.toml", "data.csv"],
+        &["typo.toml", "lugre.kind", "unknown field"],
+    );
+    std::fs::write(
+        d.join("viscus.toml"),
+        PAPER_LUGRE_MODEL.replacen(
+            "sample_period = 0.012",
+            "sample_period = 0.012\nviscus = 1",
+            1,
+        ),
+    )
+    .unwrap();
+    refused(
+        d,
+        &["export", "viscus.toml", "-o", "c.bin"],
+        &["viscus.toml", "viscus"],
+    );
+    std::fs::write(
+        d.join("hall.toml"),
+        format!(
+            "{PAPER_LUGRE_MODEL}\n[sensor]\nhall_resolution_rad = 1e-300\nvelocity_window = 10\n"
+        ),
+    )
+    .unwrap();
+    refused(
+        d,
+        &["compare", "hall.toml", "data.csv"],
+        &["hall.toml", "sensor.hall_resolution_rad", "finer"],
+    );
+    refused(
+        d,
+        &["compare", "m.toml", "data.csv", "--map", "t=u,t=theta"],
+        &["--map", "twice"],
+    );
+    refused(
+        d,
+        &["compare", "m.toml", "data.csv", "--map", "u=x,i=x"],
+        &["--map", "'x'", "both"],
+    );
+    refused(
+        d,
+        &["compare", "m.toml", "data.csv", "--units", "t=ms,t=s"],
+        &["--units", "twice"],
+    );
+    // A control character in a path is shown escaped, never sent to the terminal.
+    refused(
+        d,
+        &["compare", "m.toml", "gone\u{1b}[2J.csv"],
+        &["gone\\x1b[2J.csv", "cannot read"],
+    );
+    // The emulated board's flash file must be a flash image, not an endless device.
+    refused(
+        d,
+        &["board", "--pty", "--flash", "/dev/zero"],
+        &["/dev/zero", "not a regular file"],
+    );
+    std::fs::write(d.join("flash.bin"), vec![0u8; 1 << 20]).unwrap();
+    refused(
+        d,
+        &["board", "--pty", "--flash", "flash.bin"],
+        &["flash.bin", "too large"],
+    );
+}

@@ -78,6 +78,13 @@ pub fn run(args: Args) -> Result<()> {
     crate::input::check_distinct(&inputs[..args.data.len()], "DATA.csv")?;
     crate::input::check_distinct(&inputs[args.data.len()..], "--validate")?;
     let (map, units) = column_options(args.map.as_deref(), args.units.as_deref())?;
+    if args.adds.len() > crate::model::ranges::MAX_EFFECTS {
+        anyhow::bail!(
+            "--add: {} effects; a model carries at most {}",
+            args.adds.len(),
+            crate::model::ranges::MAX_EFFECTS
+        );
+    }
     let adds: Vec<EffectSpec> = args
         .adds
         .iter()
