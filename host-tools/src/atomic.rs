@@ -16,13 +16,14 @@
 //!   stays a link; a link to a missing file is refused.
 //! * **Devices and pipes are written in place.** `-o /dev/null` or a named pipe is opened and
 //!   written, never renamed over.
-//! * **One missing folder level is created, never at the root.** When the output's own
-//!   folder is missing but its parent exists and is not the root directory, the folder is
-//!   created and a `note: created directory DIR` line on stderr says so once the file is
-//!   written (when the write fails, the folder is removed again): `-o models/m.toml`,
-//!   `--report /tmp/run/report`. Two missing levels (`-o a/b/m.toml` without `a`) or a new
-//!   folder at the root (`-o /nonexistent/x.csv`) are refused, naming the folder: they are
-//!   typos far more often than wishes.
+//! * **Missing folders: below the current directory, or one level elsewhere.** The missing
+//!   folders of a relative output path that stays below the current directory (no `..`) are
+//!   created (`--report out/compare`); elsewhere only the output's own folder is, inside one
+//!   that exists and not at the root (`--report /tmp/run/report`). A `note: created directory
+//!   DIR` line on stderr says so once the file is written; when the write fails, the folders
+//!   are removed again. `-o /nonexistent/x.csv` or `-o /tmp/typo/deeper/x.csv` is refused,
+//!   naming the folder, before any work ([`check_outputs`]): such paths are typos far more
+//!   often than wishes.
 use anyhow::{anyhow, bail, Context, Result};
 use std::io::Write;
 use std::path::{Component, Path, PathBuf};
@@ -107,6 +108,35 @@ pub fn check_outputs(outputs: &[&Path], inputs: &[&Path]) -> Result<()> {
                 out.display()
             );
         }
+        // The folder policy too, before any work rather than at the write.
+        if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
+            folder_policy(out, &missing_dirs(dir))?;
+        }
+    }
+    Ok(())
+}
+
+/// The module's folder policy for output `path` whose missing folders are `missing`
+/// (outermost first): any below the current directory, else at most one and not at the root.
+fn folder_policy(path: &Path, missing: &[PathBuf]) -> Result<()> {
+    let Some(first) = missing.first() else {
+        return Ok(());
+    };
+    let below_cwd = path
+        .components()
+        .all(|c| matches!(c, Component::Normal(_) | Component::CurDir));
+    if below_cwd {
+        return Ok(());
+    }
+    let parent = resolve(first).parent().map(Path::to_path_buf);
+    if missing.len() > 1 || parent.is_none_or(|p| p.parent().is_none()) {
+        bail!(
+            "{}: folder {} does not exist; create it first (outside the current directory \
+             motorid creates only the output's own folder, inside one that exists, not at the \
+             root)",
+            path.display(),
+            first.display()
+        );
     }
     Ok(())
 }
@@ -160,17 +190,10 @@ pub fn write(path: &Path, bytes: &[u8]) -> Result<()> {
         _ => PathBuf::from("."),
     };
     let created = missing_dirs(&dir);
-    if let Some(first) = created.first() {
-        let parent = resolve(first).parent().map(Path::to_path_buf);
-        if created.len() > 1 || parent.is_none_or(|p| p.parent().is_none()) {
-            bail!(
-                "{p}: folder {} does not exist; create it first (motorid creates only the \
-                 output's own folder, inside one that exists, not at the root)",
-                first.display()
-            );
-        }
-        std::fs::create_dir(first)
-            .with_context(|| format!("{p}: cannot create directory {}", first.display()))?;
+    folder_policy(path, &created)?;
+    if !created.is_empty() {
+        std::fs::create_dir_all(&dir)
+            .with_context(|| format!("{p}: cannot create directory {}", dir.display()))?;
     }
     let result = write_in(&dir, &target, existing.as_ref(), bytes);
     match result {

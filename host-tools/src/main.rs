@@ -14,8 +14,9 @@ use std::process::ExitCode;
         `diagnose` what physical effect is missing, `fit --add` it, then `export` the \
         coefficients and `flash` or `upload` them to the board. `demo` runs the whole loop \
         on the built-in emulator.\n\n\
-        Outputs are written whole or not at all and never over an input; a missing folder of \
-        an output is created (and announced) only inside the current directory."
+        Outputs are written whole or not at all and never over an input; their missing \
+        folders are created (and announced) below the current directory, elsewhere only the \
+        output's own folder, never at the root."
 )]
 struct Cli {
     /// Print what the command does on stderr: -v for the steps of the fits and the

@@ -848,7 +848,7 @@ fn oversized_models_and_endless_lines_cost_their_cap_not_their_size() {
 }
 
 #[test]
-fn only_the_outputs_own_missing_folder_is_created() {
+fn missing_folders_are_created_below_the_working_directory_or_one_level_elsewhere() {
     let dir = setup();
     let d = dir.path();
     // Two missing levels, absolute or relative: refused, nothing created.
@@ -859,11 +859,18 @@ fn only_the_outputs_own_missing_folder_is_created() {
         &["simulate", "--signal", "a", "--duration", "1", "-o", abs],
         &["nowhere", "does not exist"],
     );
+    let sub = d.join("sub");
+    std::fs::create_dir(&sub).unwrap();
     refused(
-        d,
-        &["export", "m.toml", "-o", "a/b/c.bin"],
+        &sub,
+        &["export", "../m.toml", "-o", "../a/b/c.bin"],
         &["a", "does not exist"],
     );
+    assert!(!d.join("a").exists());
+    // Below the current directory, every missing level is created.
+    let r = run(d, &["export", "m.toml", "-o", "out/cmp/c.bin"]);
+    assert_eq!(r.code, Some(0), "{}", r.stderr);
+    assert!(d.join("out/cmp/c.bin").is_file());
     // A new folder at the root: refused (and removed should it appear).
     let root = format!("/motorid-hostile-{}", std::process::id());
     let r = run(d, &["export", "m.toml", "-o", &format!("{root}/c.bin")]);

@@ -58,8 +58,8 @@ pub struct Args {
     /// No progress bar on stderr (it is shown only when stderr is a terminal).
     #[arg(short, long)]
     pub quiet: bool,
-    /// Output model (TOML, written atomically; a missing folder is created only inside the
-    /// current directory).
+    /// Output model (TOML, written atomically; missing folders are created below the current
+    /// directory, elsewhere only the file's own folder, never at the root).
     #[arg(short, long, value_name = "MODEL.toml")]
     pub output: PathBuf,
     /// Logs to fit on (CSV).
