@@ -1727,7 +1727,7 @@ mod tests {
             "x.csv:3: column 'u': '\\x1b[31mred\\x07' is not a number"
         );
         assert_eq!(echo("a\u{1b}]0;x\u{7}b"), "a\\x1b]0;x\\x07b");
-        assert_eq!(echo("1\02"), "1\\02");
+        assert_eq!(echo("1\u{0}2"), "1\\02");
         let nuls = echo(&"\0".repeat(100));
         assert!(
             nuls.chars().count() <= ECHO_MAX && nuls.ends_with("\\0…"),
