@@ -16,9 +16,14 @@
 //!   stays a link; a link to a missing file is refused.
 //! * **Devices and pipes are written in place.** `-o /dev/null` or a named pipe is opened and
 //!   written, never renamed over.
-//! * **Missing parent folders are created**, and a `note: created directory DIR` line on
-//!   stderr says so once the file is written; when the write fails, the folders it created are
-//!   removed again.
+//! * **Missing folders: below the current directory, or one level elsewhere.** The missing
+//!   folders of a relative output path that stays below the current directory (no `..`) are
+//!   created (`--report out/compare`); elsewhere only the output's own folder is, inside one
+//!   that exists and not at the root (`--report /tmp/run/report`). A `note: created directory
+//!   DIR` line on stderr says so once the file is written; when the write fails, the folders
+//!   are removed again. `-o /nonexistent/x.csv` or `-o /tmp/typo/deeper/x.csv` is refused,
+//!   naming the folder, before any work ([`check_outputs`]): such paths are typos far more
+//!   often than wishes.
 use anyhow::{anyhow, bail, Context, Result};
 use std::io::Write;
 use std::path::{Component, Path, PathBuf};
@@ -64,7 +69,7 @@ fn resolve(path: &Path) -> PathBuf {
 }
 
 /// True when `a` and `b` name the same file (same resolved path, or same inode).
-fn same_file(a: &Path, b: &Path) -> bool {
+pub fn same_file(a: &Path, b: &Path) -> bool {
     if resolve(a) == resolve(b) {
         return true;
     }
@@ -103,6 +108,35 @@ pub fn check_outputs(outputs: &[&Path], inputs: &[&Path]) -> Result<()> {
                 out.display()
             );
         }
+        // The folder policy too, before any work rather than at the write.
+        if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
+            folder_policy(out, &missing_dirs(dir))?;
+        }
+    }
+    Ok(())
+}
+
+/// The module's folder policy for output `path` whose missing folders are `missing`
+/// (outermost first): any below the current directory, else at most one and not at the root.
+fn folder_policy(path: &Path, missing: &[PathBuf]) -> Result<()> {
+    let Some(first) = missing.first() else {
+        return Ok(());
+    };
+    let below_cwd = path
+        .components()
+        .all(|c| matches!(c, Component::Normal(_) | Component::CurDir));
+    if below_cwd {
+        return Ok(());
+    }
+    let parent = resolve(first).parent().map(Path::to_path_buf);
+    if missing.len() > 1 || parent.is_none_or(|p| p.parent().is_none()) {
+        bail!(
+            "{}: folder {} does not exist; create it first (outside the current directory \
+             motorid creates only the output's own folder, inside one that exists, not at the \
+             root)",
+            path.display(),
+            first.display()
+        );
     }
     Ok(())
 }
@@ -156,6 +190,7 @@ pub fn write(path: &Path, bytes: &[u8]) -> Result<()> {
         _ => PathBuf::from("."),
     };
     let created = missing_dirs(&dir);
+    folder_policy(path, &created)?;
     if !created.is_empty() {
         std::fs::create_dir_all(&dir)
             .with_context(|| format!("{p}: cannot create directory {}", dir.display()))?;
@@ -364,8 +399,11 @@ mod tests {
         let dangling = d.path().join("dangling");
         std::os::unix::fs::symlink(d.path().join("missing"), &dangling).unwrap();
         assert!(write_str(&dangling, "x").is_err());
-        write_str(&d.path().join("new/sub/x.txt"), "x").unwrap();
-        assert!(d.path().join("new/sub/x.txt").is_file());
+        write_str(&d.path().join("new/x.txt"), "x").unwrap();
+        assert!(d.path().join("new/x.txt").is_file());
+        let e = write_str(&d.path().join("a/b/x.txt"), "x").unwrap_err();
+        assert!(format!("{e:#}").contains("does not exist"), "{e:#}");
+        assert!(!d.path().join("a").exists());
         assert!(write_str(d.path(), "x").is_err());
         let names: Vec<String> = std::fs::read_dir(d.path())
             .unwrap()

@@ -5,20 +5,65 @@
 //! * **Bounded by what the file can hold.** Each kind of input has a size cap of its own
 //!   (a coefficient blob is at most a few KiB, a MODEL.toml a few MiB); a larger file is refused
 //!   from its length, and the read stops one byte past the cap even if the length lied.
+//! * **Text lines bounded.** A log's line is at most [`MAX_LINE`] bytes: a longer one is
+//!   refused as soon as the read passes the cap, so one giant line (a file of NUL bytes, a
+//!   binary file given as a log) costs [`MAX_LINE`] bytes of memory, not its size.
+//! * **A file once.** [`check_distinct`] refuses the same file given twice in a list.
 use anyhow::{anyhow, bail, Result};
 use std::io::Read;
 use std::path::Path;
 
 /// Largest coefficient blob file read [bytes]: blobs are at most 1 KiB.
 pub const MAX_BLOB_FILE: u64 = 64 * 1024;
-/// Largest MODEL.toml read [bytes]: a model with every effect and a SINDYc table is a few KiB.
-pub const MAX_MODEL_FILE: u64 = 16 * 1024 * 1024;
+/// Largest MODEL.toml read [bytes]: 256 KiB. A LuGre model with a 16-node table, eight more
+/// effects and its 40 parameters is 10 KB, a SINDYc model with full libraries about 25 KB;
+/// the rest is room for long provenance lists. The TOML parser takes about 200 bytes of
+/// memory per byte of a hostile file (a list of millions of empty tables), so the cap keeps a
+/// model's parse under about 50 MB.
+pub const MAX_MODEL_FILE: u64 = 256 * 1024;
 /// Largest log read [bytes]: 10^8 samples of a six-column CSV.
 pub const MAX_LOG_FILE: u64 = 16 * 1024 * 1024 * 1024;
+/// Longest line of a text log [bytes]: 64 KiB. A row of 100 columns of 25-character numbers
+/// is 2.6 KiB, and a metadata line is a key and a number; a longer line is not a log's.
+pub const MAX_LINE: usize = 64 * 1024;
+
+/// Refuse a file given twice among `paths` (also through another path, a symbolic link or a
+/// hard link): `what` (`DATA.csv`) names the list in the message.
+pub fn check_distinct(paths: &[&Path], what: &str) -> Result<()> {
+    for (k, a) in paths.iter().enumerate() {
+        if let Some(b) = paths[..k].iter().find(|b| crate::atomic::same_file(a, b)) {
+            let also = if a == b {
+                String::new()
+            } else {
+                format!(" (the same file as {})", b.display())
+            };
+            bail!(
+                "{}{also}: given twice as {what}; give each file once",
+                a.display()
+            );
+        }
+    }
+    Ok(())
+}
 
 /// Read the regular file `path` whole, refusing anything else and anything above `cap` bytes
 /// (`what` names the kind of file in the message).
 pub fn read(path: &Path, cap: u64, what: &str) -> Result<Vec<u8>> {
+    let p = path.display();
+    let (file, len) = open(path, cap, what)?;
+    let mut bytes = Vec::with_capacity(len as usize);
+    file.take(cap + 1)
+        .read_to_end(&mut bytes)
+        .map_err(|e| anyhow!("{p}: cannot read: {e}"))?;
+    if bytes.len() as u64 > cap {
+        bail!("{p}: too large for a {what} (at most {cap} bytes)");
+    }
+    Ok(bytes)
+}
+
+/// Open the regular file `path` for reading, refusing anything else and anything above
+/// `cap` bytes; returns the file and its length.
+fn open(path: &Path, cap: u64, what: &str) -> Result<(std::fs::File, u64)> {
     let p = path.display();
     let meta = std::fs::metadata(path).map_err(|e| anyhow!("{p}: cannot read: {e}"))?;
     if meta.is_dir() {
@@ -34,12 +79,67 @@ pub fn read(path: &Path, cap: u64, what: &str) -> Result<Vec<u8>> {
         );
     }
     let file = std::fs::File::open(path).map_err(|e| anyhow!("{p}: cannot read: {e}"))?;
-    let mut bytes = Vec::with_capacity(meta.len() as usize);
-    file.take(cap + 1)
-        .read_to_end(&mut bytes)
-        .map_err(|e| anyhow!("{p}: cannot read: {e}"))?;
-    if bytes.len() as u64 > cap {
-        bail!("{p}: too large for a {what} (at most {cap} bytes)");
+    Ok((file, meta.len()))
+}
+
+/// Bytes [`read_lines`] reads before it asks whether the file is binary.
+const SNIFF: usize = 128;
+
+/// [`read`] for a file that is text unless `binary` (given its first bytes, up to 128) says
+/// otherwise: a text file's lines must be at most `max_line` bytes, checked as the bytes come
+/// in, so that a file without line breaks costs `max_line` bytes, not its size. The message
+/// names the file and the line.
+pub fn read_lines(
+    path: &Path,
+    cap: u64,
+    max_line: usize,
+    what: &str,
+    binary: impl Fn(&[u8]) -> bool,
+) -> Result<Vec<u8>> {
+    let p = path.display();
+    let (mut file, len) = open(path, cap, what)?;
+    let mut bytes = Vec::with_capacity(len as usize);
+    let mut chunk = vec![0u8; 64 * 1024];
+    let mut text: Option<bool> = None;
+    let (mut line, mut line_len) = (1usize, 0usize);
+    loop {
+        let n = match file.read(&mut chunk) {
+            Ok(0) => break,
+            Ok(n) => n,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+            Err(e) => bail!("{p}: cannot read: {e}"),
+        };
+        let start = bytes.len();
+        bytes.extend_from_slice(&chunk[..n]);
+        if bytes.len() as u64 > cap {
+            bail!("{p}: too large for a {what} (at most {cap} bytes)");
+        }
+        if text.is_none() && bytes.len() >= SNIFF {
+            text = Some(!binary(&bytes));
+        }
+        // Lines of the bytes read so far (re-read from the start once it is known to be text).
+        let from = match text {
+            Some(false) => continue,
+            Some(true) if start >= SNIFF => start,
+            _ => 0,
+        };
+        if from == 0 {
+            (line, line_len) = (1, 0);
+        }
+        for &b in &bytes[from..] {
+            if b == b'\n' {
+                line += 1;
+                line_len = 0;
+            } else {
+                line_len += 1;
+                if line_len > max_line {
+                    bail!(
+                        "{p}:{line}: line longer than {max_line} bytes; a {what}'s lines are \
+                         a few KiB at most (is this a {what}?)"
+                    );
+                }
+            }
+        }
     }
     Ok(bytes)
 }

@@ -12,6 +12,8 @@
 //! | [`report`] | self-contained HTML reports with inline SVG plots (compare, diagnose, demo) |
 //! | [`emulator`] | the built-in motor emulator: the paper's motor, effects, sensors, signals |
 //! | [`validate`] | finite, physical numbers: sample periods, ranges, clap value parsers |
+//! | [`input`] | input files: regular files only, size and line-length caps, no file twice |
+//! | [`warnings`] | `warning:` lines about the inputs, held until the inputs are checked |
 pub mod atomic;
 pub mod board;
 pub mod closed_loop;
@@ -28,4 +30,5 @@ pub mod numerics;
 pub mod report;
 pub mod scales;
 pub mod validate;
+pub mod warnings;
 pub mod workflow;

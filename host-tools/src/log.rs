@@ -70,7 +70,16 @@ impl ColumnMap {
                     Self::STANDARD.join(", ")
                 );
             }
-            m.insert(k.to_string(), v.trim().to_string());
+            let v = v.trim();
+            if let Some((other, _)) = m.iter().find(|(_, name)| *name == v) {
+                bail!(
+                    "--map: column '{}' is mapped to both {other} and {k}",
+                    echo(v)
+                );
+            }
+            if m.insert(k.to_string(), v.to_string()).is_some() {
+                bail!("--map: '{k}' is mapped twice; map each standard column once");
+            }
         }
         Ok(ColumnMap(m))
     }
@@ -271,7 +280,12 @@ impl Units {
                     known_units()
                 );
             }
-            m.insert(k.to_string(), v.to_string());
+            if m.insert(k.to_string(), v.to_string()).is_some() {
+                bail!(
+                    "--units: '{}' is given twice; give each column's unit once",
+                    echo(k)
+                );
+            }
         }
         Ok(Units(m))
     }
@@ -288,37 +302,47 @@ fn known_units() -> String {
 /// Most characters of the input an error message echoes.
 pub const ECHO_MAX: usize = 40;
 
-/// Input text made safe to echo in a one-line message: ANSI escape sequences and other
-/// control characters removed, cut to [`ECHO_MAX`] characters with `…`.
+/// Input text made safe to echo in a one-line message: control characters shown as escapes
+/// (`\0`, `\x1b`, `\n`, `\u{feff}` for a byte-order mark), so that a NUL or an ANSI escape
+/// sequence is visible and never reaches the terminal as such; cut to [`ECHO_MAX`] characters
+/// with `…`.
 pub fn echo(s: &str) -> String {
-    let mut clean = String::new();
-    let mut chars = s.chars().peekable();
-    while let Some(c) = chars.next() {
-        if c == '\u{1b}' {
-            // CSI `ESC [ params final`, or a two-character escape.
-            if chars.peek() == Some(&'[') {
-                chars.next();
-                for c in chars.by_ref() {
-                    if ('\u{40}'..='\u{7e}').contains(&c) {
-                        break;
-                    }
-                }
-            } else {
-                chars.next();
-            }
-            continue;
-        }
-        if c.is_control() || c == '\u{feff}' {
-            continue;
-        }
-        clean.push(c);
+    let pieces: Vec<String> = s.chars().map(escape_char).collect();
+    let total: usize = pieces.iter().map(|p| p.chars().count()).sum();
+    if total <= ECHO_MAX {
+        return pieces.concat();
     }
-    if clean.chars().count() > ECHO_MAX {
-        let mut cut: String = clean.chars().take(ECHO_MAX - 1).collect();
-        cut.push('…');
-        cut
-    } else {
-        clean
+    let mut out = String::new();
+    let mut len = 0;
+    for piece in pieces {
+        let n = piece.chars().count();
+        if len + n > ECHO_MAX - 1 {
+            break;
+        }
+        len += n;
+        out.push_str(&piece);
+    }
+    out.push('…');
+    out
+}
+
+/// `s` with every control character shown as an escape (as [`echo`] does, without the cut):
+/// for a whole message line, whose paths and names come from outside.
+pub fn escape_controls(s: &str) -> String {
+    s.chars().map(escape_char).collect()
+}
+
+/// One character as a message shows it: a control character as `\0`, `\t`, `\x1b`, ...
+fn escape_char(c: char) -> String {
+    match c {
+        '\0' => "\\0".to_string(),
+        '\t' => "\\t".to_string(),
+        '\n' => "\\n".to_string(),
+        '\r' => "\\r".to_string(),
+        '\u{feff}' => "\\u{feff}".to_string(),
+        c if (c as u32) < 0x100 && c.is_control() => format!("\\x{:02x}", c as u32),
+        c if c.is_control() => format!("\\u{{{:x}}}", c as u32),
+        c => c.to_string(),
     }
 }
 
@@ -412,12 +436,22 @@ impl MotorLog {
         units: &Units,
         plant: Plant,
     ) -> Result<MotorLog> {
-        let text = crate::input::read(path, crate::input::MAX_LOG_FILE, "log")?;
-        if crate::matlab::is_mat_file(&text)
-            || path
-                .extension()
-                .is_some_and(|e| e.eq_ignore_ascii_case("mat"))
-        {
+        let mat_name = path
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("mat"));
+        let text = crate::input::read_lines(
+            path,
+            // A MAT-file over the reader's cap is refused from its length.
+            if mat_name {
+                crate::matlab::MAX_FILE as u64
+            } else {
+                crate::input::MAX_LOG_FILE
+            },
+            crate::input::MAX_LINE,
+            "log",
+            |head| mat_name || crate::matlab::is_mat_file(head),
+        )?;
+        if crate::matlab::is_mat_file(&text) || mat_name {
             return Self::parse_mat(&text, path, map, units, plant);
         }
         let text = String::from_utf8(text).map_err(|e| {
@@ -432,8 +466,8 @@ impl MotorLog {
         Self::parse_with_units(&text, path, map, units, plant)
     }
 
-    /// [`MotorLog::read_with_units`], then every [`MotorLog::sanity_warnings`] printed to
-    /// stderr as a `warning:` line: what the commands that read logs call.
+    /// [`MotorLog::read_with_units`], then every [`MotorLog::sanity_warnings`] held for a
+    /// `warning:` line ([`crate::warnings`]): what the commands that read logs call.
     pub fn read_and_warn(
         path: &Path,
         map: &ColumnMap,
@@ -448,7 +482,7 @@ impl MotorLog {
             "log read"
         );
         for w in log.sanity_warnings() {
-            eprintln!("warning: {w}");
+            crate::warnings::hold(w);
         }
         Ok(log)
     }
@@ -478,8 +512,16 @@ impl MotorLog {
             let trimmed = line.trim();
             if let Some(rest) = trimmed.strip_prefix('#') {
                 if let Some((k, v)) = rest.split_once('=') {
-                    meta.insert(k.trim().to_string(), v.trim().to_string());
-                    meta_line.insert(k.trim().to_string(), n + 1);
+                    let k = k.trim();
+                    if let Some(first) = meta_line.get(k).filter(|_| known_meta_key(k)) {
+                        bail!(
+                            "{p}:{}: {}: given twice (first on line {first}); keep one",
+                            n + 1,
+                            echo(k)
+                        );
+                    }
+                    meta.insert(k.to_string(), v.trim().to_string());
+                    meta_line.insert(k.to_string(), n + 1);
                 }
                 offset += line.len();
                 continue;
@@ -502,10 +544,17 @@ impl MotorLog {
             .delimiter(delimiter)
             .trim(csv::Trim::All)
             .comment(Some(b'#'))
+            // A row with another number of fields is reported below, with its one line.
+            .flexible(true)
             .from_reader(&text.as_bytes()[body_start..]);
         let headers: Vec<String> = rdr
             .headers()
-            .map_err(|e| anyhow!("{p}:{header_line}: cannot read the header row: {e}"))?
+            .map_err(|e| {
+                anyhow!(
+                    "{p}:{header_line}: cannot read the header row: {}",
+                    csv_problem(&e)
+                )
+            })?
             .iter()
             .map(str::to_string)
             .collect();
@@ -526,7 +575,7 @@ impl MotorLog {
                     .position()
                     .map(|q| q.line() as usize + header_line - 1)
                     .unwrap_or(0);
-                anyhow!("{p}:{line}: {e}")
+                anyhow!("{p}:{line}: {}", csv_problem(&e))
             })?;
             if !more {
                 break;
@@ -908,6 +957,46 @@ impl StdColumns {
 /// Metadata key set when the angle was integrated from the velocity (value: how).
 pub const THETA_INTEGRATED: &str = "theta_integrated_from";
 
+/// A metadata value's check: the message says what is wrong with the value.
+type MetaCheck = fn(&str) -> std::result::Result<(), String>;
+
+/// The metadata keys the tools know, each with the check of its value. A known key whose
+/// value fails its check, or a known key given twice, is an error naming the line and the
+/// key; other keys are kept as text and otherwise ignored (`-v` lists them). `unit.*` keys are
+/// checked with the column units, and `sample_period`'s range (1 µs .. 10 s) once it is in
+/// seconds.
+pub const METADATA_KEYS: &[(&str, MetaCheck)] = &[
+    // Seconds, or the unit of `t`: its range is checked after conversion.
+    ("sample_period", |v| crate::validate::number(v).map(drop)),
+    // 0 = not quantised, else 1e-12 .. 2π rad (validate::angle_quantum).
+    ("hall_resolution_rad", |v| {
+        crate::validate::angle_quantum(crate::validate::number(v)?).map(drop)
+    }),
+    // The coefficient blob stores it in a byte; real motors have 1 to about 100.
+    ("pole_pairs", |v| {
+        crate::validate::whole_number(v, 1, 255).map(drop)
+    }),
+    // Written by `simulate` and `record`: the same ranges as their flags.
+    ("seed", |v| {
+        crate::validate::whole_number(v, 0, u64::MAX).map(drop)
+    }),
+    ("lost_samples", |v| {
+        crate::validate::whole_number(v, 0, u64::MAX).map(drop)
+    }),
+    ("current_noise", |v| {
+        crate::validate::parse_noise(v).map(drop)
+    }),
+    ("fine_step", |v| {
+        crate::validate::parse_fine_step(v).map(drop)
+    }),
+    ("speed_ref", |v| crate::validate::number(v).map(drop)),
+];
+
+/// True for a metadata key whose value the tools read (a repeated one is an error).
+fn known_meta_key(key: &str) -> bool {
+    key.starts_with("unit.") || METADATA_KEYS.iter().any(|(k, _)| *k == key)
+}
+
 /// A log's columns as read, before units and checks: what CSV and MAT-files have in common.
 struct Table {
     meta: BTreeMap<String, String>,
@@ -935,6 +1024,18 @@ impl Table {
             headers,
             mut cols,
         } = self;
+        for (key, value) in &meta {
+            match METADATA_KEYS.iter().find(|(k, _)| k == key) {
+                Some((_, check)) => check(value)
+                    .map_err(|e| anyhow!("{}: {}: {e}", places.meta(path, key), echo(key)))?,
+                None if key.starts_with("unit.") => {}
+                None => tracing::debug!(
+                    file = %p,
+                    key = %echo(key),
+                    "metadata key not used by motorid, ignored"
+                ),
+            }
+        }
         // Declared units: the file's `# unit.X` lines, then --units over them.
         let mut declared: BTreeMap<&'static str, (&'static UnitDef, UnitSource)> = BTreeMap::new();
         let unit_keys: Vec<String> = meta
@@ -1112,6 +1213,19 @@ impl Table {
             extra,
             units,
         })
+    }
+}
+
+/// What is wrong in a CSV error, without the reader's own position (the message gives the
+/// line once).
+fn csv_problem(e: &csv::Error) -> String {
+    match e.kind() {
+        csv::ErrorKind::UnequalLengths {
+            expected_len, len, ..
+        } => format!("{len} fields, but the header has {expected_len}"),
+        csv::ErrorKind::Utf8 { .. } => "not UTF-8 text".to_string(),
+        csv::ErrorKind::Io(e) => format!("cannot read: {e}"),
+        _ => echo(&e.to_string()),
     }
 }
 
@@ -1608,8 +1722,17 @@ mod tests {
         )
         .unwrap_err()
         .to_string();
-        assert_eq!(e, "x.csv:3: column 'u': 'red' is not a number");
-        assert_eq!(echo("a\u{1b}]0;x\u{7}b"), "a0;xb");
+        assert_eq!(
+            e,
+            "x.csv:3: column 'u': '\\x1b[31mred\\x07' is not a number"
+        );
+        assert_eq!(echo("a\u{1b}]0;x\u{7}b"), "a\\x1b]0;x\\x07b");
+        assert_eq!(echo("1\u{0}2"), "1\\02");
+        let nuls = echo(&"\0".repeat(100));
+        assert!(
+            nuls.chars().count() <= ECHO_MAX && nuls.ends_with("\\0…"),
+            "{nuls}"
+        );
         let e = parse(&format!("t,u,{long}\n0,1,3\n"), Plant::Voltage)
             .unwrap_err()
             .to_string();

@@ -13,7 +13,10 @@ use std::process::ExitCode;
         Typical loop: `simulate` (or record) a log, `fit` a model, `compare` it with the data, \
         `diagnose` what physical effect is missing, `fit --add` it, then `export` the \
         coefficients and `flash` or `upload` them to the board. `demo` runs the whole loop \
-        on the built-in emulator."
+        on the built-in emulator.\n\n\
+        Outputs are written whole or not at all and never over an input; their missing \
+        folders are created (and announced) below the current directory, elsewhere only the \
+        output's own folder, never at the root."
 )]
 struct Cli {
     /// Print what the command does on stderr: -v for the steps of the fits and the
@@ -145,9 +148,14 @@ fn main() -> ExitCode {
         Command::Emulate(a) => cmd::emulate::run(a),
     };
     match result {
-        Ok(()) => ExitCode::SUCCESS,
+        Ok(()) => {
+            motorid::warnings::flush();
+            ExitCode::SUCCESS
+        }
         Err(e) => {
-            let msg = format!("{e:#}").replace('\n', " ");
+            motorid::warnings::discard();
+            // One line, and no control character from a path or a name reaches the terminal.
+            let msg = motorid::log::escape_controls(&format!("{e:#}").replace('\n', " "));
             eprintln!("error: {msg}");
             ExitCode::FAILURE
         }

@@ -67,6 +67,7 @@ pub fn lugre_friction(l: &LugreParams, omega: f64, z: f64) -> f64 {
 
 /// One identified number.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Parameter {
     /// Name, as in the equations (`R`, `alpha0`, `cogging.amp`, ...).
     pub name: String,
@@ -103,6 +104,7 @@ impl Parameter {
 
 /// Where the model's data came from.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
 pub struct Provenance {
     /// The logs it was fitted on.
     pub files: Vec<String>,
@@ -153,6 +155,7 @@ impl Provenance {
 
 /// The measurement chain the data went through (needed for `fit_sensor`).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Sensor {
     /// Angle quantum of the Hall sensors [rad] (0 = not quantised).
     pub hall_resolution_rad: f64,
@@ -274,6 +277,24 @@ fn field_at(text: &str, start: usize) -> String {
     }
 }
 
+/// A key of table `[name]` that is not one of `known` is an error naming it (the tables whose
+/// structs live in the `control` crate, which cannot refuse unknown keys themselves).
+fn unknown_keys(text: &str, name: &str, known: &[&str]) -> Result<()> {
+    let Ok(doc) = toml::from_str::<toml::Table>(text) else {
+        return Ok(());
+    };
+    if let Some(toml::Value::Table(t)) = doc.get(name) {
+        if let Some(k) = t.keys().find(|k| !known.contains(&k.as_str())) {
+            anyhow::bail!(
+                "field '{name}.{}': unknown field; the fields are {}",
+                echo(k),
+                known.join(", ")
+            );
+        }
+    }
+    Ok(())
+}
+
 /// Every float in a TOML value is finite (`field 'sindy.accel...': NaN is not a finite
 /// number`).
 fn check_toml_numbers(path: &str, v: &toml::Value) -> Result<()> {
@@ -294,8 +315,102 @@ fn check_toml_numbers(path: &str, v: &toml::Value) -> Result<()> {
     }
 }
 
-/// An identified model (MODEL.toml).
+/// The physical range of each MODEL.toml number, SI units, wide enough for any motor from a
+/// micro motor to a multi-kilowatt servo or a linear axis carrying a tonne, narrow enough that
+/// every product and quotient a simulation forms stays finite in `f64` and every value fits
+/// the board's `f32`. [`Model::validate`] checks a model against them.
+pub mod ranges {
+    use crate::validate::show;
+
+    /// `lo ..= hi`, with `lo` itself excluded when `open` (a quantity that divides).
+    #[derive(Debug, Clone, Copy)]
+    pub struct Range {
+        pub lo: f64,
+        pub hi: f64,
+        pub open: bool,
+        /// What the number is, with its unit, for messages.
+        pub what: &'static str,
+    }
+
+    impl Range {
+        /// Ok when `v` is finite and in the range; else what is wrong with it.
+        pub fn check(&self, v: f64) -> Result<(), String> {
+            crate::validate::finite(v)?;
+            let below = if self.open { v <= self.lo } else { v < self.lo };
+            if below || v > self.hi {
+                let (lo, hi) = (show(self.lo), show(self.hi));
+                let range = if self.open {
+                    format!("({lo}, {hi}]")
+                } else {
+                    format!("{lo} .. {hi}")
+                };
+                return Err(format!("{} is outside {range} ({})", show(v), self.what));
+            }
+            Ok(())
+        }
+    }
+
+    const fn range(lo: f64, hi: f64, open: bool, what: &'static str) -> Range {
+        Range { lo, hi, open, what }
+    }
+
+    /// Sample period [s]: the range a log's may have (`validate::sample_period`).
+    pub const SAMPLE_PERIOD: Range = range(
+        crate::validate::MIN_SAMPLE_PERIOD,
+        crate::validate::MAX_SAMPLE_PERIOD,
+        false,
+        "sample period [s]",
+    );
+    /// Phase resistance R [Ω]: 10 µΩ, below the winding of any multi-kilowatt motor, to
+    /// 10 kΩ, ten times a micro motor's; it divides in the electrical time constant.
+    pub const R: Range = range(1e-5, 1e4, true, "resistance [Ω]");
+    /// Phase inductance L [H]: 1 nH (an ironless PCB motor has µH) to 10 H (no motor winding
+    /// comes near); it divides in `dI/dt`.
+    pub const L: Range = range(1e-9, 10.0, true, "inductance [H]");
+    /// Torque constant K_t [N·m/A], or the input gain of a torque plant (1): 1 µN·m/A (a
+    /// watch motor has about 10 µN·m/A) to 1000 N·m/A (a direct-drive torque motor has
+    /// tens).
+    pub const KT: Range = range(1e-6, 1e3, true, "torque constant [N·m/A]");
+    /// Back-EMF constant K_b [V·s/rad]: 0 (not identified, or a torque plant) to 1000, the
+    /// same scale as K_t (equal in SI units).
+    pub const KB: Range = range(0.0, 1e3, false, "back-EMF constant [V·s/rad]");
+    /// Inertia J [kg·m²], or the mass of a linear axis [kg]: 1e-12 (below a watch motor's
+    /// rotor, about 1e-10) to 1e6 (a tonne-scale axis with margin); it divides in `dω/dt`.
+    pub const J: Range = range(1e-12, 1e6, true, "inertia [kg·m²] or mass [kg]");
+    /// A viscous or bristle damping [N·m·s/rad or N·s/m]: magnitude up to 1e6 (a loaded
+    /// linear axis has hundreds); the sign is left to the fit, which may land slightly below 0
+    /// on noisy data.
+    pub const DAMPING: Range = range(-1e6, 1e6, false, "damping [N·m·s/rad]");
+    /// A friction level (Coulomb α0, Stribeck excess α1) [N·m or N]: magnitude up to 1e6
+    /// (a tonne-scale linear axis has a few hundred N).
+    pub const FRICTION: Range = range(-1e6, 1e6, false, "friction [N·m]");
+    /// Stribeck velocity v0 [rad/s or m/s]: above 0 (it divides) to 1e4 (about 100 000 rpm,
+    /// beyond any motor's top speed).
+    pub const STRIBECK_VELOCITY: Range = range(0.0, 1e4, true, "Stribeck velocity [rad/s]");
+    /// Bristle stiffness σ0 [N·m/rad or N/m]: above 0 (it divides the deflection) to 1e9
+    /// (a stiff ball-screw axis has about 1e8 N/m).
+    pub const STIFFNESS: Range = range(0.0, 1e9, true, "bristle stiffness [N·m/rad]");
+    /// Moving-average window [samples]: 1 to the firmware estimator's capacity
+    /// (`control::velocity::MAX_WINDOW`); a longer window would be cut short on the board.
+    pub const VELOCITY_WINDOW: Range = range(
+        1.0,
+        control::velocity::MAX_WINDOW as f64,
+        false,
+        "moving-average window [samples]",
+    );
+    /// Most effects a model carries: 32, four times what the board's blob holds
+    /// (`control::blob::MAX_EFFECTS`), room for every effect kind and a few cogging
+    /// harmonics; each effect costs every simulation step, so the count bounds their time.
+    pub const MAX_EFFECTS: usize = 32;
+    /// Pole pairs: 1 to 255, the byte the coefficient blob stores (real motors have 1 to
+    /// about 100).
+    pub const POLE_PAIRS: Range = range(1.0, 255.0, false, "pole pairs");
+}
+
+/// An identified model (MODEL.toml). A key the model does not have (a typo, a key in the
+/// wrong table) is an error, not ignored.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Model {
     /// `linear`, `lugre` or `sindyc`.
     pub kind: ModelKind,
@@ -370,7 +485,7 @@ impl Model {
     /// Parse MODEL.toml text; `path` names the file in errors (with line and column).
     pub fn parse(text: &str, path: &Path) -> Result<Model> {
         let p = path.display();
-        toml::from_str::<Model>(text).map_err(|e| {
+        let model = toml::from_str::<Model>(text).map_err(|e| {
             // One line, and no word of the input echoed whole (a 300-digit number, escapes).
             let msg: Vec<String> = e.message().split_whitespace().map(echo).collect();
             let msg = msg.join(" ");
@@ -384,7 +499,14 @@ impl Model {
                 }
                 None => anyhow!("{p}: {msg}"),
             }
-        })
+        })?;
+        unknown_keys(text, "motor", &["r", "l", "kt", "kb", "j"])
+            .and_then(|()| {
+                let lugre = ["alpha0", "alpha1", "alpha2", "v0", "sigma0", "sigma1"];
+                unknown_keys(text, "lugre", &lugre)
+            })
+            .map_err(|e| anyhow!("{p}: {e}"))?;
+        Ok(model)
     }
 
     /// Read MODEL.toml.
@@ -396,62 +518,59 @@ impl Model {
         Ok(m)
     }
 
-    /// Same as [`Model::validate`] (the older name).
-    pub fn check(&self) -> Result<()> {
-        self.validate()
-    }
-
-    /// Every number a simulation or an export relies on is finite and physical: the one
-    /// check of a model, run by [`Model::load`] for every command that reads MODEL.toml.
-    /// The message names the field (`field 'lugre.alpha0': NaN is not a finite number`).
+    /// Every number a simulation or an export relies on is finite and in its physical range
+    /// ([`ranges`]): the one check of a model, run by [`Model::load`] for every command that
+    /// reads MODEL.toml, and by `fit` before it writes one. The message names the field
+    /// (`field 'lugre.alpha0': NaN is not a finite number`, `field 'motor.j': 1e-300 is
+    /// outside 1e-12 .. 1e6 (inertia [kg·m²] or mass [kg])`).
     pub fn validate(&self) -> Result<()> {
-        use crate::validate::{finite, in_range};
-        let field = |name: &str, r: std::result::Result<f64, String>| -> Result<()> {
-            r.map(|_| ()).map_err(|e| anyhow!("field '{name}': {e}"))
+        use ranges::*;
+        let check = |name: &str, v: f64, r: &Range| -> Result<()> {
+            r.check(v).map_err(|e| anyhow!("field '{name}': {e}"))
         };
-        let pos = |name: &str, v: f64| -> Result<()> {
-            finite(v).map_err(|e| anyhow!("field '{name}': {e}"))?;
-            if !(v > 0.0 && v <= 1e12) {
-                anyhow::bail!("field '{name}': must be a positive number up to 1e12 (got {v})");
-            }
-            Ok(())
-        };
-        field(
-            "sample_period",
-            crate::validate::sample_period(self.sample_period),
-        )?;
+        check("sample_period", self.sample_period, &SAMPLE_PERIOD)?;
         let m = &self.motor;
-        for (name, v) in [
-            ("motor.r", m.r),
-            ("motor.l", m.l),
-            ("motor.kt", m.kt),
-            ("motor.kb", m.kb),
-            ("motor.j", m.j),
-            ("viscous", self.viscous),
-        ] {
-            field(name, in_range(v, -1e12, 1e12))?;
-        }
-        let sensor = &self.sensor;
-        field(
-            "sensor.hall_resolution_rad",
-            in_range(sensor.hall_resolution_rad, 0.0, std::f64::consts::TAU),
-        )?;
-        if !(1..=10_000).contains(&sensor.velocity_window) {
+        let voltage = self.plant == Plant::Voltage;
+        // A torque plant has no electrical equation: r, l, kb are unused (0), kt is 1.
+        let unused = |r: &Range| Range {
+            lo: 0.0,
+            open: false,
+            ..*r
+        };
+        check("motor.r", m.r, &if voltage { R } else { unused(&R) })?;
+        check("motor.l", m.l, &if voltage { L } else { unused(&L) })?;
+        check("motor.kt", m.kt, &KT)?;
+        check("motor.kb", m.kb, &KB)?;
+        check("motor.j", m.j, &J)?;
+        check("viscous", self.viscous, &DAMPING)?;
+        if self.effects.len() > MAX_EFFECTS {
             anyhow::bail!(
-                "field 'sensor.velocity_window': must be 1 .. 10000 samples (got {})",
-                sensor.velocity_window
+                "field 'effects': {} effects; a model carries at most {MAX_EFFECTS}",
+                self.effects.len()
             );
         }
+        let sensor = &self.sensor;
+        crate::validate::angle_quantum(sensor.hall_resolution_rad)
+            .map_err(|e| anyhow!("field 'sensor.hall_resolution_rad': {e}"))?;
+        check(
+            "sensor.velocity_window",
+            sensor.velocity_window as f64,
+            &VELOCITY_WINDOW,
+        )?;
+        if let Some(p) = sensor.pole_pairs {
+            check("sensor.pole_pairs", f64::from(p), &POLE_PAIRS)?;
+        }
         if let Some(l) = &self.lugre {
-            for (name, v) in [
-                ("lugre.alpha0", l.alpha0),
-                ("lugre.alpha1", l.alpha1),
-                ("lugre.alpha2", l.alpha2),
-                ("lugre.v0", l.v0),
-                ("lugre.sigma0", l.sigma0),
-                ("lugre.sigma1", l.sigma1),
-            ] {
-                field(name, in_range(v, -1e12, 1e12))?;
+            check("lugre.alpha0", l.alpha0, &FRICTION)?;
+            check("lugre.alpha1", l.alpha1, &FRICTION)?;
+            check("lugre.alpha2", l.alpha2, &DAMPING)?;
+            check("lugre.v0", l.v0, &STRIBECK_VELOCITY)?;
+            check("lugre.sigma0", l.sigma0, &STIFFNESS)?;
+            check("lugre.sigma1", l.sigma1, &DAMPING)?;
+            if l.alpha0 + l.alpha1 <= 0.0 {
+                anyhow::bail!(
+                    "field 'lugre.alpha0': alpha0 + alpha1 (the breakaway friction) must be positive"
+                );
             }
         }
         if let Some(t) = &self.sindy {
@@ -459,24 +578,13 @@ impl Model {
             // Terms and keys too: a table the simulation cannot read is refused here, once.
             crate::ident::sindyc::from_table(t)?;
         }
-        pos("motor.j", self.motor.j)?;
-        pos("sign_width", self.sign_width)?;
-        pos("motor.kt", self.motor.kt)?;
-        if self.plant == Plant::Voltage {
-            pos("motor.r", self.motor.r)?;
-            pos("motor.l", self.motor.l)?;
-        }
+        // The smooth sign's width is a velocity, as the Stribeck velocity.
+        check("sign_width", self.sign_width, &STRIBECK_VELOCITY)?;
         if self.kind == ModelKind::Lugre && self.lugre.is_none() {
             anyhow::bail!("field 'lugre': a model of kind 'lugre' needs a [lugre] table");
         }
         if self.kind == ModelKind::Sindyc && self.sindy.is_none() {
             anyhow::bail!("field 'sindy': a model of kind 'sindyc' needs a [sindy] table");
-        }
-        if let Some(l) = &self.lugre {
-            pos("lugre.v0", l.v0)?;
-            if l.alpha0 + l.alpha1 <= 0.0 {
-                anyhow::bail!("field 'lugre.alpha0': alpha0 + alpha1 must be positive");
-            }
         }
         Ok(())
     }
@@ -558,7 +666,7 @@ mod tests {
         assert!(e.starts_with(&format!("m.toml:{line}:")), "{e}");
         let mut m2 = m.clone();
         m2.motor.j = -1.0;
-        assert!(m2.check().unwrap_err().to_string().contains("motor.j"));
+        assert!(m2.validate().unwrap_err().to_string().contains("motor.j"));
     }
 
     #[test]

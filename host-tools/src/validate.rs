@@ -63,6 +63,23 @@ pub fn positive_at_most(v: f64, hi: f64) -> Result<f64, String> {
     Ok(v)
 }
 
+/// Finest nonzero angle quantum [rad]: 1e-12, finer than any encoder's (2^32 counts a turn
+/// is 1.5e-9 rad).
+pub const MIN_ANGLE_QUANTUM: f64 = 1e-12;
+
+/// Ok when `v` is an angle sensor's quantum [rad]: 0 (not quantised) or
+/// [`MIN_ANGLE_QUANTUM`] .. 2π (one step a revolution, the coarsest sensor there is).
+pub fn angle_quantum(v: f64) -> Result<f64, String> {
+    in_range(v, 0.0, std::f64::consts::TAU)?;
+    if v > 0.0 && v < MIN_ANGLE_QUANTUM {
+        return Err(format!(
+            "{} rad is finer than any angle sensor (at least 1e-12 rad, or 0 for none)",
+            show(v)
+        ));
+    }
+    Ok(v)
+}
+
 /// Ok when `v` (seconds) is a sample period a motor log can have.
 pub fn sample_period(v: f64) -> Result<f64, String> {
     finite(v)?;
@@ -75,7 +92,26 @@ pub fn sample_period(v: f64) -> Result<f64, String> {
     Ok(v)
 }
 
-fn number(s: &str) -> Result<f64, String> {
+/// `s` as a whole number `lo ..= hi` (`'abc' is not a whole number`, `300 is outside 1 .. 255`).
+pub fn whole_number(s: &str, lo: u64, hi: u64) -> Result<u64, String> {
+    let n: u64 = s.trim().parse().map_err(|_| {
+        format!(
+            "'{}' is not a whole number {lo} .. {hi}",
+            crate::log::echo(s)
+        )
+    })?;
+    if !(lo..=hi).contains(&n) {
+        return Err(format!("{n} is outside {lo} .. {hi}"));
+    }
+    Ok(n)
+}
+
+/// `s` as a finite number.
+pub fn number(s: &str) -> Result<f64, String> {
+    finite(plain_number(s)?)
+}
+
+fn plain_number(s: &str) -> Result<f64, String> {
     s.trim()
         .parse::<f64>()
         .map_err(|_| format!("'{}' is not a number", crate::log::echo(s)))
@@ -86,7 +122,7 @@ macro_rules! range_parser {
     ($(#[$doc:meta])* $name:ident, $t:ty, $check:expr) => {
         $(#[$doc])*
         pub fn $name(s: &str) -> Result<$t, String> {
-            let v = number(s)?;
+            let v = plain_number(s)?;
             let check: fn(f64) -> Result<f64, String> = $check;
             check(v)?;
             Ok(v as $t)

@@ -438,14 +438,14 @@ fn an_output_is_never_an_input() {
 fn outputs_keep_permissions_follow_links_and_announce_new_folders() {
     let dir = setup();
     let d = dir.path();
-    let r = run(d, &["export", "m.toml", "-o", "new/sub/c.bin"]);
+    let r = run(d, &["export", "m.toml", "-o", "new/c.bin"]);
     assert_eq!(r.code, Some(0), "{}", r.stderr);
     assert!(
         r.stderr.contains("note: created directory new"),
         "{}",
         r.stderr
     );
-    assert!(d.join("new/sub/c.bin").is_file());
+    assert!(d.join("new/c.bin").is_file());
     #[cfg(unix)]
     {
         use std::os::unix::fs::PermissionsExt;
@@ -565,5 +565,412 @@ fn endless_or_duplicated_inputs_are_refused_before_reading() {
         d,
         &["compare", "m.toml", "dup.csv"],
         &["dup.csv", "'theta' appears twice"],
+    );
+}
+
+#[test]
+fn metadata_is_validated_like_data() {
+    let dir = setup();
+    let d = dir.path();
+    let with = |name: &str, meta: &str| {
+        std::fs::write(
+            d.join(name),
+            log_text(300, 0.012, &format!("# sample_period=0.012\n{meta}")),
+        )
+        .unwrap();
+    };
+    with("pp_huge.csv", "# pole_pairs=18446744073709551615\n");
+    with("pp_abc.csv", "# note=free text\n# pole_pairs=abc\n");
+    with("hall_inf.csv", "# hall_resolution_rad=-inf\n");
+    with("sp_twice.csv", "# sample_period=0.024\n");
+    with("unit_twice.csv", "# unit.t=s\n# unit.t=ms\n");
+    let fit = |file: &str, want: &[&str]| {
+        refused(
+            d,
+            &["fit", "--model", "linear", "-o", "out.toml", file],
+            want,
+        );
+    };
+    fit("pp_huge.csv", &["pp_huge.csv:2", "pole_pairs", "1 .. 255"]);
+    fit("pp_abc.csv", &["pp_abc.csv:3", "pole_pairs", "'abc'"]);
+    fit(
+        "hall_inf.csv",
+        &["hall_inf.csv:2", "hall_resolution_rad", "-inf"],
+    );
+    fit(
+        "sp_twice.csv",
+        &["sp_twice.csv:2", "sample_period", "twice"],
+    );
+    refused(
+        d,
+        &["compare", "m.toml", "unit_twice.csv"],
+        &["unit_twice.csv:3", "unit.t", "twice"],
+    );
+    // Keys the tools do not read are ignored, even twice.
+    with("unknown.csv", "# operator=me\n# operator=you\n");
+    let r = run(d, &["compare", "m.toml", "unknown.csv"]);
+    assert_eq!(r.code, Some(0), "{}", r.stderr);
+}
+
+#[test]
+fn a_log_given_twice_is_refused() {
+    let dir = setup();
+    let d = dir.path();
+    let fit = |files: &[&str], want: &[&str]| {
+        let mut a = vec!["fit", "--model", "linear", "-o", "out.toml"];
+        a.extend_from_slice(files);
+        refused(d, &a, want);
+    };
+    fit(&["data.csv", "data.csv"], &["data.csv", "given twice"]);
+    fit(
+        &["data.csv", "./x/../data.csv"],
+        &["data.csv", "given twice"],
+    );
+    #[cfg(unix)]
+    {
+        std::os::unix::fs::symlink("data.csv", d.join("link.csv")).unwrap();
+        std::fs::hard_link(d.join("data.csv"), d.join("hard.csv")).unwrap();
+        fit(&["data.csv", "link.csv"], &["link.csv", "given twice"]);
+        fit(&["hard.csv", "data.csv"], &["data.csv", "given twice"]);
+    }
+    refused(
+        d,
+        &[
+            "fit",
+            "--model",
+            "linear",
+            "-o",
+            "out.toml",
+            "--validate",
+            "data.csv",
+            "--validate",
+            "data.csv",
+            "data.csv",
+        ],
+        &["data.csv", "--validate"],
+    );
+}
+
+#[test]
+fn every_command_applies_the_same_physical_model_ranges() {
+    let dir = setup();
+    let d = dir.path();
+    let bad = |name: &str, from: &str, to: &str| {
+        assert!(PAPER_LUGRE_MODEL.contains(from));
+        std::fs::write(d.join(name), PAPER_LUGRE_MODEL.replace(from, to)).unwrap();
+    };
+    bad("j.toml", "j = 0.0003", "j = 1e-300");
+    bad("r.toml", "r = 0.2162", "r = 1e12");
+    bad("v0.toml", "v0 = 3.676", "v0 = 0");
+    for (file, field) in [
+        ("j.toml", "motor.j"),
+        ("r.toml", "motor.r"),
+        ("v0.toml", "lugre.v0"),
+    ] {
+        refused(d, &["compare", file, "data.csv"], &[file, field, "outside"]);
+        refused(
+            d,
+            &["diagnose", file, "data.csv"],
+            &[file, field, "outside"],
+        );
+        refused(
+            d,
+            &["export", file, "-o", "c.bin"],
+            &[file, field, "outside"],
+        );
+        refused(
+            d,
+            &["emulate", "--model", file, "--compensation", "lugre"],
+            &[file, field],
+        );
+    }
+    std::fs::write(
+        d.join("pp.toml"),
+        format!(
+            "{PAPER_LUGRE_MODEL}\n[sensor]\nhall_resolution_rad = 0.095\nvelocity_window = 10\n\
+             pole_pairs = 4294967295\n"
+        ),
+    )
+    .unwrap();
+    refused(
+        d,
+        &["export", "pp.toml", "-o", "c.bin"],
+        &["pp.toml", "sensor.pole_pairs"],
+    );
+    std::fs::write(
+        d.join("win.toml"),
+        format!(
+            "{PAPER_LUGRE_MODEL}\n[sensor]\nhall_resolution_rad = 0.095\nvelocity_window = 100\n"
+        ),
+    )
+    .unwrap();
+    refused(
+        d,
+        &["export", "win.toml", "-o", "c.bin"],
+        &["win.toml", "sensor.velocity_window"],
+    );
+    // In range for a model, beyond the board: its rated current cannot break the friction loose.
+    bad("strong.toml", "alpha0 = 0.08", "alpha0 = 50");
+    refused(
+        d,
+        &["export", "strong.toml", "-o", "c.bin"],
+        &["strong.toml", "lugre.alpha0", "rated"],
+    );
+    bad("kb.toml", "kb = 0.07126", "kb = 0");
+    refused(
+        d,
+        &["export", "kb.toml", "-o", "c.bin"],
+        &["kb.toml", "motor.kb"],
+    );
+}
+
+#[test]
+fn messages_name_the_file_and_one_line_and_show_control_characters() {
+    let dir = setup();
+    let d = dir.path();
+    // A row with a field too many: the line once.
+    let text = log_text(300, 0.012, "# sample_period=0.012\n");
+    let line = 5;
+    let text: String = text
+        .lines()
+        .enumerate()
+        .map(|(k, l)| match k + 1 == line {
+            true => format!("{l},9\n"),
+            false => format!("{l}\n"),
+        })
+        .collect();
+    std::fs::write(d.join("fields.csv"), &text).unwrap();
+    let r = run(d, &["compare", "m.toml", "fields.csv"]);
+    assert!(
+        r.stderr
+            .starts_with(&format!("error: fields.csv:{line}: 5 fields")),
+        "{}",
+        r.stderr
+    );
+    assert!(!r.stderr.contains("line:"), "{}", r.stderr);
+    refused(d, &["compare", "m.toml", "fields.csv"], &["header has 4"]);
+    // A NUL byte in a field is shown, not swallowed.
+    let text = log_text(300, 0.012, "").replacen("\n1.2e-2,", "\n1.2e-2\u{0}7,", 1);
+    assert!(text.contains('\u{0}'));
+    std::fs::write(d.join("nul.csv"), text).unwrap();
+    refused(
+        d,
+        &["compare", "m.toml", "nul.csv"],
+        &["nul.csv:3", "'1.2e-2\\07'"],
+    );
+    // A log that only warns, then one that fails: the error alone.
+    std::fs::write(
+        d.join("warns.csv"),
+        log_text(300, 0.012, "# sample_period=0.0125\n"),
+    )
+    .unwrap();
+    std::fs::write(d.join("bad.csv"), "t,u,i,theta\n0,1,2,3\n").unwrap();
+    refused(
+        d,
+        &[
+            "fit",
+            "--model",
+            "linear",
+            "-o",
+            "out.toml",
+            "warns.csv",
+            "bad.csv",
+        ],
+        &["bad.csv"],
+    );
+    // A fit the data cannot carry names the data: an input that never rests gives no
+    // steady-state point for the static LuGre curve.
+    let mut text = String::from("t,u,i,theta\n");
+    for k in 0..400u64 {
+        let u = ((k * 7919) % 13) as f64 - 6.0;
+        text.push_str(&format!(
+            "{},{u},{},{}\n",
+            k as f64 * 0.012,
+            0.1 * u,
+            0.01 * k as f64
+        ));
+    }
+    std::fs::write(d.join("restless.csv"), text).unwrap();
+    refused(
+        d,
+        &["fit", "--model", "lugre", "-o", "out.toml", "restless.csv"],
+        &["restless.csv", "not physical", "lugre.alpha0"],
+    );
+    let r = run(
+        d,
+        &[
+            "simulate",
+            "--signal",
+            "a",
+            "--duration",
+            "20",
+            "-o",
+            "a.csv",
+        ],
+    );
+    assert_eq!(r.code, Some(0), "{}", r.stderr);
+    refused(
+        d,
+        &["fit", "--model", "lugre", "-o", "out.toml", "a.csv"],
+        &["a.csv: only", "steady-state points"],
+    );
+}
+
+#[test]
+fn oversized_models_and_endless_lines_cost_their_cap_not_their_size() {
+    let dir = setup();
+    let d = dir.path();
+    let mut model = String::from(PAPER_LUGRE_MODEL);
+    while model.len() <= 300 * 1024 {
+        model.push_str("[[effects]]\n");
+    }
+    std::fs::write(d.join("many.toml"), model).unwrap();
+    refused(
+        d,
+        &["compare", "many.toml", "data.csv"],
+        &["many.toml", "too large"],
+    );
+    // One line of NUL bytes, 1 MiB: refused at the line cap.
+    std::fs::write(d.join("nul.csv"), vec![0u8; 1 << 20]).unwrap();
+    refused(
+        d,
+        &["compare", "m.toml", "nul.csv"],
+        &["nul.csv:1", "line longer than 65536 bytes"],
+    );
+    let mut text = log_text(10, 0.012, "# sample_period=0.012\n");
+    text.push_str(&"1".repeat(100_000));
+    std::fs::write(d.join("long.csv"), text).unwrap();
+    refused(
+        d,
+        &["fit", "--model", "linear", "-o", "o.toml", "long.csv"],
+        &["long.csv:13", "line longer"],
+    );
+}
+
+#[test]
+fn missing_folders_are_created_below_the_working_directory_or_one_level_elsewhere() {
+    let dir = setup();
+    let d = dir.path();
+    // Two missing levels, absolute or relative: refused, nothing created.
+    let abs = d.join("nowhere").join("deeper").join("x.csv");
+    let abs = abs.to_str().unwrap();
+    refused(
+        d,
+        &["simulate", "--signal", "a", "--duration", "1", "-o", abs],
+        &["nowhere", "does not exist"],
+    );
+    let sub = d.join("sub");
+    std::fs::create_dir(&sub).unwrap();
+    refused(
+        &sub,
+        &["export", "../m.toml", "-o", "../a/b/c.bin"],
+        &["a", "does not exist"],
+    );
+    assert!(!d.join("a").exists());
+    // Below the current directory, every missing level is created.
+    let r = run(d, &["export", "m.toml", "-o", "out/cmp/c.bin"]);
+    assert_eq!(r.code, Some(0), "{}", r.stderr);
+    assert!(d.join("out/cmp/c.bin").is_file());
+    // A new folder at the root: refused (and removed should it appear).
+    let root = format!("/motorid-hostile-{}", std::process::id());
+    let r = run(d, &["export", "m.toml", "-o", &format!("{root}/c.bin")]);
+    let made = Path::new(&root).exists();
+    if made {
+        let _ = std::fs::remove_dir_all(&root);
+    }
+    assert!(!made && r.code != Some(0), "{}", r.stderr);
+    assert!(r.stderr.contains("does not exist"), "{}", r.stderr);
+    // The output's own folder, in one that exists: created and announced.
+    let own = d.join("runs").join("x.csv");
+    let r = run(
+        d,
+        &[
+            "simulate",
+            "--signal",
+            "a",
+            "--duration",
+            "1",
+            "-o",
+            own.to_str().unwrap(),
+        ],
+    );
+    assert_eq!(r.code, Some(0), "{}", r.stderr);
+    assert!(r.stderr.contains("note: created directory"), "{}", r.stderr);
+    assert!(own.is_file());
+}
+
+#[test]
+fn typos_duplicates_and_endless_side_files_are_refused() {
+    let dir = setup();
+    let d = dir.path();
+    // A key in the wrong table or misspelt is not silently ignored.
+    std::fs::write(
+        d.join("typo.toml"),
+        format!("{PAPER_LUGRE_MODEL}kind = \"linear\"\n"),
+    )
+    .unwrap();
+    refused(
+        d,
+        &["compare", "typo.toml", "data.csv"],
+        &["typo.toml", "lugre.kind", "unknown field"],
+    );
+    std::fs::write(
+        d.join("viscus.toml"),
+        PAPER_LUGRE_MODEL.replacen(
+            "sample_period = 0.012",
+            "sample_period = 0.012\nviscus = 1",
+            1,
+        ),
+    )
+    .unwrap();
+    refused(
+        d,
+        &["export", "viscus.toml", "-o", "c.bin"],
+        &["viscus.toml", "viscus"],
+    );
+    std::fs::write(
+        d.join("hall.toml"),
+        format!(
+            "{PAPER_LUGRE_MODEL}\n[sensor]\nhall_resolution_rad = 1e-300\nvelocity_window = 10\n"
+        ),
+    )
+    .unwrap();
+    refused(
+        d,
+        &["compare", "hall.toml", "data.csv"],
+        &["hall.toml", "sensor.hall_resolution_rad", "finer"],
+    );
+    refused(
+        d,
+        &["compare", "m.toml", "data.csv", "--map", "t=u,t=theta"],
+        &["--map", "twice"],
+    );
+    refused(
+        d,
+        &["compare", "m.toml", "data.csv", "--map", "u=x,i=x"],
+        &["--map", "'x'", "both"],
+    );
+    refused(
+        d,
+        &["compare", "m.toml", "data.csv", "--units", "t=ms,t=s"],
+        &["--units", "twice"],
+    );
+    // A control character in a path is shown escaped, never sent to the terminal.
+    refused(
+        d,
+        &["compare", "m.toml", "gone\u{1b}[2J.csv"],
+        &["gone\\x1b[2J.csv", "cannot read"],
+    );
+    // The emulated board's flash file must be a flash image, not an endless device.
+    refused(
+        d,
+        &["board", "--pty", "--flash", "/dev/zero"],
+        &["/dev/zero", "not a regular file"],
+    );
+    std::fs::write(d.join("flash.bin"), vec![0u8; 1 << 20]).unwrap();
+    refused(
+        d,
+        &["board", "--pty", "--flash", "flash.bin"],
+        &["flash.bin", "too large"],
     );
 }

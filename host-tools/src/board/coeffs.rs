@@ -152,14 +152,74 @@ pub fn pole_pairs(model: &Model) -> u8 {
     control::hall::PAPER_POLE_PAIRS as u8
 }
 
-/// Model → blob payload. Errors name the MODEL.toml field at fault.
-pub fn coefficients(model: &Model, loop_settings: LoopSettings) -> Result<Coefficients> {
+/// What the board needs of a model beyond [`Model::validate`], each failure naming the
+/// MODEL.toml field: a voltage plant with a back-EMF constant (the observer divides by it),
+/// every number representable in the board's `f32`, and a breakaway friction the board can
+/// overcome: `(α0 + α1)/K_t` (LuGre) or `F_c/K_t` (a Coulomb effect) at most the board's
+/// rated current [`blob::RATED_I_MAX`].
+pub fn board_check(model: &Model) -> Result<()> {
     if model.plant != crate::log::Plant::Voltage {
         bail!(
             "field 'plant': only voltage-driven models can go to the board (this one is '{}')",
             "torque"
         );
     }
+    let m = &model.motor;
+    if m.kb <= 0.0 {
+        bail!(
+            "field 'motor.kb': the board needs a positive back-EMF constant (got {})",
+            m.kb
+        );
+    }
+    let rated = f64::from(blob::RATED_I_MAX);
+    let current = |name: &str, friction: f64| -> Result<()> {
+        let amps = friction.abs() / m.kt;
+        if amps > rated {
+            bail!(
+                "field '{name}': a friction of {} N·m needs {} A at K_t = {} N·m/A, above the \
+                 board's rated {rated} A",
+                crate::validate::show(friction),
+                crate::validate::show(amps),
+                crate::validate::show(m.kt)
+            );
+        }
+        Ok(())
+    };
+    if let Some(l) = &model.lugre {
+        current("lugre.alpha0", l.alpha0 + l.alpha1.max(0.0))?;
+    }
+    for e in &model.effects {
+        if let Effect::Coulomb { fc } = e {
+            current("effects.coulomb.fc", *fc)?;
+        }
+    }
+    if let Some(s) = &model.sindy {
+        let (sm, _) = crate::ident::sindyc::from_table(s)?;
+        let eqs = [("accel", &sm.accel), ("zdot", &sm.zdot), ("idot", &sm.idot)];
+        let big = |x: f64| x.abs() > f64::from(f32::MAX);
+        for (name, eq) in eqs {
+            if let Some((_, k)) = eq.terms.iter().find(|(_, k)| big(*k)) {
+                bail!(
+                    "field 'sindy.{name}': coefficient {} does not fit the board's single precision",
+                    crate::validate::show(*k)
+                );
+            }
+        }
+        for (name, v) in [("sindy.a", sm.a), ("sindy.vs", sm.vs), ("sindy.j", sm.j)] {
+            if big(v) {
+                bail!(
+                    "field '{name}': {} does not fit the board's single precision",
+                    crate::validate::show(v)
+                );
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Model → blob payload. Errors name the MODEL.toml field at fault ([`board_check`]).
+pub fn coefficients(model: &Model, loop_settings: LoopSettings) -> Result<Coefficients> {
+    board_check(model)?;
     let m = &model.motor;
     let mut co = Coefficients {
         model: match model.kind {
@@ -218,7 +278,8 @@ pub fn coefficients(model: &Model, loop_settings: LoopSettings) -> Result<Coeffi
             )
         })?;
     }
-    co.validate().map_err(|e| anyhow!("{e}"))?;
+    co.validate()
+        .map_err(|e| anyhow!("the board refuses the coefficients: {e}"))?;
     Ok(co)
 }
 

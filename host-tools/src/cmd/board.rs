@@ -66,6 +66,10 @@ pub fn run(args: Args) -> Result<()> {
         phase_order: parse_order(&args.phase_order).context("--phase-order")?,
         current_inverted: args.invert_current,
     };
+    // An existing flash file must be a flash image: a regular file of at most the flash's size.
+    if let Some(f) = args.flash.as_ref().filter(|f| f.exists()) {
+        crate::input::read(f, crate::board::flash::SIZE as u64, "flash image")?;
+    }
     let mut sim = BoardSim::new(plant, wiring, RamFlash::new(args.flash.clone()))?;
     let pty = Pty::open()?;
     println!("{}", pty.path.display());

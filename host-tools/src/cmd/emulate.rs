@@ -163,6 +163,7 @@ pub fn run(args: Args) -> Result<()> {
         .collect();
     let inputs: Vec<&Path> = args.models.iter().map(PathBuf::as_path).collect();
     crate::atomic::check_outputs(&outputs, &inputs)?;
+    crate::input::check_distinct(&inputs, "--model")?;
     let models: Vec<(String, Model)> = args
         .models
         .iter()

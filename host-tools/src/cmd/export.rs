@@ -18,7 +18,8 @@ use std::path::PathBuf;
 pub struct Args {
     /// The identified model (written by `motorid fit`).
     pub model: PathBuf,
-    /// Output file (written atomically).
+    /// Output file (written atomically; missing folders are created below the current
+    /// directory, elsewhere only the file's own folder, never at the root).
     #[arg(short, long, value_name = "COEFFS.bin")]
     pub output: PathBuf,
     /// What to write: the binary blob the firmware loads, a JSON object (every coefficient

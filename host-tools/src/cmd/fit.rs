@@ -71,7 +71,8 @@ pub struct Args {
     /// No progress bar on stderr (it is shown only when stderr is a terminal).
     #[arg(short, long)]
     pub quiet: bool,
-    /// Output model (TOML).
+    /// Output model (TOML, written atomically; missing folders are created below the current
+    /// directory, elsewhere only the file's own folder, never at the root).
     #[arg(short, long, value_name = "MODEL.toml")]
     pub output: PathBuf,
     /// Logs to fit on (CSV).
@@ -87,7 +88,16 @@ pub fn run(args: Args) -> Result<()> {
         .map(PathBuf::as_path)
         .collect();
     crate::atomic::check_outputs(&[&args.output], &inputs)?;
+    crate::input::check_distinct(&inputs[..args.data.len()], "DATA.csv")?;
+    crate::input::check_distinct(&inputs[args.data.len()..], "--validate")?;
     let (map, units) = column_options(args.map.as_deref(), args.units.as_deref())?;
+    if args.adds.len() > crate::model::ranges::MAX_EFFECTS {
+        anyhow::bail!(
+            "--add: {} effects; a model carries at most {}",
+            args.adds.len(),
+            crate::model::ranges::MAX_EFFECTS
+        );
+    }
     parse_constraints(&args.fix, &args.bound)?;
     let adds: Vec<EffectSpec> = args
         .adds
@@ -100,16 +110,17 @@ pub fn run(args: Args) -> Result<()> {
         let log = MotorLog::read_with_units(p, &map, &units, args.plant)?;
         if warned.insert(p.clone()) {
             for w in log.sanity_warnings() {
-                eprintln!("warning: {w}");
+                crate::warnings::hold(w);
             }
         }
         Ok(log)
     };
     let logs: Vec<MotorLog> = args.data.iter().map(&mut read).collect::<Result<_>>()?;
     let validate: Vec<MotorLog> = args.validate.iter().map(&mut read).collect::<Result<_>>()?;
-    for log in &validate {
+    for log in logs.iter().chain(&validate) {
         ident::check_log(log, args.plant)?;
     }
+    crate::warnings::flush();
     let bar = progress_bar(
         args.quiet,
         &format!("fitting the {} model", args.model.name()),
@@ -125,7 +136,15 @@ pub fn run(args: Args) -> Result<()> {
     };
     let report = ident::progress::observe(show_on(&bar), || ident::fit(&req));
     bar.finish_and_clear();
-    let report = report?;
+    let report = report.map_err(|e| name_the_data(e, &args.data))?;
+    // A model every later command would refuse is not written.
+    report.model.validate().map_err(|e| {
+        anyhow::anyhow!(
+            "{}: the fitted model is not physical: {e:#}; check the logs' units and that they \
+             excite the motor",
+            args.data[0].display()
+        )
+    })?;
     report.model.save(&args.output)?;
     if args.json {
         println!("{}", serde_json::to_string(&json_report(&report))?);
@@ -186,6 +205,17 @@ pub fn parse_constraints(fix: &[String], bound: &[String]) -> Result<Constraints
         }
     }
     Ok(c)
+}
+
+/// A fit's error that names neither a file nor a flag names the logs fitted on: every
+/// message says where the problem is.
+fn name_the_data(e: anyhow::Error, data: &[PathBuf]) -> anyhow::Error {
+    let msg = format!("{e:#}");
+    let names: Vec<String> = data.iter().map(|p| p.display().to_string()).collect();
+    if msg.starts_with("--") || names.iter().any(|n| msg.contains(n.as_str())) {
+        return e;
+    }
+    anyhow::anyhow!("{}: {msg}", names.join(", "))
 }
 
 /// A spinner on stderr with the elapsed time and `what`, hidden with `quiet` (indicatif

@@ -57,7 +57,8 @@ pub struct Args {
     /// paper's motor (0.095 rad).
     #[arg(long, default_value_t = control::hall::PAPER_POLE_PAIRS)]
     pub pole_pairs: u16,
-    /// Output log (CSV, written atomically).
+    /// Output log (CSV, written atomically; missing folders are created below the current
+    /// directory, elsewhere only the file's own folder, never at the root).
     #[arg(short, long, value_name = "LOG.csv")]
     pub output: PathBuf,
 }

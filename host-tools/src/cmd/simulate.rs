@@ -55,7 +55,8 @@ pub struct Args {
     /// Largest internal integration step in seconds.
     #[arg(long, value_name = "S", value_parser = crate::validate::parse_fine_step, allow_hyphen_values = true, default_value_t = emulator::DEFAULT_FINE_STEP)]
     pub fine_step: f64,
-    /// Output log (CSV).
+    /// Output log (CSV, written atomically; missing folders are created below the current
+    /// directory, elsewhere only the file's own folder, never at the root).
     #[arg(short, long, value_name = "OUT.csv")]
     pub output: PathBuf,
 }

@@ -98,11 +98,9 @@ impl Page {
         )
     }
 
-    /// Write the page as `DIR/index.html` (creating DIR; atomically). Returns its path.
+    /// Write the page as `DIR/index.html` (atomically; DIR is created under the output policy
+    /// of [`crate::atomic`]). Returns its path.
     pub fn write(&self, dir: &Path) -> Result<PathBuf> {
-        std::fs::create_dir_all(dir).map_err(|e| {
-            anyhow::anyhow!("{}: cannot create the report directory: {e}", dir.display())
-        })?;
         let path = dir.join("index.html");
         crate::atomic::write_str(&path, &self.render())?;
         Ok(path)

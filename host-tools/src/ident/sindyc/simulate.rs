@@ -91,8 +91,9 @@ pub fn simulate(
         for _ in 0..sub {
             s = rosenbrock_step(&rhs, &deps, &s, u, dt).ok_or_else(|| {
                 anyhow!(
-                    "{}: time step {} s before sample {} is too long to simulate the SINDYc \
-                     model (its matrix exponential is out of range)",
+                    "{}: time step {} s before sample {} is too long for the SINDYc model, or \
+                     the model's coefficients too large (its matrix exponential is out of \
+                     range)",
                     log.source.display(),
                     log.t[k + 1] - log.t[k],
                     k + 2
