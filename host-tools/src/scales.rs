@@ -15,10 +15,11 @@
 pub const REFERENCE_SPEED: f64 = 50.0;
 
 /// Drive [N·m, or the unit of a torque command] the torque bounds (±10 for Coulomb friction,
-/// an offset, a cogging amplitude) were chosen for: the paper's motor drives up to about
-/// 0.1 N·m, so ±10 is a hundred times its drive. A log whose 99th-percentile drive exceeds this
-/// (a drive in newtons, in millivolts of a command) widens the bounds by `q99(|drive|)/REFERENCE_DRIVE`.
-pub const REFERENCE_DRIVE: f64 = 0.1;
+/// an offset, a cogging amplitude) were chosen for: ±10 is ten times 1 N·m, above the paper's
+/// motor (99th percentile of K_t·I on its signal a ≈ 0.34 N·m). A log whose 99th-percentile
+/// drive exceeds this (a force in newtons, a command in millivolts) widens the bounds by
+/// `q99(|drive|)/REFERENCE_DRIVE`.
+pub const REFERENCE_DRIVE: f64 = 1.0;
 
 /// 99th percentile of `|x|` over the finite values (None when there are none or it is 0).
 fn q99_abs(x: impl Iterator<Item = f64>) -> Option<f64> {
@@ -51,7 +52,7 @@ pub fn velocity_scale(omega: &[f64]) -> f64 {
     }
 }
 
-/// `max(1, q99(|drive|)/REFERENCE_DRIVE)`: 1 for drives up to the paper motor's, larger for a
+/// `max(1, q99(|drive|)/REFERENCE_DRIVE)`: 1 for drives up to 1 N·m (the paper's motor), larger for a
 /// drive in bigger units, so that a torque bound is never tighter than the data's own drive.
 pub fn drive_scale(drive: &[f64]) -> f64 {
     match q99_abs(drive.iter().copied()) {
@@ -75,7 +76,7 @@ mod tests {
         let mm: Vec<f64> = slow.iter().map(|v| v * 1e3).collect();
         assert!((velocity_scale(&mm) - 1.0).abs() < 1e-12);
         let d: Vec<f64> = w.iter().map(|v| v * 0.5).collect();
-        assert!((drive_scale(&d) - 500.0).abs() < 5.0, "{}", drive_scale(&d));
+        assert!((drive_scale(&d) - 50.0).abs() < 0.5, "{}", drive_scale(&d));
         assert_eq!(drive_scale(&[0.01, -0.02]), 1.0);
         assert_eq!(samples_for(0.48, 0.012, 1000), 40);
         assert_eq!(samples_for(0.48, 0.0001, 1000), 1000);

@@ -239,7 +239,7 @@ fn dimension_factors(unit: &str, v: f64, d: f64) -> (f64, f64) {
 
 /// Bounds `(lo, hi)` of a parameter in `unit` widened to a log's scales: `v` its
 /// [`crate::scales::velocity_scale`] (≤ 1), `d` its [`crate::scales::drive_scale`] (≥ 1).
-/// The bounds were chosen for the paper's motor (rad/s, up to 0.1 N·m); a torque bound grows
+/// The bounds were chosen for the paper's motor (rad/s, drives up to 1 N·m); a torque bound grows
 /// with the drive, a velocity's lower bound (a Stribeck velocity) shrinks with the speeds, a
 /// friction per velocity or an inertia grows as torque over velocity. Every factor only
 /// widens, so on the paper's motor (v = d = 1) nothing changes.
