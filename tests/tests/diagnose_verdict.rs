@@ -326,11 +326,16 @@ fn write_verdict_table() {
     }
     md.push_str(
         "\nLimits seen here: on voltage steps (signal d) even the correct model is not \
-         adequate: the rotor's mechanical time constant is about one sample, and the weak form \
-         of a sampled log cannot follow the current's fall inside the interval after a step, \
-         so the residual follows the acceleration (the emulator's own correct LuGre model on d \
-         shows the same, acceleration 6-14 %). Judge a model on smooth signals (a, b, c); on \
-         steps, read the carriers against that floor. A torque constant that falls 3 % by 10 A goes unseen on the \
+         adequate. The torque balance itself is exact there (the held-interval weak form with \
+         the step response's lag leaves 2·10⁻⁵ V·s per window with a perfect sensor); what \
+         remains is the Hall sensor: at a steady speed its rounding error beats slowly with \
+         the 12 ms sampling (a sawtooth whose period is set by how far ω·dt/step is from a \
+         whole number), so for the 1-3 s of each held step the residual repeats a pattern the \
+         acceleration estimate, made from the same angle, shares (the emulator's own correct \
+         LuGre model on d shows the same). Judge a model on the multisines a and b, where a \
+         correct model is adequate at about the stated level; on steps, read the carriers \
+         against that floor (the low-speed signal c is not adequate for a correct model \
+         either). A torque constant that falls 3 % by 10 A goes unseen on the \
          fitting signal a, whose current rarely leaves that range (on voltage steps it is \
          carried by acceleration and current, which rise together). A compliant coupling is \
          named `compliance` with its load inertia and natural frequency; what it leaves shows \

@@ -1,7 +1,7 @@
 //! The model-error workbench: which physical effect a model is missing, and where it fails.
 //!
 //! How `diagnose` decides (documented for `motorid diagnose --help` too):
-//! 1. The log is turned into two *equation residuals* in weak form ([`weakform`]): the
+//! 1. The log is turned into two *equation residuals* in weak form ([`crate::numerics::weak_form`]): the
 //!    mechanical torque balance and, for a voltage plant, the electrical voltage balance.
 //!    The model's own structure (inertia, R, L, K_b and the effects it has) is refitted by
 //!    least squares in each equation, so a biased parameter cannot pass for a missing effect.
@@ -214,10 +214,25 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
     .max(2);
     let wf = weak_form::WeakForm::new(s.len(), s.dt, h, h);
     let voltage = s.plant == Plant::Voltage && s.i.is_some();
+    // The torque equation of a voltage plant integrates its held terms with the lag of the
+    // model's own step response (`numerics::weak_form`, module doc); a torque plant, or a model without
+    // motor constants (SINDYc), gets the plain interval weights.
+    let wf_m = match (voltage, st.motor) {
+        (true, Some(m)) => wf.held(weak_form::held_step_lag(
+            m.r,
+            m.l,
+            m.kt,
+            m.kb,
+            m.j,
+            viscous_of(&st.effects),
+            s.dt,
+        )),
+        _ => wf.held(0.0),
+    };
     // The model's own equations with its own numbers, for the verdict.
     let given = st
         .motor
-        .map(|m| verdict::given_residuals(&s, &wf, &st.effects, &m));
+        .map(|m| verdict::given_residuals(&s, &wf, &wf_m, &st.effects, &m));
     let mut judged: Vec<Judged> = Vec::new();
 
     // Electrical equation (voltage plant): V = R·I + L·İ + K_b·ω + losses, on the sample grid
@@ -247,7 +262,7 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
     let mut mech = EqData {
         eq: Equation::Mechanical,
         y: vec![],
-        base_cols: vec![wf.second_derivative(&s.theta)],
+        base_cols: vec![wf_m.second_derivative(&s.theta)],
         base_sample: vec![],
         min_torque: min_torque(st, &s),
         coulomb_col: None,
@@ -259,7 +274,7 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
         }
         for (eq, col) in candidates::present_columns(e, &s) {
             if eq == Equation::Mechanical {
-                mech.base_cols.push(wf.integral(&col));
+                mech.base_cols.push(weak_torque(&wf_m, &s, &col));
             } else {
                 elec.base_cols.push(wf.integral(&col));
                 mech.base_sample.push(col);
@@ -271,7 +286,7 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
     if !st.has(EffectKind::Coulomb)
         && (st.has(EffectKind::Presliding) || st.has(EffectKind::Stribeck))
     {
-        mech.base_cols.push(wf.integral(&s.stick_column()));
+        mech.base_cols.push(wf_m.integral(&s.stick_column()));
     }
 
     // Candidates.
@@ -286,13 +301,18 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
         }
         let vs = if kind == EffectKind::Presliding {
             let (nuisance, vs) = presliding_candidates(&s, st);
-            pre_nuisance = nuisance.iter().map(|c| wf.integral(c)).collect();
+            pre_nuisance = nuisance.iter().map(|c| wf_m.integral(c)).collect();
             vs
         } else {
             candidates::variants(kind, &s)
         };
         for v in vs {
-            let cols: Vec<Vec<f64>> = v.columns.iter().map(|c| wf.integral(c)).collect();
+            let w = if v.equation == Equation::Mechanical {
+                &wf_m
+            } else {
+                &wf
+            };
+            let cols: Vec<Vec<f64>> = v.columns.iter().map(|c| weak_torque(w, &s, c)).collect();
             n_variants += 1;
             if v.kind == EffectKind::Presliding {
                 pre_cand.push((v, cols));
@@ -365,18 +385,18 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
     }
     if !wf.centres.is_empty() {
         if voltage {
-            let zoh = wf.integral_zoh(&s.raw_u);
-            let w = wf.derivative(&s.theta);
+            let zoh = wf_m.integral_zoh(&s.raw_u);
+            let w = wf_m.derivative(&s.theta);
             mech.y = zoh.iter().zip(&w).map(|(a, b)| a - kb * b).collect();
             units.mech_scale = st.kt / units.r;
-            // The winding's L·dI/dt over each input step (the current's transient).
-            mech.base_cols.push(wf.derivative(s.i.as_ref().unwrap()));
+            // The winding's L·dI/dt over each interval: its increments, exactly.
+            mech.base_cols.push(wf_m.derivative(s.i.as_ref().unwrap()));
             for col in std::mem::take(&mut mech.base_sample) {
                 // Current offsets do not reach the torque equation written in volts.
-                mech.base_cols.push(wf.integral(&col));
+                mech.base_cols.push(wf_m.integral(&col));
             }
         } else {
-            mech.y = wf.integral_zoh(&s.raw_u);
+            mech.y = wf_m.integral_zoh(&s.raw_u);
             units.mech_scale = 1.0;
         }
         // Load friction per sample interval, with the held input and the angle increments
@@ -384,16 +404,16 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
         // candidate's column, or the base's when the model has it.
         let (lf_col, lf_torque) = s.load_friction_intervals(kb, units.r);
         if st.has(EffectKind::LoadFriction) {
-            mech.base_cols.push(wf.integral_zoh(&lf_col));
+            mech.base_cols.push(wf_m.integral_zoh(&lf_col));
         }
         // A model's saturation likewise per interval (its I³ weighs the step transients).
         if st.has(EffectKind::Saturation) && voltage {
             mech.base_cols
-                .push(wf.integral_zoh(&s.saturation_intervals(units.r)));
+                .push(wf_m.integral_zoh(&s.saturation_intervals(units.r)));
         }
         for (v, cols) in mech.cand.iter_mut() {
             if v.kind == EffectKind::LoadFriction {
-                *cols = vec![wf.integral_zoh(&lf_col)];
+                *cols = vec![wf_m.integral_zoh(&lf_col)];
                 v.torque = Some(lf_torque.clone());
             }
         }
@@ -440,7 +460,7 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
         judged.push(Judged {
             eq: Equation::Mechanical,
             given: given.as_ref().map(|g| select_rows(&g.0, &keep)),
-            input: select_rows(&wf.integral(&s.u), &keep),
+            input: select_rows(&wf_m.integral(&s.u), &keep),
             keep,
             base: out.2.clone(),
             after: out.3.clone(),
@@ -448,7 +468,7 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
             p: mech.base_cols.len(),
         });
         if !pre_cand.is_empty() {
-            let pre = presliding_pass(&mech, &out.0, all_rows, pre_cand, &wf);
+            let pre = presliding_pass(&mech, &out.0, all_rows, pre_cand, &wf_m, &s);
             let pout = forward_select(&pre, opts, alpha_per_test, &mut units);
             findings.extend(pout.0);
             tested.extend(pout.1);
@@ -470,6 +490,29 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
         min_explained: opts.min_explained,
         verdict,
     }
+}
+
+/// The weak form of a sample-level torque column: the velocity estimate itself (viscous
+/// friction) as the weak derivative of the angle, which is exact (its increments are the
+/// velocity's integrals over each interval; the smoothed estimate lags steps); any other
+/// column by the trapezoid over each interval.
+fn weak_torque(wf: &weak_form::WeakForm, s: &Signals, col: &[f64]) -> Vec<f64> {
+    if col == s.omega.as_slice() {
+        wf.derivative(&s.theta)
+    } else {
+        wf.integral(col)
+    }
+}
+
+/// The model's viscous friction [N·m·s/rad] (0 when it has none).
+fn viscous_of(effects: &[Effect<f64>]) -> f64 {
+    effects
+        .iter()
+        .map(|e| match e {
+            Effect::Viscous { b } if b.is_finite() => *b,
+            _ => 0.0,
+        })
+        .sum()
 }
 
 /// Fewest weak-form windows an equation needs for the verdict's tests: 64 (32 disjoint
@@ -675,6 +718,7 @@ fn presliding_pass(
     (y, mut base_cols): (Vec<f64>, Vec<Vec<f64>>),
     cand: Vec<(Variant, Vec<Vec<f64>>)>,
     wf: &weak_form::WeakForm,
+    s: &Signals,
 ) -> EqData {
     for f in found {
         let same = |v: &Variant| {
@@ -683,7 +727,7 @@ fn presliding_pass(
                     .is_ok_and(|sp| v.fixed.iter().all(|(k, x)| (sp.get(k) - x).abs() < 1e-9))
         };
         if let Some((v, _)) = mech.cand.iter().find(|(v, _)| same(v)) {
-            base_cols.extend(v.columns.iter().map(|c| wf.integral(c)));
+            base_cols.extend(v.columns.iter().map(|c| weak_torque(wf, s, c)));
         }
     }
     EqData {

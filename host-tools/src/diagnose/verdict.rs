@@ -224,16 +224,40 @@ pub fn model_torque(effects: &[Effect<f64>], s: &Signals, current: &[f64], kt: f
 
 /// The model's equation residuals with its own parameters, on every window of `wf`:
 /// (mechanical, electrical). Mechanical, voltage plant (volts, the current eliminated as in
-/// the refit): `∫φV − K_b∫φω − (R/K_t)(J∫φω̇ + ∫φT) − L∫φİ − ∫φ·v_loss`; torque plant:
-/// `∫φu − J∫φω̇ − ∫φT`. Electrical: `∫φV − R∫φ(1+h)I + (L·K_b/R)∫φω̇ − K_b∫φω − ∫φ·v_loss`
+/// the refit, held terms against `wf_m`, the weights with the model's step-response lag):
+/// `∫ψ̂V − K_b·Σψ̂Δθ − L·Σψ̂ΔI − (R/K_t)(J∫φ_lin·ω̇ + ∫ψ̂T) − ∫ψ̂·v_loss`, the viscous part of
+/// `T` through the angle increments; torque plant: `∫ψu − J∫φ_lin·ω̇ − ∫ψT` (interval form, κ = 0). Electrical:
+/// `∫φV − R∫φ(1+h)I + (L·K_b/R)∫φ_lin·ω̇ − K_b·ΣψΔθ − ∫φ·v_loss` at the sample instants
 /// (the current follows the back-EMF quasi-statically between input steps).
 pub fn given_residuals(
     s: &Signals,
     wf: &WeakForm,
+    wf_m: &WeakForm,
     effects: &[Effect<f64>],
     m: &MotorParams<f64>,
 ) -> (Vec<f64>, Option<Vec<f64>>) {
     let d2 = wf.second_derivative(&s.theta);
+    // Viscous friction integrates exactly through the angle's increments.
+    let b: f64 = effects
+        .iter()
+        .map(|e| match e {
+            Effect::Viscous { b } => *b,
+            _ => 0.0,
+        })
+        .sum();
+    let torque_weak = |w: &WeakForm, torque: &[f64]| -> Vec<f64> {
+        let rest: Vec<f64> = torque
+            .iter()
+            .zip(&s.omega)
+            .map(|(t, o)| t - b * o)
+            .collect();
+        let d1 = w.derivative(&s.theta);
+        w.integral(&rest)
+            .iter()
+            .zip(&d1)
+            .map(|(a, v)| a + b * v)
+            .collect()
+    };
     match (&s.i, s.plant) {
         (Some(i_meas), Plant::Voltage) => {
             let i0 = total_sensor_offset(effects);
@@ -251,27 +275,30 @@ pub fn given_residuals(
                     (1.0 + h) * c
                 })
                 .collect();
-            let zoh = wf.integral_zoh(&s.raw_u);
-            let d1 = wf.derivative(&s.theta);
-            let tq = wf.integral(&torque);
-            let di = wf.derivative(&i);
-            let lw = wf.integral(&loss);
+            let zoh = wf_m.integral_zoh(&s.raw_u);
+            let d1m = wf_m.derivative(&s.theta);
+            let tq = torque_weak(wf_m, &torque);
+            let di = wf_m.derivative(&i);
+            let lw_m = wf_m.integral(&loss);
             let ratio = m.r / m.kt;
-            let u = wf.integral(&s.u);
-            let ri = wf.integral(&heated);
-            let i_w = wf.integral(&i);
+            let ri_m = wf_m.integral(&heated);
+            let iw_m = wf_m.integral(&i);
             // The winding's heating adds R·h·I to the voltage the torque equation is written in.
             let mech = (0..wf.rows())
                 .map(|r| {
                     zoh[r]
-                        - m.kb * d1[r]
+                        - m.kb * d1m[r]
                         - ratio * (m.j * d2[r] + tq[r])
                         - m.l * di[r]
-                        - lw[r]
-                        - m.r * (ri[r] - i_w[r])
+                        - lw_m[r]
+                        - m.r * (ri_m[r] - iw_m[r])
                 })
                 .collect();
             let lq = if m.r > 0.0 { m.l * m.kb / m.r } else { 0.0 };
+            let u = wf.integral(&s.u);
+            let ri = wf.integral(&heated);
+            let lw = wf.integral(&loss);
+            let d1 = wf.derivative(&s.theta);
             let elec = (0..wf.rows())
                 .map(|r| u[r] - m.r * ri[r] + lq * d2[r] - m.kb * d1[r] - lw[r])
                 .collect();
@@ -281,8 +308,8 @@ pub fn given_residuals(
             // The model's input gain K_t (1 when `u` is the torque itself); load friction sees
             // the transmitted torque K_t·u, so the "current" handed to it is u.
             let torque = model_torque(effects, s, &s.raw_u, m.kt);
-            let zoh = wf.integral_zoh(&s.raw_u);
-            let tq = wf.integral(&torque);
+            let zoh = wf_m.integral_zoh(&s.raw_u);
+            let tq = torque_weak(wf_m, &torque);
             let mech = (0..wf.rows())
                 .map(|r| m.kt * zoh[r] - m.j * d2[r] - tq[r])
                 .collect();

@@ -21,6 +21,32 @@
 //! window at 12 ms, `Σ w_k·φ''(t_k)` is −1.7·10⁻³ s⁻² of `∫φ dt` instead of 0, so an angle of
 //! 1000 rad reads as a torque of `J·1.7 rad/s²` (docs/decisions/0003-exact-discrete-weights.md).
 //!
+//! # The interval form ([`WeakForm::held`])
+//! A log knows the angle and the current at the sample instants and the input over each
+//! interval `[t_j, t_{j+1})`. What it knows *exactly* is, per interval, the angle increment
+//! `∫ω dt = θ_{j+1} − θ_j`, the current increment `∫İ dt` and the held input; and, for the
+//! test function linear between the samples, the acceleration term
+//! `∫φ_lin·ω̇ dt = Σφ_k·(θ_{k+1} − 2θ_k + θ_{k−1})/dt` (each second difference is the
+//! acceleration integrated against a hat). An equation integrated over the intervals (the
+//! torque balance under a held input) takes every other term against the test function that
+//! is constant over each interval, `ψ_j = (φ_j + φ_{j+1})/2`: [`WeakForm::derivative`] is
+//! `Σψ_j·Δx_j`, [`WeakForm::integral_zoh`] `Σψ_j·x_j·dt`, and a signal known only at the
+//! samples is the trapezoid over each interval, `Σψ_j·(x_j + x_{j+1})/2·dt`. (An equation
+//! that holds at the sample instants, the voltage balance with the current sampled at `t_k`,
+//! keeps point weights `φ_k·dt`: [`WeakForm::new`].)
+//!
+//! Between ψ and φ_lin there is a first-order gap wherever the velocity does not follow a
+//! straight line over an interval. Under a held voltage it does not: after each step the
+//! velocity settles with the motor's own step response `y(s)` (normalised deficit, `y(0) = 1`,
+//! two poles from `J·L·s² + (J·R + L·b)·s + R·b + K_t·K_b`), and for a rotor whose mechanical
+//! time constant is about one sample the trapezoid misses a tenth of each step. Matching the
+//! first moment of the step response closes the gap: with
+//! `κ = Σ'_k y(k·dt) − ∫y ds/dt` (the trapezoid sum of the deficit, endpoint halved, minus its
+//! integral, in samples; [`held_step_lag`]) the interval weights become
+//! `ψ̂_j = ψ_j − κ·(φ_{j+1} − φ_j)`, and `Σψ̂_j·Δω_j = ∫φ_lin·ω̇` holds for every step that
+//! the model's own dynamics answer (`κ = 0` for a torque input, whose velocity ramps linearly
+//! over an interval).
+//!
 //! Two forms of the same operator: [`Window`]s over any time axis (the fits' regression rows)
 //! and [`WeakForm`], the same weights as one kernel convolved over a uniformly sampled log
 //! (what `diagnose` runs, many columns at a time).
@@ -56,8 +82,8 @@ fn bump(s: f64) -> f64 {
 /// Quadrature weights of one window over the sample times `t` (at least three):
 /// `(w0, w1, w2, wz)` with `Σ w0·g ≈ ∫φ·g dt` (trapezoid), `Σ w1·g ≈ ∫φ'·g dt` and
 /// `Σ w2·g ≈ ∫φ''·g dt` (the exact discrete differences of the module doc), and
-/// `Σ wz_k·u_k = ∫φ·u dt` for `u` held over `[t_k, t_{k+1})` (`len − 1` intervals; Simpson's
-/// rule per interval, exact for the bump's polynomial to about 1e-6).
+/// `Σ wz_k·u_k ≈ ∫φ·u dt` for `u` held over `[t_k, t_{k+1})` (`len − 1` intervals, each
+/// against the interval's mean of φ, `ψ_k = (φ_k + φ_{k+1})/2`, as [`WeakForm::integral_zoh`]).
 fn kernel(t: &[f64]) -> [Vec<f64>; 4] {
     let n = t.len();
     let (t0, span) = (t[0], t[n - 1] - t[0]);
@@ -85,8 +111,7 @@ fn kernel(t: &[f64]) -> [Vec<f64>; 4] {
         w[2][j] = (at(k + 1) - at(k)) / h(k) - (at(k) - at(k - 1)) / h(k - 1);
     }
     for j in 0..n - 1 {
-        let (a, b) = (s_of(t[j]), s_of(t[j + 1]));
-        w[3][j] = (t[j + 1] - t[j]) / 6.0 * (bump(a) + 4.0 * bump(0.5 * (a + b)) + bump(b));
+        w[3][j] = 0.5 * (phi[j] + phi[j + 1]) * (t[j + 1] - t[j]);
     }
     w
 }
@@ -165,34 +190,117 @@ pub fn log_windows(log: &MotorLog) -> Vec<Window> {
     windows(&log.t, len, (len / 2).max(1))
 }
 
-/// The weak form on a uniformly sampled log: windows of `2·half + 1` samples centred on
-/// [`WeakForm::centres`], each with the same weights as a [`Window`] there.
+/// Weak-form operator on a uniformly sampled log.
 #[derive(Debug, Clone)]
 pub struct WeakForm {
     /// Sample index of each window centre.
     pub centres: Vec<usize>,
     /// Half-width of a window [samples].
     pub half: usize,
-    kernel: Window,
+    /// Lag of the held-input step response [samples] the interval weights correct for.
+    pub kappa: f64,
+    /// Whether sampled signals are integrated as the trapezoid over each interval against
+    /// ψ̂ ([`WeakForm::held`]) rather than at their sample instants against φ.
+    held: bool,
+    dt: f64,
+    /// φ at offsets `−half..=half` (zero at both ends).
+    phi: Vec<f64>,
+    /// Weights at offsets `−half..=half`: sampled signals (trapezoid against ψ̂, times dt),
+    /// first differences (`ψ̂_{k−1} − ψ̂_k`) and second differences (`φ_{k+1} − 2φ_k +
+    /// φ_{k−1}`, over dt).
+    w0: Vec<f64>,
+    w1: Vec<f64>,
+    w2: Vec<f64>,
+    /// Interval weights `ψ̂_j·dt` for intervals `−half..half`.
+    wz: Vec<f64>,
 }
 
 impl WeakForm {
-    /// Windows of half-width `half` samples (at least 2) over `n` samples of period `dt`, one
-    /// every `stride`.
+    /// Windows of half-width `half` samples over `n` samples of period `dt`, one every `stride`,
+    /// for an equation that holds at the sample instants (the voltage balance with the
+    /// current sampled at `t_k`): sampled signals against φ at the samples, increments
+    /// against ψ. Discrete integration by parts holds exactly, constants and ramps are
+    /// annihilated (see the module doc). [`WeakForm::held`] gives the interval form.
     pub fn new(n: usize, dt: f64, half: usize, stride: usize) -> WeakForm {
         let half = half.max(2);
-        let t: Vec<f64> = (0..=2 * half).map(|k| k as f64 * dt).collect();
-        let kernel = windows(&t, 2 * half + 1, 1).remove(0);
+        let phi: Vec<f64> = (-(half as isize)..=(half as isize))
+            .map(|k| {
+                let s = k as f64 / half as f64;
+                let q = 1.0 - s * s;
+                if q > 0.0 {
+                    q.powi(4)
+                } else {
+                    0.0
+                }
+            })
+            .collect();
         let centres = if n > 2 * half {
             (half..n - half).step_by(stride.max(1)).collect()
         } else {
             Vec::new()
         };
-        WeakForm {
+        let mut wf = WeakForm {
             centres,
             half,
-            kernel,
-        }
+            kappa: 0.0,
+            held: false,
+            dt,
+            phi,
+            w0: vec![],
+            w1: vec![],
+            w2: vec![],
+            wz: vec![],
+        };
+        wf.set_weights();
+        wf
+    }
+
+    /// The same windows for an equation integrated over the held intervals: every sampled
+    /// signal as the trapezoid over each interval, every interval against
+    /// `ψ̂_j = ψ_j − κ·(φ_{j+1} − φ_j)`, for a velocity that settles after each input step
+    /// with lag `kappa` ([`held_step_lag`]; 0 for a torque input).
+    pub fn held(&self, kappa: f64) -> WeakForm {
+        let mut wf = self.clone();
+        wf.kappa = if kappa.is_finite() { kappa } else { 0.0 };
+        wf.held = true;
+        wf.set_weights();
+        wf
+    }
+
+    fn set_weights(&mut self) {
+        let h = self.half;
+        let dt = self.dt;
+        let phi = |k: isize| -> f64 {
+            if k.unsigned_abs() > h {
+                0.0
+            } else {
+                self.phi[(k + h as isize) as usize]
+            }
+        };
+        // ψ̂ of interval j (offsets j..j+1), zero outside −h..h−1.
+        let psi = |j: isize| -> f64 {
+            if j < -(h as isize) || j >= h as isize {
+                0.0
+            } else {
+                0.5 * (phi(j) + phi(j + 1)) - self.kappa * (phi(j + 1) - phi(j))
+            }
+        };
+        let ks = -(h as isize)..=(h as isize);
+        self.w0 = ks
+            .clone()
+            .map(|k| {
+                if self.held {
+                    0.5 * (psi(k - 1) + psi(k)) * dt
+                } else {
+                    phi(k) * dt
+                }
+            })
+            .collect();
+        self.w1 = ks.clone().map(|k| psi(k - 1) - psi(k)).collect();
+        self.w2 = ks
+            .map(|k| (phi(k + 1) - 2.0 * phi(k) + phi(k - 1)) / dt)
+            .collect();
+        self.wz = (-(h as isize)..(h as isize)).map(|j| psi(j) * dt).collect();
     }
 
     /// Number of rows (windows).
@@ -203,38 +311,121 @@ impl WeakForm {
     fn conv(&self, w: &[f64], x: &[f64]) -> Vec<f64> {
         self.centres
             .iter()
-            .map(|&c| dot(w, &x[c - self.half..]))
+            .map(|&c| {
+                let start = c - self.half;
+                w.iter().zip(&x[start..]).map(|(a, b)| a * b).sum()
+            })
             .collect()
     }
 
-    /// `∫φ·x dt` per window.
+    /// `∫φ·x dt` per window for a signal known at the samples: `Σφ_k·x_k·dt`, or, in the
+    /// interval form ([`WeakForm::held`]), the trapezoid over each interval against ψ̂.
     pub fn integral(&self, x: &[f64]) -> Vec<f64> {
-        self.conv(&self.kernel.w0, x)
+        self.conv(&self.w0, x)
     }
 
-    /// `∫φ·x dt` for a signal held constant over each sample interval `[t_k, t_k+1)`
-    /// (zero-order hold, as the board applies its voltage).
+    /// `∫ψ̂·x dt` for a signal held constant over each sample interval `[t_k, t_k+1)` (the
+    /// board's voltage, or any per-interval quantity): `Σψ̂_j·x_j·dt`.
     pub fn integral_zoh(&self, x: &[f64]) -> Vec<f64> {
-        self.conv(&self.kernel.wz, x)
+        self.conv(&self.wz, x)
     }
 
-    /// `∫φ·ẋ dt = −∫φ'·x dt` per window (the weak first derivative).
+    /// `Σψ̂_j·(x_{j+1} − x_j)`: the weak first derivative `∫φ·ẋ dt`, exact for the angle
+    /// (its increments are the velocity's integrals).
     pub fn derivative(&self, x: &[f64]) -> Vec<f64> {
-        self.conv(&self.kernel.w1, x)
-            .into_iter()
-            .map(|v| -v)
-            .collect()
+        self.conv(&self.w1, x)
     }
 
-    /// `∫φ·ẍ dt = ∫φ''·x dt` per window (the weak second derivative).
+    /// `Σφ_k·(x_{k+1} − 2x_k + x_{k−1})/dt = ∫φ_lin·ẍ dt` per window (the weak second
+    /// derivative, exact for the angle against the test function linear between samples).
     pub fn second_derivative(&self, x: &[f64]) -> Vec<f64> {
-        self.conv(&self.kernel.w2, x)
+        self.conv(&self.w2, x)
     }
+}
+
+/// Lag `κ` [samples] of a motor's velocity step response under a held voltage (module doc):
+/// the normalised deficit `y(s)` (`y(0) = 1`, `ẏ(0) = 0`, the current being continuous) of
+/// `a2·ÿ + a1·ẏ + a0·y = 0` with `a2 = J·L`, `a1 = J·R + L·b`, `a0 = R·b + K_t·K_b`, summed by
+/// the trapezoid rule at the sample instants minus its integral `a1/a0`, over `dt`. `b` is the
+/// viscous friction [N·m·s/rad]. Zero when the constants give no settling response.
+pub fn held_step_lag(r: f64, l: f64, kt: f64, kb: f64, j: f64, b: f64, dt: f64) -> f64 {
+    let (a2, a1, a0) = (j * l.max(0.0), j * r + l.max(0.0) * b, r * b + kt * kb);
+    if !(a1 > 0.0 && a0 > 0.0 && dt > 0.0 && a2.is_finite()) {
+        return 0.0;
+    }
+    // y(s) in closed form: one pole, two real poles or a damped oscillation.
+    let y: Box<dyn Fn(f64) -> f64> = if a2 <= 1e-12 * a1 * a1 / a0 {
+        let tau = a1 / a0;
+        Box::new(move |s: f64| (-s / tau).exp())
+    } else {
+        let disc = a1 * a1 - 4.0 * a2 * a0;
+        if disc > 0.0 {
+            let q = disc.sqrt();
+            let (t1, t2) = (2.0 * a2 / (a1 - q), 2.0 * a2 / (a1 + q));
+            Box::new(move |s: f64| (t1 * (-s / t1).exp() - t2 * (-s / t2).exp()) / (t1 - t2))
+        } else {
+            let (al, be) = (a1 / (2.0 * a2), (-disc).sqrt() / (2.0 * a2));
+            Box::new(move |s: f64| {
+                if be > 0.0 {
+                    (-al * s).exp() * ((be * s).cos() + al / be * (be * s).sin())
+                } else {
+                    (-al * s).exp() * (1.0 + al * s)
+                }
+            })
+        }
+    };
+    // Sum until the slowest mode has decayed to 1e-12 (at most a million samples).
+    let slow = (a1 / a0).max(2.0 * a2 / a1);
+    let steps = ((28.0 * slow / dt).ceil() as usize).clamp(1, 1_000_000);
+    let trapezoid = 0.5 + (1..=steps).map(|k| y(k as f64 * dt)).sum::<f64>();
+    trapezoid - a1 / a0 / dt
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A motor without inductance answers a held voltage with one exponential per interval:
+    /// the interval form with the step response's lag holds to rounding on the exactly
+    /// sampled angle, and without the lag it misses by the trapezoid's gap.
+    #[test]
+    fn held_form_is_exact_for_a_settling_velocity() {
+        let (r, kt, j, b, dt) = (0.22, 0.0712, 3.1e-4, 1.5e-3, 0.012);
+        let kb = kt;
+        let tau = j / (kt * kb / r + b);
+        let h = dt / tau;
+        let kappa = held_step_lag(r, 0.0, kt, kb, j, b, dt);
+        let closed = 1.0 / (1.0 - (-h).exp()) - 0.5 - 1.0 / h;
+        assert!((kappa - closed).abs() < 1e-9, "κ {kappa} vs {closed}");
+        // Voltage steps every 7 samples, both signs.
+        let n = 400;
+        let v: Vec<f64> = (0..n)
+            .map(|k| [6.0, -3.0, 9.5, 1.0, -8.0][(k / 7) % 5])
+            .collect();
+        let mut theta = vec![0.0; n];
+        let mut w = 0.0;
+        for k in 0..n - 1 {
+            let w_ss = (kt * v[k] / r) / (kt * kb / r + b);
+            theta[k + 1] = theta[k] + w_ss * dt + (w - w_ss) * tau * (1.0 - (-h).exp());
+            w = w_ss + (w - w_ss) * (-h).exp();
+        }
+        let base = WeakForm::new(n, dt, 8, 8);
+        let mut worst = [0.0f64; 2];
+        for (slot, lag) in [kappa, 0.0].into_iter().enumerate() {
+            let wf = base.held(lag);
+            let (zoh, d1, d2) = (
+                wf.integral_zoh(&v),
+                wf.derivative(&theta),
+                wf.second_derivative(&theta),
+            );
+            for r_ in 0..wf.rows() {
+                let res = zoh[r_] - (kb + r * b / kt) * d1[r_] - r * j / kt * d2[r_];
+                worst[slot] = worst[slot].max(res.abs() / zoh[r_].abs().max(1e-3));
+            }
+        }
+        assert!(worst[0] < 1e-9, "with the lag: {}", worst[0]);
+        assert!(worst[1] > 1e-3, "without the lag: {}", worst[1]);
+    }
 
     /// On a uniform axis a [`Window`] and the [`WeakForm`] row centred on it agree.
     #[test]
