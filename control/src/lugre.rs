@@ -92,7 +92,7 @@ impl<F: Float> LugreParams<F> {
     /// Stribeck curve `s(v) = α0 + α1·exp(−(v/v0)²)` [N·m].
     pub fn s(&self, v: F) -> F {
         let r = v / self.v0;
-        self.alpha0 + self.alpha1 * (-(r * r)).exp()
+        self.alpha0 + self.alpha1 * stribeck_bump(r)
     }
 
     /// Largest value of `s(v)` over all v: `α0 + max(α1, 0)`.
@@ -134,6 +134,18 @@ impl<F: Float> LugreParams<F> {
     }
 }
 
+/// `exp(−r²)`, taken as 0 beyond r² = 700 (below 1e-304, nothing against α0): far above
+/// the Stribeck velocity libm's `exp` would otherwise take its slow underflow path.
+#[inline]
+fn stribeck_bump<F: Float>(r: F) -> F {
+    let r2 = r * r;
+    if r2 > c(700.0) {
+        F::zero()
+    } else {
+        (-r2).exp()
+    }
+}
+
 fn sgn<F: Float>(v: F) -> F {
     if v > F::zero() {
         F::one()
@@ -170,7 +182,7 @@ pub fn z_step_with_slope<F: Float>(p: &LugreParams<F>, z: F, v: F, dt: F) -> (F,
         return hold;
     }
     let r = v / p.v0;
-    let bump = (-(r * r)).exp();
+    let bump = stribeck_bump(r);
     let s = p.alpha0 + p.alpha1 * bump;
     if !s.is_finite() || s <= F::zero() {
         return hold;

@@ -12,13 +12,20 @@
 //! bracketing scalar solver finds it. (An exponential Rosenbrock scheme was tried first: it
 //! diverges at LuGre breakaway, where the bilinear |ω|·z term changes within a step.)
 //!
+//! The run is generic in its number type ([`RunScalar`]): in `f64` it is the simulation; in
+//! dual numbers ([`super::tangent`]) the same code carries the states' derivatives with
+//! respect to the model's parameters, for the exact Jacobian of the simulation error.
+//!
 //! SINDYc models are simulated by `ident::sindyc` (the equations live there).
+use super::tangent::{lift_effect, RunScalar};
 use crate::emulator::scalar_root::find_root;
 use crate::log::{MotorLog, Plant};
 use crate::model::{Model, ModelKind};
 use anyhow::{bail, Result};
-use control::effects::{self, EffectInputs};
-use control::lugre::z_step;
+use control::effects::{self, Effect, EffectInputs};
+use control::lugre::{z_step, LugreParams};
+use control::motor::MotorParams;
+use echidna::DualVec;
 
 /// A free-run prediction, one value per log sample.
 #[derive(Debug, Clone, PartialEq, Default)]
@@ -43,112 +50,155 @@ pub const SUBSTEPS: usize = 12;
 /// States: θ, ω, I, z.
 const NX: usize = 4;
 
-/// The continuous-time right-hand side of a (non-SINDYc) model.
-pub struct Dynamics<'a> {
-    pub model: &'a Model,
+/// The numbers of a (non-SINDYc) model that its free run reads, in the number type the run
+/// computes in (`f64`, or a dual number carrying sensitivities, [`super::tangent`]).
+#[derive(Debug, Clone)]
+pub struct RunParams<D> {
+    pub motor: MotorParams<D>,
+    /// The LuGre law; `None` for the other kinds (viscous friction).
+    pub lugre: Option<LugreParams<D>>,
+    /// Viscous friction of a linear model [N·m·s/rad].
+    pub viscous: D,
+    /// Width of the effects' smooth sign [rad/s] (`Model::sign_width`).
+    pub sign_width: D,
+    pub effects: Vec<Effect<D>>,
+    pub plant: Plant,
 }
 
-impl Dynamics<'_> {
-    /// Friction and load torque [N·m] at state x (heat state h does not enter torques).
-    pub fn load_torque(&self, x: &[f64; NX]) -> f64 {
-        let m = self.model;
-        let (theta, omega, cur, z) = (x[0], x[1], x[2], x[3]);
-        let friction = match (&m.lugre, m.kind) {
-            (Some(l), ModelKind::Lugre) => crate::model::lugre_friction(l, omega, z),
-            _ => m.viscous * omega,
-        };
-        let inputs = EffectInputs {
-            theta,
-            omega,
-            current: cur,
-            kt: m.motor.kt,
-        };
-        friction + effects::total_torque_with_width(&m.effects, &inputs, m.sign_width)
+impl<D: RunScalar> RunParams<D> {
+    /// The numbers of `model` as constants.
+    pub fn of(model: &Model) -> Self {
+        RunParams {
+            motor: model.motor,
+            lugre: match (&model.lugre, model.kind) {
+                (Some(l), ModelKind::Lugre) => Some(*l),
+                _ => None,
+            },
+            viscous: model.viscous,
+            sign_width: model.sign_width,
+            effects: model.effects.clone(),
+            plant: model.plant,
+        }
+        .lift()
     }
+}
 
-    /// dx/dt at state x with input u and heat state h.
-    pub fn rhs(&self, x: &[f64; NX], u: f64, h: f64) -> [f64; NX] {
-        let m = self.model;
-        let p = &m.motor;
-        let (omega, cur, z) = (x[1], x[2], x[3]);
-        let torque = self.load_torque(x);
-        let domega = (p.kt * cur - torque) / p.j;
-        let dcur = match m.plant {
-            Plant::Voltage => {
-                let v = u - effects::total_voltage_loss(&m.effects, cur);
-                (-p.r * (1.0 + h) * cur - p.kb * omega + v) / p.l
-            }
-            Plant::Torque => 0.0,
-        };
-        let dz = match (&m.lugre, m.kind) {
-            (Some(l), ModelKind::Lugre) => crate::model::lugre_z_rate(l, omega, z),
-            _ => 0.0,
-        };
-        [omega, domega, dcur, dz]
+impl RunParams<f64> {
+    /// The same numbers as constants of another number type.
+    pub fn lift<D: RunScalar>(&self) -> RunParams<D> {
+        let c = D::constant;
+        let (m, l) = (&self.motor, &self.lugre);
+        RunParams {
+            motor: MotorParams {
+                r: c(m.r),
+                l: c(m.l),
+                kt: c(m.kt),
+                kb: c(m.kb),
+                j: c(m.j),
+            },
+            lugre: l.map(|l| LugreParams {
+                alpha0: c(l.alpha0),
+                alpha1: c(l.alpha1),
+                alpha2: c(l.alpha2),
+                v0: c(l.v0),
+                sigma0: c(l.sigma0),
+                sigma1: c(l.sigma1),
+            }),
+            viscous: c(self.viscous),
+            sign_width: c(self.sign_width),
+            effects: self.effects.iter().map(lift_effect).collect(),
+            plant: self.plant,
+        }
     }
+}
 
-    /// One backward-Euler sub-step of length `h` (z exact), from state x with input u and
-    /// heat state h_th. Returns the new state.
-    pub fn implicit_step(
-        &self,
-        x: &[f64; NX],
-        u: f64,
-        h_th: f64,
-        h: f64,
-        w_guess: f64,
-    ) -> [f64; NX] {
-        let m = self.model;
-        let p = &m.motor;
-        let lugre = match (&m.lugre, m.kind) {
-            (Some(l), ModelKind::Lugre) => Some(l),
-            _ => None,
-        };
-        let r = p.r * (1.0 + h_th);
-        let vloss_max: f64 = m.effects.iter().map(|e| e.voltage_loss(1e9).abs()).sum();
-        let current_for = |w: f64| -> f64 {
-            match m.plant {
-                Plant::Torque => u,
-                Plant::Voltage => {
-                    let a = p.l / h + r;
-                    let rhs = p.l / h * x[2] + u - p.kb * w;
-                    if vloss_max == 0.0 {
-                        rhs / a
-                    } else {
-                        find_root(
-                            |i| a * i + effects::total_voltage_loss(&m.effects, i) - rhs,
-                            rhs / a,
-                            vloss_max / a + 1e-12,
-                            1e-12 * (1.0 + (rhs / a).abs()),
-                        )
-                    }
-                }
+/// The residual of a sub-step of length `h` from state `x` (input `u`, heat state `h_th`)
+/// at the new velocity `w`, and the new state: `J·(w − ω)/h − K_t·I(w) + F_f(w) + loads(w)`,
+/// with `I(w)` from the backward-Euler winding equation and the bristle state updated
+/// exactly for `w` (`control::lugre::z_step`). `re` holds the values of `p` (for the
+/// winding's scalar root with a voltage loss, solved in `f64`).
+fn substep_residual<D: RunScalar>(
+    p: &RunParams<D>,
+    re: &RunParams<f64>,
+    x: &[D; NX],
+    u: f64,
+    h_th: D,
+    h: f64,
+    w: D,
+) -> (D, [D; NX]) {
+    let m = &p.motor;
+    let hd = D::constant(h);
+    let current = match p.plant {
+        Plant::Torque => D::constant(u),
+        Plant::Voltage => {
+            let r = m.r * (D::one() + h_th);
+            let a = m.l / hd + r;
+            let rhs = m.l / hd * x[2] + D::constant(u) - m.kb * w;
+            let vloss_max: f64 = re.effects.iter().map(|e| e.voltage_loss(1e9).abs()).sum();
+            if vloss_max == 0.0 {
+                rhs / a
+            } else {
+                let (ar, rr) = (a.re(), rhs.re());
+                let i = find_root(
+                    |i| ar * i + effects::total_voltage_loss(&re.effects, i) - rr,
+                    rr / ar,
+                    vloss_max / ar + 1e-12,
+                    1e-12 * (1.0 + (rr / ar).abs()),
+                );
+                // The slope of the voltage loss in the current, exact (one dual lane).
+                let id = DualVec::<f64, 1>::with_tangent(i, 0);
+                let dloss: f64 = re
+                    .effects
+                    .iter()
+                    .map(|e| lift_effect::<DualVec<f64, 1>>(e).voltage_loss(id).eps[0])
+                    .sum();
+                let ic = D::constant(i);
+                let g = a * ic + effects::total_voltage_loss(&p.effects, ic) - rhs;
+                D::root(i, g, ar + dloss)
             }
-        };
-        let eval = |w: f64| {
-            let i = current_for(w);
-            let (z, fric) = match lugre {
-                Some(l) => {
-                    let (z, zdot) = z_step(l, x[3], w, h);
-                    (z, l.friction_at(w, z, zdot))
-                }
-                None => (x[3], m.viscous * w),
-            };
-            let theta = x[0] + h * w;
-            let inputs = EffectInputs {
-                theta,
-                omega: w,
-                current: i,
-                kt: p.kt,
-            };
-            let load = effects::total_torque_with_width(&m.effects, &inputs, m.sign_width);
-            let resid = p.j * (w - x[1]) / h - p.kt * i + fric + load;
-            (resid, [theta, w, i, z])
-        };
-        let g0 = eval(w_guess).0;
-        let step0 = g0.abs() * h / p.j + 1e-9;
-        let w = find_root(|w| eval(w).0, w_guess, step0, 1e-11 * (1.0 + x[1].abs()));
-        eval(w).1
-    }
+        }
+    };
+    let (z, fric) = match &p.lugre {
+        Some(l) => {
+            let (z, zdot) = z_step(l, x[3], w, hd);
+            (z, l.friction_at(w, z, zdot))
+        }
+        None => (x[3], p.viscous * w),
+    };
+    let theta = x[0] + hd * w;
+    let inputs = EffectInputs {
+        theta,
+        omega: w,
+        current,
+        kt: m.kt,
+    };
+    let load = effects::total_torque_with_width(&p.effects, &inputs, p.sign_width);
+    let resid = m.j * (w - x[1]) / hd - m.kt * current + fric + load;
+    (resid, [theta, w, current, z])
+}
+
+/// One backward-Euler sub-step of length `h` (z exact), from state x with input u and heat
+/// state h_th. The new velocity is the root of [`substep_residual`] (increasing in it),
+/// found in `f64` by the emulator's bracketing scalar solver from `w_guess`; in dual
+/// numbers the new state then carries the implicit function's derivatives
+/// ([`RunScalar::on_root`]).
+fn implicit_step<D: RunScalar>(
+    p: &RunParams<D>,
+    re: &RunParams<f64>,
+    x: &[D; NX],
+    u: f64,
+    h_th: D,
+    h: f64,
+    w_guess: f64,
+) -> [D; NX] {
+    let xr = x.map(|v| v.re());
+    let hr = h_th.re();
+    let g = |w: f64| substep_residual(re, re, &xr, u, hr, h, w).0;
+    let g0 = g(w_guess);
+    let step0 = g0.abs() * h / re.motor.j + 1e-9;
+    let w = find_root(g, w_guess, step0, 1e-11 * (1.0 + xr[1].abs()));
+    let (g, s) = substep_residual(p, re, x, u, h_th, h, D::unknown(w));
+    s.map(|v| D::on_root(v, g))
 }
 
 /// Matrix exponential of a small dense matrix: scaling and squaring with a degree-12 Taylor
@@ -262,12 +312,12 @@ fn omega_at(log: &MotorLog, k: usize) -> f64 {
     }
 }
 
-/// The heat state of the model's thermal effects at sample `k`, from the measured current
-/// (the winding heats with the current it carries, whatever the model predicts).
-fn heat_at(model: &Model, log: &MotorLog, k: usize) -> f64 {
-    let offset = effects::total_sensor_offset(&model.effects);
-    let mut h = 0.0;
-    if !model
+/// The heat state of the thermal effects at sample `k`, from the measured current (the
+/// winding heats with the current it carries, whatever the model predicts).
+fn heat_at<D: RunScalar>(p: &RunParams<D>, log: &MotorLog, k: usize) -> D {
+    let offset = effects::total_sensor_offset(&p.effects);
+    let mut h = D::zero();
+    if !p
         .effects
         .iter()
         .any(|e| matches!(e, effects::Effect::Thermal { .. }))
@@ -276,11 +326,27 @@ fn heat_at(model: &Model, log: &MotorLog, k: usize) -> f64 {
     }
     let Some(i) = &log.i else { return h };
     for (j, &c) in i.iter().enumerate().take(k) {
-        for e in &model.effects {
-            h = e.heat_step(h, c - offset, log.t[j + 1] - log.t[j]);
+        for e in &p.effects {
+            h = e.heat_step(
+                h,
+                D::constant(c) - offset,
+                D::constant(log.t[j + 1] - log.t[j]),
+            );
         }
     }
     h
+}
+
+/// A free run's states, one value per sample, in the number type it ran in.
+#[derive(Debug, Clone)]
+pub struct Run<D> {
+    pub theta: Vec<D>,
+    pub omega: Vec<D>,
+    /// Current as the sensor would measure it (with any `current_offset`); None for
+    /// `--plant torque`.
+    pub i: Option<Vec<D>>,
+    /// Bristle deflection (LuGre models).
+    pub z: Option<Vec<D>>,
 }
 
 /// Simulation of samples `start..end` of `log` from the measured state at `start` (angle,
@@ -293,6 +359,26 @@ pub fn simulate_range(
     end: usize,
     substeps: usize,
 ) -> Result<Prediction> {
+    let p = RunParams::<f64>::of(model);
+    let run = run_range(&p, &p, log, start, end, substeps)?;
+    Ok(Prediction {
+        t: log.t[start..end.min(log.len())].to_vec(),
+        theta: run.theta,
+        omega: run.omega,
+        i: run.i,
+        z: run.z,
+    })
+}
+
+/// [`simulate_range`] of the model `p` (whose values are `re`) in its number type.
+pub fn run_range<D: RunScalar>(
+    p: &RunParams<D>,
+    re: &RunParams<f64>,
+    log: &MotorLog,
+    start: usize,
+    end: usize,
+    substeps: usize,
+) -> Result<Run<D>> {
     let end = end.min(log.len());
     if start >= end {
         bail!(
@@ -301,30 +387,29 @@ pub fn simulate_range(
         );
     }
     let n = end - start;
-    let dyn_ = Dynamics { model };
-    let offset = effects::total_sensor_offset(&model.effects);
+    let offset = effects::total_sensor_offset(&p.effects);
     let omega0 = omega_at(log, start);
-    let i0 = match (model.plant, &log.i) {
-        (Plant::Voltage, Some(i)) => i[start] - offset,
-        (Plant::Voltage, None) => 0.0,
-        (Plant::Torque, _) => log.u[start],
+    let i0 = match (p.plant, &log.i) {
+        (Plant::Voltage, Some(i)) => D::constant(i[start]) - offset,
+        (Plant::Voltage, None) => D::zero(),
+        (Plant::Torque, _) => D::constant(log.u[start]),
     };
-    let z0 = match (&model.lugre, model.kind) {
+    let z0 = match &p.lugre {
         // Sliding: the bristles sit on the Stribeck curve; at rest: no deflection known.
-        (Some(l), ModelKind::Lugre) if l.sigma0 > 0.0 && omega0.abs() > 1e-9 => {
-            l.s(omega0) * omega0.signum() / l.sigma0
+        Some(l) if l.sigma0.re() > 0.0 && omega0.abs() > 1e-9 => {
+            let w0 = D::constant(omega0);
+            l.s(w0) * D::constant(omega0.signum()) / l.sigma0
         }
-        _ => 0.0,
+        _ => D::zero(),
     };
-    let mut x = [log.theta[start], omega0, i0, z0];
-    let mut h = heat_at(model, log, start);
+    let mut x = [D::constant(log.theta[start]), D::constant(omega0), i0, z0];
+    let mut h = heat_at(p, log, start);
     let mut w_prev = omega0;
-    let mut out = Prediction {
-        t: log.t[start..end].to_vec(),
+    let mut out = Run {
         theta: Vec::with_capacity(n),
         omega: Vec::with_capacity(n),
-        i: (model.plant == Plant::Voltage).then(|| Vec::with_capacity(n)),
-        z: (model.kind == ModelKind::Lugre).then(|| Vec::with_capacity(n)),
+        i: (p.plant == Plant::Voltage).then(|| Vec::with_capacity(n)),
+        z: p.lugre.is_some().then(|| Vec::with_capacity(n)),
     };
     let sub = substeps.max(1);
     for k in 0..n {
@@ -341,19 +426,21 @@ pub fn simulate_range(
         }
         let k = start + k;
         let u = log.u[k];
-        if model.plant == Plant::Torque {
-            x[2] = u;
+        if p.plant == Plant::Torque {
+            x[2] = D::constant(u);
         }
         let dt = (log.t[k + 1] - log.t[k]) / sub as f64;
         for _ in 0..sub {
-            let guess = x[1] + (x[1] - w_prev);
-            w_prev = x[1];
-            x = dyn_.implicit_step(&x, u, h, dt, guess);
-            for e in &model.effects {
-                h = e.heat_step(h, x[2], dt);
+            let w = x[1].re();
+            let guess = w + (w - w_prev);
+            w_prev = w;
+            x = implicit_step(p, re, &x, u, h, dt, guess);
+            for e in &p.effects {
+                h = e.heat_step(h, x[2], D::constant(dt));
             }
         }
-        if !x.iter().all(|v| v.is_finite()) || x[1].abs() > 1e7 || x[2].abs() > 1e7 {
+        let xr = x.map(|v| v.re());
+        if !xr.iter().all(|v| v.is_finite()) || xr[1].abs() > 1e7 || xr[2].abs() > 1e7 {
             bail!(
                 "{}: the model diverged in free run at t = {} s (sample {}); its parameters \
                  are not physical",

@@ -5,6 +5,7 @@
 //! | [`effect_residual`] | added effects estimated on a fitted model's residual |
 //! | [`fitpct`] | the paper's fit percentage |
 //! | [`freerun`] | free-run simulation of a model with a log's input |
+//! | [`tangent`] | dual numbers: the free run's sensitivities to the parameters |
 //! | [`sensor_chain`] | Hall quantisation and the firmware's velocity estimator |
 //! | [`linear`] | the linear model (viscous friction), paper eqs. 1–2 |
 //! | [`lugre_fit`] | LuGre static curve and dynamic parameters |
@@ -28,6 +29,7 @@ pub mod sensor_chain;
 pub mod sim_error;
 pub mod sindyc;
 pub mod stlsq;
+pub mod tangent;
 
 use crate::effect_spec::EffectSpec;
 use crate::log::{MotorLog, Plant};

@@ -20,11 +20,13 @@ pub fn quantise(theta: f64, resolution: f64) -> f64 {
 
 /// The firmware's moving-average velocity estimate (`control::velocity::MovingAverage`, the
 /// very code the board runs): `(θ_k − θ_{k−N})/(N·T)` with T the median sample period of `t`
-/// (fewer samples at the start; 0 at the first sample).
-pub fn velocity_estimate(t: &[f64], theta: &[f64], window: usize) -> Vec<f64> {
+/// (fewer samples at the start; 0 at the first sample). Linear in θ: in dual numbers it
+/// carries the angle's derivatives through.
+pub fn velocity_estimate<F: num_traits::Float>(t: &[f64], theta: &[F], window: usize) -> Vec<F> {
     let mut d: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
     d.sort_by(|a, b| a.total_cmp(b));
     let ts = d.get(d.len() / 2).copied().unwrap_or(0.0);
+    let ts = F::from(ts).unwrap_or_else(F::zero);
     let mut est = MovingAverage::new(window.clamp(1, MAX_WINDOW) as u8, ts);
     theta.iter().map(|&th| est.update(th, 0)).collect()
 }

@@ -1,0 +1,233 @@
+//! Numbers a free run can carry: `f64`, or a dual number that carries, beside each value,
+//! its derivatives with respect to a few model parameters (forward sensitivities). One free
+//! run in dual numbers gives as many Jacobian columns of the simulation error as it has
+//! parameter lanes: the exact derivative of the discrete scheme the fit simulates, without
+//! the truncation and cancellation of finite differences.
+//!
+//! The sub-step of the free run is implicit (its new velocity `w` is the root of a residual
+//! `g(w; x, p)`, found in `f64`). The dual number has one more lane than parameters, for
+//! `∂/∂w`: with the residual and the new state `s` evaluated at `w` seeded in that lane, the
+//! implicit function theorem gives `ds/dp = ∂s/∂p − ∂s/∂w · (∂g/∂p)/(∂g/∂w)`
+//! ([`RunScalar::on_root`]).
+use control::effects::Effect;
+use echidna::DualVec;
+use num_traits::Float;
+
+/// Parameter lanes of [`Tangent`]: Jacobian columns per dual free run.
+pub const PARAM_LANES: usize = 6;
+
+/// The dual number of the sensitivity runs: [`PARAM_LANES`] parameter lanes, then the lane
+/// of the sub-step's unknown.
+pub type Tangent = DualVec<f64, { PARAM_LANES + 1 }>;
+
+/// A number the free run computes in.
+pub trait RunScalar: Float + Send + Sync + std::fmt::Debug + 'static {
+    /// The value (real part).
+    fn re(self) -> f64;
+    /// A constant: no derivatives.
+    fn constant(v: f64) -> Self;
+    /// The unknown of an implicit sub-step at its value `w` (the root, found in `f64`),
+    /// seeded in the unknown's lane.
+    fn unknown(w: f64) -> Self;
+    /// A value `s` computed from [`Self::unknown`], with the sub-step's residual `g` there:
+    /// `s` on the root, its parameter lanes `∂s/∂p − ∂s/∂w·(∂g/∂p)/(∂g/∂w)`, its unknown's
+    /// lane cleared.
+    fn on_root(s: Self, g: Self) -> Self;
+    /// The root `x` (found in `f64`) of a scalar equation `G(x) = 0` whose residual at `x`
+    /// is `g` and whose slope there is `slope`: lanes `−(∂G/∂·)/slope`.
+    fn root(x: f64, g: Self, slope: f64) -> Self;
+}
+
+impl RunScalar for f64 {
+    fn re(self) -> f64 {
+        self
+    }
+    fn constant(v: f64) -> Self {
+        v
+    }
+    fn unknown(w: f64) -> Self {
+        w
+    }
+    fn on_root(s: Self, _g: Self) -> Self {
+        s
+    }
+    fn root(x: f64, _g: Self, _slope: f64) -> Self {
+        x
+    }
+}
+
+impl<const N: usize> RunScalar for DualVec<f64, N> {
+    fn re(self) -> f64 {
+        self.re
+    }
+    fn constant(v: f64) -> Self {
+        DualVec::constant(v)
+    }
+    fn unknown(w: f64) -> Self {
+        DualVec::with_tangent(w, N - 1)
+    }
+    fn on_root(s: Self, g: Self) -> Self {
+        let gw = g.eps[N - 1];
+        let sw = s.eps[N - 1];
+        let mut out = s;
+        out.eps[N - 1] = 0.0;
+        if gw != 0.0 && gw.is_finite() && sw != 0.0 {
+            let f = sw / gw;
+            for (o, gp) in out.eps[..N - 1].iter_mut().zip(&g.eps[..N - 1]) {
+                *o -= f * gp;
+            }
+        }
+        out
+    }
+    fn root(x: f64, g: Self, slope: f64) -> Self {
+        let mut out = DualVec::constant(x);
+        if slope != 0.0 && slope.is_finite() {
+            for (o, gp) in out.eps.iter_mut().zip(&g.eps) {
+                *o = -gp / slope;
+            }
+        }
+        out
+    }
+}
+
+/// An effect with its parameters as constants of another number type.
+pub fn lift_effect<D: RunScalar>(e: &Effect<f64>) -> Effect<D> {
+    let c = D::constant;
+    match *e {
+        Effect::Coulomb { fc } => Effect::Coulomb { fc: c(fc) },
+        Effect::Viscous { b } => Effect::Viscous { b: c(b) },
+        Effect::Stribeck { fs, vs } => Effect::Stribeck {
+            fs: c(fs),
+            vs: c(vs),
+        },
+        Effect::Presliding { sigma0, sigma1 } => Effect::Presliding {
+            sigma0: c(sigma0),
+            sigma1: c(sigma1),
+        },
+        Effect::Cogging {
+            harmonic,
+            amp,
+            phase,
+        } => Effect::Cogging {
+            harmonic,
+            amp: c(amp),
+            phase: c(phase),
+        },
+        Effect::PositionLoad { amp, phase } => Effect::PositionLoad {
+            amp: c(amp),
+            phase: c(phase),
+        },
+        Effect::Offset { t0 } => Effect::Offset { t0: c(t0) },
+        Effect::Asymmetry { dv, dc } => Effect::Asymmetry {
+            dv: c(dv),
+            dc: c(dc),
+        },
+        Effect::Deadtime { vd } => Effect::Deadtime { vd: c(vd) },
+        Effect::CurrentOffset { i0 } => Effect::CurrentOffset { i0: c(i0) },
+        Effect::Thermal { k, tau } => Effect::Thermal {
+            k: c(k),
+            tau: c(tau),
+        },
+        Effect::LoadFriction { mu } => Effect::LoadFriction { mu: c(mu) },
+        Effect::Saturation { k } => Effect::Saturation { k: c(k) },
+        Effect::Compliance { j2, k, c: damping } => Effect::Compliance {
+            j2: c(j2),
+            k: c(k),
+            c: c(damping),
+        },
+        Effect::Backlash { j2, gap } => Effect::Backlash {
+            j2: c(j2),
+            gap: c(gap),
+        },
+        Effect::Table {
+            var,
+            bins,
+            lo,
+            hi,
+            values,
+        } => Effect::Table {
+            var,
+            bins,
+            lo: c(lo),
+            hi: c(hi),
+            values: values.map(c),
+        },
+    }
+}
+
+/// The number behind key `key` of an effect (the keys of an effect spec), if it has one.
+pub fn effect_key_mut<'a, D>(e: &'a mut Effect<D>, key: &str) -> Option<&'a mut D> {
+    Some(match (e, key) {
+        (Effect::Coulomb { fc }, "fc") => fc,
+        (Effect::Viscous { b }, "b") => b,
+        (Effect::Stribeck { fs, .. }, "fs") => fs,
+        (Effect::Stribeck { vs, .. }, "vs") => vs,
+        (Effect::Presliding { sigma0, .. }, "sigma0") => sigma0,
+        (Effect::Presliding { sigma1, .. }, "sigma1") => sigma1,
+        (Effect::Cogging { amp, .. } | Effect::PositionLoad { amp, .. }, "amp") => amp,
+        (Effect::Cogging { phase, .. } | Effect::PositionLoad { phase, .. }, "phase") => phase,
+        (Effect::Offset { t0 }, "t0") => t0,
+        (Effect::Asymmetry { dv, .. }, "dv") => dv,
+        (Effect::Asymmetry { dc, .. }, "dc") => dc,
+        (Effect::Deadtime { vd }, "vd") => vd,
+        (Effect::CurrentOffset { i0 }, "i0") => i0,
+        (Effect::Thermal { k, .. } | Effect::Saturation { k }, "k") => k,
+        (Effect::Thermal { tau, .. }, "tau") => tau,
+        (Effect::LoadFriction { mu }, "mu") => mu,
+        (Effect::Compliance { j2, .. } | Effect::Backlash { j2, .. }, "j2") => j2,
+        (Effect::Compliance { k, .. }, "k") => k,
+        (Effect::Compliance { c, .. }, "c") => c,
+        (Effect::Backlash { gap, .. }, "gap") => gap,
+        (Effect::Table { lo, .. }, "lo") => lo,
+        (Effect::Table { hi, .. }, "hi") => hi,
+        (Effect::Table { bins, values, .. }, k) => {
+            let i: usize = k.strip_prefix('b')?.parse().ok()?;
+            if i >= *bins as usize {
+                return None;
+            }
+            values.get_mut(i)?
+        }
+        _ => return None,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn implicit_root_has_the_implicit_functions_derivative() {
+        // g(w; p) = w³ + p·w − 2 at p = 1: root w = 1, dw/dp = −w/(3w² + p) = −1/4; the state
+        // s = w² then has ds/dp = 2w·dw/dp = −1/2.
+        let p = Tangent::with_tangent(1.0, 0);
+        let w = Tangent::unknown(1.0);
+        let g = w * w * w + p * w - Tangent::constant(2.0);
+        let s = Tangent::on_root(w * w, g);
+        assert!((s.re - 1.0).abs() < 1e-15);
+        assert!((s.eps[0] + 0.5).abs() < 1e-15, "{:?}", s.eps);
+        assert_eq!(s.eps[PARAM_LANES], 0.0);
+        // The scalar root: G(x) = x − p² at p = 1 (x = 1): dx/dp = 2.
+        let x = Tangent::root(1.0, Tangent::constant(1.0) - p * p, 1.0);
+        assert!((x.eps[0] - 2.0).abs() < 1e-15);
+    }
+
+    #[test]
+    fn every_estimable_key_has_a_number() {
+        use crate::effect_spec::EffectSpec;
+        use crate::ident::free_params::effect_keys_of;
+        for kind in &control::effects::EffectKind::ALL {
+            let spec = EffectSpec {
+                kind: *kind,
+                values: Default::default(),
+            };
+            let e = spec.to_effect();
+            let mut d = lift_effect::<f64>(&e);
+            for (key, _, _) in effect_keys_of(&e) {
+                let before = EffectSpec::from_effect(&e).get(key);
+                let v = effect_key_mut(&mut d, key)
+                    .unwrap_or_else(|| panic!("{kind:?} has no number for {key}"));
+                assert_eq!(*v, before, "{kind:?}.{key}");
+            }
+        }
+    }
+}
