@@ -270,28 +270,69 @@ pub fn scale_effect_magnitudes(model: &Model, f: f64) -> Model {
     m
 }
 
-/// Line search along the weak-form estimate of the effects: start from the magnitude factor
-/// (0, ¼, ½, ¾, 1, 1¼) with the lowest simulation error on `res`. The weak form gets phases
-/// right but its magnitudes can be off (Hall quantisation of θ inside sin(hθ)); factor 0
-/// ("without the effect") is a candidate, so adding an effect never starts worse than not
-/// adding it.
+/// Grid search around the weak-form estimate of the effects: start from the magnitude factor
+/// (0, ¼, ½, ¾, 1, 1¼) and, for the angle-periodic effects (cogging, position load), the
+/// phase shift with the lowest simulation error on `res`. The weak form evaluates sin(h·θ) at
+/// the Hall-quantised angle, so its magnitudes can be off, and its phases by up to h times
+/// half a Hall step (the quantised angle lags the true one by half a step on average): the
+/// shifts are h·(0, ±¼, ±½) Hall steps. Factor 0 ("without the effect") is a candidate, so
+/// adding an effect never starts worse than not adding it.
 pub fn better_effect_start(model: &mut Model, res: &Residuals) {
     if model.effects.is_empty() {
         return;
     }
-    let mut best = (f64::INFINITY, 1.0);
+    let step = model.sensor.hall_resolution_rad;
+    let periodic = model.effects.iter().any(|e| {
+        matches!(
+            e,
+            control::effects::Effect::Cogging { .. }
+                | control::effects::Effect::PositionLoad { .. }
+        )
+    });
+    let shifts: &[f64] = if periodic && step > 0.0 {
+        &[0.0, -0.25, 0.25, -0.5, 0.5]
+    } else {
+        &[0.0]
+    };
     let factors = [0.0, 0.25, 0.5, 0.75, 1.0, 1.25];
-    let costs: Vec<f64> = factors
-        .par_iter()
-        .map(|&f| cost(res, &scale_effect_magnitudes(model, f)))
+    let starts: Vec<(f64, f64)> = factors
+        .iter()
+        .flat_map(|&f| shifts.iter().map(move |&d| (f, d)))
+        .filter(|&(f, d)| f > 0.0 || d == 0.0)
         .collect();
-    for (&f, &c) in factors.iter().zip(&costs) {
-        tracing::debug!("effects {:?} x {f}: cost {c:.4e}", model.effects);
+    let trial = |f: f64, d: f64| shift_phases(&scale_effect_magnitudes(model, f), d * step);
+    let costs: Vec<f64> = starts
+        .par_iter()
+        .map(|&(f, d)| cost(res, &trial(f, d)))
+        .collect();
+    let mut best = (f64::INFINITY, 1.0, 0.0);
+    for (&(f, d), &c) in starts.iter().zip(&costs) {
+        tracing::debug!(
+            "effects {:?} x {f}, shift {d} Hall steps: cost {c:.4e}",
+            model.effects
+        );
         if c < best.0 {
-            best = (c, f);
+            best = (c, f, d);
         }
     }
-    *model = scale_effect_magnitudes(model, best.1);
+    *model = trial(best.1, best.2);
+}
+
+/// `model` with the phase of each angle-periodic effect moved as the angle would be moved by
+/// `dtheta` [rad]: `h·dtheta` for a cogging torque of harmonic h, `dtheta` for a position load.
+fn shift_phases(model: &Model, dtheta: f64) -> Model {
+    use control::effects::Effect;
+    let mut m = model.clone();
+    for e in &mut m.effects {
+        match e {
+            Effect::Cogging {
+                harmonic, phase, ..
+            } => *phase += f64::from(*harmonic) * dtheta,
+            Effect::PositionLoad { phase, .. } => *phase += dtheta,
+            _ => {}
+        }
+    }
+    m
 }
 
 /// Refine the free parameters of `model` on `logs` (free-run residuals). Returns the
