@@ -59,6 +59,20 @@ pub const MAX_EFFECTS: usize = 8;
 pub const DERATE_FRACTION: f32 = 0.8;
 /// Largest phase-current limit a blob may set [A]: the B-G431B-ESC1's 40 A peak output.
 pub const RATED_I_MAX: f32 = 40.0;
+/// Physical range of a motor's winding resistance R [Ω] (lowest, highest), as MODEL.toml
+/// accepts it: 10 µΩ (a large low-voltage servo has a few mΩ) to 10 kΩ (a micro-motor has
+/// hundreds of Ω).
+pub const MOTOR_R: (f32, f32) = (1e-5, 1e4);
+/// Physical range of the phase inductance L [H]: 1 nH (an ironless PCB motor has µH) to 10 H.
+pub const MOTOR_L: (f32, f32) = (1e-9, 10.0);
+/// Physical range of the torque constant K_t [N·m/A]: 1 µN·m/A (a watch motor has about
+/// 10 µN·m/A) to 1000 N·m/A (a direct-drive torque motor has tens).
+pub const MOTOR_KT: (f32, f32) = (1e-6, 1e3);
+/// Physical range of the back-EMF constant K_b [V·s/rad], the scale of K_t (equal in SI).
+pub const MOTOR_KB: (f32, f32) = (0.0, 1e3);
+/// Physical range of the inertia J [kg·m²] (or a linear axis's mass [kg]): 1e-12 (below a
+/// watch motor's rotor, about 1e-10) to 1e6.
+pub const MOTOR_J: (f32, f32) = (1e-12, 1e6);
 /// Largest bus voltage a blob may allow [V], and so the largest loop voltage limit `u_max`:
 /// the over-voltage threshold of ST's motor-control project for the B-G431B-ESC1 (a fully
 /// charged 6S pack is 6 × 4.2 V = 25.2 V).
@@ -296,14 +310,15 @@ impl Coefficients {
     /// limits within the board's ratings ([`RATED_I_MAX`], [`RATED_VBUS_MAX`]).
     pub fn validate(&self) -> Result<(), BlobError> {
         let m = &self.motor;
-        if !finite(&[m.r, m.l, m.kt, m.kb, m.j]) || m.r <= 0.0 || m.l <= 0.0 || m.kt <= 0.0 {
+        let inside = |x: f32, (lo, hi): (f32, f32)| x >= lo && x <= hi;
+        if !(inside(m.r, MOTOR_R) && inside(m.l, MOTOR_L) && inside(m.kt, MOTOR_KT)) {
             return Err(BlobError::Invalid(
-                "motor constants must be finite and positive",
+                "motor R, L or K_t outside its physical range",
             ));
         }
-        if m.j <= 0.0 || m.kb <= 0.0 {
+        if !(inside(m.kb, MOTOR_KB) && m.kb > 0.0 && inside(m.j, MOTOR_J)) {
             return Err(BlobError::Invalid(
-                "motor constants must be finite and positive",
+                "motor K_b or J outside its physical range",
             ));
         }
         if self.pole_pairs == 0 {
@@ -664,10 +679,14 @@ mod tests {
     #[test]
     fn invalid_values_are_rejected_even_with_a_good_crc() {
         let mut buf = [0u8; MAX_BLOB_LEN];
-        let cases: [fn(&mut Coefficients); 7] = [
+        let cases: [fn(&mut Coefficients); 10] = [
             |c| c.hall_table = [HALL_INVALID, 0, 0, 1, 4, 5, 3, HALL_INVALID],
             |c| c.pole_pairs = 0,
             |c| c.motor.r = f32::NAN,
+            // Outside the physical ranges MODEL.toml uses.
+            |c| c.motor.r = 1.5e33,
+            |c| c.motor.r = 4.6e-41,
+            |c| c.motor.j = 1e9,
             |c| c.model = ModelKind::Lugre,
             |c| c.limits.vbus_min = 50.0,
             // Above the board's ratings.

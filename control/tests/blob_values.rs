@@ -38,8 +38,8 @@ fn allowed(c: &Coefficients) -> bool {
         && within(l.vbus_min, RATED_VBUS_MAX)
         && within(l.vbus_max, RATED_VBUS_MAX)
         && l.vbus_min < l.vbus_max
-        && c.motor.r > 0.0
-        && c.motor.r.is_finite()
+        // A winding of 10 µΩ to 10 kΩ.
+        && (1e-5..=1e4).contains(&c.motor.r)
         && match c.estimator {
             Estimator::MovingAverage { window } => (1..=64).contains(&window),
             Estimator::EdgeTiming { timeout_s } => timeout_s > 0.0 && timeout_s.is_finite(),

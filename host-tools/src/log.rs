@@ -377,6 +377,10 @@ enum UnitSource {
     Flag,
 }
 
+/// Longest time step a log may take, in median steps: jitter and a few lost samples (a serial
+/// link dropping some) stay well below it; a longer step is a gap between two recordings.
+pub const MAX_GAP_STEPS: f64 = 10.0;
+
 impl MotorLog {
     /// Number of samples.
     pub fn len(&self) -> usize {
@@ -1196,6 +1200,20 @@ impl Table {
                 "{p}: column '{}': median time step: {e}{}",
                 echo(&headers[columns.t]),
                 hint(dt)
+            );
+        }
+        // A gap: the model would be run across time the log does not cover, and every
+        // simulated state after it compared with a motor that moved unseen.
+        if let Some(k) = (1..t.len()).find(|&k| t[k] - t[k - 1] > MAX_GAP_STEPS * dt) {
+            bail!(
+                "{}: column '{}': time jumps by {} s (from {} to {}), more than {MAX_GAP_STEPS} \
+                 median steps ({} s): the log has a gap; split it there into two logs",
+                places.row(path, k),
+                echo(&headers[columns.t]),
+                crate::validate::show(t[k] - t[k - 1]),
+                crate::validate::show(t[k - 1]),
+                crate::validate::show(t[k]),
+                crate::validate::show(dt)
             );
         }
         let units = declared

@@ -677,4 +677,20 @@ mod tests {
         assert!(lugre_z_rate(&l, 2.0, z).abs() < 1e-12);
         assert!((lugre_friction(&l, 2.0, z) - l.steady_friction(2.0)).abs() < 1e-12);
     }
+
+    /// The motor ranges of MODEL.toml are the board's (control::blob), so a model that
+    /// loads also exports and a blob that decodes also loads.
+    #[test]
+    fn model_motor_ranges_are_the_blobs() {
+        use control::blob::{MOTOR_J, MOTOR_KB, MOTOR_KT, MOTOR_L, MOTOR_R};
+        for (r, b) in [
+            (ranges::R, MOTOR_R),
+            (ranges::L, MOTOR_L),
+            (ranges::KT, MOTOR_KT),
+            (ranges::KB, MOTOR_KB),
+            (ranges::J, MOTOR_J),
+        ] {
+            assert_eq!((r.lo as f32, r.hi as f32), b, "{}", r.what);
+        }
+    }
 }

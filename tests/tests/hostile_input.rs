@@ -606,6 +606,26 @@ fn metadata_is_validated_like_data() {
         &["compare", "m.toml", "unit_twice.csv"],
         &["unit_twice.csv:3", "unit.t", "twice"],
     );
+    // A gap of 900,000 s between two sample rows (two recordings pasted together): every
+    // command refuses the log at the row after the gap.
+    let gap: String = log_text(300, 0.012, "")
+        .lines()
+        .enumerate()
+        .map(|(k, line)| match line.split_once(',') {
+            Some((t, rest)) if k > 150 => {
+                format!("{:e},{rest}\n", t.parse::<f64>().unwrap() + 9e5)
+            }
+            _ => format!("{line}\n"),
+        })
+        .collect();
+    std::fs::write(d.join("gap.csv"), gap).unwrap();
+    for cmd in [
+        &["fit", "--model", "linear", "-o", "out.toml", "gap.csv"][..],
+        &["compare", "m.toml", "gap.csv"],
+        &["diagnose", "m.toml", "gap.csv"],
+    ] {
+        refused(d, cmd, &["gap.csv:152", "gap", "split"]);
+    }
     // Keys the tools do not read are ignored, even twice.
     with("unknown.csv", "# operator=me\n# operator=you\n");
     let r = run(d, &["compare", "m.toml", "unknown.csv"]);
