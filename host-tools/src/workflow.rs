@@ -15,7 +15,8 @@
 //!   variable carries the rest);
 //! - a refit scores worse on the selection logs than the model before it
 //!   ([`Stop::Worse`]: that round is kept in the list, marked not kept, and the model before
-//!   it stands), or
+//!   it stands; only with selection logs apart from the fitting logs: without them the
+//!   diagnosis's significance test on the fitting logs is the only judge), or
 //! - [`Config::max_rounds`] refits have run ([`Stop::MaxRounds`]).
 //!
 //! Selection and reporting: the selection logs choose (they are `fit --validate`'s logs and
@@ -37,7 +38,8 @@ pub struct Config<'a> {
     /// Logs the model is fitted on; each is diagnosed.
     pub fit_logs: &'a [MotorLog],
     /// Logs that choose among models (passed to the fit as validation logs, and scored to
-    /// decide whether a refit is kept); empty: the fitting logs.
+    /// decide whether a refit is kept); empty: none (scores are then on the fitting logs,
+    /// for information only).
     pub select_logs: &'a [MotorLog],
     /// Effects in the model from the first round on.
     pub start: Vec<EffectSpec>,
@@ -75,7 +77,7 @@ pub struct Round {
     pub model: Model,
     /// The diagnosis on each fitting log, in order.
     pub diagnoses: Vec<Diagnosis>,
-    /// Mean fit % (angle, velocity and current where logged) on the selection logs.
+    /// Mean angle fit % on the selection logs ([`selection_fit`]).
     pub selection_fit: f64,
     /// What the next round adds (None on the last round).
     pub next: Option<Next>,
@@ -110,20 +112,16 @@ impl Outcome {
     }
 }
 
-/// Mean fit % of the model on `logs`: for each log the mean of its angle, velocity and (when
-/// logged) current fits; −∞ when the model cannot be simulated on one of them.
+/// Mean angle (or position) fit % of the model's free run on `logs`, the one state every log
+/// carries and the one a position-controlled axis is judged by; −∞ when the model cannot be
+/// simulated on one of them.
 pub fn selection_fit(model: &Model, logs: &[MotorLog]) -> f64 {
     let mut sum = 0.0;
     for log in logs {
         let Ok(s) = ident::score(model, log) else {
             return f64::NEG_INFINITY;
         };
-        let f = s.fit;
-        let (total, count) = match f.i {
-            Some(i) => (f.x + f.xdot + i, 3.0),
-            None => (f.x + f.xdot, 2.0),
-        };
-        sum += total / count;
+        sum += s.fit.x;
     }
     sum / logs.len().max(1) as f64
 }
@@ -200,11 +198,14 @@ pub fn run(
         })
         .with_context(|| format!("round {round} of the identification loop"))?;
         let score = selection_fit(&model, select);
-        let worse = rounds
-            .iter()
-            .rev()
-            .find(|r| r.kept)
-            .is_some_and(|prev| score < prev.selection_fit);
+        // Only held-out logs can say a refit is worse: on the fitting logs a larger model
+        // is never worse at its optimum, and their free-run angle fit is dominated by drift.
+        let worse = !cfg.select_logs.is_empty()
+            && rounds
+                .iter()
+                .rev()
+                .find(|r| r.kept)
+                .is_some_and(|prev| score < prev.selection_fit);
         let st = Structure::from_model(&model);
         let diagnoses: Vec<Diagnosis> = cfg
             .fit_logs

@@ -11,14 +11,13 @@
 //! ([`benchmark_rmse_mm`]): the generic free-run simulation is started at sample 19 from the
 //! state that a straight line through the first 20 measured positions gives.
 use super::emps;
-use anyhow::{Context, Result};
+use anyhow::Result;
 use control::effects::Effect;
 use motorid::diagnose::{self, Diagnosis, Structure};
 use motorid::effect_spec::EffectSpec;
 use motorid::ident::{self, freerun, FitRequest};
 use motorid::log::{MotorLog, Plant};
 use motorid::model::{Model, ModelKind};
-use motorid::workflow;
 
 /// Most refits of the loop (each adds what the previous diagnosis found).
 pub const MAX_ROUNDS: usize = 3;
@@ -199,29 +198,20 @@ pub fn authors_structures(train: &MotorLog, test: &MotorLog) -> Result<Vec<Round
     ])
 }
 
-/// The product's loop ([`motorid::workflow`]) on the EMPS training log: fit linear →
-/// diagnose → add the strongest finding → refit, until the model is adequate, nothing named is
-/// left, a refit scores worse on the training log (that round is marked not kept), or
-/// [`MAX_ROUNDS`] refits. Each round is then scored on the benchmark's test log. `progress` is
-/// called with a line per fit.
+/// Fit linear → diagnose → add what was found → refit, until nothing is found, a refit makes
+/// the free-run position fit on the training log worse (that round is marked not kept and the
+/// loop stops: what a user validating each refit would do), or [`MAX_ROUNDS`] refits.
+/// `progress` is called with a line per step.
 pub fn run(
     train: &MotorLog,
     test: &MotorLog,
     progress: &mut dyn FnMut(&str),
 ) -> Result<Vec<Round>> {
     let (train, test) = (&prepare(train, DECIMATION), &prepare(test, 1));
-    let cfg = workflow::Config {
-        kind: ModelKind::Linear,
-        plant: Plant::Torque,
-        fit_logs: std::slice::from_ref(train),
-        select_logs: &[],
-        start: Vec::new(),
-        constraints: &motorid::ident::free_params::Constraints::NONE,
-        max_rounds: MAX_ROUNDS,
-        diagnose: diagnose::Options::default(),
-    };
-    let mut fit = |req: &FitRequest| -> Result<Model> {
-        let labels: Vec<String> = req.adds.iter().map(|a| a.to_string()).collect();
+    let mut adds: Vec<EffectSpec> = Vec::new();
+    let mut rounds = Vec::new();
+    for round in 0..=MAX_ROUNDS {
+        let labels: Vec<String> = adds.iter().map(|a| a.to_string()).collect();
         progress(&format!(
             "EMPS: fitting linear{}",
             if labels.is_empty() {
@@ -230,24 +220,27 @@ pub fn run(
                 format!(" --add {}", labels.join(" --add "))
             }
         ));
-        Ok(ident::fit(req)?.model)
-    };
-    let outcome = workflow::run(&cfg, &mut fit, &mut |_| {})?;
-    outcome
-        .rounds
-        .into_iter()
-        .map(|r| {
-            let (rmse_test_mm, sim_test) = benchmark_rmse_mm(&r.model, test)?;
-            Ok(Round {
-                adds: r.adds.iter().map(|a| a.to_string()).collect(),
-                train: ident::score(&r.model, train)?,
-                test: ident::score(&r.model, test)?,
-                rmse_test_mm,
-                sim_test,
-                diagnosis: r.diagnoses.into_iter().next().context("no diagnosis")?,
-                kept: r.kept,
-                model: r.model,
-            })
-        })
-        .collect()
+        let mut r = fit_round(train, test, &adds)?;
+        if let Some(prev) = rounds.iter().rev().find(|p: &&Round| p.kept) {
+            if r.train.fit.x < prev.train.fit.x {
+                r.kept = false;
+                rounds.push(r);
+                break;
+            }
+        }
+        let found: Vec<EffectSpec> = r
+            .diagnosis
+            .effects
+            .iter()
+            .filter_map(|f| EffectSpec::parse(&f.spec).ok())
+            .collect();
+        rounds.push(r);
+        if found.is_empty() || round == MAX_ROUNDS {
+            break;
+        }
+        // Keep the bare names: the refit estimates every added effect afresh from the specs'
+        // values as starting points.
+        adds.extend(found);
+    }
+    Ok(rounds)
 }
