@@ -92,67 +92,7 @@ impl<const N: usize> RunScalar for DualVec<f64, N> {
 
 /// An effect with its parameters as constants of another number type.
 pub fn lift_effect<D: RunScalar>(e: &Effect<f64>) -> Effect<D> {
-    let c = D::constant;
-    match *e {
-        Effect::Coulomb { fc } => Effect::Coulomb { fc: c(fc) },
-        Effect::Viscous { b } => Effect::Viscous { b: c(b) },
-        Effect::Stribeck { fs, vs } => Effect::Stribeck {
-            fs: c(fs),
-            vs: c(vs),
-        },
-        Effect::Presliding { sigma0, sigma1 } => Effect::Presliding {
-            sigma0: c(sigma0),
-            sigma1: c(sigma1),
-        },
-        Effect::Cogging {
-            harmonic,
-            amp,
-            phase,
-        } => Effect::Cogging {
-            harmonic,
-            amp: c(amp),
-            phase: c(phase),
-        },
-        Effect::PositionLoad { amp, phase } => Effect::PositionLoad {
-            amp: c(amp),
-            phase: c(phase),
-        },
-        Effect::Offset { t0 } => Effect::Offset { t0: c(t0) },
-        Effect::Asymmetry { dv, dc } => Effect::Asymmetry {
-            dv: c(dv),
-            dc: c(dc),
-        },
-        Effect::Deadtime { vd } => Effect::Deadtime { vd: c(vd) },
-        Effect::CurrentOffset { i0 } => Effect::CurrentOffset { i0: c(i0) },
-        Effect::Thermal { k, tau } => Effect::Thermal {
-            k: c(k),
-            tau: c(tau),
-        },
-        Effect::LoadFriction { mu } => Effect::LoadFriction { mu: c(mu) },
-        Effect::Saturation { k } => Effect::Saturation { k: c(k) },
-        Effect::Compliance { j2, k, c: damping } => Effect::Compliance {
-            j2: c(j2),
-            k: c(k),
-            c: c(damping),
-        },
-        Effect::Backlash { j2, gap } => Effect::Backlash {
-            j2: c(j2),
-            gap: c(gap),
-        },
-        Effect::Table {
-            var,
-            bins,
-            lo,
-            hi,
-            values,
-        } => Effect::Table {
-            var,
-            bins,
-            lo: c(lo),
-            hi: c(hi),
-            values: values.map(c),
-        },
-    }
+    crate::board::coeffs::map_effect(e, D::constant)
 }
 
 /// The number behind key `key` of an effect (the keys of an effect spec), if it has one.
