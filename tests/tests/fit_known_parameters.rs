@@ -144,6 +144,8 @@ fn known_parameters_are_fixed_or_bounded_and_recorded() {
         &["--fix coulomb.fc", "R, L, Kb, J, b"],
     );
     run(&["--bound", "J=2..1"], &["--bound J=2..1", "empty"]);
+    // A motor constant outside the range every model is held to names the flag.
+    run(&["--fix", "J=-1"], &["--fix J=-1", "outside", "inertia"]);
     run(&["--bound", "J=1"], &["--bound J=1", "LO..HI"]);
     run(&["--fix", "R=abc"], &["--fix R=abc", "not a finite number"]);
     run(&["--fix", "R=1", "--bound", "R=0..2"], &["R", "give one"]);

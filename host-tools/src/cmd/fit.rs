@@ -181,6 +181,17 @@ pub fn parse_constraints(fix: &[String], bound: &[String]) -> Result<Constraints
     for arg in fix {
         let (key, value) = split("--fix", arg)?;
         let v = number("--fix", arg, &value)?;
+        // A motor constant must lie in the range every model is held to.
+        let range = match key.as_str() {
+            "R" => Some(crate::model::ranges::R),
+            "L" => Some(crate::model::ranges::L),
+            "Kb" => Some(crate::model::ranges::KT),
+            "J" => Some(crate::model::ranges::J),
+            _ => None,
+        };
+        if let Some(Err(e)) = range.map(|r| r.check(v)) {
+            anyhow::bail!("--fix {}: {e}", echo(arg));
+        }
         if c.fixed.insert(key.clone(), v).is_some() {
             anyhow::bail!("--fix {key}: given twice");
         }

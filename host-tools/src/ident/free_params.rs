@@ -215,8 +215,14 @@ impl Constraints {
 /// The table's name for a user's key: `Kt`, `K_t` and `K_b` name the back-EMF constant `Kb`
 /// (K_t is tied to it); other keys as given.
 pub fn canonical_key(key: &str) -> String {
-    match key {
+    // MODEL.toml's names (`motor.r`, `r`, `viscous`, `lugre.alpha0`) name the same parameters.
+    let key = key.strip_prefix("lugre.").unwrap_or(key);
+    match key.strip_prefix("motor.").unwrap_or(key) {
         "Kt" | "K_t" | "K_b" | "kt" | "kb" => "Kb".into(),
+        "r" => "R".into(),
+        "l" => "L".into(),
+        "j" => "J".into(),
+        "viscous" => "b".into(),
         k => k.to_string(),
     }
 }
@@ -396,6 +402,22 @@ mod tests {
         assert!((lo - 1e-13).abs() < 1e-25 && (hi - 1e10).abs() < 1.0);
         // Electrical constants keep their SI bounds.
         assert_eq!(widen_to_data(1e-4, 1e3, "Ω", 0.01, 100.0), (1e-4, 1e3));
+    }
+
+    /// MODEL.toml's names of the motor and LuGre numbers name the table's parameters.
+    #[test]
+    fn model_file_names_are_parameter_names() {
+        for (given, key) in [
+            ("r", "R"),
+            ("motor.l", "L"),
+            ("motor.j", "J"),
+            ("kt", "Kb"),
+            ("viscous", "b"),
+            ("lugre.alpha0", "alpha0"),
+            ("coulomb.fc", "coulomb.fc"),
+        ] {
+            assert_eq!(canonical_key(given), key);
+        }
     }
 
     #[test]
