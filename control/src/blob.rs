@@ -57,6 +57,10 @@ pub const MAX_EFFECTS: usize = 8;
 /// The control step derates the voltage above this fraction of `limits.i_max`; the board
 /// trips (fault, bridge off) above `i_max` itself.
 pub const DERATE_FRACTION: f32 = 0.8;
+/// Share of the current limit's torque `K_t·i_limit` the speed reference's ramp asks of the
+/// inertia ([`Coefficients::ramp_acceleration`]); the rest is left for friction, load and
+/// the speed loop's tracking error.
+pub const RAMP_CURRENT_FRACTION: f32 = 0.5;
 /// Largest phase-current limit a blob may set [A]: the B-G431B-ESC1's 40 A peak output.
 pub const RATED_I_MAX: f32 = 40.0;
 /// Physical range of a motor's winding resistance R [Ω] (lowest, highest), as MODEL.toml
@@ -416,6 +420,36 @@ impl Coefficients {
 }
 
 impl Coefficients {
+    /// Acceleration [rad/s²] of the speed reference's ramp at current limit `i_limit` [A]:
+    /// `RAMP_CURRENT_FRACTION·K_t·i_limit/J` ([`RAMP_CURRENT_FRACTION`]), what half the
+    /// limit's torque gives the identified inertia. Derived from the blob's motor and
+    /// limits rather than stored: it follows a refit of J or K_t and a lowered `i_max`
+    /// without a second value to keep consistent.
+    pub fn ramp_acceleration(&self, i_limit: f32) -> f32 {
+        RAMP_CURRENT_FRACTION * self.motor.kt * i_limit / self.motor.j
+    }
+
+    /// Largest speed reference [rad/s] at nominal bus voltage `v_bus` [V]: the no-load
+    /// speed at the voltage limit, `min(u_max, MAX_DUTY·v_bus)/K_b`, and at most the speed
+    /// whose Hall edge rate the capture queue holds ([`crate::step::rated_speed`]). A
+    /// reference beyond the first cannot be reached (the loop would sit at its voltage
+    /// limit); beyond the second, Hall edges are lost.
+    pub fn speed_limit(&self, v_bus: f32) -> f32 {
+        let bus = crate::board::MAX_DUTY * v_bus;
+        let u = if self.pi.u_max < bus {
+            self.pi.u_max
+        } else {
+            bus
+        };
+        let emf = u / self.motor.kb;
+        let edges = crate::step::rated_speed(u16::from(self.pole_pairs.max(1)));
+        if emf < edges {
+            emf
+        } else {
+            edges
+        }
+    }
+
     /// Tick rate [Hz] of the firmware's Hall capture timer (TIM4 at 1 MHz), used by the
     /// edge-timing estimator.
     pub const CAPTURE_TICK_HZ: f32 = 1.0e6;

@@ -11,13 +11,15 @@
 //! Limits and faults (each turns the bridge off; faults latch until `ClearFault`):
 //! - hardware over-current: the transport's comparators cut the bridge within a PWM period
 //!   above [`HW_TRIP_A`] ([`Measurements::hw_overcurrent`]);
-//! - over-current: |I| > `limits.i_max` (the step derates the voltage above
-//!   [`crate::blob::DERATE_FRACTION`]·i_max first, [`crate::step`]);
+//! - over-current: |I| > `limits.i_max`. Below it a standing current limit keeps the motor
+//!   running: every command lies in the step's voltage window `K_b·ω ± R·i_limit`,
+//!   `i_limit` = [`crate::blob::DERATE_FRACTION`]·i_max ([`crate::step::current_window`]);
 //! - over-temperature: the board's NTC at [`TEMP_MAX_C`] or above; from [`TEMP_DERATE_C`]
-//!   up the step's soft current limit falls linearly to zero ([`temperature_derating`]);
+//!   up the step's current limit falls linearly to zero ([`temperature_derating`]);
 //! - bus over-voltage always, under-voltage and control overrun while running;
 //! - Hall faults (invalid state, impossible jump, edge overflow) while running;
-//! - stall: |V| above [`STALL_FRACTION`]·u_max and no Hall step for [`STALL_PERIODS`];
+//! - stall: no Hall step for [`STALL_PERIODS`] while the command is held by the current
+//!   limit or above [`STALL_FRACTION`]·u_max;
 //! - link loss (a stop, not a fault): no frame for [`LINK_TIMEOUT_PERIODS`] in speed or
 //!   experiment mode.
 //!
@@ -27,7 +29,9 @@
 //!
 //! The voltage never exceeds `min(pi.u_max, MAX_DUTY·V_bus)`; speed and experiment modes
 //! need valid coefficients (identify and commissioning do not); experiment amplitudes are
-//! relative to `u_max` ([`crate::excitation`]) and durations are bounded.
+//! relative to `u_max` and to `R·i_max`, the smaller ([`crate::excitation`]), and durations
+//! are bounded; the speed reference ramps at [`Coefficients::ramp_acceleration`] up to at
+//! most [`Coefficients::speed_limit`] (`SetSpeed` beyond it is refused).
 use embedded_storage::nor_flash::NorFlash;
 
 use crate::blob::{self, Coefficients, HALL_INVALID, MAX_BLOB_LEN};
@@ -177,6 +181,10 @@ pub struct Board {
     step: ControlStep<f32>,
     table: HallTable,
     run: Run,
+    /// Speed the host asked for [rad/s] (`SetSpeed`).
+    omega_target: f32,
+    /// Speed reference of the control step [rad/s]: moves towards `omega_target` at the
+    /// ramp's acceleration ([`Coefficients::ramp_acceleration`]).
     omega_ref: f32,
     latched: Option<Fault>,
     seq: u32,
@@ -240,6 +248,7 @@ impl Board {
             firmware,
             v_bus_nominal,
             run: Run::Idle,
+            omega_target: 0.0,
             omega_ref: 0.0,
             latched: None,
             seq: 0,
@@ -334,8 +343,20 @@ impl Board {
         }
     }
 
+    /// Largest speed reference `SetSpeed` takes [rad/s] ([`Coefficients::speed_limit`] at
+    /// the nominal bus voltage).
+    pub fn speed_limit(&self) -> f32 {
+        self.coeffs.speed_limit(self.v_bus_nominal)
+    }
+
+    /// The control step's speed reference now [rad/s] (the ramp towards `SetSpeed`'s).
+    pub fn speed_reference(&self) -> f32 {
+        self.omega_ref
+    }
+
     fn start(&mut self, run: Run) {
         self.step.reset();
+        self.omega_ref = 0.0;
         self.run = run;
         self.seq = 0;
         self.k = 0;
@@ -384,6 +405,7 @@ impl Board {
                     firmware,
                     model: self.coeffs.model,
                     coeff_seq: self.coeff_seq,
+                    speed_max: self.speed_limit(),
                 }
             }
             HostMsg::UploadBegin { .. }
@@ -391,8 +413,8 @@ impl Board {
             | HostMsg::UploadCommit
             | HostMsg::UploadAbort => return false,
             HostMsg::SetSpeed { omega_ref } => {
-                if omega_ref.is_finite() {
-                    self.omega_ref = omega_ref;
+                if omega_ref.abs() <= self.speed_limit() {
+                    self.omega_target = omega_ref;
                     BoardMsg::Ack
                 } else {
                     BoardMsg::Nack(Nack::OutOfRange)
@@ -585,7 +607,8 @@ impl Board {
                     self.run = Run::Idle;
                     None
                 } else {
-                    Some(excitation::voltage(signal, t, u_lim))
+                    let r_i_max = self.coeffs.motor.r * lim.i_max;
+                    Some(excitation::voltage(signal, t, u_lim, r_i_max))
                 }
             }
             _ => None,
@@ -599,14 +622,21 @@ impl Board {
         inp.now_ticks = m.now_ticks;
         inp.i_meas = i;
         inp.v_bus = u_lim;
+        // The speed ramp: at most the ramp's acceleration times the period per period.
+        let dw = self.coeffs.ramp_acceleration(self.step.current_limit()) * dt;
+        let w = self.omega_ref;
+        self.omega_ref = crate::pi::saturate(self.omega_target, w - dw, w + dw);
         inp.omega_ref = self.omega_ref;
         inp.v_override = v_override;
         let out = self.step.step(&self.inp);
         self.last_out = out;
 
         if self.run != Run::Idle {
-            // Stall: a large voltage and the rotor does not step.
-            if out.v_cmd.abs() > STALL_FRACTION * u_lim && out.steps == self.last_steps {
+            // Stall: the drive pushes (a large voltage, or held by the current limit) and
+            // the rotor does not step.
+            let pushing = out.v_cmd.abs() > STALL_FRACTION * u_lim
+                || out.faults.contains(Faults::CURRENT_LIMIT);
+            if pushing && out.steps == self.last_steps {
                 self.stall += 1;
             } else {
                 self.stall = 0;

@@ -2,13 +2,21 @@
 //! the firmware and the emulated board alike, through [`crate::board`]).
 //!
 //! The reference paper gives its signals only by amplitude and frequency range; these follow
-//! the same table as the host emulator (`host-tools/src/emulator/signals.rs`), with the
-//! amplitudes relative to the loop's voltage limit `u_max` (the paper's 24 V motor, where
-//! they are the paper's values): `a` multisine 0.1-1 Hz up to u_max/2 (12 V), `b` up to
-//! u_max/4 (6 V) 0.05-1 Hz, `c` up to u_max/48 (0.5 V) 0.25-1 Hz, `d` steps between
-//! ±5/12·u_max (±10 V) held 1-3 s, plus constant and ramp in volts, bounded by ±u_max. The shapes are deterministic but
-//! not sample-identical to the host's (which uses a seeded `StdRng`): the log records the
-//! voltage actually applied, which is what identification uses.
+//! the same table as the host emulator (`host-tools/src/emulator/signals.rs`). Each of
+//! `a`-`d` has its paper peak `P` at the reference voltage limit of 24 V (the paper's
+//! motor): `a` multisine 0.1-1 Hz up to 12 V, `b` up to 6 V 0.05-1 Hz, `c` up to 0.5 V
+//! 0.25-1 Hz, `d` steps between ±10 V held 1-3 s. On the board a signal's peak [V] is the
+//! smaller of two sizes:
+//! - relative to the voltage limit: `P·u_max/24 V`;
+//! - relative to the current limit: [`CURRENT_FRACTION`]`·R·i_max` (R [Ω], i_max [A], the
+//!   blob's trip current). At standstill the signal then draws at most 0.35·i_max, and the
+//!   largest step of `d` (between opposite levels, at speed) changes the current by at
+//!   most 0.7·i_max, inside the standing current limit 0.8·i_max of [`crate::step`].
+//!
+//! Constant and ramp are in volts, bounded by ±u_max (the step's current window bounds their
+//! current). The shapes are deterministic but not sample-identical to the host's (which uses
+//! a seeded `StdRng`): the log records the voltage actually applied, which is what
+//! identification uses.
 //!
 //! Multisines use Schroeder phases (low crest factor) and are scaled by the sum of their
 //! amplitudes, so the peak never exceeds the stated amplitude; a slow envelope varies the
@@ -19,6 +27,9 @@ use crate::frame::Excitation;
 
 /// The `u_max` [V] at which the signals a-d have the paper's amplitudes (its 24 V motor).
 pub const U_MAX_REFERENCE: f32 = 24.0;
+/// Largest peak of a-d as a fraction of `R·i_max` [V]: at most 0.35·i_max at standstill,
+/// and twice that for a step between opposite levels (module docs).
+pub const CURRENT_FRACTION: f32 = 0.35;
 
 struct Multisine {
     f_lo: f32,
@@ -53,7 +64,8 @@ fn hash01(mut x: u32) -> f32 {
     (x >> 8) as f32 / (1u32 << 24) as f32
 }
 
-/// Steps between −10 and 10 V held 1-3 s, at rest for the first second.
+/// Steps between −10 and 10 V held 1-3 s, at rest for the first second (peak
+/// [`STEPS_PEAK`]).
 fn steps(t: f32) -> f32 {
     if t < 1.0 {
         return 0.0;
@@ -63,7 +75,7 @@ fn steps(t: f32) -> f32 {
     loop {
         let hold = 1.0 + 2.0 * hash01(2 * k + 1);
         if t < start + hold || k > 10_000 {
-            let level = 10.0 * hash01(2 * k + 2);
+            let level = STEPS_PEAK * hash01(2 * k + 2);
             return if hash01(2 * k + 3 + 0x9e37) < 0.5 {
                 level
             } else {
@@ -75,49 +87,54 @@ fn steps(t: f32) -> f32 {
     }
 }
 
+/// Largest level of signal d at the reference voltage limit [V].
+const STEPS_PEAK: f32 = 10.0;
+
+const A: Multisine = Multisine {
+    f_lo: 0.1,
+    f_hi: 1.0,
+    n: 12,
+    peak: 12.0,
+    env_period: 30.0,
+    env_min: 0.1,
+};
+const B: Multisine = Multisine {
+    f_lo: 0.05,
+    f_hi: 1.0,
+    n: 10,
+    peak: 6.0,
+    env_period: 60.0,
+    env_min: 0.2,
+};
+const C: Multisine = Multisine {
+    f_lo: 0.25,
+    f_hi: 1.0,
+    n: 8,
+    peak: 0.5,
+    env_period: 20.0,
+    env_min: 0.3,
+};
+
 /// Voltage [V] of `signal` at time `t` [s] since the start, for the voltage limit `u_max`
-/// [V] (the result is within ±u_max).
-pub fn voltage(signal: Excitation, t: f32, u_max: f32) -> f32 {
-    let scale = u_max / U_MAX_REFERENCE;
-    let v = match signal {
-        Excitation::A => multisine(
-            &Multisine {
-                f_lo: 0.1,
-                f_hi: 1.0,
-                n: 12,
-                peak: 12.0,
-                env_period: 30.0,
-                env_min: 0.1,
-            },
-            t,
-        ),
-        Excitation::B => multisine(
-            &Multisine {
-                f_lo: 0.05,
-                f_hi: 1.0,
-                n: 10,
-                peak: 6.0,
-                env_period: 60.0,
-                env_min: 0.2,
-            },
-            t,
-        ),
-        Excitation::C => multisine(
-            &Multisine {
-                f_lo: 0.25,
-                f_hi: 1.0,
-                n: 8,
-                peak: 0.5,
-                env_period: 20.0,
-                env_min: 0.3,
-            },
-            t,
-        ),
-        Excitation::D => steps(t),
+/// [V] and the winding's drop at the current trip, `r_i_max = R·i_max` [V]: a-d peak at
+/// `min(P·u_max/24 V, CURRENT_FRACTION·r_i_max)` (module docs). The result is within ±u_max.
+pub fn voltage(signal: Excitation, t: f32, u_max: f32, r_i_max: f32) -> f32 {
+    let (shape, peak) = match signal {
+        Excitation::A => (multisine(&A, t), A.peak),
+        Excitation::B => (multisine(&B, t), B.peak),
+        Excitation::C => (multisine(&C, t), C.peak),
+        Excitation::D => (steps(t), STEPS_PEAK),
         Excitation::Steady { volts } => return crate::pi::saturate(volts, -u_max, u_max),
         Excitation::Ramp { volts_per_s } => {
             return crate::pi::saturate(volts_per_s * t, -u_max, u_max)
         }
     };
-    crate::pi::saturate(v * scale, -u_max, u_max)
+    let by_voltage = u_max / U_MAX_REFERENCE;
+    let by_current = CURRENT_FRACTION * r_i_max / peak;
+    let scale = if by_current < by_voltage {
+        by_current
+    } else {
+        by_voltage
+    };
+    crate::pi::saturate(shape * scale, -u_max, u_max)
 }

@@ -21,12 +21,12 @@
 //!
 //! | host sends | board answers |
 //! |---|---|
-//! | `Identify` | `Identity { protocol, firmware, model, coeff_seq }` |
+//! | `Identify` | `Identity { protocol, firmware, model, coeff_seq, speed_max }` |
 //! | `UploadBegin { total_len, crc }` | `UploadAck { index: 0xFFFF }` or `Nack` |
 //! | `UploadChunk { index, data }` (≤ [`CHUNK_LEN`] bytes, index 0, 1, ...) | `UploadAck { index }` or `Nack` |
 //! | `UploadCommit` | `Committed { seq }` after the flash write, or `Nack` (`Busy` unless idle) |
 //! | `UploadAbort` | `UploadAck { index: 0xFFFF }` |
-//! | `SetSpeed { omega_ref }` | `Ack` |
+//! | `SetSpeed { omega_ref }` | `Ack`, or `Nack(OutOfRange)` when \|omega_ref\| exceeds `speed_max` (or is not finite) |
 //! | `SetMode { mode }` | `Ack`, or `Nack(Faulted)` with a latched fault, `Nack(NoCoefficients)` (see below), `Nack(Busy)` if the firmware's command queue is full |
 //! | `StartExperiment { signal, duration_s }` | `Ack`, then samples until done (`t` and `seq` restart at 0) |
 //! | `Stop` / `ClearFault` | `Ack` |
@@ -36,7 +36,7 @@
 //! | `ReadTelemetry` | `Telemetry(..)`: the last complete window of [`crate::telemetry`] |
 //! | (nothing) | `Sample { .. }` every 12 ms while running, `Telemetry(..)` every second while running, `Fault`, `Warning` |
 //!
-//! Version 3 adds `ReadTelemetry` and `Telemetry`. Refusals (since version 2): `SetMode { Speed }` and `StartExperiment` without valid
+//! Version 4 adds `speed_max` to `Identity` and refuses a `SetSpeed` beyond it; version 3 adds `ReadTelemetry` and `Telemetry`. Refusals (since version 2): `SetMode { Speed }` and `StartExperiment` without valid
 //! coefficients (`Nack(NoCoefficients)`); an experiment whose duration is not finite, not
 //! positive or above [`crate::board::MAX_EXPERIMENT_S`], or a steady voltage beyond `u_max`
 //! (`Nack(OutOfRange)`); any start while a fault is latched (`Nack(Faulted)`). A speed or
@@ -62,7 +62,7 @@ use serde::{Deserialize, Serialize};
 use crate::blob::{self, Coefficients, ModelKind, CRC32, MAX_BLOB_LEN};
 
 /// Protocol version reported by `Identity`.
-pub const PROTOCOL_VERSION: u16 = 3;
+pub const PROTOCOL_VERSION: u16 = 4;
 /// Largest upload chunk.
 pub const CHUNK_LEN: usize = 64;
 /// Largest body (postcard message + CRC).
@@ -242,6 +242,9 @@ pub enum BoardMsg {
         model: ModelKind,
         /// Sequence number of the loaded flash slot (0: none).
         coeff_seq: u32,
+        /// Largest speed reference `SetSpeed` takes [rad/s]
+        /// ([`crate::blob::Coefficients::speed_limit`]).
+        speed_max: f32,
     },
     /// Request done.
     Ack,
@@ -577,6 +580,7 @@ mod tests {
             firmware: heapless::String::try_from("0.1.0").unwrap(),
             model: ModelKind::Lugre,
             coeff_seq: 7,
+            speed_max: 336.8,
         };
         for m in [
             id,

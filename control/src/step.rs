@@ -17,11 +17,13 @@
 //! 5. Compensation `V_c = L·dI_c/dt + R·I_c`, `I_c = F_f/K_t` (R scaled by the heat state of
 //!    a `thermal` effect), plus the voltage lost to `deadtime`.
 //! 6. `V = PI(ω_ref − ω) + g·V_c + V_deadtime` (`g` the compensation weight
-//!    [`StepConfig::comp_gain`]), saturated at ±min(u_max, V_bus) (the PI's
-//!    anti-windup sees the saturation of the total), or the open-loop override in experiment
-//!    mode, saturated the same way. While |I| exceeds the soft current limit `i_limit` the
-//!    window narrows to the steady-state current limit around the back-EMF,
-//!    `K_b·ω ± R·i_limit` (voltage derating; released below 80 % of `i_limit`).
+//!    [`StepConfig::comp_gain`]), or the open-loop override in experiment mode, held in the
+//!    voltage window [`current_window`]: `[K_b·ω − R·i_limit, K_b·ω + R·i_limit]` [V]
+//!    (K_b [V·s/rad], ω [rad/s], R [Ω] with the heat of a `thermal` effect, i_limit [A])
+//!    intersected with ±min(u_max, V_bus). The window is standing: it bounds every command,
+//!    so the current limit holds while the motor keeps running. The PI's anti-windup sees
+//!    the window (no integration while the command is held at an edge and the error pushes
+//!    further).
 //!
 //! No allocation; per step the transcendental calls are those of the observer and the
 //! effects (LuGre: 2 exp; the paper's SINDYc model: a few tanh), the rest is arithmetic.
@@ -53,6 +55,11 @@ pub const RATED_EDGE_RATE: f32 =
 /// More edges in one period are counted as lost (`crate::telemetry::Telemetry::edges_lost`)
 /// and stop a run ([`Faults::EDGE_OVERFLOW`]).
 pub const MAX_EDGES: usize = (RATED_EDGE_RATE * crate::CONTROL_PERIOD_S * 1.5) as usize + 1;
+/// Highest speed [rad/s] of a motor with `pole_pairs` whose Hall edges the capture queue
+/// holds: [`RATED_EDGE_RATE`]·2π/(6·pole_pairs) (373 rad/s with 11 pole pairs).
+pub fn rated_speed(pole_pairs: u16) -> f32 {
+    RATED_EDGE_RATE * core::f32::consts::TAU / (6.0 * f32::from(pole_pairs.max(1)))
+}
 /// Effects a configuration can carry.
 pub const MAX_EFFECTS: usize = 8;
 /// The velocity estimator's angle reference moves after this many Hall steps (4096 steps are
@@ -91,8 +98,7 @@ pub struct StepConfig<F> {
     pub pi: PiParams<F>,
     /// Voltage limit of the command [V] (the blob's `u_max`); non-finite or ≤ 0: V_bus only.
     pub u_max: F,
-    /// Soft current limit [A]: above it the voltage is derated (see the module docs);
-    /// infinite: none.
+    /// Current limit [A] of the voltage window [`current_window`]; infinite: none.
     pub i_limit: F,
     /// Nominal bus voltage [V], used when the measured one is missing or invalid.
     pub v_bus: F,
@@ -172,7 +178,8 @@ impl Faults {
     pub const SATURATED: u16 = 1 << 5;
     /// The friction estimate was not finite; it was replaced by 0 and the observer reset.
     pub const OBSERVER_RESET: u16 = 1 << 6;
-    /// The current exceeded the soft limit: the voltage is derated.
+    /// The command is held at an edge of the current window `K_b·ω ± R·i_limit` (the
+    /// current limit acts; see [`current_window`]).
     pub const CURRENT_LIMIT: u16 = 1 << 7;
 
     pub fn contains(self, flag: u16) -> bool {
@@ -220,8 +227,6 @@ pub struct ControlStep<F> {
     v_bus_nominal: F,
     u_max: F,
     i_limit: F,
-    /// Voltage derating active (hysteresis state of the soft current limit).
-    derating: bool,
     /// Weight of the compensation voltage (see [`StepConfig::comp_gain`]).
     comp_gain: F,
     decoder: HallDecoder,
@@ -275,6 +280,25 @@ pub fn observer_velocity<F: Float>(_omega_est: F, omega_ref: F, _v_res: F) -> F 
     omega_ref
 }
 
+/// The voltage window [V] that keeps the winding current within a limit: `[emf − r_i,
+/// emf + r_i]` intersected with `[−lim, lim]`, for the back-EMF `emf = K_b·ω` [V], the
+/// limit's resistive drop `r_i = R·i_limit` [V] and the voltage limit `lim` [V].
+///
+/// Exact for the DC-equivalent winding (eq. 2, `L·dI/dt = V − R·I − K_b·ω`) with the
+/// voltage held over the period: the current moves monotonically, with time constant L/R,
+/// from its value at the period's start towards `(V − K_b·ω)/R`, which the window keeps
+/// within ±i_limit, so a current inside the limit stays inside. The rotor's own response
+/// to that current lowers |V − K_b·ω| during the period (motoring speeds it up, braking
+/// slows it down). What the window does not see is the error of the velocity estimate:
+/// `K_b·|ω − ω̂|/R` [A]. An infinite `r_i` gives `[−lim, lim]`; a window beyond `±lim` (a
+/// back-EMF above the voltage limit) collapses onto that edge.
+pub fn current_window<F: Float>(emf: F, r_i: F, lim: F) -> (F, F) {
+    (
+        saturate(emf - r_i, -lim, lim),
+        saturate(emf + r_i, -lim, lim),
+    )
+}
+
 impl<F: Float> ControlStep<F> {
     pub fn new(cfg: &StepConfig<F>) -> Self {
         let step = hall::step_angle::<F>(cfg.pole_pairs);
@@ -302,7 +326,6 @@ impl<F: Float> ControlStep<F> {
             } else {
                 F::infinity()
             },
-            derating: false,
             comp_gain: if cfg.comp_gain.is_finite() && cfg.comp_gain > F::zero() {
                 cfg.comp_gain
             } else {
@@ -327,13 +350,13 @@ impl<F: Float> ControlStep<F> {
         }
     }
 
-    /// Soft current limit [A] (see [`StepConfig::i_limit`]).
+    /// Current limit [A] (see [`StepConfig::i_limit`]).
     pub fn current_limit(&self) -> F {
         self.i_limit
     }
 
-    /// Changes the soft current limit [A] (e.g. lowered with the board temperature); zero
-    /// holds the voltage at the back-EMF, so that no current flows.
+    /// Changes the current limit [A] (e.g. lowered with the board temperature); zero holds
+    /// the voltage at the back-EMF, so that no current flows.
     pub fn set_current_limit(&mut self, i_limit: F) {
         self.i_limit = if i_limit >= F::zero() {
             i_limit
@@ -356,7 +379,6 @@ impl<F: Float> ControlStep<F> {
         self.comp.reset();
         self.u_prev = F::zero();
         self.steps_ref = 0;
-        self.derating = false;
     }
 
     /// The Hall decoder (angle, step count, fault count).
@@ -489,23 +511,11 @@ impl<F: Float> ControlStep<F> {
         } else {
             v_bus
         };
-        let i_abs = current.abs();
-        if i_abs > self.i_limit {
-            self.derating = true;
-        } else if i_abs < F::from(0.8).unwrap() * self.i_limit {
-            self.derating = false;
-        }
-        let (lo, hi) = if self.derating {
-            faults.set(Faults::CURRENT_LIMIT);
-            let emf = self.motor.kb * omega;
-            let win = self.comp.params.r * self.i_limit;
-            (
-                saturate(emf - win, -lim, lim),
-                saturate(emf + win, -lim, lim),
-            )
-        } else {
-            (-lim, lim)
-        };
+        let (lo, hi) = current_window(
+            self.motor.kb * omega,
+            self.comp.params.r * self.i_limit,
+            lim,
+        );
         self.pi.set_limits(lo, hi);
         let err = omega_ref - omega;
         let v_cmd = match inp.v_override {
@@ -528,6 +538,8 @@ impl<F: Float> ControlStep<F> {
         };
         if v_cmd.abs() >= lim {
             faults.set(Faults::SATURATED);
+        } else if v_cmd <= lo || v_cmd >= hi {
+            faults.set(Faults::CURRENT_LIMIT);
         }
         self.u_prev = v_cmd;
         StepOutputs {

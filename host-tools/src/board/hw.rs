@@ -105,6 +105,8 @@ pub struct Hardware {
     tripped: bool,
     /// Hall edges dropped because a period brought more than the queue holds.
     edges_lost: u32,
+    /// Largest |I| [A] of the winding over the fine steps of the last [`Hardware::apply`].
+    peak_current: f64,
 }
 
 impl Hardware {
@@ -120,6 +122,7 @@ impl Hardware {
             last_sign: 1.0,
             tripped: false,
             edges_lost: 0,
+            peak_current: 0.0,
         })
     }
 
@@ -154,6 +157,12 @@ impl Hardware {
         m
     }
 
+    /// Largest winding current |I| [A] during the last period, sampled at every fine
+    /// integration step (the truth, between the board's 12 ms samples).
+    pub fn peak_current(&self) -> f64 {
+        self.peak_current
+    }
+
     /// Re-arms the hardware over-current stop (the firmware does it after `ClearFault`).
     pub fn rearm(&mut self) {
         self.tripped = false;
@@ -167,6 +176,7 @@ impl Hardware {
         let n = (dt / fine - 1e-9).ceil().max(1.0) as usize;
         let h = dt / n as f64;
         let step = std::f64::consts::TAU / (6.0 * f64::from(self.plant.config().pole_pairs));
+        self.peak_current = self.plant.truth().i.abs();
         for _ in 0..n {
             if self.plant.truth().i.abs() > f64::from(HW_TRIP_A) {
                 self.tripped = true;
@@ -194,6 +204,7 @@ impl Hardware {
             };
             self.plant.set_commutation(g);
             self.plant.apply(if k.is_some() { v } else { 0.0 }, h);
+            self.peak_current = self.peak_current.max(self.plant.truth().i.abs());
         }
         self.last_sign = match drive {
             Drive::SixStep { volts, .. } | Drive::Vector { volts, .. } if volts < 0.0 => -1.0,

@@ -25,6 +25,8 @@ pub struct Identity {
     pub firmware: String,
     pub model: control::blob::ModelKind,
     pub coeff_seq: u32,
+    /// Largest speed reference the board takes [rad/s].
+    pub speed_max: f32,
 }
 
 /// An open link to a board.
@@ -130,6 +132,7 @@ impl Link {
                 firmware,
                 model,
                 coeff_seq,
+                speed_max,
             } => {
                 if protocol != frame::PROTOCOL_VERSION {
                     bail!(
@@ -143,6 +146,7 @@ impl Link {
                     firmware: firmware.as_str().to_string(),
                     model,
                     coeff_seq,
+                    speed_max,
                 })
             }
             other => bail!("{}: unexpected answer to Identify: {other:?}", self.name),

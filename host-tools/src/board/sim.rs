@@ -279,6 +279,12 @@ mod tests {
         (None, samples)
     }
 
+    /// R·i_max [V] of the default coefficients.
+    fn co_default_r_i_max() -> f32 {
+        let co = Coefficients::default();
+        co.motor.r * co.limits.i_max
+    }
+
     fn sim_with(plant: EmulatorConfig, co: Option<&Coefficients>) -> BoardSim {
         let mut sim = BoardSim::new(plant, Wiring::default(), RamFlash::new(None)).unwrap();
         replies(&mut sim);
@@ -350,7 +356,8 @@ mod tests {
                 "{signal:?} {duration_s}"
             );
         }
-        // Amplitudes are relative to u_max (12 V by default: signal d steps up to 5 V).
+        // Amplitudes are relative to u_max and R·i_max, the smaller: signal d steps up to
+        // 5/12·12 V = 5 V by the default u_max, 0.35·0.216 Ω·30 A = 2.27 V by the current.
         sim.receive(&frame(&HostMsg::StartExperiment {
             signal: Excitation::D,
             duration_s: 6.0,
@@ -359,7 +366,8 @@ mod tests {
         assert_eq!(f, None);
         assert_eq!(samples.len(), 500);
         let peak = samples.iter().map(|s| s.u.abs()).fold(0.0, f32::max);
-        assert!(peak > 1.0 && peak <= 5.0 + 1e-4, "peak {peak}");
+        let by_current = 0.35 * co_default_r_i_max();
+        assert!(peak > 1.0 && peak <= by_current + 1e-4, "peak {peak}");
     }
 
     #[test]
@@ -367,7 +375,11 @@ mod tests {
         let mut co = Coefficients::default();
         co.pi.u_max = 3.0;
         let mut sim = sim_with(EmulatorConfig::paper(), Some(&co));
-        sim.receive(&frame(&HostMsg::SetSpeed { omega_ref: 150.0 }));
+        // The speed limit is the no-load speed at u_max (42 rad/s): friction keeps the motor
+        // below it, and the loop at its voltage limit.
+        let top = sim.board().speed_limit();
+        assert!((top - 3.0 / co.motor.kb).abs() < 1e-3, "{top}");
+        sim.receive(&frame(&HostMsg::SetSpeed { omega_ref: top }));
         sim.receive(&frame(&HostMsg::SetMode { mode: Mode::Speed }));
         let (f, samples) = run_until_fault(&mut sim, 150);
         assert_eq!(f, None);
@@ -377,10 +389,12 @@ mod tests {
 
     #[test]
     fn overcurrent_trips_and_turns_the_bridge_off() {
+        // A blob whose K_b is three times the motor's: the current window sits around a
+        // back-EMF twice too high once the rotor turns, and the current passes the trip.
         let mut co = Coefficients::default();
         co.limits.i_max = 5.0;
+        co.motor.kb *= 3.0;
         let mut sim = sim_with(EmulatorConfig::paper(), Some(&co));
-        // 6 V on a 0.22 Ω winding: 27 A within the first period.
         sim.receive(&frame(&HostMsg::StartExperiment {
             signal: Excitation::Steady { volts: 6.0 },
             duration_s: 2.0,
@@ -403,45 +417,45 @@ mod tests {
     }
 
     #[test]
-    fn current_derating_keeps_a_rising_voltage_below_the_trip() {
+    fn a_locked_rotor_is_held_at_the_current_limit_then_stops_as_a_stall() {
         // A locked rotor and a voltage ramp of 8 V/s: 44 A after 1.2 s without a limit.
         let mut plant = EmulatorConfig::paper();
         plant.extra_load = Some(std::sync::Arc::new(|x| 1.0e4 * x.omega));
         let mut co = Coefficients::default();
         co.pi.u_max = 20.0;
         co.limits.i_max = 20.0;
-        let mut widest = co.clone();
-        widest.limits.i_max = control::board::HW_TRIP_A;
-        let peak = |co: &Coefficients| {
-            let mut sim = sim_with(plant.clone(), Some(co));
-            sim.receive(&frame(&HostMsg::StartExperiment {
-                signal: Excitation::Ramp { volts_per_s: 8.0 },
-                duration_s: 1.2,
-            }));
-            replies(&mut sim);
-            let (f, samples) = run_until_fault(&mut sim, 100);
-            let peak = samples.iter().map(|s| s.i.abs()).fold(0.0, f32::max);
-            (f, peak, samples.last().map_or(0.0, |s| s.i))
-        };
-        // With the board's widest limit (derating from 32 A) the ramp passes 20 A.
-        let (f, free, _) = peak(&widest);
-        assert_eq!(f, None);
-        assert!(free > 25.0, "with i_max = 40 A the ramp draws {free} A");
-        let (f, limited, last) = peak(&co);
-        assert_eq!(f, None, "peak {limited} A");
-        // Derated from 0.8·i_max = 16 A: the current settles there, below the 20 A trip.
-        assert!(limited <= 20.0, "peak {limited} A");
+        let mut sim = sim_with(plant, Some(&co));
+        sim.receive(&frame(&HostMsg::StartExperiment {
+            signal: Excitation::Ramp { volts_per_s: 8.0 },
+            duration_s: 3.0,
+        }));
+        replies(&mut sim);
+        let (f, samples) = run_until_fault(&mut sim, 300);
+        assert_eq!(f, Some(Fault::Stall));
+        // Held at 0.8·i_max = 16 A, below the 20 A trip, for the stall time.
+        let peak = samples.iter().map(|s| s.i.abs()).fold(0.0, f32::max);
+        assert!(peak <= 16.5, "peak {peak} A");
+        let last = samples.last().map_or(0.0, |s| s.i);
         assert!((last - 16.0).abs() < 1.0, "last {last} A");
+        let held = samples.iter().filter(|s| s.i > 15.5).count() as u32;
+        let n = control::board::STALL_PERIODS;
+        assert!(
+            (n - 3..=n + 1).contains(&held),
+            "{held} periods at the limit"
+        );
     }
 
     #[test]
     fn the_hardware_stop_cuts_a_short_until_the_fault_is_cleared() {
         // A locked rotor and 12 V on 0.22 Ω: 55 A within a few milliseconds of the first
-        // period, before the 12 ms software limit (the widest allowed) can act.
+        // period, before the 12 ms software limit (the widest allowed) can act. The blob
+        // says R is ten times the winding's, so the current window lets 12 V through (as a
+        // shorted winding would).
         let mut plant = EmulatorConfig::paper();
         plant.extra_load = Some(std::sync::Arc::new(|x| 1.0e4 * x.omega));
         let mut co = Coefficients::default();
         co.limits.i_max = control::board::HW_TRIP_A;
+        co.motor.r *= 10.0;
         let mut sim = sim_with(plant, Some(&co));
         sim.receive(&frame(&HostMsg::StartExperiment {
             signal: Excitation::Steady { volts: 12.0 },

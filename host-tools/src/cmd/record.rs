@@ -45,7 +45,11 @@ pub struct Args {
     #[arg(long, value_name = "V", default_value_t = 12.0)]
     pub u_max: f64,
     /// Instead of an excitation: closed-loop speed control at this reference [rad/s], with
-    /// the board's friction compensation (the uploaded coefficients).
+    /// the board's friction compensation (the uploaded coefficients). At most the board's
+    /// speed limit: the no-load speed at its voltage limit, min(u_max, 0.95·V_bus)/K_b, and
+    /// the speed whose Hall edges the board captures (373 rad/s with 11 pole pairs, see
+    /// --pole-pairs). The board ramps the speed up at half the current limit's torque over
+    /// the inertia, 0.5·K_t·i_limit/J.
     #[arg(long, value_name = "RAD_S", allow_hyphen_values = true)]
     pub speed_ref: Option<f32>,
     /// Duration [s] of a-d or --speed-ref. Default: the signal's (a, b: 90 s; c, d: see
@@ -101,6 +105,21 @@ pub fn program(kind: &str, peak: f64) -> Vec<(Excitation, f64)> {
     }
 }
 
+/// `--speed-ref` `w` [rad/s] within ±`limit` [rad/s] (`whose` names the limit): one error
+/// line naming the flag otherwise.
+fn check_speed_ref(w: f32, limit: f32, whose: &str) -> Result<()> {
+    if !w.is_finite() {
+        bail!("--speed-ref: must be a number of rad/s (got {w})");
+    }
+    if w.abs() > limit {
+        bail!(
+            "--speed-ref: {w} rad/s is beyond {whose} speed limit of {limit:.1} rad/s \
+             (the board refuses it)"
+        );
+    }
+    Ok(())
+}
+
 /// The serial port to use when none is given: the only candidate, else an error that lists
 /// them (or says there is none).
 pub fn pick_port(candidates: &[String]) -> Result<String> {
@@ -140,9 +159,11 @@ pub fn run(args: Args) -> Result<()> {
     };
     let program_kind = matches!(args.signal.as_deref(), Some("steady" | "ramp"));
     if let Some(w) = args.speed_ref {
-        if !w.is_finite() {
-            bail!("--speed-ref: must be a number of rad/s (got {w})");
-        }
+        check_speed_ref(
+            w,
+            control::step::rated_speed(args.pole_pairs),
+            "the Hall capture's",
+        )?;
     }
     let rated = f64::from(control::blob::RATED_VBUS_MAX);
     if !(args.u_max.is_finite() && args.u_max > 0.0 && args.u_max <= rated) {
@@ -197,6 +218,9 @@ pub fn run(args: Args) -> Result<()> {
     crate::atomic::check_outputs(&[&args.output], &[std::path::Path::new(&port)])?;
     let mut link = Link::open(&port)?;
     let id = link.identify()?;
+    if let Some(w) = args.speed_ref {
+        check_speed_ref(w, id.speed_max, "the board's")?;
+    }
     link.command(&HostMsg::Stop, "stop")?;
     let before = link.read_telemetry()?;
     link.pending_telemetry.clear();
