@@ -54,8 +54,9 @@ pub const MAX_BLOB_LEN: usize = 1024;
 pub const MAX_PAYLOAD_LEN: usize = MAX_BLOB_LEN - HEADER_LEN - CRC_LEN;
 /// Most added effects a blob carries.
 pub const MAX_EFFECTS: usize = 8;
-/// The control step derates the voltage above this fraction of `limits.i_max`; the board
-/// trips (fault, bridge off) above `i_max` itself.
+/// The control step holds the current at this fraction of `limits.i_max` (its standing
+/// current limit, [`crate::step::current_window`]); the board trips (fault, bridge off)
+/// above `i_max` itself.
 pub const DERATE_FRACTION: f32 = 0.8;
 /// Share of the current limit's torque `K_t·i_limit` the speed reference's ramp asks of the
 /// inertia ([`Coefficients::ramp_acceleration`]); the rest is left for friction, load and

@@ -113,6 +113,12 @@ fn a_step_from_standstill_holds_the_current_limit_and_reaches_the_speed() {
         );
         let w = mean_speed(&p[250..]);
         assert!((w - 200.0).abs() < 4.0, "speed, i_max {i_max}: {w} rad/s");
+        // The PI did not wind up while the window held it: no overshoot to speak of.
+        let top = p.iter().map(|x| x.omega).fold(0.0, f64::max);
+        assert!(
+            top < 205.0,
+            "speed, i_max {i_max}: overshoot to {top} rad/s"
+        );
         if i_max == 10.0 {
             // The ramp alone would ask 8 A of acceleration and friction: the limit acts.
             assert!(peak > 0.85 * lim, "speed, i_max {i_max}: peak {peak} A");

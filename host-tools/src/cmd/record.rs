@@ -29,7 +29,8 @@ pub struct Args {
     pub port: Option<String>,
     /// Excitation, open loop, with amplitudes relative to the board's voltage limit u_max (the
     /// uploaded coefficients'; the paper's values at u_max = 24 V): a (fitting, up to u_max/2),
-    /// b (up to u_max/4), c (low speed, up to u_max/48), d (steps up to 5/12·u_max); steady
+    /// b (up to u_max/4), c (low speed, up to u_max/48), d (steps up to 5/12·u_max), each at
+    /// most 0.35·R·i_max (the board's current trip through the winding); steady
     /// (constant levels from 2/3 to all of --amplitude, both signs, 3 s each: the static
     /// friction curve `fit --model lugre` asks for) and ramp (slow ramps from rest to ±2/3 of
     /// --amplitude at two slopes: breakaway).
