@@ -138,3 +138,39 @@ pub fn voltage(signal: Excitation, t: f32, u_max: f32, r_i_max: f32) -> f32 {
     };
     crate::pi::saturate(shape * scale, -u_max, u_max)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn signals_peak_at_the_smaller_of_the_voltage_and_the_current_size() {
+        // u_max 24 V: the paper's peaks; R·i_max 6.5 V (0.216 Ω, 30 A): at most 2.27 V.
+        for (r_i_max, sizes) in [
+            (1e3, [12.0, 6.0, 0.5, 10.0]),
+            (6.5, [2.275, 2.275, 0.5, 2.275]),
+        ] {
+            for (signal, size) in [Excitation::A, Excitation::B, Excitation::C, Excitation::D]
+                .into_iter()
+                .zip(sizes)
+            {
+                let top = (0..10_000)
+                    .map(|k| voltage(signal, k as f32 * 0.012, 24.0, r_i_max).abs())
+                    .fold(0.0f32, f32::max);
+                assert!(
+                    top <= size * (1.0 + 1e-6) && top > 0.3 * size,
+                    "{signal:?} at R·i_max {r_i_max} V: peak {top} V of {size} V"
+                );
+            }
+        }
+        // Constant and ramp stay in volts, within ±u_max.
+        assert_eq!(
+            voltage(Excitation::Steady { volts: 5.0 }, 1.0, 24.0, 1.0),
+            5.0
+        );
+        assert_eq!(
+            voltage(Excitation::Ramp { volts_per_s: -10.0 }, 3.0, 24.0, 1.0),
+            -24.0
+        );
+    }
+}

@@ -847,6 +847,46 @@ mod tests {
     }
 
     #[test]
+    fn current_window_centres_on_the_back_emf_within_the_voltage_limit() {
+        // K_b·ω = 7 V, R·i_limit = 2 V, limit 12 V: 5..9 V, i.e. ±i_limit at steady state.
+        assert_eq!(current_window(7.0, 2.0, 12.0), (5.0, 9.0));
+        // A back-EMF beyond the voltage limit collapses the window onto that edge.
+        assert_eq!(current_window(20.0, 2.0, 12.0), (12.0, 12.0));
+        // No current limit: the voltage limit alone.
+        assert_eq!(current_window(-3.0, f64::INFINITY, 12.0), (-12.0, 12.0));
+    }
+
+    #[test]
+    fn the_current_window_holds_the_command_and_stops_the_integrator() {
+        // At standstill with a large speed error the command is R·i_limit, not the
+        // 5 V the PI asks (kp·100 rad/s), and the integral does not grow meanwhile.
+        let mut cfg = StepConfig::<f64>::paper();
+        cfg.observer = ObserverConfig::None;
+        cfg.i_limit = 10.0;
+        let mut ctl = ControlStep::new(&cfg);
+        let inp = StepInputs {
+            hall: 1,
+            v_bus: 24.0,
+            omega_ref: 100.0,
+            ..Default::default()
+        };
+        let r_i = cfg.motor.r * 10.0;
+        for _ in 0..50 {
+            let out = ctl.step(&inp);
+            assert!((out.v_cmd - r_i).abs() < 1e-12, "{}", out.v_cmd);
+            assert!(out.faults.contains(Faults::CURRENT_LIMIT));
+            assert!(!out.faults.contains(Faults::SATURATED));
+        }
+        assert_eq!(ctl.pi().integral, 0.0);
+        // The open-loop override is held the same way.
+        let out = ctl.step(&StepInputs {
+            v_override: Some(-20.0),
+            ..inp
+        });
+        assert!((out.v_cmd + r_i).abs() < 1e-12, "{}", out.v_cmd);
+    }
+
+    #[test]
     fn edge_queue_holds_a_period_at_the_rated_speed() {
         let per_period = RATED_EDGE_RATE * crate::CONTROL_PERIOD_S;
         assert!(
@@ -856,6 +896,8 @@ mod tests {
         assert!((per_period - 47.0).abs() < 0.5, "{per_period}");
         assert!(MAX_EDGES as f32 >= 1.5 * per_period, "{MAX_EDGES}");
         assert!((MAX_EDGES as f32) < 1.5 * per_period + 2.0, "{MAX_EDGES}");
+        assert!((rated_speed(RATED_POLE_PAIRS) - RATED_SPEED_RAD_S).abs() < 1e-3);
+        assert!((rated_speed(4) - RATED_SPEED_RAD_S * 11.0 / 4.0).abs() < 1e-2);
     }
 
     #[test]
