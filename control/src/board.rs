@@ -275,8 +275,10 @@ impl Board {
         b
     }
 
-    /// Load newly committed coefficients (flash slot sequence `seq`); any run stops.
+    /// Load newly committed coefficients (flash slot sequence `seq`); any run stops, and
+    /// the speed asked for goes back to zero (it was checked against the old limit).
     pub fn load(&mut self, coeffs: Coefficients, seq: u32) {
+        self.omega_target = 0.0;
         self.step = ControlStep::new(&coeffs.step_config(self.v_bus_nominal));
         self.table = table_of(&coeffs);
         if let Some(c) = coeffs.commission {
@@ -879,6 +881,26 @@ mod tests {
         }
         assert_eq!(reports, 1);
         assert!(out.is_empty(), "{out:?}");
+    }
+
+    #[test]
+    fn new_coefficients_drop_a_speed_checked_against_the_old_limit() {
+        let (mut b, mut out) = running_board();
+        b.handle(&HostMsg::SetSpeed { omega_ref: 150.0 }, &mut |m| {
+            out.push(m)
+        });
+        assert_eq!(out, [BoardMsg::Ack]);
+        let mut slow = Coefficients::default();
+        slow.pi.u_max = 3.0; // 42 rad/s
+        b.load(slow, 2);
+        b.handle(&HostMsg::SetMode { mode: Mode::Speed }, &mut |m| {
+            out.push(m)
+        });
+        for _ in 0..20 {
+            b.tick(&at(25.0), &mut |m| out.push(m));
+        }
+        assert_eq!(b.speed_reference(), 0.0);
+        assert!(b.speed_limit() < 43.0, "{}", b.speed_limit());
     }
 
     #[test]
