@@ -70,6 +70,13 @@ fn export_inspect_round_trip() {
         "cogging:harmonic=6,amp=0.01,phase=0.5"
     );
     let c = &v["coefficients"];
+    // The limits the board derives from the blob are shown beside it.
+    let d = &v["derived_limits"];
+    let i_max = c["limits"]["i_max"].as_f64().unwrap();
+    let held = d["current_limit_a"].as_f64().unwrap();
+    assert!(held > 0.0 && held < i_max, "{held} vs {i_max}");
+    assert!(d["speed_limit_rad_s"].as_f64().unwrap() > 0.0);
+    assert!(d["ramp_rad_s2"].as_f64().unwrap() > 0.0);
     // f32 on the board: compare at single precision.
     let close = |x: &serde_json::Value, want: f64| {
         let x = x.as_f64().unwrap();

@@ -64,6 +64,7 @@ pub fn to_json(file: &str, bytes: &[u8], co: &Coefficients) -> Result<serde_json
         "model": kind_name(co.model),
         "effects": effects,
         // Through text so that each f32 keeps its shortest decimal form.
+        "derived_limits": derived_limits(co),
         "coefficients": serde_json::from_str::<serde_json::Value>(&serde_json::to_string(co)?)?,
     }))
 }
@@ -121,5 +122,38 @@ pub fn run(args: Args) -> Result<()> {
         "loop:       kp = {} V/(rad/s), ki = {} V/rad, u_max = {} V, compensation gain {}",
         co.pi.kp, co.pi.ki, co.pi.u_max, co.pi.comp_gain
     );
+    let d = derived_limits(&co);
+    println!(
+        "limits:     i_max = {} A (current held below {} A), bus {}..{} V; speed reference \
+         at most {} rad/s, ramped at {} rad/s²",
+        co.limits.i_max,
+        d.current_limit_a,
+        co.limits.vbus_min,
+        co.limits.vbus_max,
+        d.speed_limit_rad_s,
+        d.ramp_rad_s2
+    );
     Ok(())
+}
+
+/// What the board derives from the blob's limits and motor constants (`control::blob`):
+/// the standing current limit, the largest speed reference at the highest allowed bus
+/// voltage, and the speed reference's ramp.
+#[derive(serde::Serialize)]
+struct DerivedLimits {
+    /// `DERATE_FRACTION·i_max` [A].
+    current_limit_a: f32,
+    /// `min(u_max, MAX_DUTY·vbus_max)/K_b`, capped by the Hall capture rate [rad/s].
+    speed_limit_rad_s: f32,
+    /// Acceleration of the speed reference at that current limit [rad/s²].
+    ramp_rad_s2: f32,
+}
+
+fn derived_limits(co: &Coefficients) -> DerivedLimits {
+    let current_limit_a = blob::DERATE_FRACTION * co.limits.i_max;
+    DerivedLimits {
+        current_limit_a,
+        speed_limit_rad_s: co.speed_limit(co.limits.vbus_max),
+        ramp_rad_s2: co.ramp_acceleration(current_limit_a),
+    }
 }
