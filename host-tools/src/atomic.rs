@@ -91,21 +91,21 @@ pub fn check_outputs(outputs: &[&Path], inputs: &[&Path]) -> Result<()> {
             bail!(
                 "{}: the output file is also an input ({}) and would be overwritten; choose \
                  another output path",
-                out.display(),
-                inp.display()
+                crate::log::echo_path(&out),
+                crate::log::echo_path(&inp)
             );
         }
         if let Some(other) = outputs[..k].iter().find(|o| same_file(out, o)) {
             bail!(
                 "{}: two outputs of this command are the same file ({}); give each its own path",
-                out.display(),
-                other.display()
+                crate::log::echo_path(&out),
+                crate::log::echo_path(&other)
             );
         }
         if out.is_dir() {
             bail!(
                 "{}: is a directory; give a file name for the output",
-                out.display()
+                crate::log::echo_path(&out)
             );
         }
         // The folder policy too, before any work rather than at the write.
@@ -134,8 +134,8 @@ fn folder_policy(path: &Path, missing: &[PathBuf]) -> Result<()> {
             "{}: folder {} does not exist; create it first (outside the current directory \
              motorid creates only the output's own folder, inside one that exists, not at the \
              root)",
-            path.display(),
-            first.display()
+            crate::log::echo_path(&path),
+            crate::log::echo_path(&first)
         );
     }
     Ok(())
@@ -161,7 +161,7 @@ fn missing_dirs(dir: &Path) -> Vec<PathBuf> {
 /// folders created and announced). On any error `path` is untouched and nothing is left
 /// behind.
 pub fn write(path: &Path, bytes: &[u8]) -> Result<()> {
-    let p = path.display();
+    let p = crate::log::echo_path(&path);
     // A symbolic link: write through to its target.
     let target = match std::fs::symlink_metadata(path) {
         Ok(m) if m.file_type().is_symlink() => std::fs::canonicalize(path).map_err(|_| {
@@ -192,14 +192,18 @@ pub fn write(path: &Path, bytes: &[u8]) -> Result<()> {
     let created = missing_dirs(&dir);
     folder_policy(path, &created)?;
     if !created.is_empty() {
-        std::fs::create_dir_all(&dir)
-            .with_context(|| format!("{p}: cannot create directory {}", dir.display()))?;
+        std::fs::create_dir_all(&dir).with_context(|| {
+            format!(
+                "{p}: cannot create directory {}",
+                crate::log::echo_path(&dir)
+            )
+        })?;
     }
     let result = write_in(&dir, &target, existing.as_ref(), bytes);
     match result {
         Ok(()) => {
             if let Some(first) = created.first() {
-                eprintln!("note: created directory {}", first.display());
+                eprintln!("note: created directory {}", crate::log::echo_path(&first));
             }
             Ok(())
         }
@@ -222,7 +226,7 @@ fn write_in(
         .prefix(".motorid-")
         .suffix(".tmp")
         .tempfile_in(dir)
-        .with_context(|| format!("cannot create a file in {}", dir.display()))?;
+        .with_context(|| format!("cannot create a file in {}", crate::log::echo_path(&dir)))?;
     // Removed by the handler on Ctrl-C; by `tmp`'s own drop on an error.
     let _guard = interrupt::register(tmp.path());
     // Temporary files are created 0600: keep the replaced file's bits, else the usual 0644.

@@ -312,7 +312,11 @@ impl EffectSpec {
             })?;
             let k = k.trim();
             if values.contains_key(k) {
-                bail!("effect '{}': key '{k}' is given twice", kind.name());
+                bail!(
+                    "effect '{}': key '{}' is given twice",
+                    kind.name(),
+                    crate::log::echo(k)
+                );
             }
             if !known.iter().any(|key| key.name == k) {
                 bail!(
@@ -375,7 +379,11 @@ impl EffectSpec {
         if self.kind == EffectKind::Cogging {
             if let Some(h) = self.values.get("harmonic") {
                 if *h < 2.0 || h.fract() != 0.0 || *h > 1000.0 {
-                    bail!("effect 'cogging': harmonic must be a whole number of 2 or more (got {h}); one period per revolution is 'position_load'");
+                    bail!(
+                        "effect 'cogging': harmonic must be a whole number of 2 or more (got {}); \
+                         one period per revolution is 'position_load'",
+                        crate::validate::show(*h)
+                    );
                 }
             }
         }
@@ -397,7 +405,11 @@ impl EffectSpec {
             if self.table_var() != TableVar::Theta {
                 if let (Some(lo), Some(hi)) = (self.values.get("lo"), self.values.get("hi")) {
                     if lo >= hi {
-                        bail!("effect 'table': lo ({lo}) must be below hi ({hi})");
+                        bail!(
+                            "effect 'table': lo ({}) must be below hi ({})",
+                            crate::validate::show(*lo),
+                            crate::validate::show(*hi)
+                        );
                     }
                 }
             }
@@ -405,7 +417,7 @@ impl EffectSpec {
         if self.kind == EffectKind::Backlash && self.get("gap") < 0.0 {
             bail!(
                 "effect 'backlash': key 'gap' [rad] must be 0 or more (got {})",
-                self.get("gap")
+                crate::validate::show(self.get("gap"))
             );
         }
         Ok(())

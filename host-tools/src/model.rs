@@ -220,14 +220,15 @@ mod effects_serde {
             .into_iter()
             .map(|en| {
                 let kind = EffectKind::from_name(&en.name).ok_or_else(|| {
-                    serde::de::Error::custom(format!("unknown effect '{}'", en.name))
+                    serde::de::Error::custom(format!("unknown effect '{}'", echo(&en.name)))
                 })?;
                 let keys = crate::effect_spec::keys(kind);
                 for k in en.values.keys() {
                     if !keys.iter().any(|key| key.name == k) {
                         return Err(serde::de::Error::custom(format!(
-                            "effect '{}': unknown key '{k}'",
-                            en.name
+                            "effect '{}': unknown key '{}'",
+                            en.name,
+                            echo(k)
                         )));
                     }
                 }
@@ -303,7 +304,7 @@ fn check_toml_numbers(path: &str, v: &toml::Value) -> Result<()> {
         toml::Value::Float(f) if path.ends_with(".z_max") && *f == f64::INFINITY => Ok(()),
         toml::Value::Float(f) => crate::validate::finite(*f)
             .map(|_| ())
-            .map_err(|e| anyhow!("field '{path}': {e}")),
+            .map_err(|e| anyhow!("field '{}': {e}", echo(path))),
         toml::Value::Table(t) => t
             .iter()
             .try_for_each(|(k, v)| check_toml_numbers(&format!("{path}.{k}"), v)),
@@ -484,7 +485,7 @@ impl Model {
 
     /// Parse MODEL.toml text; `path` names the file in errors (with line and column).
     pub fn parse(text: &str, path: &Path) -> Result<Model> {
-        let p = path.display();
+        let p = crate::log::echo_path(&path);
         let model = toml::from_str::<Model>(text).map_err(|e| {
             // One line, and no word of the input echoed whole (a 300-digit number, escapes).
             let msg: Vec<String> = e.message().split_whitespace().map(echo).collect();
@@ -514,7 +515,7 @@ impl Model {
         let text = crate::input::read_text(path, crate::input::MAX_MODEL_FILE, "MODEL.toml")?;
         let m = Self::parse(&text, path)?;
         m.validate()
-            .map_err(|e| anyhow!("{}: {e}", path.display()))?;
+            .map_err(|e| anyhow!("{}: {e}", crate::log::echo_path(&path)))?;
         Ok(m)
     }
 

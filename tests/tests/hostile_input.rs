@@ -994,3 +994,105 @@ fn typos_duplicates_and_endless_side_files_are_refused() {
         &["flash.bin", "too large"],
     );
 }
+
+/// Every line `r` holds is at most `max` characters (two paths of 100 and the text) and free of control
+/// characters.
+fn lines_bounded(r: &Run, max: usize) {
+    for line in r.stdout.lines().chain(r.stderr.lines()) {
+        assert!(
+            line.chars().count() <= max,
+            "{} characters: {line}",
+            line.chars().count()
+        );
+        assert!(!line.chars().any(char::is_control), "{line:?}");
+    }
+}
+
+#[test]
+fn echoed_values_are_cut_and_escaped_in_every_message() {
+    let dir = setup();
+    let d = dir.path();
+    let long = format!("\u{1b}[31m{}", "k".repeat(3000));
+    // A note: bounds far beyond the parameter are shown as numbers, not 300 digits.
+    let r = run(
+        d,
+        &[
+            "simulate",
+            "--signal",
+            "a",
+            "--duration",
+            "20",
+            "-o",
+            "a.csv",
+        ],
+    );
+    assert_eq!(r.code, Some(0), "{}", r.stderr);
+    let r = run(
+        d,
+        &[
+            "fit",
+            "--model",
+            "linear",
+            "--bound",
+            "R=1e-300..1e300",
+            "-o",
+            "o.toml",
+            "a.csv",
+        ],
+    );
+    assert_eq!(r.code, Some(0), "{}", r.stderr);
+    assert!(r.stdout.contains("--bound 1e-300..1e300"), "{}", r.stdout);
+    lines_bounded(&r, 200);
+    // Errors: a command-line value clap refuses, one the command refuses, a number.
+    refused(
+        d,
+        &["simulate", "--signal", "a", "--seed", &long],
+        &["--seed", "…"],
+    );
+    refused(
+        d,
+        &["board", "--pty", "--hall-order", &long],
+        &["--hall-order", "…"],
+    );
+    refused(
+        d,
+        &[
+            "record",
+            "--port",
+            "/dev/null",
+            "--signal",
+            "a",
+            "--u-max",
+            "1e300",
+            "-o",
+            "r.csv",
+        ],
+        &["--u-max", "1e300"],
+    );
+    // Names inside a MODEL.toml.
+    std::fs::write(
+        d.join("name.toml"),
+        format!(
+            "{PAPER_LUGRE_MODEL}\n[[effects]]\nname = \"{}\"\n",
+            "k".repeat(3000)
+        ),
+    )
+    .unwrap();
+    refused(
+        d,
+        &["compare", "name.toml", "data.csv"],
+        &["name.toml", "…"],
+    );
+    // A path: its start and its file name.
+    let path = format!("{}/x.csv", "p".repeat(3000));
+    refused(d, &["compare", "m.toml", &path], &["ppp…", "p/x.csv"]);
+    for args in [
+        &["simulate", "--signal", "a", "--seed", &long][..],
+        &["board", "--pty", "--hall-order", &long],
+        &["compare", "name.toml", "data.csv"],
+        &["compare", "m.toml", &path],
+        &["compare", "m.toml", "data.csv", "--report", &long],
+    ] {
+        lines_bounded(&run(d, args), 300);
+    }
+}

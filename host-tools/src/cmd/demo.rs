@@ -289,7 +289,7 @@ pub fn run(args: Args) -> Result<()> {
     if !(args.duration.is_finite() && args.duration >= 10.0) {
         anyhow::bail!(
             "--duration: give at least 10 seconds (got {})",
-            args.duration
+            crate::validate::show(args.duration)
         );
     }
     println!(

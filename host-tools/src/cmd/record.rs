@@ -141,14 +141,17 @@ pub fn run(args: Args) -> Result<()> {
     let program_kind = matches!(args.signal.as_deref(), Some("steady" | "ramp"));
     if let Some(w) = args.speed_ref {
         if !w.is_finite() {
-            bail!("--speed-ref: must be a number of rad/s (got {w})");
+            bail!(
+                "--speed-ref: must be a number of rad/s (got {})",
+                crate::validate::show(f64::from(w))
+            );
         }
     }
     let rated = f64::from(control::blob::RATED_VBUS_MAX);
     if !(args.u_max.is_finite() && args.u_max > 0.0 && args.u_max <= rated) {
         bail!(
             "--u-max: must be positive and at most the board's rated {rated} V (got {})",
-            args.u_max
+            crate::validate::show(args.u_max)
         );
     }
     if args.amplitude.is_some() && !program_kind {
@@ -156,7 +159,10 @@ pub fn run(args: Args) -> Result<()> {
     }
     let amplitude = args.amplitude.unwrap_or(DEFAULT_AMPLITUDE);
     if !(amplitude.is_finite() && amplitude > 0.0 && amplitude <= 1.0) {
-        bail!("--amplitude: must be a fraction of u_max above 0 and at most 1 (got {amplitude})");
+        bail!(
+            "--amplitude: must be a fraction of u_max above 0 and at most 1 (got {})",
+            crate::validate::show(amplitude)
+        );
     }
     if program_kind && args.duration.is_some() {
         bail!("--duration: steady and ramp are programs of fixed length; leave it out");
@@ -180,7 +186,10 @@ pub fn run(args: Args) -> Result<()> {
     };
     for (_, duration) in &runs {
         if !(duration.is_finite() && *duration > 0.0 && *duration <= 3600.0) {
-            bail!("--duration: must be between 0 and 3600 s (got {duration})");
+            bail!(
+                "--duration: must be between 0 and 3600 s (got {})",
+                crate::validate::show(*duration)
+            );
         }
     }
     if args.pole_pairs == 0 {
@@ -251,7 +260,7 @@ pub fn run(args: Args) -> Result<()> {
                 "{port}: the board ended the run early{which}: {got} of {total_n} samples \
                  ({:.1} of {total:.1} s): {end}; nothing written to {} (record again)",
                 got as f64 * ts,
-                args.output.display()
+                crate::log::echo_path(&args.output)
             );
         }
         if excitation.is_none() {
@@ -332,7 +341,7 @@ pub fn run(args: Args) -> Result<()> {
             String::new()
         },
         port,
-        args.output.display()
+        crate::log::echo_path(&args.output)
     );
     Ok(())
 }

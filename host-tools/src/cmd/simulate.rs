@@ -111,7 +111,7 @@ pub fn run(args: Args) -> Result<()> {
     let (ilo, ihi) = range(&res.truth.i);
     println!(
         "wrote {}: {} samples, {:.1} s, signal {}, effects: {}; speed {:.1} .. {:.1} rad/s, current {:.1} .. {:.1} A",
-        args.output.display(),
+        crate::log::echo_path(&args.output),
         res.log.len(),
         res.log.len() as f64 * emulator::SAMPLE_PERIOD,
         args.signal.name(),

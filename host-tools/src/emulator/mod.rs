@@ -203,7 +203,10 @@ impl EmulatorConfig {
             ("J", m.j),
         ] {
             if !(v.is_finite() && v > 0.0) {
-                bail!("motor constant {name} must be a positive number (got {v})");
+                bail!(
+                    "motor constant {name} must be a positive number (got {})",
+                    crate::validate::show(v)
+                );
             }
         }
         if self.pole_pairs == 0 || self.pole_pairs > 1000 {
@@ -215,7 +218,7 @@ impl EmulatorConfig {
         if !(self.current_noise.is_finite() && self.current_noise >= 0.0) {
             bail!(
                 "current noise must be 0 or more amperes (got {})",
-                self.current_noise
+                crate::validate::show(self.current_noise)
             );
         }
         // At least 1 µs: the sub-step count per sample is sample / fine_step.
@@ -232,7 +235,10 @@ impl EmulatorConfig {
         for e in &self.effects {
             if let Effect::Thermal { tau, .. } = e {
                 if tau.is_nan() || *tau <= 0.0 {
-                    bail!("effect 'thermal': tau must be positive (got {tau})");
+                    bail!(
+                        "effect 'thermal': tau must be positive (got {})",
+                        crate::validate::show(*tau)
+                    );
                 }
             }
         }
@@ -287,7 +293,10 @@ pub const MAX_CURRENT: f64 = 1e5;
 /// `seed`, `current_noise`, `fine_step`, `effects` (spec strings separated by `;`).
 pub fn simulate(cfg: &EmulatorConfig, input: &[f64], ts: f64) -> Result<SimResult> {
     if !(ts.is_finite() && ts > 0.0) {
-        bail!("sample period must be a positive number of seconds (got {ts})");
+        bail!(
+            "sample period must be a positive number of seconds (got {})",
+            crate::validate::show(ts)
+        );
     }
     if input.len() < 2 {
         bail!(
@@ -368,7 +377,10 @@ pub fn simulate(cfg: &EmulatorConfig, input: &[f64], ts: f64) -> Result<SimResul
 /// log's metadata also names the signal.
 pub fn simulate_signal(cfg: &EmulatorConfig, kind: SignalKind, duration: f64) -> Result<SimResult> {
     if !(duration.is_finite() && duration > 0.0) {
-        bail!("duration must be a positive number of seconds (got {duration})");
+        bail!(
+            "duration must be a positive number of seconds (got {})",
+            crate::validate::show(duration)
+        );
     }
     let u = signal(kind, duration, cfg.seed);
     let mut res = simulate(cfg, &u, SAMPLE_PERIOD)?;
