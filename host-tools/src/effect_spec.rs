@@ -22,6 +22,10 @@ impl Key {
     /// stays finite and quick. Signs are free where a fit may estimate either sign; a time
     /// constant or a velocity scale must be positive.
     pub fn range(&self) -> (f64, f64) {
+        if self.name == "gap" {
+            // A backlash gap is a width: never negative.
+            return (0.0, 1e3);
+        }
         match self.unit {
             "N·m" | "N·m·s/rad" | "V" | "A" => (-1e4, 1e4),
             "N·m/rad" => (-1e9, 1e9),
@@ -413,12 +417,6 @@ impl EffectSpec {
                     }
                 }
             }
-        }
-        if self.kind == EffectKind::Backlash && self.get("gap") < 0.0 {
-            bail!(
-                "effect 'backlash': key 'gap' [rad] must be 0 or more (got {})",
-                crate::validate::show(self.get("gap"))
-            );
         }
         Ok(())
     }
