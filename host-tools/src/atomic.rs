@@ -102,15 +102,33 @@ pub fn check_outputs(outputs: &[&Path], inputs: &[&Path]) -> Result<()> {
                 crate::log::echo_path(&other)
             );
         }
-        if out.is_dir() {
-            bail!(
-                "{}: is a directory; give a file name for the output",
-                crate::log::echo_path(&out)
-            );
-        }
+        check_shape(out)?;
         // The folder policy too, before any work rather than at the write.
         if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
             folder_policy(out, &missing_dirs(dir))?;
+        }
+    }
+    Ok(())
+}
+
+/// An output path must name a file: not an existing directory, nor a name ending in `/`, nor a
+/// file below something that is not a folder.
+fn check_shape(out: &Path) -> Result<()> {
+    let p = crate::log::echo_path(out);
+    if out.is_dir() || out.as_os_str().as_encoded_bytes().ends_with(b"/") {
+        bail!("{p}: is a directory name; give a file name for the output");
+    }
+    // The nearest existing ancestor must be a folder (`--report data.csv` writes below it).
+    if let Some(above) = out
+        .ancestors()
+        .skip(1)
+        .find(|a| !a.as_os_str().is_empty() && std::fs::symlink_metadata(a).is_ok())
+    {
+        if !above.is_dir() {
+            bail!(
+                "{p}: {} is a file, not a folder; give another output path",
+                crate::log::echo_path(above)
+            );
         }
     }
     Ok(())
@@ -170,9 +188,7 @@ pub fn write(path: &Path, bytes: &[u8]) -> Result<()> {
         _ => path.to_path_buf(),
     };
     let existing = std::fs::metadata(&target).ok();
-    if existing.as_ref().is_some_and(|m| m.is_dir()) {
-        bail!("{p}: is a directory; give a file name for the output");
-    }
+    check_shape(path)?;
     // A device, pipe or socket (`-o /dev/null`, `-o /dev/stdout`): written in place, never
     // replaced by a regular file.
     if existing.as_ref().is_some_and(|m| !m.is_file()) {
@@ -226,7 +242,14 @@ fn write_in(
         .prefix(".motorid-")
         .suffix(".tmp")
         .tempfile_in(dir)
-        .with_context(|| format!("cannot create a file in {}", crate::log::echo_path(&dir)))?;
+        // The error's kind alone: its text names the temporary file, not the user's.
+        .map_err(|e| {
+            anyhow!(
+                "cannot create a file in {}: {}",
+                crate::log::echo_path(dir),
+                std::io::Error::from(e.kind())
+            )
+        })?;
     // Removed by the handler on Ctrl-C; by `tmp`'s own drop on an error.
     let _guard = interrupt::register(tmp.path());
     // Temporary files are created 0600: keep the replaced file's bits, else the usual 0644.

@@ -82,6 +82,10 @@ fn open(path: &Path, cap: u64, what: &str) -> Result<(std::fs::File, u64)> {
     Ok((file, meta.len()))
 }
 
+/// What is wrong with a text file whose lines end in a lone carriage return.
+pub const LONE_CR: &str =
+    "lines end in a lone CR (classic Mac OS line ends); save the file with LF or CRLF line ends";
+
 /// Bytes [`read_lines`] reads before it asks whether the file is binary.
 const SNIFF: usize = 128;
 
@@ -126,13 +130,17 @@ pub fn read_lines(
         if from == 0 {
             (line, line_len) = (1, 0);
         }
-        for &b in &bytes[from..] {
+        for (k, &b) in bytes[from..].iter().enumerate() {
             if b == b'\n' {
                 line += 1;
                 line_len = 0;
             } else {
                 line_len += 1;
                 if line_len > max_line {
+                    let end = from + k + 1;
+                    if bytes[end - line_len..end].contains(&b'\r') {
+                        bail!("{p}:{line}: {LONE_CR}");
+                    }
                     bail!(
                         "{p}:{line}: line longer than {max_line} bytes; a {what}'s lines are \
                          a few KiB at most (is this a {what}?)"

@@ -543,6 +543,9 @@ impl MotorLog {
         let p = crate::log::echo_path(&path);
         // A byte-order mark is not part of the first line's text (nor a line of its own).
         let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+        if text.contains('\r') && !text.contains('\n') {
+            bail!("{p}:1: {}", crate::input::LONE_CR);
+        }
         let mut meta = BTreeMap::new();
         let mut meta_line: BTreeMap<String, usize> = BTreeMap::new();
         let mut header_line = 0usize;

@@ -577,7 +577,19 @@ impl Model {
         if let Some(t) = &self.sindy {
             check_toml_numbers("sindy", &toml::Value::Table(t.clone()))?;
             // Terms and keys too: a table the simulation cannot read is refused here, once.
-            crate::ident::sindyc::from_table(t)?;
+            let (sm, _) = crate::ident::sindyc::from_table(t)?;
+            // Without a term of the current or the input the modelled rotor never moves.
+            let driven = sm
+                .accel
+                .terms
+                .iter()
+                .any(|(term, c)| (term.has_current() || term.has_voltage()) && *c != 0.0);
+            if self.kind == ModelKind::Sindyc && !driven {
+                anyhow::bail!(
+                    "field 'sindy.accel': no term of the current or the input (i, u, ...) with a \
+                     nonzero coefficient: the modelled motor cannot move"
+                );
+            }
         }
         // The smooth sign's width is a velocity, as the Stribeck velocity.
         check("sign_width", self.sign_width, &STRIBECK_VELOCITY)?;
@@ -586,6 +598,20 @@ impl Model {
         }
         if self.kind == ModelKind::Sindyc && self.sindy.is_none() {
             anyhow::bail!("field 'sindy': a model of kind 'sindyc' needs a [sindy] table");
+        }
+        // A table of another kind would be silently ignored: the kind decides how it reads.
+        for (table, present, kind) in [
+            ("lugre", self.lugre.is_some(), ModelKind::Lugre),
+            ("sindy", self.sindy.is_some(), ModelKind::Sindyc),
+        ] {
+            if present && self.kind != kind {
+                anyhow::bail!(
+                    "field '{table}': a model of kind '{}' has no [{table}] table (it belongs to \
+                     kind '{}'); remove it or change 'kind'",
+                    self.kind.name(),
+                    kind.name()
+                );
+            }
         }
         Ok(())
     }

@@ -118,7 +118,12 @@ pub fn from_table(t: &toml::Table) -> Result<(SindyModel<f64>, HankelSettings)> 
                     .as_float()
                     .or_else(|| v.as_integer().map(|i| i as f64))
                     .filter(|c| c.is_finite())
-                    .ok_or_else(|| anyhow!("field 'sindy.{name}.\"{k}\"': not a number"))?;
+                    .ok_or_else(|| {
+                        anyhow!(
+                            "field 'sindy.{name}.\"{}\"': not a number",
+                            crate::log::echo(k)
+                        )
+                    })?;
                 eq.push(term, c)
                     .map_err(|_| anyhow!("field 'sindy.{name}': more than {MAX_TERMS} terms"))?;
             }
