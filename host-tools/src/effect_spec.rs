@@ -737,7 +737,7 @@ mod tests {
             ("table:bins=4,b4=1", "beyond the table's 4 bins"),
             ("table:var=current,lo=2,hi=1", "below hi"),
             ("table:b32=1", "unknown key"),
-            ("backlash:gap=-0.1", "0 or more"),
+            ("backlash:gap=-0.1", "-0.1 is outside 0 .. 1000"),
         ] {
             let e = EffectSpec::parse(bad).unwrap_err().to_string();
             assert!(e.contains(why), "{bad}: {e}");
