@@ -91,15 +91,15 @@ pub fn check_outputs(outputs: &[&Path], inputs: &[&Path]) -> Result<()> {
             bail!(
                 "{}: the output file is also an input ({}) and would be overwritten; choose \
                  another output path",
-                crate::log::echo_path(&out),
-                crate::log::echo_path(&inp)
+                crate::log::echo_path(out),
+                crate::log::echo_path(inp)
             );
         }
         if let Some(other) = outputs[..k].iter().find(|o| same_file(out, o)) {
             bail!(
                 "{}: two outputs of this command are the same file ({}); give each its own path",
-                crate::log::echo_path(&out),
-                crate::log::echo_path(&other)
+                crate::log::echo_path(out),
+                crate::log::echo_path(other)
             );
         }
         check_shape(out)?;
@@ -152,8 +152,8 @@ fn folder_policy(path: &Path, missing: &[PathBuf]) -> Result<()> {
             "{}: folder {} does not exist; create it first (outside the current directory \
              motorid creates only the output's own folder, inside one that exists, not at the \
              root)",
-            crate::log::echo_path(&path),
-            crate::log::echo_path(&first)
+            crate::log::echo_path(path),
+            crate::log::echo_path(first)
         );
     }
     Ok(())
@@ -179,7 +179,7 @@ fn missing_dirs(dir: &Path) -> Vec<PathBuf> {
 /// folders created and announced). On any error `path` is untouched and nothing is left
 /// behind.
 pub fn write(path: &Path, bytes: &[u8]) -> Result<()> {
-    let p = crate::log::echo_path(&path);
+    let p = crate::log::echo_path(path);
     // A symbolic link: write through to its target.
     let target = match std::fs::symlink_metadata(path) {
         Ok(m) if m.file_type().is_symlink() => std::fs::canonicalize(path).map_err(|_| {
@@ -219,7 +219,7 @@ pub fn write(path: &Path, bytes: &[u8]) -> Result<()> {
     match result {
         Ok(()) => {
             if let Some(first) = created.first() {
-                eprintln!("note: created directory {}", crate::log::echo_path(&first));
+                eprintln!("note: created directory {}", crate::log::echo_path(first));
             }
             Ok(())
         }

@@ -35,11 +35,11 @@ pub fn check_distinct(paths: &[&Path], what: &str) -> Result<()> {
             let also = if a == b {
                 String::new()
             } else {
-                format!(" (the same file as {})", crate::log::echo_path(&b))
+                format!(" (the same file as {})", crate::log::echo_path(b))
             };
             bail!(
                 "{}{also}: given twice as {what}; give each file once",
-                crate::log::echo_path(&a)
+                crate::log::echo_path(a)
             );
         }
     }
@@ -49,7 +49,7 @@ pub fn check_distinct(paths: &[&Path], what: &str) -> Result<()> {
 /// Read the regular file `path` whole, refusing anything else and anything above `cap` bytes
 /// (`what` names the kind of file in the message).
 pub fn read(path: &Path, cap: u64, what: &str) -> Result<Vec<u8>> {
-    let p = crate::log::echo_path(&path);
+    let p = crate::log::echo_path(path);
     let (file, len) = open(path, cap, what)?;
     let mut bytes = Vec::with_capacity(len as usize);
     file.take(cap + 1)
@@ -64,7 +64,7 @@ pub fn read(path: &Path, cap: u64, what: &str) -> Result<Vec<u8>> {
 /// Open the regular file `path` for reading, refusing anything else and anything above
 /// `cap` bytes; returns the file and its length.
 fn open(path: &Path, cap: u64, what: &str) -> Result<(std::fs::File, u64)> {
-    let p = crate::log::echo_path(&path);
+    let p = crate::log::echo_path(path);
     let meta = std::fs::metadata(path).map_err(|e| anyhow!("{p}: cannot read: {e}"))?;
     if meta.is_dir() {
         bail!("{p}: is a directory; give the {what} file");
@@ -100,7 +100,7 @@ pub fn read_lines(
     what: &str,
     binary: impl Fn(&[u8]) -> bool,
 ) -> Result<Vec<u8>> {
-    let p = crate::log::echo_path(&path);
+    let p = crate::log::echo_path(path);
     let (mut file, len) = open(path, cap, what)?;
     let mut bytes = Vec::with_capacity(len as usize);
     let mut chunk = vec![0u8; 64 * 1024];
@@ -158,7 +158,7 @@ pub fn read_text(path: &Path, cap: u64, what: &str) -> Result<String> {
     String::from_utf8(bytes).map_err(|e| {
         anyhow!(
             "{}: byte {}: not UTF-8 text",
-            crate::log::echo_path(&path),
+            crate::log::echo_path(path),
             e.utf8_error().valid_up_to()
         )
     })

@@ -500,7 +500,7 @@ impl MotorLog {
             let line = bytes[..at].iter().filter(|b| **b == b'\n').count() + 1;
             anyhow!(
                 "{}:{line}: not UTF-8 text (byte {at}); save the file as UTF-8",
-                crate::log::echo_path(&path)
+                crate::log::echo_path(path)
             )
         })?;
         Self::parse_with_units(&text, path, map, units, plant)
@@ -516,7 +516,7 @@ impl MotorLog {
     ) -> Result<MotorLog> {
         let log = Self::read_with_units(path, map, units, plant)?;
         tracing::debug!(
-            file = %crate::log::echo_path(&path),
+            file = %crate::log::echo_path(path),
             samples = log.t.len(),
             sample_period_s = log.sample_period(),
             "log read"
@@ -540,7 +540,7 @@ impl MotorLog {
         units: &Units,
         plant: Plant,
     ) -> Result<MotorLog> {
-        let p = crate::log::echo_path(&path);
+        let p = crate::log::echo_path(path);
         // A byte-order mark is not part of the first line's text (nor a line of its own).
         let text = text.strip_prefix('\u{feff}').unwrap_or(text);
         if text.contains('\r') && !text.contains('\n') {
@@ -684,7 +684,7 @@ impl MotorLog {
         units: &Units,
         plant: Plant,
     ) -> Result<MotorLog> {
-        let p = crate::log::echo_path(&path);
+        let p = crate::log::echo_path(path);
         let mat = crate::matlab::read(bytes, path)?;
         let t_name = map.name_of("t");
         let Some(n) = mat
@@ -890,9 +890,9 @@ impl Places {
     fn header(&self, path: &Path) -> String {
         match self {
             Places::Csv { header_line, .. } => {
-                format!("{}:{header_line}", crate::log::echo_path(&path))
+                format!("{}:{header_line}", crate::log::echo_path(path))
             }
-            Places::Mat => crate::log::echo_path(&path).to_string(),
+            Places::Mat => crate::log::echo_path(path).to_string(),
         }
     }
 
@@ -901,9 +901,9 @@ impl Places {
         match self {
             Places::Csv { meta_line, .. } => {
                 let line = meta_line.get(key).copied().unwrap_or(0);
-                format!("{}:{line}", crate::log::echo_path(&path))
+                format!("{}:{line}", crate::log::echo_path(path))
             }
-            Places::Mat => format!("{}: variable '{}'", crate::log::echo_path(&path), echo(key)),
+            Places::Mat => format!("{}: variable '{}'", crate::log::echo_path(path), echo(key)),
         }
     }
 
@@ -913,11 +913,11 @@ impl Places {
             Places::Csv { row_lines, .. } => {
                 format!(
                     "{}:{}",
-                    crate::log::echo_path(&path),
+                    crate::log::echo_path(path),
                     row_lines.get(k).copied().unwrap_or(0)
                 )
             }
-            Places::Mat => format!("{}: sample {}", crate::log::echo_path(&path), k + 1),
+            Places::Mat => format!("{}: sample {}", crate::log::echo_path(path), k + 1),
         }
     }
 }
@@ -1062,7 +1062,7 @@ impl Table {
         units: &Units,
         plant: Plant,
     ) -> Result<MotorLog> {
-        let p = crate::log::echo_path(&path);
+        let p = crate::log::echo_path(path);
         let Table {
             mut meta,
             places,

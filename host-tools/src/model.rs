@@ -485,7 +485,7 @@ impl Model {
 
     /// Parse MODEL.toml text; `path` names the file in errors (with line and column).
     pub fn parse(text: &str, path: &Path) -> Result<Model> {
-        let p = crate::log::echo_path(&path);
+        let p = crate::log::echo_path(path);
         let model = toml::from_str::<Model>(text).map_err(|e| {
             // One line, and no word of the input echoed whole (a 300-digit number, escapes).
             let msg: Vec<String> = e.message().split_whitespace().map(echo).collect();
@@ -515,7 +515,7 @@ impl Model {
         let text = crate::input::read_text(path, crate::input::MAX_MODEL_FILE, "MODEL.toml")?;
         let m = Self::parse(&text, path)?;
         m.validate()
-            .map_err(|e| anyhow!("{}: {e}", crate::log::echo_path(&path)))?;
+            .map_err(|e| anyhow!("{}: {e}", crate::log::echo_path(path)))?;
         Ok(m)
     }
 

@@ -86,9 +86,9 @@ pub fn run(args: Args) -> Result<()> {
         );
     }
     let co = coeffs::coefficients(&model, settings)
-        .with_context(|| format!("{}", crate::log::echo_path(&args.model)))?;
+        .with_context(|| crate::log::echo_path(&args.model).to_string())?;
     let bytes =
-        coeffs::encode(&co).with_context(|| format!("{}", crate::log::echo_path(&args.model)))?;
+        coeffs::encode(&co).with_context(|| crate::log::echo_path(&args.model).to_string())?;
     let source = args.model.display().to_string();
     match args.format {
         Format::Blob => crate::atomic::write(&args.output, &bytes)?,

@@ -205,6 +205,8 @@ pub fn run(args: Args) -> Result<()> {
     };
     crate::atomic::check_outputs(&[&args.output], &[std::path::Path::new(&port)])?;
     let mut link = Link::open(&port)?;
+    // From here on the port as messages show it.
+    let port = link.name().to_string();
     let id = link.identify()?;
     link.command(&HostMsg::Stop, "stop")?;
     let before = link.read_telemetry()?;
