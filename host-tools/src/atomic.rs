@@ -91,26 +91,44 @@ pub fn check_outputs(outputs: &[&Path], inputs: &[&Path]) -> Result<()> {
             bail!(
                 "{}: the output file is also an input ({}) and would be overwritten; choose \
                  another output path",
-                out.display(),
-                inp.display()
+                crate::log::echo_path(out),
+                crate::log::echo_path(inp)
             );
         }
         if let Some(other) = outputs[..k].iter().find(|o| same_file(out, o)) {
             bail!(
                 "{}: two outputs of this command are the same file ({}); give each its own path",
-                out.display(),
-                other.display()
+                crate::log::echo_path(out),
+                crate::log::echo_path(other)
             );
         }
-        if out.is_dir() {
-            bail!(
-                "{}: is a directory; give a file name for the output",
-                out.display()
-            );
-        }
+        check_shape(out)?;
         // The folder policy too, before any work rather than at the write.
         if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
             folder_policy(out, &missing_dirs(dir))?;
+        }
+    }
+    Ok(())
+}
+
+/// An output path must name a file: not an existing directory, nor a name ending in `/`, nor a
+/// file below something that is not a folder.
+fn check_shape(out: &Path) -> Result<()> {
+    let p = crate::log::echo_path(out);
+    if out.is_dir() || out.as_os_str().as_encoded_bytes().ends_with(b"/") {
+        bail!("{p}: is a directory name; give a file name for the output");
+    }
+    // The nearest existing ancestor must be a folder (`--report data.csv` writes below it).
+    if let Some(above) = out
+        .ancestors()
+        .skip(1)
+        .find(|a| !a.as_os_str().is_empty() && std::fs::symlink_metadata(a).is_ok())
+    {
+        if !above.is_dir() {
+            bail!(
+                "{p}: {} is a file, not a folder; give another output path",
+                crate::log::echo_path(above)
+            );
         }
     }
     Ok(())
@@ -134,8 +152,8 @@ fn folder_policy(path: &Path, missing: &[PathBuf]) -> Result<()> {
             "{}: folder {} does not exist; create it first (outside the current directory \
              motorid creates only the output's own folder, inside one that exists, not at the \
              root)",
-            path.display(),
-            first.display()
+            crate::log::echo_path(path),
+            crate::log::echo_path(first)
         );
     }
     Ok(())
@@ -161,7 +179,7 @@ fn missing_dirs(dir: &Path) -> Vec<PathBuf> {
 /// folders created and announced). On any error `path` is untouched and nothing is left
 /// behind.
 pub fn write(path: &Path, bytes: &[u8]) -> Result<()> {
-    let p = path.display();
+    let p = crate::log::echo_path(path);
     // A symbolic link: write through to its target.
     let target = match std::fs::symlink_metadata(path) {
         Ok(m) if m.file_type().is_symlink() => std::fs::canonicalize(path).map_err(|_| {
@@ -170,9 +188,7 @@ pub fn write(path: &Path, bytes: &[u8]) -> Result<()> {
         _ => path.to_path_buf(),
     };
     let existing = std::fs::metadata(&target).ok();
-    if existing.as_ref().is_some_and(|m| m.is_dir()) {
-        bail!("{p}: is a directory; give a file name for the output");
-    }
+    check_shape(path)?;
     // A device, pipe or socket (`-o /dev/null`, `-o /dev/stdout`): written in place, never
     // replaced by a regular file.
     if existing.as_ref().is_some_and(|m| !m.is_file()) {
@@ -192,14 +208,18 @@ pub fn write(path: &Path, bytes: &[u8]) -> Result<()> {
     let created = missing_dirs(&dir);
     folder_policy(path, &created)?;
     if !created.is_empty() {
-        std::fs::create_dir_all(&dir)
-            .with_context(|| format!("{p}: cannot create directory {}", dir.display()))?;
+        std::fs::create_dir_all(&dir).with_context(|| {
+            format!(
+                "{p}: cannot create directory {}",
+                crate::log::echo_path(&dir)
+            )
+        })?;
     }
     let result = write_in(&dir, &target, existing.as_ref(), bytes);
     match result {
         Ok(()) => {
             if let Some(first) = created.first() {
-                eprintln!("note: created directory {}", first.display());
+                eprintln!("note: created directory {}", crate::log::echo_path(first));
             }
             Ok(())
         }
@@ -222,7 +242,14 @@ fn write_in(
         .prefix(".motorid-")
         .suffix(".tmp")
         .tempfile_in(dir)
-        .with_context(|| format!("cannot create a file in {}", dir.display()))?;
+        // The error's kind alone: its text names the temporary file, not the user's.
+        .map_err(|e| {
+            anyhow!(
+                "cannot create a file in {}: {}",
+                crate::log::echo_path(dir),
+                std::io::Error::from(e.kind())
+            )
+        })?;
     // Removed by the handler on Ctrl-C; by `tmp`'s own drop on an error.
     let _guard = interrupt::register(tmp.path());
     // Temporary files are created 0600: keep the replaced file's bits, else the usual 0644.

@@ -22,6 +22,10 @@ impl Key {
     /// stays finite and quick. Signs are free where a fit may estimate either sign; a time
     /// constant or a velocity scale must be positive.
     pub fn range(&self) -> (f64, f64) {
+        if self.name == "gap" {
+            // A backlash gap is a width: never negative.
+            return (0.0, 1e3);
+        }
         match self.unit {
             "N·m" | "N·m·s/rad" | "V" | "A" => (-1e4, 1e4),
             "N·m/rad" => (-1e9, 1e9),
@@ -312,7 +316,11 @@ impl EffectSpec {
             })?;
             let k = k.trim();
             if values.contains_key(k) {
-                bail!("effect '{}': key '{k}' is given twice", kind.name());
+                bail!(
+                    "effect '{}': key '{}' is given twice",
+                    kind.name(),
+                    crate::log::echo(k)
+                );
             }
             if !known.iter().any(|key| key.name == k) {
                 bail!(
@@ -375,7 +383,11 @@ impl EffectSpec {
         if self.kind == EffectKind::Cogging {
             if let Some(h) = self.values.get("harmonic") {
                 if *h < 2.0 || h.fract() != 0.0 || *h > 1000.0 {
-                    bail!("effect 'cogging': harmonic must be a whole number of 2 or more (got {h}); one period per revolution is 'position_load'");
+                    bail!(
+                        "effect 'cogging': harmonic must be a whole number of 2 or more (got {}); \
+                         one period per revolution is 'position_load'",
+                        crate::validate::show(*h)
+                    );
                 }
             }
         }
@@ -397,16 +409,14 @@ impl EffectSpec {
             if self.table_var() != TableVar::Theta {
                 if let (Some(lo), Some(hi)) = (self.values.get("lo"), self.values.get("hi")) {
                     if lo >= hi {
-                        bail!("effect 'table': lo ({lo}) must be below hi ({hi})");
+                        bail!(
+                            "effect 'table': lo ({}) must be below hi ({})",
+                            crate::validate::show(*lo),
+                            crate::validate::show(*hi)
+                        );
                     }
                 }
             }
-        }
-        if self.kind == EffectKind::Backlash && self.get("gap") < 0.0 {
-            bail!(
-                "effect 'backlash': key 'gap' [rad] must be 0 or more (got {})",
-                self.get("gap")
-            );
         }
         Ok(())
     }
@@ -727,7 +737,7 @@ mod tests {
             ("table:bins=4,b4=1", "beyond the table's 4 bins"),
             ("table:var=current,lo=2,hi=1", "below hi"),
             ("table:b32=1", "unknown key"),
-            ("backlash:gap=-0.1", "0 or more"),
+            ("backlash:gap=-0.1", "-0.1 is outside 0 .. 1000"),
         ] {
             let e = EffectSpec::parse(bad).unwrap_err().to_string();
             assert!(e.contains(why), "{bad}: {e}");

@@ -35,11 +35,11 @@ pub fn check_distinct(paths: &[&Path], what: &str) -> Result<()> {
             let also = if a == b {
                 String::new()
             } else {
-                format!(" (the same file as {})", b.display())
+                format!(" (the same file as {})", crate::log::echo_path(b))
             };
             bail!(
                 "{}{also}: given twice as {what}; give each file once",
-                a.display()
+                crate::log::echo_path(a)
             );
         }
     }
@@ -49,7 +49,7 @@ pub fn check_distinct(paths: &[&Path], what: &str) -> Result<()> {
 /// Read the regular file `path` whole, refusing anything else and anything above `cap` bytes
 /// (`what` names the kind of file in the message).
 pub fn read(path: &Path, cap: u64, what: &str) -> Result<Vec<u8>> {
-    let p = path.display();
+    let p = crate::log::echo_path(path);
     let (file, len) = open(path, cap, what)?;
     let mut bytes = Vec::with_capacity(len as usize);
     file.take(cap + 1)
@@ -64,7 +64,7 @@ pub fn read(path: &Path, cap: u64, what: &str) -> Result<Vec<u8>> {
 /// Open the regular file `path` for reading, refusing anything else and anything above
 /// `cap` bytes; returns the file and its length.
 fn open(path: &Path, cap: u64, what: &str) -> Result<(std::fs::File, u64)> {
-    let p = path.display();
+    let p = crate::log::echo_path(path);
     let meta = std::fs::metadata(path).map_err(|e| anyhow!("{p}: cannot read: {e}"))?;
     if meta.is_dir() {
         bail!("{p}: is a directory; give the {what} file");
@@ -82,6 +82,10 @@ fn open(path: &Path, cap: u64, what: &str) -> Result<(std::fs::File, u64)> {
     Ok((file, meta.len()))
 }
 
+/// What is wrong with a text file whose lines end in a lone carriage return.
+pub const LONE_CR: &str =
+    "lines end in a lone CR (classic Mac OS line ends); save the file with LF or CRLF line ends";
+
 /// Bytes [`read_lines`] reads before it asks whether the file is binary.
 const SNIFF: usize = 128;
 
@@ -96,7 +100,7 @@ pub fn read_lines(
     what: &str,
     binary: impl Fn(&[u8]) -> bool,
 ) -> Result<Vec<u8>> {
-    let p = path.display();
+    let p = crate::log::echo_path(path);
     let (mut file, len) = open(path, cap, what)?;
     let mut bytes = Vec::with_capacity(len as usize);
     let mut chunk = vec![0u8; 64 * 1024];
@@ -126,13 +130,17 @@ pub fn read_lines(
         if from == 0 {
             (line, line_len) = (1, 0);
         }
-        for &b in &bytes[from..] {
+        for (k, &b) in bytes[from..].iter().enumerate() {
             if b == b'\n' {
                 line += 1;
                 line_len = 0;
             } else {
                 line_len += 1;
                 if line_len > max_line {
+                    let end = from + k + 1;
+                    if bytes[end - line_len..end].contains(&b'\r') {
+                        bail!("{p}:{line}: {LONE_CR}");
+                    }
                     bail!(
                         "{p}:{line}: line longer than {max_line} bytes; a {what}'s lines are \
                          a few KiB at most (is this a {what}?)"
@@ -150,7 +158,7 @@ pub fn read_text(path: &Path, cap: u64, what: &str) -> Result<String> {
     String::from_utf8(bytes).map_err(|e| {
         anyhow!(
             "{}: byte {}: not UTF-8 text",
-            path.display(),
+            crate::log::echo_path(path),
             e.utf8_error().valid_up_to()
         )
     })

@@ -326,6 +326,42 @@ pub fn echo(s: &str) -> String {
     out
 }
 
+/// Most characters of a path a message shows.
+pub const ECHO_PATH_MAX: usize = 100;
+
+/// A path made safe to echo in a one-line message, by the rule of [`echo`] with a longer cut
+/// ([`ECHO_PATH_MAX`]) made in the middle: the start and the file name stay.
+pub fn echo_path(path: &std::path::Path) -> String {
+    let pieces: Vec<String> = path.to_string_lossy().chars().map(escape_char).collect();
+    let total: usize = pieces.iter().map(|p| p.chars().count()).sum();
+    if total <= ECHO_PATH_MAX {
+        return pieces.concat();
+    }
+    // A third of the room for the start, the rest for the end (the file's name).
+    let head_room = ECHO_PATH_MAX / 3;
+    let tail_room = ECHO_PATH_MAX - head_room - 1;
+    let (mut head, mut len) = (String::new(), 0);
+    for piece in &pieces {
+        let n = piece.chars().count();
+        if len + n > head_room {
+            break;
+        }
+        len += n;
+        head.push_str(piece);
+    }
+    let (mut tail, mut len) = (Vec::new(), 0);
+    for piece in pieces.iter().rev() {
+        let n = piece.chars().count();
+        if len + n > tail_room {
+            break;
+        }
+        len += n;
+        tail.push(piece.as_str());
+    }
+    tail.reverse();
+    format!("{head}…{}", tail.concat())
+}
+
 /// `s` with every control character shown as an escape (as [`echo`] does, without the cut):
 /// for a whole message line, whose paths and names come from outside.
 pub fn escape_controls(s: &str) -> String {
@@ -464,7 +500,7 @@ impl MotorLog {
             let line = bytes[..at].iter().filter(|b| **b == b'\n').count() + 1;
             anyhow!(
                 "{}:{line}: not UTF-8 text (byte {at}); save the file as UTF-8",
-                path.display()
+                crate::log::echo_path(path)
             )
         })?;
         Self::parse_with_units(&text, path, map, units, plant)
@@ -480,7 +516,7 @@ impl MotorLog {
     ) -> Result<MotorLog> {
         let log = Self::read_with_units(path, map, units, plant)?;
         tracing::debug!(
-            file = %path.display(),
+            file = %crate::log::echo_path(path),
             samples = log.t.len(),
             sample_period_s = log.sample_period(),
             "log read"
@@ -504,9 +540,12 @@ impl MotorLog {
         units: &Units,
         plant: Plant,
     ) -> Result<MotorLog> {
-        let p = path.display();
+        let p = crate::log::echo_path(path);
         // A byte-order mark is not part of the first line's text (nor a line of its own).
         let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+        if text.contains('\r') && !text.contains('\n') {
+            bail!("{p}:1: {}", crate::input::LONE_CR);
+        }
         let mut meta = BTreeMap::new();
         let mut meta_line: BTreeMap<String, usize> = BTreeMap::new();
         let mut header_line = 0usize;
@@ -645,7 +684,7 @@ impl MotorLog {
         units: &Units,
         plant: Plant,
     ) -> Result<MotorLog> {
-        let p = path.display();
+        let p = crate::log::echo_path(path);
         let mat = crate::matlab::read(bytes, path)?;
         let t_name = map.name_of("t");
         let Some(n) = mat
@@ -718,7 +757,7 @@ impl MotorLog {
     /// `t`, a median angle step that is not a multiple of `# hall_resolution_rad`, a speed
     /// beyond any motor's (|Δθ/Δt| above [`MAX_PLAUSIBLE_SPEED`] in rad/s).
     pub fn sanity_warnings(&self) -> Vec<String> {
-        let p = self.source.display();
+        let p = crate::log::echo_path(&self.source);
         let mut out = Vec::new();
         if self.len() < 2 {
             return out;
@@ -850,8 +889,10 @@ impl Places {
     /// The header row (`x.csv:3`), or the file.
     fn header(&self, path: &Path) -> String {
         match self {
-            Places::Csv { header_line, .. } => format!("{}:{header_line}", path.display()),
-            Places::Mat => path.display().to_string(),
+            Places::Csv { header_line, .. } => {
+                format!("{}:{header_line}", crate::log::echo_path(path))
+            }
+            Places::Mat => crate::log::echo_path(path).to_string(),
         }
     }
 
@@ -860,9 +901,9 @@ impl Places {
         match self {
             Places::Csv { meta_line, .. } => {
                 let line = meta_line.get(key).copied().unwrap_or(0);
-                format!("{}:{line}", path.display())
+                format!("{}:{line}", crate::log::echo_path(path))
             }
-            Places::Mat => format!("{}: variable '{}'", path.display(), echo(key)),
+            Places::Mat => format!("{}: variable '{}'", crate::log::echo_path(path), echo(key)),
         }
     }
 
@@ -872,11 +913,11 @@ impl Places {
             Places::Csv { row_lines, .. } => {
                 format!(
                     "{}:{}",
-                    path.display(),
+                    crate::log::echo_path(path),
                     row_lines.get(k).copied().unwrap_or(0)
                 )
             }
-            Places::Mat => format!("{}: sample {}", path.display(), k + 1),
+            Places::Mat => format!("{}: sample {}", crate::log::echo_path(path), k + 1),
         }
     }
 }
@@ -1021,7 +1062,7 @@ impl Table {
         units: &Units,
         plant: Plant,
     ) -> Result<MotorLog> {
-        let p = path.display();
+        let p = crate::log::echo_path(path);
         let Table {
             mut meta,
             places,
@@ -1722,6 +1763,21 @@ mod tests {
             .to_string();
         assert!(e.starts_with("x.csv:1: missing column 'theta'"), "{e}");
         assert!(e.contains("velocity column 'omega'"), "{e}");
+    }
+
+    #[test]
+    fn echoed_paths_keep_their_start_and_file_name() {
+        let short = Path::new("logs/run\u{1b}[2J.csv");
+        assert_eq!(echo_path(short), "logs/run\\x1b[2J.csv");
+        let long = format!("/data/{}/run.csv", "d\u{7}".repeat(3000));
+        let shown = echo_path(Path::new(&long));
+        assert!(shown.chars().count() <= ECHO_PATH_MAX, "{shown}");
+        assert!(
+            shown.starts_with("/data/d\\x07") && shown.ends_with("/run.csv"),
+            "{shown}"
+        );
+        assert_eq!(shown.matches('…').count(), 1, "{shown}");
+        assert!(!shown.chars().any(char::is_control), "{shown}");
     }
 
     #[test]

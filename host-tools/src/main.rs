@@ -85,7 +85,18 @@ fn clap_error(e: clap::Error) -> ExitCode {
         | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand => e.exit(),
         _ => {}
     }
-    eprintln!("{}", one_line(&e.render().to_string()));
+    // The values clap quotes are the user's: echoed by the rule of every other message.
+    let mut msg = one_line(&e.render().to_string());
+    for (_, value) in e.context() {
+        if let clap::error::ContextValue::String(s) = value {
+            if s.chars().count() > motorid::log::ECHO_MAX {
+                // clap's text has the value's escape sequences stripped: find it as shown.
+                let shown = clap::builder::StyledStr::from(s.clone()).to_string();
+                msg = msg.replace(shown.as_str(), &motorid::log::echo(s));
+            }
+        }
+    }
+    eprintln!("{}", motorid::log::escape_controls(&msg));
     ExitCode::from(u8::try_from(e.exit_code()).unwrap_or(2))
 }
 

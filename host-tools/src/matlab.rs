@@ -46,7 +46,7 @@ pub fn is_mat_file(bytes: &[u8]) -> bool {
 /// Read the real numeric scalars and vectors of a MAT-file (other arrays, complex ones,
 /// matrices, cells, structures and strings, are left out). `path` is for messages.
 pub fn read(bytes: &[u8], path: &Path) -> Result<MatData> {
-    let p = path.display();
+    let p = crate::log::echo_path(path);
     if bytes.len() > MAX_FILE {
         bail!(
             "{p}: {} bytes; MAT-files over {MAX_FILE} bytes are not read",

@@ -220,14 +220,15 @@ mod effects_serde {
             .into_iter()
             .map(|en| {
                 let kind = EffectKind::from_name(&en.name).ok_or_else(|| {
-                    serde::de::Error::custom(format!("unknown effect '{}'", en.name))
+                    serde::de::Error::custom(format!("unknown effect '{}'", echo(&en.name)))
                 })?;
                 let keys = crate::effect_spec::keys(kind);
                 for k in en.values.keys() {
                     if !keys.iter().any(|key| key.name == k) {
                         return Err(serde::de::Error::custom(format!(
-                            "effect '{}': unknown key '{k}'",
-                            en.name
+                            "effect '{}': unknown key '{}'",
+                            en.name,
+                            echo(k)
                         )));
                     }
                 }
@@ -303,7 +304,7 @@ fn check_toml_numbers(path: &str, v: &toml::Value) -> Result<()> {
         toml::Value::Float(f) if path.ends_with(".z_max") && *f == f64::INFINITY => Ok(()),
         toml::Value::Float(f) => crate::validate::finite(*f)
             .map(|_| ())
-            .map_err(|e| anyhow!("field '{path}': {e}")),
+            .map_err(|e| anyhow!("field '{}': {e}", echo(path))),
         toml::Value::Table(t) => t
             .iter()
             .try_for_each(|(k, v)| check_toml_numbers(&format!("{path}.{k}"), v)),
@@ -484,7 +485,7 @@ impl Model {
 
     /// Parse MODEL.toml text; `path` names the file in errors (with line and column).
     pub fn parse(text: &str, path: &Path) -> Result<Model> {
-        let p = path.display();
+        let p = crate::log::echo_path(path);
         let model = toml::from_str::<Model>(text).map_err(|e| {
             // One line, and no word of the input echoed whole (a 300-digit number, escapes).
             let msg: Vec<String> = e.message().split_whitespace().map(echo).collect();
@@ -514,7 +515,7 @@ impl Model {
         let text = crate::input::read_text(path, crate::input::MAX_MODEL_FILE, "MODEL.toml")?;
         let m = Self::parse(&text, path)?;
         m.validate()
-            .map_err(|e| anyhow!("{}: {e}", path.display()))?;
+            .map_err(|e| anyhow!("{}: {e}", crate::log::echo_path(path)))?;
         Ok(m)
     }
 
@@ -576,7 +577,19 @@ impl Model {
         if let Some(t) = &self.sindy {
             check_toml_numbers("sindy", &toml::Value::Table(t.clone()))?;
             // Terms and keys too: a table the simulation cannot read is refused here, once.
-            crate::ident::sindyc::from_table(t)?;
+            let (sm, _) = crate::ident::sindyc::from_table(t)?;
+            // Without a term of the current or the input the modelled rotor never moves.
+            let driven = sm
+                .accel
+                .terms
+                .iter()
+                .any(|(term, c)| (term.has_current() || term.has_voltage()) && *c != 0.0);
+            if self.kind == ModelKind::Sindyc && !driven {
+                anyhow::bail!(
+                    "field 'sindy.accel': no term of the current or the input (i, u, ...) with a \
+                     nonzero coefficient: the modelled motor cannot move"
+                );
+            }
         }
         // The smooth sign's width is a velocity, as the Stribeck velocity.
         check("sign_width", self.sign_width, &STRIBECK_VELOCITY)?;
@@ -585,6 +598,20 @@ impl Model {
         }
         if self.kind == ModelKind::Sindyc && self.sindy.is_none() {
             anyhow::bail!("field 'sindy': a model of kind 'sindyc' needs a [sindy] table");
+        }
+        // A table of another kind would be silently ignored: the kind decides how it reads.
+        for (table, present, kind) in [
+            ("lugre", self.lugre.is_some(), ModelKind::Lugre),
+            ("sindy", self.sindy.is_some(), ModelKind::Sindyc),
+        ] {
+            if present && self.kind != kind {
+                anyhow::bail!(
+                    "field '{table}': a model of kind '{}' has no [{table}] table (it belongs to \
+                     kind '{}'); remove it or change 'kind'",
+                    self.kind.name(),
+                    kind.name()
+                );
+            }
         }
         Ok(())
     }

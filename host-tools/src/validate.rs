@@ -130,9 +130,15 @@ macro_rules! range_parser {
     };
 }
 
+/// Longest simulated signal [s]: 10⁴ s, 833,334 samples of 12 ms (a simulation's memory
+/// grows with its length).
+pub const MAX_SIM_DURATION: f64 = 1e4;
+/// Shortest simulated signal [s]: two samples of 12 ms, the fewest a log holds.
+pub const MIN_SIM_DURATION: f64 = 0.024;
+
 range_parser!(
-    /// `simulate --duration` [s]: (0, 10000].
-    parse_duration, f64, |v| positive_at_most(v, 1e4)
+    /// `simulate --duration` [s]: two samples .. [`MAX_SIM_DURATION`].
+    parse_duration, f64, |v| in_range(v, MIN_SIM_DURATION, MAX_SIM_DURATION)
 );
 range_parser!(
     /// `simulate --fine-step` [s]: 1 µs .. 12 ms (one sample).

@@ -994,3 +994,295 @@ fn typos_duplicates_and_endless_side_files_are_refused() {
         &["flash.bin", "too large"],
     );
 }
+
+/// Every line `r` holds is at most `max` characters (two paths of 100 and the text) and free of control
+/// characters.
+fn lines_bounded(r: &Run, max: usize) {
+    for line in r.stdout.lines().chain(r.stderr.lines()) {
+        assert!(
+            line.chars().count() <= max,
+            "{} characters: {line}",
+            line.chars().count()
+        );
+        assert!(!line.chars().any(char::is_control), "{line:?}");
+    }
+}
+
+#[test]
+fn echoed_values_are_cut_and_escaped_in_every_message() {
+    let dir = setup();
+    let d = dir.path();
+    let long = format!("\u{1b}[31m{}", "k".repeat(3000));
+    // A note: bounds far beyond the parameter are shown as numbers, not 300 digits.
+    let r = run(
+        d,
+        &[
+            "simulate",
+            "--signal",
+            "a",
+            "--duration",
+            "20",
+            "-o",
+            "a.csv",
+        ],
+    );
+    assert_eq!(r.code, Some(0), "{}", r.stderr);
+    let r = run(
+        d,
+        &[
+            "fit",
+            "--model",
+            "linear",
+            "--bound",
+            "R=1e-300..1e300",
+            "-o",
+            "o.toml",
+            "a.csv",
+        ],
+    );
+    assert_eq!(r.code, Some(0), "{}", r.stderr);
+    assert!(r.stdout.contains("--bound 1e-300..1e300"), "{}", r.stdout);
+    lines_bounded(&r, 200);
+    // Errors: a command-line value clap refuses, one the command refuses, a number.
+    refused(
+        d,
+        &["simulate", "--signal", "a", "--seed", &long],
+        &["--seed", "…"],
+    );
+    refused(
+        d,
+        &["board", "--pty", "--hall-order", &long],
+        &["--hall-order", "…"],
+    );
+    refused(
+        d,
+        &[
+            "record",
+            "--port",
+            "/dev/null",
+            "--signal",
+            "a",
+            "--u-max",
+            "1e300",
+            "-o",
+            "r.csv",
+        ],
+        &["--u-max", "1e300"],
+    );
+    // Names inside a MODEL.toml.
+    std::fs::write(
+        d.join("name.toml"),
+        format!(
+            "{PAPER_LUGRE_MODEL}\n[[effects]]\nname = \"{}\"\n",
+            "k".repeat(3000)
+        ),
+    )
+    .unwrap();
+    refused(
+        d,
+        &["compare", "name.toml", "data.csv"],
+        &["name.toml", "…"],
+    );
+    // A path: its start and its file name.
+    let path = format!("{}/x.csv", "p".repeat(3000));
+    refused(d, &["compare", "m.toml", &path], &["ppp…", "p/x.csv"]);
+    for args in [
+        &["simulate", "--signal", "a", "--seed", &long][..],
+        &["board", "--pty", "--hall-order", &long],
+        &["compare", "name.toml", "data.csv"],
+        &["compare", "m.toml", &path],
+        &["compare", "m.toml", "data.csv", "--report", &long],
+    ] {
+        lines_bounded(&run(d, args), 300);
+    }
+}
+
+/// A SINDYc model of the paper's motor (voltage plant).
+const SINDYC_MODEL: &str = r#"kind = "sindyc"
+plant = "voltage"
+sample_period = 0.012
+
+[motor]
+r = 0.2162
+l = 0.0003
+kt = 0.07126
+kb = 0.07126
+j = 0.00083
+
+[sindy]
+a = 5.0
+hankel_components = [12, 60]
+hankel_delays = 60
+j = 0.00083
+vs = 1.0
+z_max = 7.8
+z_scale = 0.24
+
+[sindy.accel]
+i = 85.9
+"tanh(a*xdot)" = -168.2
+
+[sindy.idot]
+i = -833.3
+"tanh(a*xdot)" = 464.7
+u = 2188.2
+xdot = -149.2
+
+[sindy.zdot]
+z = -3.0
+xdot = 1.0
+"#;
+
+#[test]
+fn models_that_cannot_move_or_mix_kinds_are_refused() {
+    let dir = setup();
+    let d = dir.path();
+    std::fs::write(d.join("s.toml"), SINDYC_MODEL).unwrap();
+    let r = run(d, &["compare", "s.toml", "data.csv"]);
+    assert_eq!(r.code, Some(0), "{}", r.stderr);
+    // No term of the current or the input: the modelled rotor never moves.
+    let idle = SINDYC_MODEL
+        .replace("i = 85.9\n", "")
+        .replace("\"tanh(a*xdot)\" = -168.2\n", "");
+    std::fs::write(d.join("idle.toml"), &idle).unwrap();
+    for cmd in [
+        &["compare", "idle.toml", "data.csv"][..],
+        &["export", "idle.toml", "-o", "c.bin"],
+    ] {
+        refused(d, cmd, &["idle.toml", "sindy.accel", "cannot move"]);
+    }
+    // A table of another kind is not ignored.
+    std::fs::write(
+        d.join("mixed.toml"),
+        format!("{SINDYC_MODEL}\n[lugre]\nalpha0 = 0.08\nalpha1 = 0.01\nalpha2 = 0.001\nv0 = 3\nsigma0 = 300\nsigma1 = 20\n"),
+    )
+    .unwrap();
+    refused(
+        d,
+        &["compare", "mixed.toml", "data.csv"],
+        &["mixed.toml", "field 'lugre'", "kind 'sindyc'"],
+    );
+}
+
+#[test]
+fn simulation_lengths_and_pole_pairs_are_bounded_for_every_command() {
+    let dir = setup();
+    let d = dir.path();
+    // A demo of 1e9 s would allocate hundreds of GB.
+    refused(
+        d,
+        &["demo", "--duration", "1e9", "-q"],
+        &["--duration", "1e9"],
+    );
+    // Below two samples there is no log.
+    refused(
+        d,
+        &[
+            "simulate",
+            "--signal",
+            "a",
+            "--duration",
+            "0.001",
+            "-o",
+            "x.csv",
+        ],
+        &["--duration", "0.001"],
+    );
+    refused(
+        d,
+        &[
+            "simulate",
+            "--signal",
+            "a",
+            "--pole-pairs",
+            "0",
+            "-o",
+            "x.csv",
+        ],
+        &["--pole-pairs"],
+    );
+}
+
+#[test]
+fn outputs_must_name_a_file_below_a_folder() {
+    let dir = setup();
+    let d = dir.path();
+    refused(
+        d,
+        &["export", "m.toml", "-o", "newdir/"],
+        &["newdir/", "directory name"],
+    );
+    assert!(!d.join("newdir").exists());
+    refused(
+        d,
+        &["export", "m.toml", "-o", "data.csv/c.bin"],
+        &["data.csv is a file, not a folder"],
+    );
+    // A report folder that is a file: named, and no temporary file's name in the message.
+    refused(
+        d,
+        &["compare", "m.toml", "data.csv", "--report", "data.csv"],
+        &["data.csv is a file, not a folder"],
+    );
+}
+
+#[test]
+fn lone_cr_line_ends_are_named_whatever_the_size() {
+    let dir = setup();
+    let d = dir.path();
+    let text = log_text(300, 0.012, "# sample_period=0.012\n").replace('\n', "\r");
+    std::fs::write(d.join("small.csv"), &text).unwrap();
+    let big = log_text(5000, 0.012, "# sample_period=0.012\n").replace('\n', "\r");
+    assert!(big.len() > 65536);
+    std::fs::write(d.join("big.csv"), &big).unwrap();
+    for file in ["small.csv", "big.csv"] {
+        refused(
+            d,
+            &["compare", "m.toml", file],
+            &[&format!("{file}:1"), "lone CR"],
+        );
+    }
+}
+
+/// Ctrl-C during a long fit: exit 130, no model, no temporary file.
+#[cfg(unix)]
+#[test]
+fn an_interrupted_fit_leaves_nothing() {
+    let dir = setup();
+    let d = dir.path();
+    let r = run(
+        d,
+        &[
+            "simulate",
+            "--signal",
+            "a",
+            "--duration",
+            "300",
+            "-o",
+            "long.csv",
+        ],
+    );
+    assert_eq!(r.code, Some(0), "{}", r.stderr);
+    let before = snapshot(d);
+    let child = Command::new(motorid_bin())
+        .args([
+            "fit", "--model", "linear", "--add", "cogging", "--add", "offset",
+        ])
+        .args(["-o", "o.toml", "long.csv"])
+        .current_dir(d)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(Duration::from_millis(1500));
+    let st = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(st.success());
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(130), "{err}");
+    assert_eq!(err.trim(), "error: interrupted");
+    assert_eq!(snapshot(d), before, "files changed or left behind");
+}

@@ -1,6 +1,7 @@
 //! `motorid record --signal steady|ramp` on the emulated board (`motorid board --pty`): the
 //! programs `fit --model lugre` asks for, played as board runs with voltages relative to the
-//! board's u_max, in one log with a continuous clock; amplitudes above the ratings refused.
+//! board's u_max, in one log with a continuous clock; amplitudes above the ratings refused;
+//! a run the board ends early is an error that writes no log.
 use std::io::{BufRead, BufReader};
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
@@ -14,8 +15,13 @@ struct Board {
 
 impl Board {
     fn start(dir: &Path) -> Board {
+        Board::start_at(dir, "50")
+    }
+
+    /// The emulated board at time factor `speed`.
+    fn start_at(dir: &Path, speed: &str) -> Board {
         let mut child = Command::new(motorid_bin())
-            .args(["board", "--pty", "--speed", "50"])
+            .args(["board", "--pty", "--speed", speed])
             .current_dir(dir)
             .stdout(Stdio::piped())
             .stderr(Stdio::null())
@@ -153,4 +159,62 @@ fn steady_and_ramp_programs_play_on_the_board() {
         assert!(err.starts_with("error: ") && err.contains(want), "{err}");
         assert!(!d.join("bad.csv").exists());
     }
+}
+
+/// A run the board stops before its end (here: link loss while `record` is paused, as on an
+/// overloaded machine) is an error naming the samples received of those asked for and why,
+/// and leaves no log that looks complete.
+#[cfg(unix)]
+#[test]
+fn a_run_the_board_ends_early_is_an_error_and_writes_no_log() {
+    use std::time::Duration;
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("m.toml"), PAPER_LUGRE_MODEL).unwrap();
+    ok(&motorid(d, &["export", "m.toml", "-o", "c.bin"]));
+    // Five times real time: the board's 2 s link timeout is 0.4 s here, the run 4 s.
+    let board = Board::start_at(d, "5");
+    ok(&motorid(d, &["upload", "c.bin", "--port", &board.port]));
+    let rec = Command::new(motorid_bin())
+        .args(["record", "--port", &board.port, "--signal", "a"])
+        .args(["--duration", "20", "-o", "rec.csv"])
+        .current_dir(d)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let pid = rec.id().to_string();
+    let signal = |s: &str| {
+        let st = Command::new("kill").args([s, &pid]).status().unwrap();
+        assert!(st.success(), "kill {s}");
+    };
+    std::thread::sleep(Duration::from_millis(1000));
+    signal("-STOP");
+    std::thread::sleep(Duration::from_millis(1500));
+    signal("-CONT");
+    let out = rec.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "record succeeded: {err}");
+    let lines: Vec<&str> = err.lines().collect();
+    assert_eq!(lines.len(), 1, "{err}");
+    assert!(
+        lines[0].starts_with("error: ")
+            && lines[0].contains("ended the run early")
+            && lines[0].contains("of 1667 samples")
+            && lines[0].contains("link loss"),
+        "{err}"
+    );
+    let got: usize = lines[0]
+        .split("early: ")
+        .nth(1)
+        .and_then(|r| r.split(' ').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no sample count in: {err}"));
+    assert!(got > 0 && got < 1667, "{got}");
+    let left: Vec<String> = std::fs::read_dir(d)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with("rec") || n.ends_with(".tmp"))
+        .collect();
+    assert!(left.is_empty(), "{left:?}");
 }

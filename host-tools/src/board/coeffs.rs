@@ -168,7 +168,7 @@ pub fn board_check(model: &Model) -> Result<()> {
     if m.kb <= 0.0 {
         bail!(
             "field 'motor.kb': the board needs a positive back-EMF constant (got {})",
-            m.kb
+            crate::validate::show(m.kb)
         );
     }
     let rated = f64::from(blob::RATED_I_MAX);
@@ -300,7 +300,7 @@ pub fn encode(co: &Coefficients) -> Result<Vec<u8>> {
 
 /// Decode a blob read from `path`; the error names the file and says what is wrong.
 pub fn decode_file(path: &std::path::Path) -> Result<(Vec<u8>, Coefficients)> {
-    let p = path.display();
+    let p = crate::log::echo_path(path);
     let bytes = crate::input::read(path, crate::input::MAX_BLOB_FILE, "coefficient blob")?;
     match blob::decode(&bytes) {
         Ok(co) => Ok((bytes, co)),

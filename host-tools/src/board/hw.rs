@@ -58,7 +58,10 @@ pub fn parse_order(s: &str) -> Result<[u8; 3]> {
         || d.iter()
             .any(|&x| x > 2 || std::mem::replace(&mut seen[x as usize], true))
     {
-        bail!("'{s}' is not an order of 1, 2, 3 (e.g. 123, 213, 321)");
+        bail!(
+            "'{}' is not an order of 1, 2, 3 (e.g. 123, 213, 321)",
+            crate::log::echo(s)
+        );
     }
     Ok([d[0], d[1], d[2]])
 }

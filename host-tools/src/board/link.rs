@@ -44,20 +44,22 @@ impl Link {
     /// Open the serial device `path` (e.g. /dev/ttyACM0, or the path `motorid board --pty`
     /// printed).
     pub fn open(path: &str) -> Result<Link> {
+        // As messages show it: control characters escaped, a long path cut.
+        let name = crate::log::echo_path(std::path::Path::new(path));
         let port = serialport::new(path, BAUD)
             .timeout(Duration::from_millis(20))
             .open()
-            .with_context(|| format!("{path}: cannot open the serial port"))?;
+            .with_context(|| format!("{name}: cannot open the serial port"))?;
         Ok(Link {
             port,
-            name: path.to_string(),
+            name,
             decoder: FrameDecoder::new(),
             pending_samples: Vec::new(),
             pending_telemetry: Vec::new(),
         })
     }
 
-    /// The device path.
+    /// The device path as messages show it.
     pub fn name(&self) -> &str {
         &self.name
     }

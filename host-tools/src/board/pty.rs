@@ -31,7 +31,7 @@ impl Pty {
             .read(true)
             .write(true)
             .open(&path)
-            .with_context(|| format!("cannot open {}", path.display()))?
+            .with_context(|| format!("cannot open {}", crate::log::echo_path(&path)))?
             .into();
         let mut t = tcgetattr(&slave).context("tcgetattr failed")?;
         t.make_raw();

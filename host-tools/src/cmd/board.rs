@@ -53,7 +53,10 @@ pub fn run(args: Args) -> Result<()> {
         bail!("choose how the emulated board is reached: --pty (a pseudo-terminal)");
     }
     if !(args.speed.is_finite() && args.speed > 0.0) {
-        bail!("--speed: must be a positive number (got {})", args.speed);
+        bail!(
+            "--speed: must be a positive number (got {})",
+            crate::validate::show(args.speed)
+        );
     }
     let mut plant = EmulatorConfig::paper();
     plant.seed = args.seed;
@@ -76,7 +79,7 @@ pub fn run(args: Args) -> Result<()> {
     std::io::stdout().flush()?;
     eprintln!(
         "emulated board on {} (time ×{}, coefficients: {}); stop with Ctrl-C",
-        pty.path.display(),
+        crate::log::echo_path(&pty.path),
         args.speed,
         if sim.coeff_seq() == 0 {
             "none".to_string()

@@ -59,7 +59,7 @@ pub fn run(args: Args) -> Result<()> {
         println!(
             "{} model on {} ({} samples)",
             model.kind.name(),
-            args.data.display(),
+            crate::log::echo_path(&args.data),
             sc.samples
         );
         println!("              {:>9} {:>9} {:>9}", "x", "xdot", "i");

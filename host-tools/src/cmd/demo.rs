@@ -286,11 +286,10 @@ pub fn hidden_effects(args: &Args) -> Result<Vec<EffectSpec>> {
 
 pub fn run(args: Args) -> Result<()> {
     let hidden = hidden_effects(&args)?;
-    if !(args.duration.is_finite() && args.duration >= 10.0) {
-        anyhow::bail!(
-            "--duration: give at least 10 seconds (got {})",
-            args.duration
-        );
+    if let Err(e) =
+        crate::validate::in_range(args.duration, 10.0, crate::validate::MAX_SIM_DURATION)
+    {
+        anyhow::bail!("--duration [s]: {e} (give at least 10 seconds)");
     }
     println!(
         "Emulated motor (paper's BLDC motor, LuGre friction) with {} hidden effect(s); \

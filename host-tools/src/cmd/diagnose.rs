@@ -174,7 +174,7 @@ fn print_verdict(model: &Model, args: &Args, d: &diagnose::Diagnosis) {
         println!(
             "Adequate: the {} model explains {} down to its noise (every check passes at the {:.0}% level; no effect of the list is missing).",
             model.kind.name(),
-            args.data.display(),
+            crate::log::echo_path(&args.data),
             100.0 * v.level
         );
         return;
@@ -186,14 +186,14 @@ fn print_verdict(model: &Model, args: &Args, d: &diagnose::Diagnosis) {
     if only_data {
         println!(
             "Cannot judge: {} has too little motion to test the {} model (not adequate until a log can show it).",
-            args.data.display(),
+            crate::log::echo_path(&args.data),
             model.kind.name()
         );
     } else {
         println!(
             "Not adequate: the {} model leaves structure in {} (checks at the {:.0}% family level).",
             model.kind.name(),
-            args.data.display(),
+            crate::log::echo_path(&args.data),
             100.0 * v.level
         );
     }

@@ -80,14 +80,15 @@ pub fn run(args: Args) -> Result<()> {
         eprintln!(
             "warning: {}: the model's friction sign is smoothed over {:.3e} rad/s (sign_width, \
              from its slow log); the board compensates with {} rad/s",
-            args.model.display(),
+            crate::log::echo_path(&args.model),
             model.sign_width,
             control::effects::VELOCITY_EPS
         );
     }
     let co = coeffs::coefficients(&model, settings)
-        .with_context(|| format!("{}", args.model.display()))?;
-    let bytes = coeffs::encode(&co).with_context(|| format!("{}", args.model.display()))?;
+        .with_context(|| crate::log::echo_path(&args.model).to_string())?;
+    let bytes =
+        coeffs::encode(&co).with_context(|| crate::log::echo_path(&args.model).to_string())?;
     let source = args.model.display().to_string();
     match args.format {
         Format::Blob => crate::atomic::write(&args.output, &bytes)?,
@@ -102,7 +103,7 @@ pub fn run(args: Args) -> Result<()> {
     if args.format != Format::Blob {
         eprintln!(
             "wrote {} ({} model, {} effects)",
-            args.output.display(),
+            crate::log::echo_path(&args.output),
             model.kind.name(),
             co.effects.len()
         );
@@ -110,7 +111,7 @@ pub fn run(args: Args) -> Result<()> {
     }
     eprintln!(
         "wrote {} ({} bytes: {} model, {} effects)",
-        args.output.display(),
+        crate::log::echo_path(&args.output),
         bytes.len(),
         model.kind.name(),
         co.effects.len()

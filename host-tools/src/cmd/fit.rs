@@ -142,16 +142,16 @@ pub fn run(args: Args) -> Result<()> {
         anyhow::anyhow!(
             "{}: the fitted model is not physical: {e:#}; check the logs' units and that they \
              excite the motor",
-            args.data[0].display()
+            crate::log::echo_path(&args.data[0])
         )
     })?;
     report.model.save(&args.output)?;
     if args.json {
         println!("{}", serde_json::to_string(&json_report(&report))?);
-        eprintln!("wrote {}", args.output.display());
+        eprintln!("wrote {}", crate::log::echo_path(&args.output));
     } else {
         print!("{}", report.summary_text);
-        println!("wrote {}", args.output.display());
+        println!("wrote {}", crate::log::echo_path(&args.output));
     }
     Ok(())
 }
@@ -222,7 +222,7 @@ pub fn parse_constraints(fix: &[String], bound: &[String]) -> Result<Constraints
 /// message says where the problem is.
 fn name_the_data(e: anyhow::Error, data: &[PathBuf]) -> anyhow::Error {
     let msg = format!("{e:#}");
-    let names: Vec<String> = data.iter().map(|p| p.display().to_string()).collect();
+    let names: Vec<String> = data.iter().map(|p| crate::log::echo_path(p)).collect();
     if msg.starts_with("--") || names.iter().any(|n| msg.contains(n.as_str())) {
         return e;
     }

@@ -38,7 +38,7 @@ pub fn run(args: Args) -> Result<()> {
     anyhow::bail!(
         "motorid was built without probe support; rebuild with --features probe \
          (cargo build --release --features probe --bin motorid), or use `motorid upload {} --port PORT`",
-        args.blob.display()
+        crate::log::echo_path(&args.blob)
     )
 }
 
@@ -110,7 +110,7 @@ pub fn run(args: Args) -> Result<()> {
     }
     println!(
         "flashed {} ({} bytes) into coefficient slot {} (sequence {}) of the {}; verified",
-        args.blob.display(),
+        crate::log::echo_path(&args.blob),
         bytes.len(),
         info.index,
         info.seq,

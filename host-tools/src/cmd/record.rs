@@ -3,7 +3,7 @@ use crate::board::link::Link;
 use crate::emulator::SignalKind;
 use crate::log::MotorLog;
 use anyhow::{bail, Result};
-use control::frame::{BoardMsg, Excitation, HostMsg, Mode, Sample};
+use control::frame::{BoardMsg, Excitation, HostMsg, Mode, Sample, Warning};
 use control::telemetry::Telemetry;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::collections::BTreeMap;
@@ -110,12 +110,16 @@ pub fn program(kind: &str, peak: f64) -> Vec<(Excitation, f64)> {
 /// line naming the flag otherwise.
 fn check_speed_ref(w: f32, limit: f32, whose: &str) -> Result<()> {
     if !w.is_finite() {
-        bail!("--speed-ref: must be a number of rad/s (got {w})");
+        bail!(
+            "--speed-ref: must be a number of rad/s (got {})",
+            crate::validate::show(f64::from(w))
+        );
     }
     if w.abs() > limit {
         bail!(
-            "--speed-ref: {w} rad/s is beyond {whose} speed limit of {limit:.1} rad/s \
-             (the board refuses it)"
+            "--speed-ref: {} rad/s is beyond {whose} speed limit of {limit:.1} rad/s \
+             (the board refuses it)",
+            crate::validate::show(f64::from(w))
         );
     }
     Ok(())
@@ -170,7 +174,7 @@ pub fn run(args: Args) -> Result<()> {
     if !(args.u_max.is_finite() && args.u_max > 0.0 && args.u_max <= rated) {
         bail!(
             "--u-max: must be positive and at most the board's rated {rated} V (got {})",
-            args.u_max
+            crate::validate::show(args.u_max)
         );
     }
     if args.amplitude.is_some() && !program_kind {
@@ -178,7 +182,10 @@ pub fn run(args: Args) -> Result<()> {
     }
     let amplitude = args.amplitude.unwrap_or(DEFAULT_AMPLITUDE);
     if !(amplitude.is_finite() && amplitude > 0.0 && amplitude <= 1.0) {
-        bail!("--amplitude: must be a fraction of u_max above 0 and at most 1 (got {amplitude})");
+        bail!(
+            "--amplitude: must be a fraction of u_max above 0 and at most 1 (got {})",
+            crate::validate::show(amplitude)
+        );
     }
     if program_kind && args.duration.is_some() {
         bail!("--duration: steady and ramp are programs of fixed length; leave it out");
@@ -202,7 +209,10 @@ pub fn run(args: Args) -> Result<()> {
     };
     for (_, duration) in &runs {
         if !(duration.is_finite() && *duration > 0.0 && *duration <= 3600.0) {
-            bail!("--duration: must be between 0 and 3600 s (got {duration})");
+            bail!(
+                "--duration: must be between 0 and 3600 s (got {})",
+                crate::validate::show(*duration)
+            );
         }
     }
     if args.pole_pairs == 0 {
@@ -218,6 +228,8 @@ pub fn run(args: Args) -> Result<()> {
     };
     crate::atomic::check_outputs(&[&args.output], &[std::path::Path::new(&port)])?;
     let mut link = Link::open(&port)?;
+    // From here on the port as messages show it.
+    let port = link.name().to_string();
     let id = link.identify()?;
     if let Some(w) = args.speed_ref {
         check_speed_ref(w, id.speed_max, "the board's")?;
@@ -236,7 +248,7 @@ pub fn run(args: Args) -> Result<()> {
     let mut samples: Vec<Sample> = Vec::new();
     let mut windows: Vec<Telemetry> = Vec::new();
     let mut lost = 0u64;
-    for (excitation, duration) in &runs {
+    for (index, (excitation, duration)) in runs.iter().enumerate() {
         match excitation {
             Some(sig) => link.start_experiment(*sig, *duration as f32)?,
             None => {
@@ -251,7 +263,7 @@ pub fn run(args: Args) -> Result<()> {
             }
         }
         let expected = (duration / ts).round() as usize;
-        let run = collect(
+        let (run, end) = collect(
             &mut link,
             expected,
             &port,
@@ -259,6 +271,26 @@ pub fn run(args: Args) -> Result<()> {
             samples.len(),
             &mut windows,
         )?;
+        if let Some(end) = end {
+            if excitation.is_none() {
+                // Speed mode runs until told otherwise; a board that lost the link stopped.
+                let _ = link.command(&HostMsg::Stop, "stop");
+            }
+            bar.finish_and_clear();
+            let which = if runs.len() > 1 {
+                format!(" (board run {} of {})", index + 1, runs.len())
+            } else {
+                String::new()
+            };
+            let got = samples.len() + run.len();
+            let total_n: usize = runs.iter().map(|(_, d)| (d / ts).round() as usize).sum();
+            bail!(
+                "{port}: the board ended the run early{which}: {got} of {total_n} samples \
+                 ({:.1} of {total:.1} s): {end}; nothing written to {} (record again)",
+                got as f64 * ts,
+                crate::log::echo_path(&args.output)
+            );
+        }
         if excitation.is_none() {
             // Speed mode runs until told otherwise.
             link.command(&HostMsg::Stop, "stop")?;
@@ -337,14 +369,50 @@ pub fn run(args: Args) -> Result<()> {
             String::new()
         },
         port,
-        args.output.display()
+        crate::log::echo_path(&args.output)
     );
     Ok(())
 }
 
+/// Why a board run ended before its duration.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum EarlyEnd {
+    /// The board stopped the run: it heard no frame from the host for its link timeout.
+    LinkLost,
+    /// The board sent nothing for [`SILENCE`].
+    Silent,
+}
+
+impl std::fmt::Display for EarlyEnd {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            EarlyEnd::LinkLost => write!(
+                f,
+                "it stopped on link loss (no frame from this computer for {:.0} s of board \
+                 time: was this process paused or the machine overloaded?)",
+                control::board::LINK_TIMEOUT_PERIODS as f64 * f64::from(control::CONTROL_PERIOD_S)
+            ),
+            EarlyEnd::Silent => write!(
+                f,
+                "it fell silent for {} s (cable out, board reset or powered off?)",
+                SILENCE.as_secs()
+            ),
+        }
+    }
+}
+
+/// Samples of the run `run` covers in board time: up to its last sample's (lost samples in
+/// between count, the log reports them as `lost_samples`).
+fn covered(run: &[Sample], ts: f64) -> usize {
+    run.last()
+        .map_or(0, |s| (f64::from(s.t) / ts).round() as usize + 1)
+}
+
 /// The samples of one board run: up to `expected` of them, until the board falls silent
-/// (it stops on its own at the run's duration). `before` samples are already on the bar;
-/// the board's telemetry windows are appended to `windows`.
+/// or stops the run. `before` samples are already on the bar; the board's telemetry windows
+/// are appended to `windows`. The second value says why the run ended before its last
+/// period, by the board's clock (`None`: the run is complete; samples lost on the link
+/// within it are counted by the caller).
 fn collect(
     link: &mut Link,
     expected: usize,
@@ -352,8 +420,9 @@ fn collect(
     bar: &ProgressBar,
     before: usize,
     windows: &mut Vec<Telemetry>,
-) -> Result<Vec<Sample>> {
+) -> Result<(Vec<Sample>, Option<EarlyEnd>)> {
     let mut samples: Vec<Sample> = std::mem::take(&mut link.pending_samples);
+    let mut end = None;
     while samples.len() < expected {
         match link.recv(SILENCE)? {
             Some(BoardMsg::Sample(s)) => {
@@ -370,13 +439,26 @@ fn collect(
                 bail!("{port}: the board stopped with a fault: {f:?}")
             }
             Some(BoardMsg::Telemetry(t)) => windows.push(t),
+            Some(BoardMsg::Warning(Warning::LinkLost)) => {
+                end = Some(EarlyEnd::LinkLost);
+                break;
+            }
             Some(_) => {}
-            // Silence: the run ended.
-            None => break,
+            // Silence: the run ended, at its duration or before.
+            None => {
+                end = Some(EarlyEnd::Silent);
+                break;
+            }
         }
     }
     samples.truncate(expected);
-    Ok(samples)
+    // The board's clock says whether the run reached its end: its last sample is the
+    // run's last period (a few samples of slack for the board's f32 clock).
+    let ts = f64::from(control::CONTROL_PERIOD_S);
+    if covered(&samples, ts) + 1 >= expected {
+        end = None;
+    }
+    Ok((samples, end))
 }
 
 /// The log's telemetry metadata: period, jitter and cycles over the one-second windows the

@@ -47,7 +47,8 @@ pub struct Args {
     #[arg(long)]
     pub truth: bool,
     /// Pole pairs seen by the Hall sensors (the paper's 0.095 rad resolution is 11).
-    #[arg(long, value_name = "P", default_value_t = emulator::DEFAULT_POLE_PAIRS)]
+    #[arg(long, value_name = "P", default_value_t = emulator::DEFAULT_POLE_PAIRS,
+          value_parser = clap::value_parser!(u16).range(1..=i64::from(emulator::MAX_POLE_PAIRS)))]
     pub pole_pairs: u16,
     /// Current-sensor noise, standard deviation in amperes.
     #[arg(long, value_name = "A", value_parser = crate::validate::parse_noise, allow_hyphen_values = true, default_value_t = emulator::DEFAULT_CURRENT_NOISE)]
@@ -111,7 +112,7 @@ pub fn run(args: Args) -> Result<()> {
     let (ilo, ihi) = range(&res.truth.i);
     println!(
         "wrote {}: {} samples, {:.1} s, signal {}, effects: {}; speed {:.1} .. {:.1} rad/s, current {:.1} .. {:.1} A",
-        args.output.display(),
+        crate::log::echo_path(&args.output),
         res.log.len(),
         res.log.len() as f64 * emulator::SAMPLE_PERIOD,
         args.signal.name(),

@@ -38,7 +38,7 @@ pub fn run(args: Args) -> Result<()> {
                 .map_err(|e| {
                     anyhow::anyhow!(
                         "{}: cannot keep the board's commissioning: {e:?}",
-                        args.blob.display()
+                        crate::log::echo_path(&args.blob)
                     )
                 })?
                 .to_vec();
@@ -68,7 +68,7 @@ pub fn run(args: Args) -> Result<()> {
     }
     println!(
         "uploaded {} ({} bytes, {} model) to {} (firmware {}): active as flash slot sequence {seq} (was {})",
-        args.blob.display(),
+        crate::log::echo_path(&args.blob),
         bytes.len(),
         kind_name(co.model),
         args.port,

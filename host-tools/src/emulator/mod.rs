@@ -46,6 +46,8 @@ pub type ExtraLoad = Arc<dyn Fn(LoadInputs) -> f64 + Send + Sync>;
 
 /// Default Hall pole pairs: the paper's 0.095 rad resolution is 2π/(6·11).
 pub const DEFAULT_POLE_PAIRS: u16 = control::hall::PAPER_POLE_PAIRS;
+/// Most Hall pole pairs the emulator takes: beyond any motor it could stand for.
+pub const MAX_POLE_PAIRS: u16 = 1000;
 /// Default current-sensor noise [A] (standard deviation): a typical shunt amplifier + 12-bit
 /// ADC on the B-G431B-ESC1 after the firmware's averaging.
 pub const DEFAULT_CURRENT_NOISE: f64 = 0.02;
@@ -203,19 +205,22 @@ impl EmulatorConfig {
             ("J", m.j),
         ] {
             if !(v.is_finite() && v > 0.0) {
-                bail!("motor constant {name} must be a positive number (got {v})");
+                bail!(
+                    "motor constant {name} must be a positive number (got {})",
+                    crate::validate::show(v)
+                );
             }
         }
-        if self.pole_pairs == 0 || self.pole_pairs > 1000 {
+        if self.pole_pairs == 0 || self.pole_pairs > MAX_POLE_PAIRS {
             bail!(
-                "pole pairs must be between 1 and 1000 (got {})",
+                "pole pairs must be between 1 and {MAX_POLE_PAIRS} (got {})",
                 self.pole_pairs
             );
         }
         if !(self.current_noise.is_finite() && self.current_noise >= 0.0) {
             bail!(
                 "current noise must be 0 or more amperes (got {})",
-                self.current_noise
+                crate::validate::show(self.current_noise)
             );
         }
         // At least 1 µs: the sub-step count per sample is sample / fine_step.
@@ -232,7 +237,10 @@ impl EmulatorConfig {
         for e in &self.effects {
             if let Effect::Thermal { tau, .. } = e {
                 if tau.is_nan() || *tau <= 0.0 {
-                    bail!("effect 'thermal': tau must be positive (got {tau})");
+                    bail!(
+                        "effect 'thermal': tau must be positive (got {})",
+                        crate::validate::show(*tau)
+                    );
                 }
             }
         }
@@ -287,7 +295,10 @@ pub const MAX_CURRENT: f64 = 1e5;
 /// `seed`, `current_noise`, `fine_step`, `effects` (spec strings separated by `;`).
 pub fn simulate(cfg: &EmulatorConfig, input: &[f64], ts: f64) -> Result<SimResult> {
     if !(ts.is_finite() && ts > 0.0) {
-        bail!("sample period must be a positive number of seconds (got {ts})");
+        bail!(
+            "sample period must be a positive number of seconds (got {})",
+            crate::validate::show(ts)
+        );
     }
     if input.len() < 2 {
         bail!(
@@ -367,8 +378,13 @@ pub fn simulate(cfg: &EmulatorConfig, input: &[f64], ts: f64) -> Result<SimResul
 /// [`simulate`] under one of the paper's signals (seeded with `cfg.seed`), at 12 ms; the
 /// log's metadata also names the signal.
 pub fn simulate_signal(cfg: &EmulatorConfig, kind: SignalKind, duration: f64) -> Result<SimResult> {
-    if !(duration.is_finite() && duration > 0.0) {
-        bail!("duration must be a positive number of seconds (got {duration})");
+    // The signal and the log are sized by the duration: bounded here for every caller.
+    if let Err(e) = crate::validate::in_range(
+        duration,
+        crate::validate::MIN_SIM_DURATION,
+        crate::validate::MAX_SIM_DURATION,
+    ) {
+        bail!("duration [s]: {e}");
     }
     let u = signal(kind, duration, cfg.seed);
     let mut res = simulate(cfg, &u, SAMPLE_PERIOD)?;

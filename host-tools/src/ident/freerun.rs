@@ -289,7 +289,10 @@ pub fn simulate_with(model: &Model, log: &MotorLog, substeps: usize) -> Result<P
         return super::sindyc_simulate(model, log);
     }
     if log.is_empty() {
-        bail!("{}: the log has no samples", log.source.display());
+        bail!(
+            "{}: the log has no samples",
+            crate::log::echo_path(&log.source)
+        );
     }
     simulate_range(model, log, 0, log.len(), substeps)
 }
@@ -383,7 +386,7 @@ pub fn run_range<D: RunScalar>(
     if start >= end {
         bail!(
             "{}: empty sample range {start}..{end}",
-            log.source.display()
+            crate::log::echo_path(&log.source)
         );
     }
     let n = end - start;
@@ -444,7 +447,7 @@ pub fn run_range<D: RunScalar>(
             bail!(
                 "{}: the model diverged in free run at t = {} s (sample {}); its parameters \
                  are not physical",
-                log.source.display(),
+                crate::log::echo_path(&log.source),
                 log.t[k + 1],
                 k + 2
             );

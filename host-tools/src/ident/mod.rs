@@ -100,7 +100,7 @@ pub const MIN_SAMPLES: usize = 50;
 
 /// Checks a log is usable for fitting: enough samples, a non-constant input and angle.
 pub fn check_log(log: &MotorLog, plant: Plant) -> Result<()> {
-    let p = log.source.display();
+    let p = crate::log::echo_path(&log.source);
     if log.len() < MIN_SAMPLES {
         bail!(
             "{p}: only {} samples; fitting needs at least {MIN_SAMPLES}",
@@ -521,7 +521,7 @@ pub fn declared_units<'a>(logs: impl Iterator<Item = &'a MotorLog>) -> BTreeMap<
             per[0].1.to_string()
         } else {
             per.iter()
-                .map(|(l, u)| format!("{u} in {}", l.source.display()))
+                .map(|(l, u)| format!("{u} in {}", crate::log::echo_path(&l.source)))
                 .collect::<Vec<_>>()
                 .join("; ")
         };
@@ -643,7 +643,7 @@ pub fn score(model: &Model, log: &MotorLog) -> Result<Scores> {
 
 /// Score an existing prediction (see [`score`]).
 pub fn score_prediction(model: &Model, log: &MotorLog, pred: &Prediction) -> Result<Scores> {
-    let src = log.source.display();
+    let src = crate::log::echo_path(&log.source);
     let window = model.sensor.velocity_window;
     let res = match sensor_chain::hall_resolution(log) {
         r if r > 0.0 => r,

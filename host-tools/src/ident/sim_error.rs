@@ -138,7 +138,10 @@ impl<'a> Residuals<'a> {
         for tg in &self.targets {
             let n = tg.log.len();
             if n == 0 {
-                bail!("{}: the log has no samples", tg.log.source.display());
+                bail!(
+                    "{}: the log has no samples",
+                    crate::log::echo_path(&tg.log.source)
+                );
             }
             // Segments start every `seg` samples; each is simulated from `window` samples
             // before its start (so that the velocity estimator has its history) and scored
@@ -423,7 +426,12 @@ pub fn refine_on(
     for (row, f) in rows.iter_mut().zip(free) {
         if let Some((lo, hi)) = user.bounds.get(&row.name) {
             let sep = if row.note.is_empty() { "" } else { "; " };
-            row.note = format!("{}{sep}bounded by --bound {lo}..{hi}", row.note);
+            row.note = format!(
+                "{}{sep}bounded by --bound {}..{}",
+                row.note,
+                crate::validate::show(*lo),
+                crate::validate::show(*hi)
+            );
             debug_assert_eq!((f.lo, f.hi), (*lo, *hi));
         }
     }

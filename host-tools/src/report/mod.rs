@@ -143,7 +143,7 @@ pub fn write_compare_report(
     let mut page = Page::new(&format!(
         "{} model on {}",
         model.kind.name(),
-        log.source.display()
+        crate::log::echo_path(&log.source)
     ));
     page.paragraph(&format!(
         "Free-run simulation of the model with the log's input, {} samples. Fit percentage \
@@ -293,7 +293,7 @@ pub fn write_diagnose_report(
     let mut page = Page::new(&format!(
         "Diagnosis of the {} model on {}",
         model.kind.name(),
-        log.source.display()
+        crate::log::echo_path(&log.source)
     ));
     page.heading("Missing effects");
     findings_section(&mut page, d);

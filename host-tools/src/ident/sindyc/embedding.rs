@@ -41,7 +41,7 @@ impl HiddenState {
             ),
             r => r,
         }
-        .with_context(|| format!("{}: column 'theta'", logs[0].source.display()))?;
+        .with_context(|| format!("{}: column 'theta'", crate::log::echo_path(&logs[0].source)))?;
         drop(all);
         let mut z = xdot
             .iter()

@@ -207,13 +207,13 @@ fn check_logs(fit_logs: &[MotorLog], val_logs: &[MotorLog], opts: &SindycOptions
         if voltage && log.i.is_none() {
             bail!(
                 "{}: column 'i': SINDYc with --plant voltage needs the measured current",
-                log.source.display()
+                crate::log::echo_path(&log.source)
             );
         }
         if log.len() < needed {
             bail!(
                 "{}: {} samples are too few for SINDYc (the delay embedding needs at least {})",
-                log.source.display(),
+                crate::log::echo_path(&log.source),
                 log.len(),
                 needed
             );

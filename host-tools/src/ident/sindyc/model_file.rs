@@ -108,13 +108,22 @@ pub fn from_table(t: &toml::Table) -> Result<(SindyModel<f64>, HankelSettings)> 
                 anyhow!("field 'sindy.{name}': not a table of term = coefficient")
             })?;
             for (k, v) in tab {
-                let term = Term::parse(k)
-                    .ok_or_else(|| anyhow!("field 'sindy.{name}': unknown term '{k}'"))?;
+                let term = Term::parse(k).ok_or_else(|| {
+                    anyhow!(
+                        "field 'sindy.{name}': unknown term '{}'",
+                        crate::log::echo(k)
+                    )
+                })?;
                 let c = v
                     .as_float()
                     .or_else(|| v.as_integer().map(|i| i as f64))
                     .filter(|c| c.is_finite())
-                    .ok_or_else(|| anyhow!("field 'sindy.{name}.\"{k}\"': not a number"))?;
+                    .ok_or_else(|| {
+                        anyhow!(
+                            "field 'sindy.{name}.\"{}\"': not a number",
+                            crate::log::echo(k)
+                        )
+                    })?;
                 eq.push(term, c)
                     .map_err(|_| anyhow!("field 'sindy.{name}': more than {MAX_TERMS} terms"))?;
             }

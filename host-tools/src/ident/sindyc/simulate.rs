@@ -45,7 +45,10 @@ pub fn simulate(
 ) -> Result<Prediction> {
     let n = log.len();
     if n == 0 {
-        bail!("{}: the log has no samples", log.source.display());
+        bail!(
+            "{}: the log has no samples",
+            crate::log::echo_path(&log.source)
+        );
     }
     let voltage = plant == Plant::Voltage;
     let i0 = match (&log.i, voltage) {
@@ -94,7 +97,7 @@ pub fn simulate(
                     "{}: time step {} s before sample {} is too long for the SINDYc model, or \
                      the model's coefficients too large (its matrix exponential is out of \
                      range)",
-                    log.source.display(),
+                    crate::log::echo_path(&log.source),
                     log.t[k + 1] - log.t[k],
                     k + 2
                 )
@@ -107,7 +110,7 @@ pub fn simulate(
         {
             bail!(
                 "{}: the SINDYc model diverged in free run at t = {} s (sample {})",
-                log.source.display(),
+                crate::log::echo_path(&log.source),
                 log.t[k + 1],
                 k + 2
             );
