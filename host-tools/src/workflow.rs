@@ -25,6 +25,9 @@
 //! residual, at the level [`SELECTION_ALPHA`]). A refit that is not kept is recorded, its
 //! addition is set aside, and the next candidate of the kept model's diagnoses is tried.
 //!
+//! A named effect the fit cannot estimate yet (it refuses the request) is set aside the same
+//! way, without a round, and listed in [`Outcome::not_fitted`].
+//!
 //! When the selection data was held out in time, the final structure is refitted on the whole
 //! fitting logs ([`Outcome::refit_on_all`]).
 //!
@@ -131,6 +134,9 @@ pub struct Outcome {
     /// whole fitting logs (the structure is chosen on the split, its parameters use all the
     /// data).
     pub refit_on_all: Option<Model>,
+    /// Effects the diagnosis named that the fit could not add, with its reason; each was
+    /// set aside and the next candidate tried.
+    pub not_fitted: Vec<(EffectSpec, String)>,
 }
 
 impl Outcome {
@@ -316,17 +322,45 @@ pub fn run(
     let mut set_aside: Vec<EffectSpec> = Vec::new();
     let mut rounds: Vec<Round> = Vec::new();
     let mut kept_at: Option<usize> = None;
+    let mut not_fitted: Vec<(EffectSpec, String)> = Vec::new();
+    let stop;
     let mut round = 0;
     loop {
-        let model = fit(&FitRequest {
+        let fitted = fit(&FitRequest {
             kind: cfg.kind,
             logs: fit_logs,
             validate: select,
             adds: &adds,
             plant: cfg.plant,
             constraints: cfg.constraints,
-        })
-        .with_context(|| format!("round {round} of the identification loop"))?;
+        });
+        let model = match (fitted, kept_at) {
+            (Ok(m), _) => m,
+            // A refit the fit refuses (an effect it cannot estimate yet): set the effect
+            // aside and try the next candidate of the kept model, in the same round.
+            (Err(e), Some(k)) => {
+                let spec = adds.pop().expect("a refit adds an effect");
+                not_fitted.push((spec.clone(), format!("{e:#}")));
+                set_aside.push(spec);
+                let kept = &rounds[k];
+                if round < cfg.max_rounds {
+                    if let Some(n) = next_addition(&kept.diagnoses, &adds, &set_aside) {
+                        adds.push(n.spec);
+                        continue;
+                    }
+                }
+                let adequate = kept.diagnoses.iter().all(|d| d.verdict.adequate);
+                stop = Some(if adequate {
+                    Stop::Adequate
+                } else {
+                    Stop::NothingToAdd
+                });
+                break;
+            }
+            (Err(e), None) => {
+                return Err(e).with_context(|| format!("round {round} of the identification loop"))
+            }
+        };
         let selection_fit = selection_fit(&model, select);
         let test = kept_at.map(|k| {
             let added = adds.last().expect("a refit adds an effect");
@@ -369,7 +403,7 @@ pub fn run(
         if kept {
             kept_at = Some(rounds.len() - 1);
         }
-        let stop = if let Some(n) = next {
+        let round_stop = if let Some(n) = next {
             adds.push(n.spec);
             None
         } else if adequate {
@@ -381,29 +415,32 @@ pub fn run(
         } else {
             Some(Stop::NothingToAdd)
         };
-        if let Some(stop) = stop {
-            let mut out = Outcome {
-                rounds,
-                stop,
-                held_out_in_time,
-                refit_on_all: None,
-            };
-            if held_out_in_time {
-                let model = fit(&FitRequest {
-                    kind: cfg.kind,
-                    logs: cfg.fit_logs,
-                    validate: &[],
-                    adds: &out.final_round().adds,
-                    plant: cfg.plant,
-                    constraints: cfg.constraints,
-                })
-                .context("refitting the final model on the whole fitting logs")?;
-                out.refit_on_all = Some(model);
-            }
-            return Ok(out);
+        if let Some(s) = round_stop {
+            stop = Some(s);
+            break;
         }
         round += 1;
     }
+    let mut out = Outcome {
+        rounds,
+        stop: stop.expect("the loop ends with a stop"),
+        held_out_in_time,
+        refit_on_all: None,
+        not_fitted,
+    };
+    if held_out_in_time {
+        let model = fit(&FitRequest {
+            kind: cfg.kind,
+            logs: cfg.fit_logs,
+            validate: &[],
+            adds: &out.final_round().adds,
+            plant: cfg.plant,
+            constraints: cfg.constraints,
+        })
+        .context("refitting the final model on the whole fitting logs")?;
+        out.refit_on_all = Some(model);
+    }
+    Ok(out)
 }
 
 #[cfg(test)]
@@ -489,6 +526,50 @@ mod tests {
         let second = next_addition(&d, &[], std::slice::from_ref(&first.spec))
             .expect("the other effect is still proposed");
         assert_ne!(first.spec.kind, second.spec.kind);
+    }
+
+    /// A refit the fit refuses (an effect it cannot estimate) is set aside without a round,
+    /// and the loop goes on with the next candidate.
+    #[test]
+    fn an_effect_the_fit_refuses_is_set_aside_and_the_loop_goes_on() {
+        let mut cfg = EmulatorConfig::paper();
+        cfg.seed = 4;
+        cfg.effects = vec![EffectSpec::parse("offset").unwrap().to_effect()];
+        let logs = [simulate_signal(&cfg, SignalKind::A, 30.0).unwrap().log];
+        let loop_cfg = Config {
+            kind: ModelKind::Linear,
+            plant: Plant::Voltage,
+            fit_logs: &logs,
+            select_logs: &[],
+            start: Vec::new(),
+            constraints: &Constraints::NONE,
+            max_rounds: 1,
+            diagnose: diagnose::Options::default(),
+        };
+        let mut refused: Option<EffectKind> = None;
+        let out = run(
+            &loop_cfg,
+            &mut |req| {
+                if let Some(a) = req.adds.last() {
+                    if refused.is_none_or(|k| k == a.kind) {
+                        refused = Some(a.kind);
+                        anyhow::bail!("--add {}: not estimable", a.kind.name());
+                    }
+                }
+                Ok(ident::fit(req)?.model)
+            },
+            &mut |_| {},
+        )
+        .unwrap();
+        let kind = refused.expect("the linear model misses friction: a refit was asked");
+        assert_eq!(out.not_fitted.len(), 1, "{:?}", out.not_fitted);
+        assert_eq!(out.not_fitted[0].0.kind, kind);
+        assert!(out.not_fitted[0].1.contains("not estimable"));
+        assert!(out
+            .rounds
+            .iter()
+            .all(|r| r.adds.iter().all(|a| a.kind != kind)));
+        assert!(out.rounds.len() <= 2);
     }
 
     /// On an emulated motor with LuGre friction and a constant load, the linear model's loop

@@ -250,14 +250,18 @@ pub fn run_loop(
             r.selection_fit,
             r.selection_test
                 .map(|t| format!(
-                    "; {} (F = {:.1}, p = {:.1e}, level {:.0} %)",
+                    "; {} (F = {:.1}, p {}, level {:.0} %)",
                     if r.kept {
                         "kept: explains it better beyond noise"
                     } else {
                         "not kept: no better beyond noise, the model before stands"
                     },
                     t.f,
-                    t.p_value,
+                    if t.p_value >= 1e-300 {
+                        format!("= {:.1e}", t.p_value)
+                    } else {
+                        "< 1e-300".to_string()
+                    },
                     100.0 * workflow::SELECTION_ALPHA
                 ))
                 .unwrap_or_default()
@@ -298,6 +302,13 @@ pub fn run_loop(
     };
     let out = workflow::run(&loop_cfg, &mut fit, &mut on_round)?;
     scored?;
+    for (spec, why) in &out.not_fitted {
+        say(&format!(
+            "set aside: {} was named but cannot be fitted: {}",
+            spec.kind.name(),
+            why.lines().next().unwrap_or_default()
+        ));
+    }
     let last = out.final_round();
     let pred = ident::freerun::simulate(&last.model, &test_log)?;
     let sc = ident::score_prediction(&last.model, &test_log, &pred)?;
