@@ -503,6 +503,28 @@ mod tests {
         }
     }
 
+    /// Unnamed physics alone hides no named effect, and counts as found only through a table
+    /// on the variable that carries it.
+    #[test]
+    fn unnamed_physics_is_found_only_by_a_table_on_its_carrier() {
+        let mut a = args(&[], false, 1);
+        a.unnamed = Some(Unnamed::Fan);
+        assert!(hidden_effects(&a).unwrap().is_empty());
+        let outcome = |added: &[&str]| Outcome {
+            hidden: Vec::new(),
+            unnamed: Some(Unnamed::Fan),
+            iterations: Vec::new(),
+            added: added
+                .iter()
+                .map(|s| EffectSpec::parse(s).unwrap())
+                .collect(),
+            report: None,
+        };
+        assert!(outcome(&["table:var=omega,bins=8"]).found_all());
+        assert!(!outcome(&["table:var=current,bins=8"]).found_all());
+        assert!(!outcome(&["stribeck"]).found_all());
+    }
+
     #[test]
     fn random_draws_from_the_list_and_effect_wins() {
         let h = hidden_effects(&args(&[], true, 1)).unwrap();
