@@ -61,7 +61,7 @@ cargo build $MOTORID_BUILD_ARGS
 # Cargo runs test binaries one after another, and most are one long single-threaded fit: the
 # longest (fit_add_effects: position_load and cogging, about 3 min) runs beside all the others
 # so that both cores work.
-slow_test=fit_add_closes_half_the_gap_for_position_load_and_cogging
+slow_test=the_loop_adds_position_load_and_cogging_and_closes_half_the_gap
 # (The same arguments as the build above, so nothing is rebuilt: `-p tests` alone would resolve
 # other features and compile the dependencies again.)
 slow_bin=$(cargo test --no-run --all-targets --message-format=json 2>/dev/null \

@@ -2,6 +2,16 @@
 //! refit, with one stopping policy. `motorid demo`, the real-data runs and the tests all run
 //! this loop; a user runs the same steps by hand with `fit`, `diagnose` and `fit --add`.
 //!
+//! # Data
+//! Three roles, never mixed: the *fitting* data estimates the parameters and is diagnosed;
+//! the *selection* data decides whether a refit is kept (and is `fit --validate`'s data); the
+//! caller reports scores on *test* data no choice was made on. Without selection logs the
+//! loop holds out the last [`SELECT_FRACTION`] of every fitting log in time ([`split_in_time`]):
+//! the model is fitted on the first part and judged on its continuation, as it will be used.
+//! (Alternating blocks would interleave the two, but every block would then be a short free
+//! run dominated by its initial state, and the held-out part would not be the future of the
+//! fitted one.)
+//!
 //! # Policy
 //! Each round fits the model with the effects added so far and diagnoses it on every fitting
 //! log. The next addition is the strongest significant effect `diagnose` names that the model
@@ -9,27 +19,44 @@
 //! variable that carries unexplained structure and comes with a term to add (a `table:`
 //! spec). One addition per round, so that each refit answers for one change.
 //!
+//! A refit is kept when it explains the selection data significantly better than the model it
+//! extends ([`selection_test`]: the nested-model F-test of [`statistics::f_test`] on the
+//! simulation-error residual the fit itself minimises, with the effective sample size of that
+//! residual, at the level [`SELECTION_ALPHA`]). A refit that is not kept is recorded, its
+//! addition is set aside, and the next candidate of the kept model's diagnoses is tried.
+//!
+//! A named effect the fit cannot estimate yet (it refuses the request) is set aside the same
+//! way, without a round, and listed in [`Outcome::not_fitted`].
+//!
+//! When the selection data was held out in time, the final structure is refitted on the whole
+//! fitting logs ([`Outcome::refit_on_all`]).
+//!
 //! The loop stops when
 //! - the model is adequate on every fitting log ([`Stop::Adequate`]);
-//! - it is not, but nothing named can be added ([`Stop::NothingToAdd`]: the verdict says which
-//!   variable carries the rest);
-//! - a refit scores worse on the selection logs than the model before it
-//!   ([`Stop::Worse`]: that round is kept in the list, marked not kept, and the model before
-//!   it stands; only with selection logs apart from the fitting logs: without them the
-//!   diagnosis's significance test on the fitting logs is the only judge), or
+//! - it is not, but nothing untried can be added ([`Stop::NothingToAdd`]: the verdict says
+//!   which variable carries the rest);
+//! - the last candidates were all refitted and none was kept ([`Stop::NoGain`]), or
 //! - [`Config::max_rounds`] refits have run ([`Stop::MaxRounds`]).
-//!
-//! Selection and reporting: the selection logs choose (they are `fit --validate`'s logs and
-//! the keep/stop score); scores a user reads should come from other data, which the caller
-//! owns (the demo scores a fresh test log no choice was made on).
 use crate::diagnose::{self, Diagnosis, Structure};
 use crate::effect_spec::EffectSpec;
-use crate::ident::free_params::Constraints;
+use crate::ident::free_params::{self, Constraints};
+use crate::ident::sim_error::Residuals;
 use crate::ident::{self, FitRequest};
 use crate::log::{MotorLog, Plant};
 use crate::model::{Model, ModelKind};
-use anyhow::{Context, Result};
+use crate::numerics::statistics::{self, FTest};
+use anyhow::{bail, Context, Result};
 use control::effects::EffectKind;
+
+/// Share of each fitting log held out in time for selection when no selection logs are
+/// given: the last 30 %, enough for several of the slowest excitation cycles while the fit
+/// keeps most of the data.
+pub const SELECT_FRACTION: f64 = 0.3;
+
+/// Level of the keep-or-not test of a refit: a refit whose addition does nothing is kept with
+/// probability at most 1 % per round (at most a few percent over a loop of a few rounds),
+/// while a real improvement on a few thousand held-out samples passes easily.
+pub const SELECTION_ALPHA: f64 = 0.01;
 
 /// What the loop fits, on which data.
 pub struct Config<'a> {
@@ -37,9 +64,8 @@ pub struct Config<'a> {
     pub plant: Plant,
     /// Logs the model is fitted on; each is diagnosed.
     pub fit_logs: &'a [MotorLog],
-    /// Logs that choose among models (passed to the fit as validation logs, and scored to
-    /// decide whether a refit is kept); empty: none (scores are then on the fitting logs,
-    /// for information only).
+    /// Logs that choose among models (passed to the fit as validation logs, and the data of
+    /// the keep-or-not test); empty: the last [`SELECT_FRACTION`] of each fitting log.
     pub select_logs: &'a [MotorLog],
     /// Effects in the model from the first round on.
     pub start: Vec<EffectSpec>,
@@ -69,19 +95,22 @@ pub struct Next {
     pub reason: Reason,
 }
 
-/// One fit and its diagnoses.
+/// One fit, its keep-or-not test and its diagnoses.
 #[derive(Debug, Clone)]
 pub struct Round {
     /// Effects added to the base model in this round's fit.
     pub adds: Vec<EffectSpec>,
     pub model: Model,
-    /// The diagnosis on each fitting log, in order.
+    /// The diagnosis on each fitting log, in order (empty for a refit that was not kept).
     pub diagnoses: Vec<Diagnosis>,
-    /// Mean angle fit % on the selection logs ([`selection_fit`]).
+    /// Mean angle fit % of the free run on the selection data ([`selection_fit`]).
     pub selection_fit: f64,
+    /// The test of this refit against the kept model it extends, on the selection data
+    /// ([`selection_test`]); None for the first fit.
+    pub selection_test: Option<FTest>,
     /// What the next round adds (None on the last round).
     pub next: Option<Next>,
-    /// False when this refit scored worse on the selection logs than the round before.
+    /// False when this refit did not explain the selection data significantly better.
     pub kept: bool,
 }
 
@@ -90,7 +119,7 @@ pub struct Round {
 pub enum Stop {
     Adequate,
     NothingToAdd,
-    Worse,
+    NoGain,
     MaxRounds,
 }
 
@@ -99,10 +128,19 @@ pub enum Stop {
 pub struct Outcome {
     pub rounds: Vec<Round>,
     pub stop: Stop,
+    /// True when the selection data was the held-out end of the fitting logs.
+    pub held_out_in_time: bool,
+    /// With the selection data held out in time: the final round's effects refitted on the
+    /// whole fitting logs (the structure is chosen on the split, its parameters use all the
+    /// data).
+    pub refit_on_all: Option<Model>,
+    /// Effects the diagnosis named that the fit could not add, with its reason; each was
+    /// set aside and the next candidate tried.
+    pub not_fitted: Vec<(EffectSpec, String)>,
 }
 
 impl Outcome {
-    /// The last kept round: the model the loop ends with.
+    /// The last kept round: the structure the loop ends with.
     pub fn final_round(&self) -> &Round {
         self.rounds
             .iter()
@@ -110,6 +148,51 @@ impl Outcome {
             .find(|r| r.kept)
             .expect("the first round is always kept")
     }
+
+    /// The model the loop ends with: the final round's structure refitted on the whole
+    /// fitting logs when they were split, else the final round's model.
+    pub fn final_model(&self) -> &Model {
+        self.refit_on_all
+            .as_ref()
+            .unwrap_or(&self.final_round().model)
+    }
+}
+
+/// The log cut at `fraction` of its samples from the end: (first part, last part), each a
+/// log of its own (sources say which part). Errors when a part would be too short to fit or
+/// to score.
+pub fn split_in_time(log: &MotorLog, fraction: f64) -> Result<(MotorLog, MotorLog)> {
+    let n = log.len();
+    let cut = n - ((fraction.clamp(0.0, 1.0) * n as f64).round() as usize).min(n);
+    if cut < ident::MIN_SAMPLES || n - cut < ident::MIN_SAMPLES {
+        bail!(
+            "{}: {n} samples are too few to hold out the last {:.0} % for model selection \
+             (each part needs {}); give selection logs apart",
+            log.source.display(),
+            100.0 * fraction,
+            ident::MIN_SAMPLES
+        );
+    }
+    let part = |a: usize, b: usize, what: String| MotorLog {
+        source: format!("{} ({what})", log.source.display()).into(),
+        meta: log.meta.clone(),
+        t: log.t[a..b].to_vec(),
+        u: log.u[a..b].to_vec(),
+        i: log.i.as_ref().map(|v| v[a..b].to_vec()),
+        theta: log.theta[a..b].to_vec(),
+        omega: log.omega.as_ref().map(|v| v[a..b].to_vec()),
+        extra: log
+            .extra
+            .iter()
+            .map(|(k, v)| (k.clone(), v[a..b].to_vec()))
+            .collect(),
+        units: log.units.clone(),
+    };
+    let pct = (100.0 * fraction).round();
+    Ok((
+        part(0, cut, format!("first {:.0} %", 100.0 - pct)),
+        part(cut, n, format!("last {pct:.0} %, held out")),
+    ))
 }
 
 /// Mean angle (or position) fit % of the model's free run on `logs`, the one state every log
@@ -126,21 +209,62 @@ pub fn selection_fit(model: &Model, logs: &[MotorLog]) -> f64 {
     sum / logs.len().max(1) as f64
 }
 
-/// The addition the diagnoses propose for a model with the effects `adds` (see the policy in
-/// the module doc).
-pub fn next_addition(diagnoses: &[Diagnosis], adds: &[EffectSpec]) -> Option<Next> {
-    let have = |s: &EffectSpec| {
-        adds.iter().any(|a| {
-            a.kind == s.kind && (a.kind != EffectKind::Table || a.table_var() == s.table_var())
-        })
+/// Does `refit` (the model `base` plus the effect `added`) explain the selection `logs`
+/// significantly better than `base`? The nested-model F-test ([`statistics::f_test`]) on the
+/// residual the fit minimises (the multiple-shooting simulation error of
+/// [`Residuals::segmented`]: velocity, current and angle, each scaled by its spread), with
+/// `q` the estimable keys of the added effect and the effective sample size
+/// `n / τ` of the refit's residual ([`statistics::correlation_time`]). No parameter was
+/// fitted on these samples, so the denominator keeps `n_eff − q` degrees of freedom; on
+/// held-out data a larger model is not better by construction, which makes the test
+/// conservative. A base that cannot be simulated loses to any refit that can; a refit that
+/// cannot loses (p = 1).
+pub fn selection_test(base: &Model, refit: &Model, added: &EffectSpec, logs: &[MotorLog]) -> FTest {
+    let residuals = Residuals::segmented(logs, refit.sensor.velocity_window);
+    let rss = |r: &[f64]| r.iter().map(|v| v * v).sum::<f64>();
+    let Ok(r1) = residuals.eval(refit) else {
+        return FTest {
+            f: 0.0,
+            p_value: 1.0,
+            explained: 0.0,
+            delta_bic: f64::INFINITY,
+        };
     };
+    let Ok(r0) = residuals.eval(base) else {
+        return FTest {
+            f: f64::INFINITY,
+            p_value: 0.0,
+            explained: 1.0,
+            delta_bic: f64::NEG_INFINITY,
+        };
+    };
+    let q = free_params::effect_keys_of(&added.to_effect()).len().max(1);
+    let n_eff = r1.len() as f64 / statistics::correlation_time(&r1);
+    statistics::f_test(rss(&r0), rss(&r1), q, 0, n_eff)
+}
+
+/// True when `s` is one of `specs`' effects (a table: on the same variable).
+fn contains(specs: &[EffectSpec], s: &EffectSpec) -> bool {
+    specs.iter().any(|a| {
+        a.kind == s.kind && (a.kind != EffectKind::Table || a.table_var() == s.table_var())
+    })
+}
+
+/// The addition the diagnoses propose for a model with the effects `adds`, leaving out the
+/// effects in `set_aside` (refits that were not kept); see the policy in the module doc.
+pub fn next_addition(
+    diagnoses: &[Diagnosis],
+    adds: &[EffectSpec],
+    set_aside: &[EffectSpec],
+) -> Option<Next> {
+    let new = |s: &EffectSpec| !contains(adds, s) && !contains(set_aside, s);
     let named = diagnoses
         .iter()
         .enumerate()
         .flat_map(|(k, d)| d.effects.iter().map(move |f| (k, f)))
         .filter_map(|(k, f)| {
             let spec = EffectSpec::parse(&f.spec).ok()?;
-            (!have(&spec)).then_some((k, f, spec))
+            new(&spec).then_some((k, f, spec))
         })
         .max_by(|a, b| a.1.score.total_cmp(&b.1.score));
     if let Some((log, f, spec)) = named {
@@ -160,7 +284,7 @@ pub fn next_addition(diagnoses: &[Diagnosis], adds: &[EffectSpec]) -> Option<Nex
         .flat_map(|(k, d)| d.verdict.unexplained.iter().map(move |c| (k, c)))
         .find_map(|(log, c)| {
             let spec = EffectSpec::parse(c.spec.as_deref()?).ok()?;
-            (!have(&spec)).then(|| Next {
+            new(&spec).then(|| Next {
                 spec,
                 log,
                 reason: Reason::Unexplained {
@@ -173,78 +297,150 @@ pub fn next_addition(diagnoses: &[Diagnosis], adds: &[EffectSpec]) -> Option<Nex
 
 /// Run the loop. `fit` performs one fit (the caller may wrap it in a progress display; pass
 /// `|req| Ok(ident::fit(req)?.model)` for a plain one); `on_round` sees each round as soon as
-/// it is diagnosed.
+/// it is decided.
 pub fn run(
     cfg: &Config,
     fit: &mut dyn FnMut(&FitRequest) -> Result<Model>,
     on_round: &mut dyn FnMut(&Round),
 ) -> Result<Outcome> {
-    let select = if cfg.select_logs.is_empty() {
+    let held_out_in_time = cfg.select_logs.is_empty();
+    let split: Vec<(MotorLog, MotorLog)> = if held_out_in_time {
         cfg.fit_logs
+            .iter()
+            .map(|l| split_in_time(l, SELECT_FRACTION))
+            .collect::<Result<_>>()?
     } else {
-        cfg.select_logs
+        Vec::new()
+    };
+    let (fit_owned, select_owned): (Vec<MotorLog>, Vec<MotorLog>) = split.into_iter().unzip();
+    let (fit_logs, select) = if held_out_in_time {
+        (&fit_owned[..], &select_owned[..])
+    } else {
+        (cfg.fit_logs, cfg.select_logs)
     };
     let mut adds = cfg.start.clone();
+    let mut set_aside: Vec<EffectSpec> = Vec::new();
     let mut rounds: Vec<Round> = Vec::new();
+    let mut kept_at: Option<usize> = None;
+    let mut not_fitted: Vec<(EffectSpec, String)> = Vec::new();
+    let stop;
     let mut round = 0;
     loop {
-        let model = fit(&FitRequest {
+        let fitted = fit(&FitRequest {
             kind: cfg.kind,
-            logs: cfg.fit_logs,
-            validate: cfg.select_logs,
+            logs: fit_logs,
+            validate: select,
             adds: &adds,
             plant: cfg.plant,
             constraints: cfg.constraints,
-        })
-        .with_context(|| format!("round {round} of the identification loop"))?;
-        let score = selection_fit(&model, select);
-        // Only held-out logs can say a refit is worse: on the fitting logs a larger model
-        // is never worse at its optimum, and their free-run angle fit is dominated by drift.
-        let worse = !cfg.select_logs.is_empty()
-            && rounds
+        });
+        let model = match (fitted, kept_at) {
+            (Ok(m), _) => m,
+            // A refit the fit refuses (an effect it cannot estimate yet): set the effect
+            // aside and try the next candidate of the kept model, in the same round.
+            (Err(e), Some(k)) => {
+                let spec = adds.pop().expect("a refit adds an effect");
+                not_fitted.push((spec.clone(), format!("{e:#}")));
+                set_aside.push(spec);
+                let kept = &rounds[k];
+                if round < cfg.max_rounds {
+                    if let Some(n) = next_addition(&kept.diagnoses, &adds, &set_aside) {
+                        adds.push(n.spec);
+                        continue;
+                    }
+                }
+                let adequate = kept.diagnoses.iter().all(|d| d.verdict.adequate);
+                stop = Some(if adequate {
+                    Stop::Adequate
+                } else {
+                    Stop::NothingToAdd
+                });
+                break;
+            }
+            (Err(e), None) => {
+                return Err(e).with_context(|| format!("round {round} of the identification loop"))
+            }
+        };
+        let selection_fit = selection_fit(&model, select);
+        let test = kept_at.map(|k| {
+            let added = adds.last().expect("a refit adds an effect");
+            selection_test(&rounds[k].model, &model, added, select)
+        });
+        let kept = test.is_none_or(|t| t.p_value < SELECTION_ALPHA);
+        let fitted = adds.clone();
+        let diagnoses: Vec<Diagnosis> = if kept {
+            let st = Structure::from_model(&model);
+            fit_logs
                 .iter()
-                .rev()
-                .find(|r| r.kept)
-                .is_some_and(|prev| score < prev.selection_fit);
-        let st = Structure::from_model(&model);
-        let diagnoses: Vec<Diagnosis> = cfg
-            .fit_logs
-            .iter()
-            .map(|l| diagnose::diagnose(l, &st, &cfg.diagnose))
-            .collect();
-        let next = if worse || round == cfg.max_rounds {
+                .map(|l| diagnose::diagnose(l, &st, &cfg.diagnose))
+                .collect()
+        } else {
+            set_aside.extend(adds.pop());
+            Vec::new()
+        };
+        let base = if kept {
+            &diagnoses
+        } else {
+            &rounds[kept_at.expect("a refit follows a kept round")].diagnoses
+        };
+        let adequate = base.iter().all(|d| d.verdict.adequate);
+        let next = if round == cfg.max_rounds {
             None
         } else {
-            next_addition(&diagnoses, &adds)
+            next_addition(base, &adds, &set_aside)
         };
-        let adequate = diagnoses.iter().all(|d| d.verdict.adequate);
         let r = Round {
-            adds: adds.clone(),
+            adds: fitted,
             model,
             diagnoses,
-            selection_fit: score,
+            selection_fit,
+            selection_test: test,
             next: next.clone(),
-            kept: !worse,
+            kept,
         };
         on_round(&r);
         rounds.push(r);
-        let stop = if worse {
-            Some(Stop::Worse)
-        } else if let Some(n) = next {
+        if kept {
+            kept_at = Some(rounds.len() - 1);
+        }
+        let round_stop = if let Some(n) = next {
             adds.push(n.spec);
             None
         } else if adequate {
             Some(Stop::Adequate)
         } else if round == cfg.max_rounds {
             Some(Stop::MaxRounds)
+        } else if !kept {
+            Some(Stop::NoGain)
         } else {
             Some(Stop::NothingToAdd)
         };
-        if let Some(stop) = stop {
-            return Ok(Outcome { rounds, stop });
+        if let Some(s) = round_stop {
+            stop = Some(s);
+            break;
         }
         round += 1;
     }
+    let mut out = Outcome {
+        rounds,
+        stop: stop.expect("the loop ends with a stop"),
+        held_out_in_time,
+        refit_on_all: None,
+        not_fitted,
+    };
+    if held_out_in_time {
+        let model = fit(&FitRequest {
+            kind: cfg.kind,
+            logs: cfg.fit_logs,
+            validate: &[],
+            adds: &out.final_round().adds,
+            plant: cfg.plant,
+            constraints: cfg.constraints,
+        })
+        .context("refitting the final model on the whole fitting logs")?;
+        out.refit_on_all = Some(model);
+    }
+    Ok(out)
 }
 
 #[cfg(test)]
@@ -252,11 +448,136 @@ mod tests {
     use super::*;
     use crate::emulator::{simulate_signal, EmulatorConfig, SignalKind};
 
-    /// On an emulated motor with LuGre friction and a constant load, the linear model's loop
-    /// adds one named effect per round, each round refits with what the round before
-    /// proposed, and the loop ends with a kept model and a stop that matches its last round.
+    /// The emulator's own model (the truth a fit is measured against).
+    fn truth_model(cfg: &EmulatorConfig) -> Model {
+        let mut m = Model::new(ModelKind::Lugre, Plant::Voltage, 0.012);
+        m.motor = cfg.motor;
+        m.lugre = Some(cfg.effective_lugre());
+        m.effects = cfg.effects.clone();
+        m.sensor.hall_resolution_rad = cfg.hall_resolution();
+        m
+    }
+
     #[test]
-    fn each_round_adds_what_the_last_one_named_and_the_loop_ends() {
+    fn split_in_time_keeps_every_sample_once_and_names_the_parts() {
+        let log = simulate_signal(&EmulatorConfig::paper(), SignalKind::A, 6.0)
+            .unwrap()
+            .log;
+        let (a, b) = split_in_time(&log, SELECT_FRACTION).unwrap();
+        assert_eq!(a.len() + b.len(), log.len());
+        assert_eq!(b.t[0], log.t[a.len()]);
+        assert_eq!(b.theta.last(), log.theta.last());
+        assert_eq!(b.i.as_ref().map(Vec::len), Some(b.len()));
+        let share = b.len() as f64 / log.len() as f64;
+        assert!((share - SELECT_FRACTION).abs() < 0.01, "{share}");
+        assert!(b.source.to_string_lossy().contains("held out"));
+        let mut short = log.clone();
+        for v in [&mut short.t, &mut short.u, &mut short.theta] {
+            v.truncate(ident::MIN_SAMPLES);
+        }
+        short.i = None;
+        assert!(split_in_time(&short, SELECT_FRACTION).is_err());
+    }
+
+    /// On held-out data, the true effect added to a model that lacks it passes the test, and
+    /// an effect the motor does not have, added to the true model, does not.
+    #[test]
+    fn selection_test_keeps_a_real_effect_and_rejects_a_useless_one() {
+        let mut cfg = EmulatorConfig::paper();
+        cfg.seed = 5;
+        let offset = EffectSpec::parse("offset").unwrap();
+        cfg.effects = vec![offset.to_effect()];
+        let held_out = [simulate_signal(&cfg, SignalKind::B, 20.0).unwrap().log];
+        let truth = truth_model(&cfg);
+        let mut without = truth.clone();
+        without.effects.clear();
+        let real = selection_test(&without, &truth, &offset, &held_out);
+        assert!(real.p_value < SELECTION_ALPHA, "{real:?}");
+        // A cogging torque a hundredth of the offset's size: nothing to see in the data.
+        let cogging = EffectSpec::parse("cogging:harmonic=5,amp=0.0003,phase=1").unwrap();
+        let mut extra = truth.clone();
+        extra.effects.push(cogging.to_effect());
+        let useless = selection_test(&truth, &extra, &cogging, &held_out);
+        assert!(useless.p_value >= SELECTION_ALPHA, "{useless:?}");
+    }
+
+    /// A refit that was not kept sets its effect aside: the next proposal is another one.
+    #[test]
+    fn next_addition_skips_what_was_set_aside() {
+        let mut cfg = EmulatorConfig::paper();
+        cfg.seed = 2;
+        cfg.effects = vec![
+            EffectSpec::parse("offset").unwrap().to_effect(),
+            EffectSpec::parse("position_load:amp=0.05")
+                .unwrap()
+                .to_effect(),
+        ];
+        let log = simulate_signal(&cfg, SignalKind::A, 40.0).unwrap().log;
+        let mut model = truth_model(&cfg);
+        model.effects.clear();
+        let d = vec![diagnose::diagnose(
+            &log,
+            &Structure::from_model(&model),
+            &diagnose::Options::default(),
+        )];
+        let names: Vec<&str> = d[0].effects.iter().map(|f| f.name.as_str()).collect();
+        assert!(names.len() >= 2, "two effects are missing, found {names:?}");
+        let first = next_addition(&d, &[], &[]).expect("two effects are missing");
+        let second = next_addition(&d, &[], std::slice::from_ref(&first.spec))
+            .expect("the other effect is still proposed");
+        assert_ne!(first.spec.kind, second.spec.kind);
+    }
+
+    /// A refit the fit refuses (an effect it cannot estimate) is set aside without a round,
+    /// and the loop goes on with the next candidate.
+    #[test]
+    fn an_effect_the_fit_refuses_is_set_aside_and_the_loop_goes_on() {
+        let mut cfg = EmulatorConfig::paper();
+        cfg.seed = 4;
+        cfg.effects = vec![EffectSpec::parse("offset").unwrap().to_effect()];
+        let logs = [simulate_signal(&cfg, SignalKind::A, 30.0).unwrap().log];
+        let loop_cfg = Config {
+            kind: ModelKind::Linear,
+            plant: Plant::Voltage,
+            fit_logs: &logs,
+            select_logs: &[],
+            start: Vec::new(),
+            constraints: &Constraints::NONE,
+            max_rounds: 1,
+            diagnose: diagnose::Options::default(),
+        };
+        let mut refused: Option<EffectKind> = None;
+        let out = run(
+            &loop_cfg,
+            &mut |req| {
+                if let Some(a) = req.adds.last() {
+                    if refused.is_none_or(|k| k == a.kind) {
+                        refused = Some(a.kind);
+                        anyhow::bail!("--add {}: not estimable", a.kind.name());
+                    }
+                }
+                Ok(ident::fit(req)?.model)
+            },
+            &mut |_| {},
+        )
+        .unwrap();
+        let kind = refused.expect("the linear model misses friction: a refit was asked");
+        assert_eq!(out.not_fitted.len(), 1, "{:?}", out.not_fitted);
+        assert_eq!(out.not_fitted[0].0.kind, kind);
+        assert!(out.not_fitted[0].1.contains("not estimable"));
+        assert!(out
+            .rounds
+            .iter()
+            .all(|r| r.adds.iter().all(|a| a.kind != kind)));
+        assert!(out.rounds.len() <= 2);
+    }
+
+    /// On an emulated motor with LuGre friction and a constant load, the linear model's loop
+    /// holds out the end of its only log, adds one effect per round, each round refits with
+    /// what the last kept round proposed, and the loop ends with a kept model and a stop that
+    /// matches its last round.
+    #[test]
+    fn each_round_adds_what_the_last_kept_one_named_and_the_loop_ends() {
         let mut cfg = EmulatorConfig::paper();
         cfg.seed = 3;
         cfg.effects = vec![EffectSpec::parse("offset").unwrap().to_effect()];
@@ -277,27 +598,37 @@ mod tests {
             seen.push(r.adds.len())
         })
         .unwrap();
+        assert!(out.held_out_in_time);
         assert_eq!(seen.len(), out.rounds.len());
         let first = &out.rounds[0];
+        assert!(first.kept && first.selection_test.is_none());
         let next = first
             .next
             .as_ref()
             .expect("the linear model misses friction");
         assert!(matches!(next.reason, Reason::Effect { .. }), "{next:?}");
-        for w in out.rounds.windows(2) {
-            let proposed = w[0].next.as_ref().expect("a refit follows a proposal");
-            assert_eq!(w[1].adds.len(), w[0].adds.len() + 1);
-            assert_eq!(w[1].adds.last().unwrap().kind, proposed.spec.kind);
+        let mut kept = first;
+        for r in &out.rounds[1..] {
+            let proposed = kept.next.as_ref().expect("a refit follows a proposal");
+            assert_eq!(r.adds.len(), kept.adds.len() + 1);
+            assert_eq!(r.adds.last().unwrap().kind, proposed.spec.kind);
+            let t = r.selection_test.expect("every refit is tested");
+            assert_eq!(r.kept, t.p_value < SELECTION_ALPHA);
+            if r.kept {
+                kept = r;
+            }
         }
         let last = out.rounds.last().unwrap();
         assert!(last.next.is_none());
         match out.stop {
-            Stop::Worse => assert!(!last.kept),
-            Stop::Adequate => assert!(last.diagnoses.iter().all(|d| d.verdict.adequate)),
+            Stop::NoGain => assert!(!last.kept),
+            Stop::Adequate => assert!(kept.diagnoses.iter().all(|d| d.verdict.adequate)),
             Stop::MaxRounds => assert_eq!(out.rounds.len(), 3),
-            Stop::NothingToAdd => assert!(last.diagnoses.iter().any(|d| !d.verdict.adequate)),
+            Stop::NothingToAdd => assert!(kept.diagnoses.iter().any(|d| !d.verdict.adequate)),
         }
         assert!(out.final_round().kept);
         assert!(out.final_round().selection_fit.is_finite());
+        let all = out.refit_on_all.as_ref().expect("the log was split");
+        assert_eq!(all.effects.len(), out.final_round().model.effects.len());
     }
 }

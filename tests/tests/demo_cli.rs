@@ -39,7 +39,17 @@ fn demo_finds_the_hidden_effect_and_the_error_falls() {
         String::from_utf8_lossy(&out.stderr)
     );
     assert!(text.contains("position_load: FOUND"), "{text}");
-    let steps: Vec<&str> = text.lines().filter(|l| l.starts_with("step ")).collect();
+    // The kept models, each scored on the test log no choice was made on.
+    let steps: Vec<&str> = text
+        .lines()
+        .filter(|l| l.starts_with("step ") && !l.contains("(not kept)"))
+        .collect();
+    assert!(
+        steps
+            .iter()
+            .all(|l| l.contains("test fit (fresh signal b)")),
+        "{text}"
+    );
     assert!(steps.len() >= 2, "{text}");
     let (first, last) = (steps[0], steps[steps.len() - 1]);
     // The angle and the current fits rise by points; the velocity fit against the Hall-based

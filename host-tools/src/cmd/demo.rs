@@ -1,15 +1,16 @@
-//! `motorid demo`: the whole identification loop on the built-in emulator with a hidden
-//! physical effect: simulate fitting (signals a and d), validation (signal b: it chooses
-//! among models) and test data (another draw of signal b, on which no choice is made), fit
-//! LuGre, diagnose, add the top finding, refit, until nothing significant is left; print the
-//! test fit after each step, name the hidden effect and whether it was found.
-use crate::diagnose::{self, Options, Structure};
+//! `motorid demo`: the identification loop ([`workflow::run`]) on the built-in emulator with a
+//! hidden physical effect: simulate fitting (signals a and d), selection (signal b: it decides
+//! which refits are kept) and test data (another draw of signal b, on which no choice is
+//! made); print the test fit after each step, name the hidden effect and whether it was found.
+use crate::diagnose::{self, Options};
 use crate::effect_spec::EffectSpec;
 use crate::emulator::{simulate_signal, EmulatorConfig, SignalKind};
+use crate::ident::free_params::Constraints;
 use crate::ident::{self, FitRequest};
-use crate::log::{MotorLog, Plant};
+use crate::log::Plant;
 use crate::model::{Model, ModelKind};
 use crate::report::{self, Iteration};
+use crate::workflow;
 use anyhow::{Context, Result};
 use control::effects::EffectKind;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -27,6 +28,44 @@ pub const RANDOM_EFFECTS: &[EffectKind] = EffectKind::ALL.split_at(12).0.split_a
 /// with no argument shows the whole loop working, the error falling included. (Cogging is
 /// found as reliably, but `fit --add cogging` closes less of the gap: 63 %.)
 pub const DEFAULT_EFFECT: EffectKind = EffectKind::Offset;
+
+/// Physics outside the effect list that the demo can hide (`--unnamed`), through the
+/// emulator's extra load: no named effect has its law, so the loop can only add a table on
+/// the variable that carries it.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Unnamed {
+    /// A fan or pump on the shaft: an aerodynamic drag `c·ω·|ω|` ([`FAN_DRAG`]), quadratic in
+    /// the speed where the list's friction laws are constant or linear in it.
+    Fan,
+}
+
+/// Drag coefficient of [`Unnamed::Fan`] [N·m·s²/rad²]: 0.016 N·m at the fitting signal's RMS
+/// speed (40 rad/s), a sixth of the paper motor's Coulomb friction, 0.23 N·m at its fastest.
+pub const FAN_DRAG: f64 = 1e-5;
+
+impl Unnamed {
+    /// What the user reads about it.
+    pub fn describe(self) -> String {
+        match self {
+            Unnamed::Fan => {
+                format!("fan drag {FAN_DRAG:e}·ω·|ω| N·m (a law the effect list lacks)")
+            }
+        }
+    }
+
+    /// The table variable that should carry it.
+    pub fn carrier(self) -> control::effects::TableVar {
+        match self {
+            Unnamed::Fan => control::effects::TableVar::Omega,
+        }
+    }
+
+    fn hide(self, cfg: EmulatorConfig) -> EmulatorConfig {
+        match self {
+            Unnamed::Fan => cfg.with_extra_load(|x| FAN_DRAG * x.omega * x.omega.abs()),
+        }
+    }
+}
 
 /// Most diagnose → add → refit rounds.
 pub const MAX_ROUNDS: usize = 4;
@@ -48,9 +87,12 @@ pub const STEP_DURATION: f64 = 30.0;
     current_offset, thermal, load_friction, with its default size. Give --effect more than once to hide several.\n\n\
     Each round: fit a LuGre model (with the effects added so far) on signal a plus 30 s of \
     the step signal d (a braking experiment: load_friction shows only where the drive brakes \
-    the moving rotor, which signal a never does), score it on signal b (fit %, the paper's \
-    eq. 48), diagnose it on a and on d, add the strongest new finding. \
-    Stops when nothing significant is left or after 4 rounds."
+    the moving rotor, which signal a never does), score it (fit %, the paper's eq. 48) on a \
+    second draw of signal b that no choice is made on, diagnose it on a and on d, add \
+    the strongest new finding (or, when no effect of the list is left but the model is not \
+    adequate, a table on the variable that carries the rest). A refit is kept only when it \
+    explains signal b significantly better (F-test at the 1 % level); otherwise the next \
+    finding is tried. Stops when the model is adequate, nothing is left to add, or after 4 refits."
 )]
 pub struct Args {
     /// Hidden effect, NAME or NAME:key=value,... (repeatable; default: offset).
@@ -59,6 +101,10 @@ pub struct Args {
     /// Hide one effect drawn at random from the seed instead of the default (ignored with --effect).
     #[arg(long)]
     pub random: bool,
+    /// Hide physics outside the effect list (instead of the default effect; with --effect,
+    /// beside it).
+    #[arg(long, value_enum, value_name = "KIND")]
+    pub unnamed: Option<Unnamed>,
     /// Seed of the emulator's noise, the signals and the random effect.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -77,6 +123,7 @@ pub struct Args {
 #[derive(Debug, Clone)]
 pub struct Outcome {
     pub hidden: Vec<EffectSpec>,
+    pub unnamed: Option<Unnamed>,
     pub iterations: Vec<Iteration>,
     /// Effects added, in order.
     pub added: Vec<EffectSpec>,
@@ -84,52 +131,41 @@ pub struct Outcome {
 }
 
 impl Outcome {
-    /// True when every hidden effect's kind was added.
+    /// True when every hidden effect's kind was added, and a table on the variable that
+    /// carries the unnamed physics.
     pub fn found_all(&self) -> bool {
         self.hidden
             .iter()
             .all(|h| self.added.iter().any(|a| a.kind == h.kind))
+            && self.unnamed.is_none_or(|u| self.table_found(u))
     }
-}
 
-/// Fit LuGre with `adds`, its progress (stage, iteration, cost) after `what` on `bar`.
-fn fit(
-    logs: &[MotorLog],
-    val: &MotorLog,
-    adds: &[EffectSpec],
-    bar: &ProgressBar,
-    what: &str,
-) -> Result<Model> {
-    let validate = std::slice::from_ref(val);
-    let req = FitRequest {
-        kind: ModelKind::Lugre,
-        logs,
-        validate,
-        adds,
-        plant: Plant::Voltage,
-        constraints: &crate::ident::free_params::Constraints::NONE,
-    };
-    bar.set_message(what.to_string());
-    let b = bar.clone();
-    let what = what.to_string();
-    let show = move |u: &ident::progress::Update| {
-        b.set_message(format!("{what}: {}", super::fit::progress_message(u)))
-    };
-    Ok(ident::progress::observe(show, || ident::fit(&req))?.model)
+    /// True when a table on the variable that carries `u` was added.
+    pub fn table_found(&self, u: Unnamed) -> bool {
+        self.added
+            .iter()
+            .any(|a| a.kind == EffectKind::Table && a.table_var() == u.carrier())
+    }
 }
 
 fn label(adds: &[EffectSpec]) -> String {
     let mut s = String::from("LuGre");
     for a in adds {
         s.push_str(" + ");
-        s.push_str(a.kind.name());
+        if a.kind == EffectKind::Table {
+            s.push_str(&format!("table({})", a.table_var().name()));
+        } else {
+            s.push_str(a.kind.name());
+        }
     }
     s
 }
 
-/// The demo loop; `say` receives each line for the terminal.
+/// The demo loop ([`workflow::run`] on emulated logs); `say` receives each line for the
+/// terminal.
 pub fn run_loop(
     hidden: &[EffectSpec],
+    unnamed: Option<Unnamed>,
     seed: u64,
     duration: f64,
     report_dir: Option<&std::path::Path>,
@@ -139,7 +175,10 @@ pub fn run_loop(
     let mut cfg = EmulatorConfig::paper();
     cfg.seed = seed;
     cfg.effects = hidden.iter().map(EffectSpec::to_effect).collect();
-    bar.set_message("simulating signals a and d (fit), b (validation) and b (test)");
+    if let Some(u) = unnamed {
+        cfg = u.hide(cfg);
+    }
+    bar.set_message("simulating signals a and d (fit), b (selection) and b (test)");
     let mut fit_log = simulate_signal(&cfg, SignalKind::A, duration)?.log;
     fit_log.source = PathBuf::from("emulated signal a");
     // The braking experiment: after each voltage step down the drive brakes the moving
@@ -153,25 +192,52 @@ pub fn run_loop(
     val_cfg.seed = seed.wrapping_add(1000);
     let mut val_log = simulate_signal(&val_cfg, SignalKind::B, duration)?.log;
     val_log.source = PathBuf::from("emulated signal b");
-    // The validation log chooses among models (the guard of added effects); the scores are
-    // reported on a fresh log that no choice was made on.
+    // The selection log decides which refits are kept; the scores are reported on a fresh
+    // log that no choice was made on.
     let mut test_cfg = cfg.clone();
     test_cfg.seed = seed.wrapping_add(3000);
     let mut test_log = simulate_signal(&test_cfg, SignalKind::B, duration)?.log;
     test_log.source = PathBuf::from("emulated signal b (test)");
     bar.inc(1);
-    let mut adds: Vec<EffectSpec> = Vec::new();
-    let mut iterations = Vec::new();
-    let mut last = None;
-    for round in 0..=MAX_ROUNDS {
-        let what = format!("round {round}: fitting {}", label(&adds));
-        let model = fit(&fit_logs, &val_log, &adds, bar, &what)?;
+    let loop_cfg = workflow::Config {
+        kind: ModelKind::Lugre,
+        plant: Plant::Voltage,
+        fit_logs: &fit_logs,
+        select_logs: std::slice::from_ref(&val_log),
+        start: Vec::new(),
+        constraints: &Constraints::NONE,
+        max_rounds: MAX_ROUNDS,
+        diagnose: Options::default(),
+    };
+    let mut round = 0;
+    let mut fit = |req: &FitRequest| -> Result<Model> {
+        let what = format!("round {round}: fitting {}", label(req.adds));
+        round += 1;
+        bar.set_message(what.clone());
+        let b = bar.clone();
+        let show = move |u: &ident::progress::Update| {
+            b.set_message(format!("{what}: {}", super::fit::progress_message(u)))
+        };
+        let model = ident::progress::observe(show, || ident::fit(req))?.model;
         bar.inc(1);
-        let pred = ident::freerun::simulate(&model, &test_log)?;
-        let sc = ident::score_prediction(&model, &test_log, &pred)?;
+        bar.set_message("scoring on signal b and diagnosing on a and d");
+        Ok(model)
+    };
+    let mut iterations = Vec::new();
+    let mut step = 0;
+    let mut scored: Result<()> = Ok(());
+    let mut on_round = |r: &workflow::Round| {
+        let sc = match ident::score(&r.model, &test_log) {
+            Ok(sc) => sc,
+            Err(e) => {
+                scored = Err(e);
+                return;
+            }
+        };
         say(&format!(
-            "step {round}: {:<32} test fit: x {:6.2} %, xdot {:6.2} %, i {}",
-            label(&adds),
+            "step {step}{}: {:<32} test fit (fresh signal b): x {:6.2} %, xdot {:6.2} %, i {}",
+            if r.kept { "" } else { " (not kept)" },
+            label(&r.adds),
             sc.fit.x,
             sc.fit.xdot,
             sc.fit
@@ -179,65 +245,85 @@ pub fn run_loop(
                 .map(|v| format!("{v:6.2} %"))
                 .unwrap_or_else(|| "-".into())
         ));
-        bar.set_message(format!("round {round}: diagnosing"));
-        // Each fitting experiment is diagnosed; the strongest new finding of either is added.
-        let st = Structure::from_model(&model);
-        let ds: Vec<diagnose::Diagnosis> = fit_logs
-            .iter()
-            .map(|l| diagnose::diagnose(l, &st, &Options::default()))
-            .collect();
-        let new = |f: &&diagnose::Finding| !adds.iter().any(|a| a.kind.name() == f.name);
-        let best = ds
-            .iter()
-            .enumerate()
-            .filter_map(|(k, d)| d.effects.iter().find(new).map(|f| (k, f.score)))
-            .max_by(|a, b| a.1.total_cmp(&b.1))
-            .map(|(k, _)| k);
-        let d = ds
-            .into_iter()
-            .nth(best.unwrap_or(0))
-            .context("no diagnosis")?;
-        let next = d.effects.iter().find_map(|f| {
-            EffectSpec::parse(&f.spec)
-                .ok()
-                .filter(|s| !adds.iter().any(|a| a.kind == s.kind))
-        });
-        let mut it = Iteration {
-            label: label(&adds),
-            validation: sc.fit,
-            added: None,
-        };
-        match (&next, round < MAX_ROUNDS) {
-            (Some(spec), true) => {
-                let f = d
-                    .effects
-                    .iter()
-                    .find(|f| f.name == spec.kind.name())
-                    .unwrap();
-                say(&format!(
-                    "        diagnose: {} (score {:.2}) — {}",
-                    f.spec, f.score, f.explanation
-                ));
-                it.added = Some(spec.to_string());
-                adds.push(spec.clone());
-                iterations.push(it);
-                last = Some((model, d, pred));
-            }
-            _ => {
-                if next.is_none() {
-                    say(&format!("        diagnose: {}", verdict_line(&d.verdict)));
+        say(&format!(
+            "        selection (signal b): x fit {:.2} %{}",
+            r.selection_fit,
+            r.selection_test
+                .map(|t| format!(
+                    "; {} (F = {:.1}, p {}, level {:.0} %)",
+                    if r.kept {
+                        "kept: explains it better beyond noise"
+                    } else {
+                        "not kept: no better beyond noise, the model before stands"
+                    },
+                    t.f,
+                    if t.p_value >= 1e-300 {
+                        format!("= {:.1e}", t.p_value)
+                    } else {
+                        "< 1e-300".to_string()
+                    },
+                    100.0 * workflow::SELECTION_ALPHA
+                ))
+                .unwrap_or_default()
+        ));
+        match &r.next {
+            Some(n) => say(&format!(
+                "        diagnose (fitting signals a, d): {}",
+                match &n.reason {
+                    workflow::Reason::Effect { score, explanation } =>
+                        format!("{} (score {score:.2}) — {explanation}", n.spec),
+                    workflow::Reason::Unexplained { variable, share } => format!(
+                        "NOT adequate, carried by {variable} ({:.0} % of the residual): add {}",
+                        100.0 * share,
+                        n.spec
+                    ),
                 }
-                iterations.push(it);
-                last = Some((model, d, pred));
-                break;
+            )),
+            None if r.kept => {
+                for (d, name) in r.diagnoses.iter().zip(["a", "d"]) {
+                    say(&format!(
+                        "        diagnose (fitting signal {name}): {}",
+                        verdict_line(&d.verdict)
+                    ));
+                }
             }
+            None => {}
         }
+        iterations.push(Iteration {
+            label: if r.kept {
+                label(&r.adds)
+            } else {
+                format!("{} (not kept)", label(&r.adds))
+            },
+            validation: sc.fit,
+            added: r.next.as_ref().map(|n| n.spec.to_string()),
+        });
+        step += 1;
+    };
+    let out = workflow::run(&loop_cfg, &mut fit, &mut on_round)?;
+    scored?;
+    for (spec, why) in &out.not_fitted {
+        say(&format!(
+            "set aside: {} was named but cannot be fitted: {}",
+            spec.kind.name(),
+            why.lines().next().unwrap_or_default()
+        ));
     }
-    let (model, d, pred) = last.context("the demo ran no round")?;
+    let last = out.final_round();
+    let pred = ident::freerun::simulate(&last.model, &test_log)?;
+    let sc = ident::score_prediction(&last.model, &test_log, &pred)?;
+    say(&format!(
+        "final model: {} — test fit on fresh signal b, no choice made on it: x {:.2} %, xdot {:.2} %, i {}",
+        label(&last.adds),
+        sc.fit.x,
+        sc.fit.xdot,
+        sc.fit.i.map(|v| format!("{v:.2} %")).unwrap_or_else(|| "-".into())
+    ));
     let mut outcome = Outcome {
         hidden: hidden.to_vec(),
+        unnamed,
         iterations,
-        added: adds,
+        added: last.adds.clone(),
         report: None,
     };
     let verdict = if outcome.found_all() {
@@ -247,13 +333,20 @@ pub fn run_loop(
     };
     if let Some(dir) = report_dir {
         bar.set_message("writing the report");
-        let hidden_s: Vec<String> = hidden.iter().map(|h| h.to_string()).collect();
+        let mut hidden_s: Vec<String> = hidden.iter().map(|h| h.to_string()).collect();
+        hidden_s.extend(unnamed.map(Unnamed::describe));
+        let d = last
+            .diagnoses
+            .iter()
+            .find(|d| !d.verdict.adequate)
+            .or(last.diagnoses.first())
+            .context("the final model has no diagnosis")?;
         let w = report::write_demo_report(
             dir,
             &hidden_s,
             verdict,
             &outcome.iterations,
-            (&model, &test_log, &d, &pred),
+            (&last.model, &test_log, d, &pred),
         )?;
         outcome.report = Some(w.path);
     }
@@ -263,7 +356,9 @@ pub fn run_loop(
 /// The effects to hide: `--effect`s, else one drawn from the seed (`--random`), else
 /// [`DEFAULT_EFFECT`], each at its default size.
 pub fn hidden_effects(args: &Args) -> Result<Vec<EffectSpec>> {
-    Ok(if args.effect.is_empty() {
+    Ok(if args.effect.is_empty() && args.unnamed.is_some() {
+        Vec::new()
+    } else if args.effect.is_empty() {
         use rand::{Rng, SeedableRng};
         let k = if args.random {
             let mut rng = rand::rngs::StdRng::seed_from_u64(args.seed);
@@ -292,10 +387,14 @@ pub fn run(args: Args) -> Result<()> {
         anyhow::bail!("--duration [s]: {e} (give at least 10 seconds)");
     }
     println!(
-        "Emulated motor (paper's BLDC motor, LuGre friction) with {} hidden effect(s); \
-         fitting on signals a ({} s) and d ({} s, voltage steps), choosing among models on \
-         signal b ({} s) and scoring on a second draw of b ({} s) that no choice is made on.",
-        hidden.len(),
+        "Emulated motor (paper's BLDC motor, LuGre friction) with {}; fitting on signals a \
+         ({} s) and d ({} s, voltage steps), choosing among models on signal b ({} s) and \
+         scoring on a second draw of b ({} s) that no choice is made on.",
+        match (hidden.len(), args.unnamed) {
+            (n, None) => format!("{n} hidden effect(s)"),
+            (0, Some(u)) => format!("unnamed physics hidden: {}", u.describe()),
+            (n, Some(u)) => format!("{n} hidden effect(s) and unnamed physics: {}", u.describe()),
+        },
         args.duration,
         STEP_DURATION,
         args.duration,
@@ -313,6 +412,7 @@ pub fn run(args: Args) -> Result<()> {
     let mut say = |s: &str| bar.suspend(|| println!("{s}"));
     let out = run_loop(
         &hidden,
+        args.unnamed,
         args.seed,
         args.duration,
         Some(&args.report),
@@ -321,12 +421,24 @@ pub fn run(args: Args) -> Result<()> {
     )?;
     bar.finish_and_clear();
     let hidden_s: Vec<String> = out.hidden.iter().map(|h| h.to_string()).collect();
-    println!("hidden effect: {}", hidden_s.join(", "));
+    if !hidden_s.is_empty() {
+        println!("hidden effect: {}", hidden_s.join(", "));
+    }
     for h in &out.hidden {
         let found = out.added.iter().find(|a| a.kind == h.kind);
         match found {
             Some(a) => println!("  {}: FOUND (estimated {a})", h.kind.name()),
             None => println!("  {}: NOT FOUND", h.kind.name()),
+        }
+    }
+    if let Some(u) = out.unnamed {
+        println!("unnamed physics: {}", u.describe());
+        let var = u.carrier().name();
+        match out.added.iter().find(|a| a.kind == EffectKind::Table) {
+            Some(a) if out.table_found(u) => {
+                println!("  carried by {var}: FOUND (table added: {a})")
+            }
+            _ => println!("  carried by {var}: NOT FOUND (no table on {var} was added)"),
         }
     }
     if let Some(p) = &out.report {
@@ -369,6 +481,7 @@ mod tests {
         Args {
             effect: effect.iter().map(|s| s.to_string()).collect(),
             random,
+            unnamed: None,
             seed,
             report: PathBuf::from("unused"),
             duration: DURATION,
@@ -387,6 +500,28 @@ mod tests {
                 EffectSpec::bare(DEFAULT_EFFECT).to_effect()
             );
         }
+    }
+
+    /// Unnamed physics alone hides no named effect, and counts as found only through a table
+    /// on the variable that carries it.
+    #[test]
+    fn unnamed_physics_is_found_only_by_a_table_on_its_carrier() {
+        let mut a = args(&[], false, 1);
+        a.unnamed = Some(Unnamed::Fan);
+        assert!(hidden_effects(&a).unwrap().is_empty());
+        let outcome = |added: &[&str]| Outcome {
+            hidden: Vec::new(),
+            unnamed: Some(Unnamed::Fan),
+            iterations: Vec::new(),
+            added: added
+                .iter()
+                .map(|s| EffectSpec::parse(s).unwrap())
+                .collect(),
+            report: None,
+        };
+        assert!(outcome(&["table:var=omega,bins=8"]).found_all());
+        assert!(!outcome(&["table:var=current,bins=8"]).found_all());
+        assert!(!outcome(&["stribeck"]).found_all());
     }
 
     #[test]

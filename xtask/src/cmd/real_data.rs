@@ -166,50 +166,63 @@ fn emps_section(md: &mut String, data: &Path, args: &Args) -> Result<()> {
         let rounds: Vec<emps_loop::Round> = rounds.into_iter().chain(authors).collect();
         let _ = writeln!(
             loop_md,
-            "The generic loop on the same data: the code paths of `motorid fit --model linear \
-             --plant torque --map {}`, `motorid diagnose` and `fit --add` (ident::fit, \
-             diagnose::diagnose), on the training log in mm at 100 Hz (the generic tools' \
-             velocity constants are set for rad/s of a motor sampled at ~10 ms; see \
-             `real_data::emps_loop`). With `u = vir` the force parameters come out in volts of \
-             `vir`; they are shown ×gτ in newtons. Fit % (the paper's, free run) on the \
-             100 Hz training log and the 1 kHz test log.\n",
+            "The generic loop on the same data, `motorid::workflow::run` (the loop of `motorid \
+             demo`, and the steps a user runs with `motorid fit --model linear --plant torque \
+             --map {}`, `motorid diagnose` and `fit --add`), on the 1 kHz training log in mm. \
+             Data: each round is fitted on the first 70 % of DATA_EMPS and diagnosed there; a \
+             refit is kept only when it explains the held-out last 30 % significantly better \
+             (F-test on the simulation error with its effective sample size, 1 % level); the \
+             final structure is refitted on the whole of DATA_EMPS. DATA_EMPS_PULSES (test) \
+             makes no choice. With `u = vir` the force parameters come out in volts of `vir`; \
+             they are shown ×gτ in newtons. Fit % (the paper's, free run) on the whole training \
+             log and on the test log; the selection columns are on the held-out 30 %.\n",
             emps::MAP
         );
         let _ = writeln!(
             loop_md,
-            "| round | added effects | M [kg] | Fv [N·s/m] | Fc [N] | OF [N] | asymmetry dv, dc | fit % q / q̇ (train) | fit % q / q̇ (test) | test RMSE [mm] | diagnosed next (share of residual) |"
+            "| round | added effects | M [kg] | Fv [N·s/m] | Fc [N] | OF [N] | asymmetry dv, dc | fit % q (selection) | F, p (selection) | fit % q / q̇ (train) | fit % q / q̇ (test) | test RMSE [mm] | diagnosed next (share of residual) |"
         );
-        let _ = writeln!(loop_md, "|---|---|---|---|---|---|---|---|---|---|---|");
+        let _ = writeln!(
+            loop_md,
+            "|---|---|---|---|---|---|---|---|---|---|---|---|---|"
+        );
         for (k, r) in rounds.iter().enumerate() {
             let p = emps_loop::physical(&r.model, g);
             let opt = |v: Option<f64>| v.map_or("–".to_string(), |x| format!("{x:.2}"));
             let found: Vec<String> = r
                 .diagnosis
-                .effects
                 .iter()
+                .flat_map(|d| &d.effects)
                 .map(|f| format!("{} ({:.0} %)", f.name, 100.0 * f.score))
                 .collect();
             let _ = writeln!(
                 loop_md,
-                "| {} | {} | {:.2} | {:.2} | {} | {} | {} | {:.1} / {:.1} | {:.1} / {:.1} | {:.3} | {} |",
-                if k >= n_loop { "authors' structure".to_string() } else if r.kept { k.to_string() } else { format!("{k} (not kept: worse training free run)") },
+                "| {} | {} | {:.2} | {:.2} | {} | {} | {} | {} | {} | {:.1} / {:.1} | {:.1} / {:.1} | {:.3} | {} |",
+                if k >= n_loop { "authors' structure".to_string() } else if r.whole_log { "final: the kept structure refitted on the whole training log".to_string() } else if r.kept { k.to_string() } else { format!("{k} (not kept: no significant gain on the held-out part)") },
                 if r.adds.is_empty() { "– (linear)".to_string() } else { r.adds.iter().map(|a| format!("`{a}`")).collect::<Vec<_>>().join(" ") },
                 p.m,
                 p.fv,
                 opt(p.fc),
                 opt(p.offset),
                 p.asym.map_or("–".to_string(), |(a, b)| format!("{a:.1}, {b:.2}")),
+                if r.selection_fit.is_finite() { format!("{:.1}", r.selection_fit) } else { "–".to_string() },
+                r.selection_test.map_or("–".to_string(), |t| format!("{:.1}, {:.1e}", t.f, t.p_value)),
                 r.train.fit.x,
                 r.train.fit.xdot,
                 r.test.fit.x,
                 r.test.fit.xdot,
                 r.rmse_test_mm,
-                if found.is_empty() { "nothing".to_string() } else { found.join(", ") }
+                if r.diagnosis.is_none() { "–".to_string() } else if found.is_empty() { "nothing".to_string() } else { found.join(", ") }
             );
             let label = if k == 0 {
                 "generic linear model (viscous only)".to_string()
+            } else if r.whole_log {
+                format!("generic loop's final model ({})", r.adds.join(" + "))
             } else if k < n_loop {
-                format!("generic model after round {k}")
+                format!(
+                    "generic model of round {k}, fitted on the first 70 %{}",
+                    if r.kept { "" } else { " (not kept)" }
+                )
             } else {
                 format!("generic model + {}", r.adds.join(" + "))
             };
@@ -221,11 +234,14 @@ fn emps_section(md: &mut String, data: &Path, args: &Args) -> Result<()> {
         let _ = writeln!(
             loop_md,
             "\nEvery candidate's best test per diagnosis (Bonferroni level {:.1e}):\n",
-            rounds[0].diagnosis.alpha_per_test
+            rounds[0]
+                .diagnosis
+                .as_ref()
+                .map_or(f64::NAN, |d| d.alpha_per_test)
         );
         for (k, r) in rounds.iter().enumerate() {
-            let tested: Vec<String> = r
-                .diagnosis
+            let Some(d) = &r.diagnosis else { continue };
+            let tested: Vec<String> = d
                 .tested
                 .iter()
                 .map(|t| {
@@ -237,7 +253,9 @@ fn emps_section(md: &mut String, data: &Path, args: &Args) -> Result<()> {
                     )
                 })
                 .collect();
-            let what = if k < n_loop {
+            let what = if r.whole_log {
+                "final model (whole training log)".to_string()
+            } else if k < n_loop {
                 format!("round {k}")
             } else {
                 format!("with {}", r.adds.join(" + "))
@@ -338,17 +356,22 @@ fn loop_result(
     let (fvp, fcp, fvm, fcm) = emps_loop::per_direction(&p);
     let found: Vec<&str> = rounds[0]
         .diagnosis
-        .effects
         .iter()
+        .flat_map(|d| &d.effects)
         .map(|f| f.name.as_str())
         .collect();
     let _ = writeln!(
         md,
-        "\nResult of the loop (`diagnose` on the linear model found: {}; refit with `fit --add` \
-         of those specs; test RMSE on DATA_EMPS_PULSES {:.2} mm), beside the authors' IDIM-LS \
-         estimates. The generic asymmetry `dv·|v| + dc·|sgn v|` is the authors' per-direction \
+        "\nResult of the loop (`diagnose` on the linear model found: {}; final structure {}, \
+         refitted on the whole training log; test RMSE on DATA_EMPS_PULSES {:.2} mm), beside \
+         the authors' IDIM-LS estimates. The generic asymmetry `dv·|v| + dc·|sgn v|` is the authors' per-direction \
          model (Fv± = Fv ± dv, Fc± = Fc ± dc ± OF):\n",
         found.join(", "),
+        last.adds
+            .iter()
+            .map(|a| format!("`{a}`"))
+            .collect::<Vec<_>>()
+            .join(" + "),
         last.rmse_test_mm
     );
     let _ = writeln!(
@@ -409,8 +432,8 @@ fn loop_result(
     // Offset against asymmetry once Coulomb friction is in the model.
     let fc = rounds[0]
         .diagnosis
-        .effects
         .iter()
+        .flat_map(|d| &d.effects)
         .find(|f| f.name == "coulomb")
         .and_then(|f| motorid::effect_spec::EffectSpec::parse(&f.spec).ok())
         .map(|s| s.get("fc"));
@@ -436,8 +459,10 @@ fn loop_result(
                 100.0 * a.explained,
                 a.p_value,
                 rounds
-                    .get(1)
-                    .and_then(|r| r.diagnosis.tested.iter().find(|t| t.name == "offset"))
+                    .iter()
+                    .find(|r| r.kept && r.adds.iter().any(|a| a.starts_with("asymmetry")))
+                    .and_then(|r| r.diagnosis.as_ref())
+                    .and_then(|d| d.tested.iter().find(|t| t.name == "offset"))
                     .map_or("–".to_string(), |t| format!(
                         "{:.1} % (p = {:.1e})",
                         100.0 * t.explained,

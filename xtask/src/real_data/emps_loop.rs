@@ -5,31 +5,35 @@
 //!
 //! With `u = vir` [V] and the model's input gain fixed to 1, every force parameter comes out in
 //! volts of `vir`; multiplied by gτ = 35.15 N/V it is in newtons (M = gτ·J, Fv = gτ·b, ...).
-//! The loop works in millimetres at 100 Hz ([`prepare`], [`POSITION_SCALE`], [`DECIMATION`]).
+//! The loop works in millimetres on the logs' own 1 kHz ([`prepare`], [`POSITION_SCALE`],
+//! [`DECIMATION`]).
 //!
 //! The benchmark's test is a free run `vir` → `qm` after a 20-sample initialisation window
 //! ([`benchmark_rmse_mm`]): the generic free-run simulation is started at sample 19 from the
 //! state that a straight line through the first 20 measured positions gives.
 use super::emps;
-use anyhow::Result;
+use anyhow::{Context, Result};
 use control::effects::Effect;
 use motorid::diagnose::{self, Diagnosis, Structure};
 use motorid::effect_spec::EffectSpec;
+use motorid::ident::free_params::Constraints;
 use motorid::ident::{self, freerun, FitRequest};
 use motorid::log::{MotorLog, Plant};
 use motorid::model::{Model, ModelKind};
+use motorid::numerics::statistics::FTest;
+use motorid::workflow;
 
-/// Most refits of the loop (each adds what the previous diagnosis found).
-pub const MAX_ROUNDS: usize = 3;
+/// Most refits of the loop (each adds one effect the last kept diagnosis found).
+pub const MAX_ROUNDS: usize = 5;
 /// Position unit of the loop: millimetres (qm [m] × 1000). The generic tools' velocity
 /// constants are set for a motor in rad/s (stick speed 1 rad/s in `diagnose`, smooth sign
 /// 0.05 rad/s in `control::effects`); EMPS moves at most 0.13 m/s, so in metres every sample
 /// would count as standing still. In mm/s the same constants mean 1 mm/s and 0.05 mm/s.
 pub const POSITION_SCALE: f64 = 1000.0;
-/// Decimation of the training log, 1 kHz → 100 Hz, as the benchmark's IDIM-LS scripts
-/// decimate by 10; 10 ms is also the sampling the generic diagnosis is tuned for (the paper's
-/// 12 ms). The free-run test runs on the full 1 kHz test log.
-pub const DECIMATION: usize = 10;
+/// Decimation of the training log: none. The generic tools' windows and speed constants come
+/// from the log (seconds, its own speeds), so the loop reads the 1 kHz log as a user's
+/// `motorid fit` would, and fits at the rate the benchmark's free-run test simulates.
+pub const DECIMATION: usize = 1;
 
 /// The log the loop works on: position in mm, and every `r`-th sample with the input
 /// averaged over the `r` samples it stands for (zero-order hold over the new period).
@@ -110,53 +114,59 @@ pub fn physical(m: &Model, gain: f64) -> Physical {
     p
 }
 
-/// One round of the loop.
+/// One round of the loop, scored by the benchmark's test.
 #[derive(Debug, Clone)]
 pub struct Round {
     /// Effects added to the linear model (specs as `fit --add` takes them).
     pub adds: Vec<String>,
     pub model: Model,
-    /// Paper fit % of angle and velocity on the (decimated) training and the test log.
+    /// Paper fit % of angle and velocity on the whole training log and on the
+    /// test log.
     pub train: ident::Scores,
     pub test: ident::Scores,
     /// Benchmark RMSE [mm] on the test log.
     pub rmse_test_mm: f64,
     /// The test's simulated position [mm].
     pub sim_test: Vec<f64>,
-    /// Diagnosis of this model on the training log.
-    pub diagnosis: Diagnosis,
-    /// False when this refit made the free-run position fit on the training log worse than
-    /// the round before: the loop then stops and keeps the previous model (see [`run`]).
+    /// Diagnosis of this model on the data it was fitted on (None for a refit that was not
+    /// kept).
+    pub diagnosis: Option<Diagnosis>,
+    /// Position fit % of the free run on the selection data (the held-out end of the
+    /// training log), and the keep-or-not test against the kept model before it.
+    pub selection_fit: f64,
+    pub selection_test: Option<FTest>,
+    /// False when this refit did not explain the selection data significantly better
+    /// (see [`workflow`]).
     pub kept: bool,
+    /// True for the last row of [`run`]: the final structure refitted on the whole training
+    /// log.
+    pub whole_log: bool,
 }
 
-/// Fit the linear model with `adds` on a prepared training log, diagnose it, score it.
-fn fit_round(train: &MotorLog, test: &MotorLog, adds: &[EffectSpec]) -> Result<Round> {
-    let rep = ident::fit(&FitRequest {
-        kind: ModelKind::Linear,
-        logs: std::slice::from_ref(train),
-        validate: &[],
-        adds,
-        plant: Plant::Torque,
-        constraints: &motorid::ident::free_params::Constraints::NONE,
-    })?;
-    let model = rep.model;
-    let diagnosis = diagnose::diagnose(
-        train,
-        &Structure::from_model(&model),
-        &diagnose::Options::default(),
-    );
-    let (rmse_test_mm, sim_test) = benchmark_rmse_mm(&model, test)?;
-    Ok(Round {
-        adds: adds.iter().map(|a| a.to_string()).collect(),
-        train: ident::score(&model, train)?,
-        test: ident::score(&model, test)?,
-        model,
-        rmse_test_mm,
-        sim_test,
-        diagnosis,
-        kept: true,
-    })
+impl Round {
+    /// A fitted model scored on the whole training log and by the benchmark's test.
+    fn scored(
+        adds: &[EffectSpec],
+        model: Model,
+        diagnosis: Option<Diagnosis>,
+        train: &MotorLog,
+        test: &MotorLog,
+    ) -> Result<Round> {
+        let (rmse_test_mm, sim_test) = benchmark_rmse_mm(&model, test)?;
+        Ok(Round {
+            adds: adds.iter().map(|a| a.to_string()).collect(),
+            train: ident::score(&model, train)?,
+            test: ident::score(&model, test)?,
+            model,
+            rmse_test_mm,
+            sim_test,
+            diagnosis,
+            selection_fit: f64::NAN,
+            selection_test: None,
+            kept: true,
+            whole_log: false,
+        })
+    }
 }
 
 /// The last kept round of [`run`].
@@ -186,32 +196,60 @@ pub fn per_direction(p: &Physical) -> (f64, f64, f64, f64) {
 }
 
 /// The generic linear model with the authors' structures added by name (`fit --add coulomb
-/// --add offset [--add asymmetry]`), for comparison with the loop's own choices.
+/// --add offset [--add asymmetry]`), fitted on the whole training log, for comparison with
+/// the loop's own choices.
 pub fn authors_structures(train: &MotorLog, test: &MotorLog) -> Result<Vec<Round>> {
     let (train, test) = (&prepare(train, DECIMATION), &prepare(test, 1));
-    let bare = |names: &[&str]| -> Result<Vec<EffectSpec>> {
-        names.iter().map(|n| EffectSpec::parse(n)).collect()
+    let fit = |names: &[&str]| -> Result<Round> {
+        let adds = names
+            .iter()
+            .map(|n| EffectSpec::parse(n))
+            .collect::<Result<Vec<_>>>()?;
+        let model = ident::fit(&FitRequest {
+            kind: ModelKind::Linear,
+            logs: std::slice::from_ref(train),
+            validate: &[],
+            adds: &adds,
+            plant: Plant::Torque,
+            constraints: &Constraints::NONE,
+        })?
+        .model;
+        let d = diagnose::diagnose(
+            train,
+            &Structure::from_model(&model),
+            &diagnose::Options::default(),
+        );
+        Round::scored(&adds, model, Some(d), train, test)
     };
     Ok(vec![
-        fit_round(train, test, &bare(&["coulomb", "offset"])?)?,
-        fit_round(train, test, &bare(&["coulomb", "offset", "asymmetry"])?)?,
+        fit(&["coulomb", "offset"])?,
+        fit(&["coulomb", "offset", "asymmetry"])?,
     ])
 }
 
-/// Fit linear → diagnose → add what was found → refit, until nothing is found, a refit makes
-/// the free-run position fit on the training log worse (that round is marked not kept and the
-/// loop stops: what a user validating each refit would do), or [`MAX_ROUNDS`] refits.
-/// `progress` is called with a line per step.
+/// The identification loop of [`workflow::run`] on the training log (linear model, torque
+/// plant, the last [`workflow::SELECT_FRACTION`] of the log held out for selection), every
+/// round scored by the benchmark's test on `test` (no choice is made on it). `progress` is
+/// called with a line per fit. The last round is the final structure refitted on the whole
+/// training log.
 pub fn run(
     train: &MotorLog,
     test: &MotorLog,
     progress: &mut dyn FnMut(&str),
 ) -> Result<Vec<Round>> {
     let (train, test) = (&prepare(train, DECIMATION), &prepare(test, 1));
-    let mut adds: Vec<EffectSpec> = Vec::new();
-    let mut rounds = Vec::new();
-    for round in 0..=MAX_ROUNDS {
-        let labels: Vec<String> = adds.iter().map(|a| a.to_string()).collect();
+    let cfg = workflow::Config {
+        kind: ModelKind::Linear,
+        plant: Plant::Torque,
+        fit_logs: std::slice::from_ref(train),
+        select_logs: &[],
+        start: Vec::new(),
+        constraints: &Constraints::NONE,
+        max_rounds: MAX_ROUNDS,
+        diagnose: diagnose::Options::default(),
+    };
+    let mut fit = |req: &FitRequest| -> Result<Model> {
+        let labels: Vec<String> = req.adds.iter().map(|a| a.to_string()).collect();
         progress(&format!(
             "EMPS: fitting linear{}",
             if labels.is_empty() {
@@ -220,27 +258,35 @@ pub fn run(
                 format!(" --add {}", labels.join(" --add "))
             }
         ));
-        let mut r = fit_round(train, test, &adds)?;
-        if let Some(prev) = rounds.iter().rev().find(|p: &&Round| p.kept) {
-            if r.train.fit.x < prev.train.fit.x {
-                r.kept = false;
-                rounds.push(r);
-                break;
-            }
-        }
-        let found: Vec<EffectSpec> = r
-            .diagnosis
-            .effects
-            .iter()
-            .filter_map(|f| EffectSpec::parse(&f.spec).ok())
-            .collect();
-        rounds.push(r);
-        if found.is_empty() || round == MAX_ROUNDS {
-            break;
-        }
-        // Keep the bare names: the refit estimates every added effect afresh from the specs'
-        // values as starting points.
-        adds.extend(found);
-    }
+        Ok(ident::fit(req)?.model)
+    };
+    let out = workflow::run(&cfg, &mut fit, &mut |_| {})?;
+    let adds = out.final_round().adds.clone();
+    let refit = out.refit_on_all.context("the training log was split")?;
+    let mut rounds = out
+        .rounds
+        .into_iter()
+        .map(|r| {
+            let mut scored = Round::scored(
+                &r.adds,
+                r.model,
+                r.diagnoses.into_iter().next(),
+                train,
+                test,
+            )?;
+            scored.selection_fit = r.selection_fit;
+            scored.selection_test = r.selection_test;
+            scored.kept = r.kept;
+            Ok(scored)
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let d = diagnose::diagnose(
+        train,
+        &Structure::from_model(&refit),
+        &diagnose::Options::default(),
+    );
+    let mut last = Round::scored(&adds, refit, Some(d), train, test)?;
+    last.whole_log = true;
+    rounds.push(last);
     Ok(rounds)
 }
