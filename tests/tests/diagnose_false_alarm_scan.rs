@@ -45,7 +45,14 @@ fn summary(d: &Diagnosis) -> String {
         .verdict
         .unexplained
         .iter()
-        .map(|u| format!("{}:{:.2}:{:.1e}", u.variable, u.share, u.p_value))
+        .map(|u| {
+            let eq = if u.explanation.contains("voltage equation") {
+                "volt"
+            } else {
+                "torq"
+            };
+            format!("{}:{eq}:{:.2}:{:.1e}", u.variable, u.share, u.p_value)
+        })
         .collect();
     let ef: Vec<String> = d.effects.iter().map(|f| f.spec.clone()).collect();
     format!("[{}] {:?} [{}]", checks.join(" "), ef, un.join(" "))
