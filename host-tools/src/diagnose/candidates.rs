@@ -54,6 +54,11 @@ pub struct Signals {
     pub theta: Vec<f64>,
     /// Angle smoothed over a few samples (less quantisation error while moving) [rad].
     pub theta_s: Vec<f64>,
+    /// The angle the torque equation integrates [rad]: the readings, or a path through their
+    /// quantisation bands (`diagnose` sets it, see `numerics::quantisation`).
+    pub theta_torque: Vec<f64>,
+    /// Variance of the error left in `theta_torque` at each sample [rad²].
+    pub theta_torque_var: Vec<f64>,
     /// Velocity: smoothed derivative of the angle [rad/s].
     pub omega: Vec<f64>,
     /// Motor torque: `K_t·I` (voltage plant) or `u` (torque plant).
@@ -116,6 +121,8 @@ impl Signals {
             raw_u: log.u.clone(),
             i,
             theta: log.theta.clone(),
+            theta_torque: log.theta.clone(),
+            theta_torque_var: vec![0.0; log.len()],
             theta_s,
             omega,
             drive_model: drive.clone(),
@@ -894,6 +901,8 @@ mod tests {
             i: None,
             theta: vec![0.0; n],
             theta_s: vec![0.0; n],
+            theta_torque: vec![0.0; n],
+            theta_torque_var: vec![0.0; n],
             omega: omega.to_vec(),
             drive: drive_model.to_vec(),
             drive_model: drive_model.to_vec(),

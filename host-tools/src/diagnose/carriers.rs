@@ -75,8 +75,10 @@ pub struct Rows<'a> {
     pub wf: &'a WeakForm,
     /// Which windows the residual has (in window order).
     pub keep: &'a [bool],
-    /// The residual on the kept windows.
+    /// The residual on the kept windows (weighted by `scale` where given).
     pub resid: &'a [f64],
+    /// Weight of each kept row, applied to the regressors as it was to the residual.
+    pub scale: Option<&'a [f64]>,
     /// Equation label for explanations.
     pub label: &'a str,
 }
@@ -159,7 +161,13 @@ fn test_rows(
     n_eff: f64,
     step: usize,
 ) -> Tested {
-    let thin = |v: Vec<f64>| -> Vec<f64> { v.into_iter().step_by(step).collect() };
+    let thin = |v: Vec<f64>| -> Vec<f64> {
+        let v = match rows.scale {
+            Some(w) => v.iter().zip(w).map(|(a, b)| a * b).collect(),
+            None => v,
+        };
+        v.into_iter().step_by(step).collect()
+    };
     let resid: Vec<f64> = rows.resid.iter().step_by(step).copied().collect();
     let ones_w: Vec<f64> = thin(super::select_rows(
         &rows.wf.integral(&vec![1.0; cols[0].len()]),

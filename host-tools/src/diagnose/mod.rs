@@ -91,6 +91,13 @@ pub struct Options {
     /// Weak-form window half-width in samples; 0 (the default): [`weak_form::HALF_WIDTH_S`]
     /// seconds in the log's samples (8 samples at the paper's 12 ms).
     pub half_width: usize,
+    /// Read the torque equation's angle as the centre line its readings allow on stretches
+    /// of steady speed ([`crate::numerics::quantisation`]) and weight that equation's rows by
+    /// the variance the remaining quantisation puts into each ([`row_scale`]). Off by
+    /// default: it removes the beat of the rounding against the sampling on voltage steps,
+    /// but the voltage equation's own error at the steps then decides the verdict there, and
+    /// on the multisines it changes nothing a correct model needs.
+    pub steady_angle: bool,
 }
 
 impl Default for Options {
@@ -99,6 +106,7 @@ impl Default for Options {
             alpha: FAMILY_ALPHA,
             min_explained: MIN_EXPLAINED,
             half_width: 0,
+            steady_angle: false,
         }
     }
 }
@@ -204,14 +212,14 @@ struct EqData {
 
 /// Diagnose a log against a model structure.
 pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
-    let mut s = Signals::from_log(log, st.plant, st.kt);
-    s.drive_model = modelled_drive(&s, st);
     let h = if opts.half_width == 0 {
-        candidates::samples_for(weak_form::HALF_WIDTH_S, s.dt, s.len() / 2)
+        candidates::samples_for(weak_form::HALF_WIDTH_S, log.sample_period(), log.len() / 2)
     } else {
         opts.half_width
     }
     .max(2);
+    let mut s = signals_of(log, st, h, opts.steady_angle);
+    s.drive_model = modelled_drive(&s, st);
     let wf = weak_form::WeakForm::new(s.len(), s.dt, h, h);
     let voltage = s.plant == Plant::Voltage && s.i.is_some();
     // The torque equation of a voltage plant integrates its held terms with the lag of the
@@ -262,7 +270,7 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
     let mut mech = EqData {
         eq: Equation::Mechanical,
         y: vec![],
-        base_cols: vec![wf_m.second_derivative(&s.theta)],
+        base_cols: vec![wf_m.second_derivative(&s.theta_torque)],
         base_sample: vec![],
         min_torque: min_torque(st, &s),
         coulomb_col: None,
@@ -372,6 +380,7 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
         equations.push(push_eq(Equation::Electrical, &out, "V·s", None));
         judged.push(Judged {
             eq: Equation::Electrical,
+            scale: None,
             keep: vec![true; wf.rows()],
             given: given.as_ref().and_then(|g| g.1.clone()),
             base: out.2.clone(),
@@ -386,7 +395,7 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
     if !wf.centres.is_empty() {
         if voltage {
             let zoh = wf_m.integral_zoh(&s.raw_u);
-            let w = wf_m.derivative(&s.theta);
+            let w = wf_m.derivative(&s.theta_torque);
             mech.y = zoh.iter().zip(&w).map(|(a, b)| a - kb * b).collect();
             units.mech_scale = st.kt / units.r;
             // The winding's L·dI/dt over each interval: its increments, exactly.
@@ -449,6 +458,32 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
             }
             mech_keep = Some(keep);
         }
+        // Rows weighted by their noise: a first fit gives the residual whose squares set
+        // the variance model ([`row_scale`]).
+        let scale = st.motor.filter(|_| opts.steady_angle).map(|m| {
+            let b = viscous_of(&st.effects);
+            let (a1, a2) = if voltage {
+                let ratio = if m.kt != 0.0 { m.r / m.kt } else { 0.0 };
+                (-(m.kb + ratio * b), -ratio * m.j)
+            } else {
+                (-b, -m.j)
+            };
+            let keep = mech_keep.as_deref().unwrap_or(&[]);
+            let v = select_rows(
+                &wf_m.angle_error_variance(a1, a2, &s.theta_torque_var),
+                keep,
+            );
+            let first = forward_select(&mech, opts, alpha_per_test, &mut units.clone());
+            row_scale(&first.2, &v)
+        });
+        if let Some(w) = &scale {
+            let mul = |x: &mut Vec<f64>| x.iter_mut().zip(w).for_each(|(a, b)| *a *= b);
+            mul(&mut mech.y);
+            mech.base_cols.iter_mut().for_each(mul);
+            for (_, cols) in mech.cand.iter_mut() {
+                cols.iter_mut().for_each(mul);
+            }
+        }
         let out = forward_select(&mech, opts, alpha_per_test, &mut units);
         equations.push(push_eq(
             Equation::Mechanical,
@@ -457,10 +492,17 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
             mech_keep.as_deref(),
         ));
         let keep = mech_keep.clone().unwrap_or_else(|| vec![true; wf.rows()]);
+        let scaled = |x: Vec<f64>| -> Vec<f64> {
+            match &scale {
+                Some(w) => x.iter().zip(w).map(|(a, b)| a * b).collect(),
+                None => x,
+            }
+        };
         judged.push(Judged {
             eq: Equation::Mechanical,
-            given: given.as_ref().map(|g| select_rows(&g.0, &keep)),
-            input: select_rows(&wf_m.integral(&s.u), &keep),
+            scale: scale.clone(),
+            given: given.as_ref().map(|g| scaled(select_rows(&g.0, &keep))),
+            input: scaled(select_rows(&wf_m.integral(&s.u), &keep)),
             keep,
             base: out.2.clone(),
             after: out.3.clone(),
@@ -492,13 +534,31 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
     }
 }
 
+/// The log's signals; with `steady_angle`, the angle the torque equation integrates is read
+/// as the centre line its readings allow wherever the rotor turns at a steady speed for at
+/// least one weak-form window ([`crate::numerics::quantisation`]), so that a correct model's
+/// torque residual no longer repeats the slow beat of the angle's rounding against the
+/// sampling. The voltage equation takes the readings as they are.
+fn signals_of(log: &MotorLog, st: &Structure, half: usize, steady_angle: bool) -> Signals {
+    let mut s = Signals::from_log(log, st.plant, st.kt);
+    if !steady_angle {
+        return s;
+    }
+    (s.theta_torque, s.theta_torque_var) = crate::numerics::quantisation::dequantise_with_variance(
+        &log.theta,
+        s.angle_step(),
+        2 * half + 1,
+    );
+    s
+}
+
 /// The weak form of a sample-level torque column: the velocity estimate itself (viscous
 /// friction) as the weak derivative of the angle, which is exact (its increments are the
 /// velocity's integrals over each interval; the smoothed estimate lags steps); any other
 /// column by the trapezoid over each interval.
 fn weak_torque(wf: &weak_form::WeakForm, s: &Signals, col: &[f64]) -> Vec<f64> {
     if col == s.omega.as_slice() {
-        wf.derivative(&s.theta)
+        wf.derivative(&s.theta_torque)
     } else {
         wf.integral(col)
     }
@@ -519,9 +579,60 @@ fn viscous_of(effects: &[Effect<f64>]) -> f64 {
 /// windows, enough for the whiteness regression on 4 lags and for the carriers' 8 knots).
 pub const MIN_VERDICT_ROWS: usize = 64;
 
+/// Weight of each row of a residual whose variance differs from row to row: `1/σ_r`, with
+/// `σ_r² = α·v_r + β` fitted to the squared residual by least squares (α, β ≥ 0), `v_r` the
+/// variance the angle's quantisation puts into row `r`; scaled to a mean square of 1. Windows
+/// through a transient, where the angle keeps its readings' error, then weigh no more than
+/// their noise deserves against windows at a steady speed, and a term that lives in the
+/// transients (a braking drive, a coupling) is not taken in by their larger scatter. Both
+/// variance parts come from the residual itself, so noise of another origin (the current,
+/// the model's own approximations) sets the floor β.
+fn row_scale(resid: &[f64], v: &[f64]) -> Vec<f64> {
+    let n = resid.len().min(v.len());
+    if n < 3 {
+        return vec![1.0; resid.len()];
+    }
+    let r2: Vec<f64> = resid[..n].iter().map(|r| r * r).collect();
+    let ones = vec![1.0; n];
+    let fit = least_squares::lstsq(&[&v[..n], &ones], &r2);
+    let mean_r2 = r2.iter().sum::<f64>() / n as f64;
+    let mean_v = v[..n].iter().sum::<f64>() / n as f64;
+    let (mut alpha, mut beta) = (
+        fit.beta.first().copied().unwrap_or(0.0),
+        fit.beta.get(1).copied().unwrap_or(mean_r2),
+    );
+    if !(alpha >= 0.0 && beta >= 0.0) {
+        // One part alone: the one whose fit by its own mean is better.
+        if alpha < 0.0 || !alpha.is_finite() || mean_v <= 0.0 {
+            (alpha, beta) = (0.0, mean_r2);
+        } else {
+            (alpha, beta) = (mean_r2 / mean_v, 0.0);
+        }
+    }
+    let w: Vec<f64> = v[..n]
+        .iter()
+        .map(|vr| {
+            let var = alpha * vr + beta;
+            if var > 0.0 && var.is_finite() {
+                1.0 / var.sqrt()
+            } else {
+                1.0
+            }
+        })
+        .collect();
+    let norm = (w.iter().map(|x| x * x).sum::<f64>() / n as f64).sqrt();
+    if norm > 0.0 && norm.is_finite() {
+        w.iter().map(|x| x / norm).collect()
+    } else {
+        vec![1.0; n]
+    }
+}
+
 /// One equation's residuals for the verdict.
 struct Judged {
     eq: Equation,
+    /// Weight of each kept row ([`row_scale`]); the residuals are already weighted.
+    scale: Option<Vec<f64>>,
     /// Which windows the equation kept.
     keep: Vec<bool>,
     /// The model's residual with its own numbers (kept rows), when it has motor constants.
@@ -592,6 +703,7 @@ fn judge(
             wf,
             keep: &j.keep,
             resid: &j.after,
+            scale: j.scale.as_deref(),
             label: j.eq.label(),
         };
         for c in carriers::carriers(s, &rows, level_per_test, opts.min_explained) {
@@ -1199,5 +1311,37 @@ impl Structure {
             kt: if m.motor.kt > 0.0 { m.motor.kt } else { 1.0 },
             motor: (m.kind != ModelKind::Sindyc).then_some(m.motor),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::row_scale;
+    use crate::numerics::statistics::white_noise;
+
+    /// Rows whose noise is a known part plus a floor get weights that make them equally
+    /// noisy; rows of one variance keep equal weights.
+    #[test]
+    fn row_scale_evens_out_a_known_variance() {
+        let n = 4000;
+        let v: Vec<f64> = (0..n).map(|k| if k % 4 == 0 { 9.0 } else { 0.0 }).collect();
+        let z = white_noise(n, 11);
+        let r: Vec<f64> = z
+            .iter()
+            .zip(&v)
+            .map(|(z, v)| z * (v + 1.0f64).sqrt())
+            .collect();
+        let w = row_scale(&r, &v);
+        let ms = |pick: usize| {
+            let x: Vec<f64> = (0..n)
+                .filter(|k| (k % 4 == 0) == (pick == 0))
+                .map(|k| (r[k] * w[k]).powi(2))
+                .collect();
+            x.iter().sum::<f64>() / x.len() as f64
+        };
+        let ratio = ms(0) / ms(1);
+        assert!((0.8..1.25).contains(&ratio), "{ratio}");
+        let flat = row_scale(&z, &vec![0.5; n]);
+        assert!(flat.iter().all(|x| (x - 1.0).abs() < 1e-9));
     }
 }

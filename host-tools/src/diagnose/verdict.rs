@@ -237,6 +237,7 @@ pub fn given_residuals(
     m: &MotorParams<f64>,
 ) -> (Vec<f64>, Option<Vec<f64>>) {
     let d2 = wf.second_derivative(&s.theta);
+    let d2m = wf.second_derivative(&s.theta_torque);
     // Viscous friction integrates exactly through the angle's increments.
     let b: f64 = effects
         .iter()
@@ -251,7 +252,7 @@ pub fn given_residuals(
             .zip(&s.omega)
             .map(|(t, o)| t - b * o)
             .collect();
-        let d1 = w.derivative(&s.theta);
+        let d1 = w.derivative(&s.theta_torque);
         w.integral(&rest)
             .iter()
             .zip(&d1)
@@ -276,7 +277,7 @@ pub fn given_residuals(
                 })
                 .collect();
             let zoh = wf_m.integral_zoh(&s.raw_u);
-            let d1m = wf_m.derivative(&s.theta);
+            let d1m = wf_m.derivative(&s.theta_torque);
             let tq = torque_weak(wf_m, &torque);
             let di = wf_m.derivative(&i);
             let lw_m = wf_m.integral(&loss);
@@ -288,7 +289,7 @@ pub fn given_residuals(
                 .map(|r| {
                     zoh[r]
                         - m.kb * d1m[r]
-                        - ratio * (m.j * d2[r] + tq[r])
+                        - ratio * (m.j * d2m[r] + tq[r])
                         - m.l * di[r]
                         - lw_m[r]
                         - m.r * (ri_m[r] - iw_m[r])
@@ -311,7 +312,7 @@ pub fn given_residuals(
             let zoh = wf_m.integral_zoh(&s.raw_u);
             let tq = torque_weak(wf_m, &torque);
             let mech = (0..wf.rows())
-                .map(|r| m.kt * zoh[r] - m.j * d2[r] - tq[r])
+                .map(|r| m.kt * zoh[r] - m.j * d2m[r] - tq[r])
                 .collect();
             (mech, None)
         }

@@ -2,5 +2,6 @@
 //! model errors, smoothed differentiation and the weak form.
 pub mod differentiation;
 pub mod least_squares;
+pub mod quantisation;
 pub mod statistics;
 pub mod weak_form;

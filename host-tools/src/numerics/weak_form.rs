@@ -336,6 +336,19 @@ impl WeakForm {
         self.conv(&self.w1, x)
     }
 
+    /// Variance of `a1·derivative(e) + a2·second_derivative(e)` per window for independent
+    /// errors `e_k` of variance `var_k` (an angle's quantisation error through the terms of
+    /// an equation that take the angle): `Σ_k (a1·w1_k + a2·w2_k)²·var_k`.
+    pub fn angle_error_variance(&self, a1: f64, a2: f64, var: &[f64]) -> Vec<f64> {
+        let w: Vec<f64> = self
+            .w1
+            .iter()
+            .zip(&self.w2)
+            .map(|(b, c)| (a1 * b + a2 * c).powi(2))
+            .collect();
+        self.conv(&w, var)
+    }
+
     /// `Σφ_k·(x_{k+1} − 2x_k + x_{k−1})/dt = ∫φ_lin·ẍ dt` per window (the weak second
     /// derivative, exact for the angle against the test function linear between samples).
     pub fn second_derivative(&self, x: &[f64]) -> Vec<f64> {
@@ -655,5 +668,30 @@ mod tests {
             assert!(c.abs() < 0.2, "residual correlates with {name}: {c}");
         }
         assert!(rms < 0.15 * lg.alpha0, "rms residual {rms} N·m");
+    }
+
+    /// The variance of the weak derivatives of independent errors is what their spread over
+    /// many draws shows.
+    #[test]
+    fn angle_error_variance_matches_the_spread_of_its_weights() {
+        let (n, dt) = (200, 0.012);
+        let wf = WeakForm::new(n, dt, 8, 8).held(0.1);
+        let var: Vec<f64> = (0..n).map(|k| if k < 100 { 1e-3 } else { 4e-3 }).collect();
+        let (a1, a2) = (-0.07, -1e-3);
+        let predicted = wf.angle_error_variance(a1, a2, &var);
+        let mut sum2 = vec![0.0; wf.rows()];
+        let draws = 400;
+        for d in 0..draws {
+            let z = crate::numerics::statistics::white_noise(n, 1000 + d);
+            let e: Vec<f64> = z.iter().zip(&var).map(|(z, v)| z * v.sqrt()).collect();
+            let (d1, d2) = (wf.derivative(&e), wf.second_derivative(&e));
+            for r in 0..wf.rows() {
+                sum2[r] += (a1 * d1[r] + a2 * d2[r]).powi(2) / draws as f64;
+            }
+        }
+        for r in 0..wf.rows() {
+            let ratio = sum2[r] / predicted[r];
+            assert!((0.8..1.25).contains(&ratio), "row {r}: {ratio}");
+        }
     }
 }
