@@ -197,6 +197,11 @@ pub struct Board {
     last_steps: i32,
     /// Voltage commanded last period (its sign gives the current's).
     last_volts: f32,
+    /// Voltage the bridge applied over the last period (`None`: off or holding a
+    /// commissioning vector), for the step's measured-current window.
+    applied: Option<f32>,
+    /// Bus voltage of the last period [V]: measured, or the nominal one while not measured.
+    v_bus: f32,
     commission: CommissionOutcome,
     commission_seq: u32,
     store_request: bool,
@@ -257,6 +262,8 @@ impl Board {
             stall: 0,
             last_steps: 0,
             last_volts: 0.0,
+            applied: None,
+            v_bus: v_bus_nominal,
             commission: CommissionOutcome::NotRun,
             commission_seq: 0,
             store_request: false,
@@ -346,9 +353,10 @@ impl Board {
     }
 
     /// Largest speed reference `SetSpeed` takes [rad/s] ([`Coefficients::speed_limit`] at
-    /// the nominal bus voltage).
+    /// the bus voltage of the last period: measured, or the nominal one while not measured).
+    /// The running reference is held within it every period, so a sagging bus lowers it.
     pub fn speed_limit(&self) -> f32 {
-        self.coeffs.speed_limit(self.v_bus_nominal)
+        self.coeffs.speed_limit(self.v_bus)
     }
 
     /// The control step's speed reference now [rad/s] (the ramp towards `SetSpeed`'s).
@@ -356,9 +364,17 @@ impl Board {
         self.omega_ref
     }
 
+    /// Starts `run` from wherever the rotor is: the velocity estimate goes on (a rotor still
+    /// turning from an earlier run keeps its back-EMF in the current window), and the speed
+    /// reference starts at it (bumpless). Only speed mode keeps the speed asked for
+    /// (`SetSpeed` before `SetMode`); the other runs drop it.
     fn start(&mut self, run: Run) {
-        self.step.reset();
-        self.omega_ref = 0.0;
+        self.step.restart();
+        if run != Run::Speed {
+            self.omega_target = 0.0;
+        }
+        let w_max = self.speed_limit();
+        self.omega_ref = crate::pi::saturate(self.step.omega(), -w_max, w_max);
         self.run = run;
         self.seq = 0;
         self.k = 0;
@@ -367,11 +383,14 @@ impl Board {
         self.last_steps = self.step.decoder().steps();
     }
 
+    /// Ends any run; the speed asked for goes back to zero, so that it never carries over
+    /// to a later run.
     fn stop(&mut self, send: &mut impl FnMut(BoardMsg)) {
         if let Run::Commission(_) = self.run {
             self.commission = CommissionOutcome::Failed(CommissionError::Aborted);
             send(self.commission_msg());
         }
+        self.omega_target = 0.0;
         self.run = Run::Idle;
     }
 
@@ -545,6 +564,7 @@ impl Board {
             }
         }
         let v_bus = self.v_bus_of(m.v_bus);
+        self.v_bus = v_bus;
         let u_lim = self.u_limit(v_bus);
         let lim = self.coeffs.limits;
         let sign = self
@@ -582,7 +602,7 @@ impl Board {
         if matches!(self.run, Run::Speed | Run::Experiment { .. })
             && self.quiet > LINK_TIMEOUT_PERIODS
         {
-            self.run = Run::Idle;
+            self.stop(send);
             send(BoardMsg::Warning(Warning::LinkLost));
         }
 
@@ -592,11 +612,13 @@ impl Board {
             match c.tick(m.hall, edges, m.edges_overflow, m.i_vector) {
                 CommissionStep::Hold { step, volts } => {
                     self.last_volts = volts;
+                    self.applied = None;
                     return Drive::Vector { step, volts };
                 }
                 CommissionStep::Done(r) => {
                     self.commissioned(r, send);
                     self.last_volts = 0.0;
+                    self.applied = None;
                     return Drive::Off;
                 }
             }
@@ -624,10 +646,20 @@ impl Board {
         inp.now_ticks = m.now_ticks;
         inp.i_meas = i;
         inp.v_bus = u_lim;
-        // The speed ramp: at most the ramp's acceleration times the period per period.
-        let dw = self.coeffs.ramp_acceleration(self.step.current_limit()) * dt;
-        let w = self.omega_ref;
-        self.omega_ref = crate::pi::saturate(self.omega_target, w - dw, w + dw);
+        inp.v_applied = self.applied;
+        if v_override.is_some() {
+            // Experiments: the reference (and so the friction observer) follows the
+            // measured speed; the loop is open.
+            self.omega_ref = self.step.omega();
+        } else {
+            // The speed ramp: at most the ramp's acceleration times the period per period,
+            // within the speed limit at this period's bus voltage.
+            let dw = self.coeffs.ramp_acceleration(self.step.current_limit()) * dt;
+            let w = self.omega_ref;
+            let w_max = self.coeffs.speed_limit(v_bus);
+            let target = crate::pi::saturate(self.omega_target, -w_max, w_max);
+            self.omega_ref = crate::pi::saturate(target, w - dw, w + dw);
+        }
         inp.omega_ref = self.omega_ref;
         inp.v_override = v_override;
         let out = self.step.step(&self.inp);
@@ -656,9 +688,11 @@ impl Board {
 
         if self.run == Run::Idle || self.step.decoder().sector().is_none() {
             self.last_volts = 0.0;
+            self.applied = None;
             return Drive::Off;
         }
         self.last_volts = out.v_cmd;
+        self.applied = Some(out.v_cmd);
         send(BoardMsg::Sample(Sample {
             seq: self.seq,
             t: self.k as f32 * dt,

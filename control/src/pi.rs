@@ -10,13 +10,15 @@ use num_traits::Float;
 use serde::{Deserialize, Serialize};
 
 /// Saturate `v` to `[lo, hi]` by comparisons (cheaper than `max`/`min` on a Cortex-M4F,
-/// where those are library calls); a NaN `v` passes through.
+/// where those are library calls). A NaN `v` gives 0 (no drive); so do NaN bounds.
 #[inline]
 pub fn saturate<F: Float>(v: F, lo: F, hi: F) -> F {
     if v > hi {
         hi
     } else if v < lo {
         lo
+    } else if v.is_nan() || lo.is_nan() || hi.is_nan() {
+        F::zero()
     } else {
         v
     }

@@ -19,8 +19,9 @@
 //! 6. `V = PI(ω_ref − ω) + g·V_c + V_deadtime` (`g` the compensation weight
 //!    [`StepConfig::comp_gain`]), or the open-loop override in experiment mode, held in the
 //!    voltage window [`current_window`]: `[K_b·ω − R·i_limit, K_b·ω + R·i_limit]` [V]
-//!    (K_b [V·s/rad], ω [rad/s], R [Ω] with the heat of a `thermal` effect, i_limit [A])
-//!    intersected with ±min(u_max, V_bus). The window is standing: it bounds every command,
+//!    (K_b [V·s/rad], ω [rad/s], R [Ω] the plain winding resistance, i_limit [A]),
+//!    tightened by the measured current's window [`measured_current_window`]
+//!    `u_prev + g·R·(±i_limit − I)`, intersected with ±min(u_max, V_bus). The window is standing: it bounds every command,
 //!    so the current limit holds while the motor keeps running. The PI's anti-windup sees
 //!    the window (no integration while the command is held at an edge and the error pushes
 //!    further).
@@ -157,6 +158,10 @@ pub struct StepInputs<F> {
     pub omega_ref: F,
     /// Experiment mode: apply this voltage open loop (saturated at ±V_bus) instead of the PI.
     pub v_override: Option<F>,
+    /// Voltage [V] the bridge applied over the period that ended, whose current `i_meas` is
+    /// (`None`: the bridge was off; the window then rests on the motor model alone, see
+    /// [`measured_current_window`]).
+    pub v_applied: Option<F>,
 }
 
 /// Fault and status flags of one step (bit set).
@@ -239,6 +244,9 @@ pub struct ControlStep<F> {
     comp: Compensator<F>,
     /// Voltage commanded at the previous step (the SINDYc model's u).
     u_prev: F,
+    /// Back-EMF measured at the previous step, `u_applied − R·I` [V] (`None`: the bridge
+    /// was off), for the trend of [`MeasuredCurrent::emf_trend`].
+    emf_meas: Option<F>,
     /// Step count the estimator's angle is relative to.
     steps_ref: i32,
     step_angle: F,
@@ -290,13 +298,77 @@ pub fn observer_velocity<F: Float>(_omega_est: F, omega_ref: F, _v_res: F) -> F 
 /// within ±i_limit, so a current inside the limit stays inside. The rotor's own response
 /// to that current lowers |V − K_b·ω| during the period (motoring speeds it up, braking
 /// slows it down). What the window does not see is the error of the velocity estimate:
-/// `K_b·|ω − ω̂|/R` [A]. An infinite `r_i` gives `[−lim, lim]`; a window beyond `±lim` (a
-/// back-EMF above the voltage limit) collapses onto that edge.
+/// `K_b·|ω − ω̂|/R` [A], nor an error of the model's K_b or R: [`measured_current_window`]
+/// bounds those. An infinite `r_i` gives `[−lim, lim]`; a window beyond `±lim` (a back-EMF
+/// above the voltage limit) collapses onto that edge. A non-finite `emf`, or a NaN `r_i` or
+/// `lim`, gives `(0, 0)`: no drive.
 pub fn current_window<F: Float>(emf: F, r_i: F, lim: F) -> (F, F) {
+    if !(emf.is_finite() && r_i >= F::zero() && lim >= F::zero()) {
+        return (F::zero(), F::zero());
+    }
     (
         saturate(emf - r_i, -lim, lim),
         saturate(emf + r_i, -lim, lim),
     )
+}
+
+/// Gain `g` of the measured-current bound [`measured_current_window`].
+///
+/// After a change ΔV of the held voltage the current moves by ΔV/R_true, so the bound
+/// moves the current from `I` by at most `g·ρ·(±i_limit − I)`, with `ρ = R/R_true` the
+/// model's resistance error. It reaches the limit without overshoot while `g·ρ ≤ 1` and
+/// converges while `g·ρ < 2`: `g = 0.5` holds the limit with R up to 2× too high (the
+/// resistance is the constant identified least well: a cold winding, the cables, the
+/// bridge's on-resistance) and converges up to 4×. The price is the current's rise: from
+/// `I` it reaches `I + g·(i_limit − I)` in one period, so a step of the current (a speed
+/// step, a level change of an experiment signal at speed) takes two or three periods.
+pub const MEASURED_CURRENT_GAIN: f32 = 0.5;
+
+/// The measured current's part of the step's voltage window.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MeasuredCurrent<F> {
+    /// Voltage held over the last period [V] (after a period with the bridge off: the
+    /// model's back-EMF `K_b·ω̂`, the terminal voltage of an open winding).
+    pub u_prev: F,
+    /// Current it drove, measured at the period's end [A].
+    pub i: F,
+    /// Change of the measured back-EMF `u_prev − R·I` over the last period [V] (0 when not
+    /// known).
+    pub emf_trend: F,
+}
+
+/// The voltage window [V] from the measured current: `u_prev + g·R·(±i_limit − I)`, i.e.
+/// [`current_window`] around `u_prev − g·R·I` with the half-width `g·R·i_limit`, for the
+/// model's resistance `r` [Ω], the limit `i_limit` [A], the gain `g`
+/// ([`MEASURED_CURRENT_GAIN`]) and the voltage limit `lim` [V].
+///
+/// It rests on the measured back-EMF `u_prev − R·I` (the winding's L/R is short against the
+/// period), not on the model's `K_b·ω̂`: it holds the current when K_b, the pole pairs or
+/// the velocity estimate are wrong, e.g. a load step at speed while the estimate still
+/// reports the old speed. A back-EMF that falls while the current is positive (the drive
+/// accelerates, so a load slows the rotor) is expected to fall as much again over the next
+/// period, and the upper edge moves down by that much; likewise the lower edge for a
+/// rising back-EMF under a negative current. Without it a load rising over several
+/// periods would keep the current `ΔE/(g·R)` beyond the limit. A change the drive's own
+/// current makes (speeding up under a positive current) is not extrapolated: cutting the
+/// voltage stops it. The step takes the tighter of this and the model's window.
+pub fn measured_current_window<F: Float>(
+    m: MeasuredCurrent<F>,
+    r: F,
+    i_limit: F,
+    g: F,
+    lim: F,
+) -> (F, F) {
+    let g_r = g * r;
+    let (mut lo, mut hi) = current_window(m.u_prev - g_r * m.i, g_r * i_limit, lim);
+    if m.i > F::zero() && m.emf_trend < F::zero() {
+        hi = saturate(hi + m.emf_trend, -lim, lim);
+        lo = saturate(lo, -lim, hi);
+    } else if m.i < F::zero() && m.emf_trend > F::zero() {
+        lo = saturate(lo + m.emf_trend, -lim, lim);
+        hi = saturate(hi, lo, lim);
+    }
+    (lo, hi)
 }
 
 impl<F: Float> ControlStep<F> {
@@ -344,6 +416,7 @@ impl<F: Float> ControlStep<F> {
                 tau_d: cfg.tau_d,
             }),
             u_prev: F::zero(),
+            emf_meas: None,
             steps_ref: 0,
             step_angle: step,
             v_res: estimator_resolution(&cfg.estimator, step, dt),
@@ -365,6 +438,37 @@ impl<F: Float> ControlStep<F> {
         };
     }
 
+    /// Velocity estimate of the last step [rad/s].
+    pub fn omega(&self) -> F {
+        self.estimator.omega()
+    }
+
+    /// A new run from wherever the rotor is: the position count restarts at the present
+    /// sector, the observer, the compensation filter and the PI start again, but the
+    /// velocity estimate (and the heat state) go on: the rotor may still turn, and the
+    /// current window needs its back-EMF from the first period on. The PI's integral starts
+    /// at that back-EMF `K_b·ω̂`, the voltage that drives no current (a bumpless start).
+    pub fn restart(&mut self) {
+        let rel = self.decoder.steps().wrapping_sub(self.steps_ref);
+        self.decoder.restart_count();
+        self.steps_ref = self.decoder.steps();
+        self.estimator
+            .rebase(F::from(rel).unwrap() * self.step_angle);
+        match &mut self.observer {
+            Observer::None => {}
+            Observer::Lugre(o) => o.reset(),
+            Observer::Sindy(o) => o.reset(),
+        }
+        self.comp.reset();
+        self.pi.reset();
+        let emf = self.motor.kb * self.estimator.omega();
+        if emf.is_finite() {
+            self.pi.integral = emf;
+        }
+        self.u_prev = F::zero();
+        self.emf_meas = None;
+    }
+
     /// Back to rest: position count, estimator, observer, PI, compensation, heat.
     pub fn reset(&mut self) {
         self.decoder.reset();
@@ -378,6 +482,7 @@ impl<F: Float> ControlStep<F> {
         self.pi.reset();
         self.comp.reset();
         self.u_prev = F::zero();
+        self.emf_meas = None;
         self.steps_ref = 0;
     }
 
@@ -511,11 +616,36 @@ impl<F: Float> ControlStep<F> {
         } else {
             v_bus
         };
-        let (lo, hi) = current_window(
-            self.motor.kb * omega,
-            self.comp.params.r * self.i_limit,
+        // The model's window uses the plain winding resistance: the heat state of a thermal
+        // effect is fitted, may be of either sign, and would widen or invert the window.
+        let emf = self.motor.kb * omega;
+        let (lo, hi) = current_window(emf, self.motor.r * self.i_limit, lim);
+        // After a period with the bridge off the terminal voltage was the back-EMF, which
+        // only the model knows.
+        let r = self.motor.r;
+        let (u_prev, emf_meas) = match inp.v_applied {
+            Some(u) if u.is_finite() => (u, Some(u - r * current)),
+            _ => (emf, None),
+        };
+        let emf_trend = match (emf_meas, self.emf_meas) {
+            (Some(e), Some(p)) => e - p,
+            _ => F::zero(),
+        };
+        self.emf_meas = emf_meas;
+        let measured = MeasuredCurrent {
+            u_prev,
+            i: current,
+            emf_trend,
+        };
+        let (lo_m, hi_m) = measured_current_window(
+            measured,
+            r,
+            self.i_limit,
+            F::from(MEASURED_CURRENT_GAIN).unwrap(),
             lim,
         );
+        // The tighter of both; where they do not overlap the measured one wins.
+        let (lo, hi) = (saturate(lo, lo_m, hi_m), saturate(hi, lo_m, hi_m));
         self.pi.set_limits(lo, hi);
         let err = omega_ref - omega;
         let v_cmd = match inp.v_override {
