@@ -988,24 +988,35 @@ mod tests {
 
     #[test]
     fn the_current_window_holds_the_command_and_stops_the_integrator() {
-        // At standstill with a large speed error the command is R·i_limit, not the
+        // At standstill with a large speed error the command rises to R·i_limit, by half
+        // the remaining distance per period (the measured current's window), not to the
         // 5 V the PI asks (kp·100 rad/s), and the integral does not grow meanwhile.
         let mut cfg = StepConfig::<f64>::paper();
         cfg.observer = ObserverConfig::None;
         cfg.i_limit = 10.0;
         let mut ctl = ControlStep::new(&cfg);
-        let inp = StepInputs {
+        let r = cfg.motor.r;
+        let r_i = r * 10.0;
+        let g = f64::from(MEASURED_CURRENT_GAIN);
+        let mut inp = StepInputs {
             hall: 1,
             v_bus: 24.0,
             omega_ref: 100.0,
             ..Default::default()
         };
-        let r_i = cfg.motor.r * 10.0;
-        for _ in 0..50 {
+        for k in 0..50 {
             let out = ctl.step(&inp);
-            assert!((out.v_cmd - r_i).abs() < 1e-12, "{}", out.v_cmd);
+            let want = r_i * (1.0 - (1.0 - g).powi(k + 1));
+            assert!(
+                (out.v_cmd - want).abs() < 1e-9,
+                "{k}: {} vs {want}",
+                out.v_cmd
+            );
             assert!(out.faults.contains(Faults::CURRENT_LIMIT));
             assert!(!out.faults.contains(Faults::SATURATED));
+            // A rotor held at standstill: the current is V/R.
+            inp.v_applied = Some(out.v_cmd);
+            inp.i_meas = out.v_cmd / r;
         }
         assert_eq!(ctl.pi().integral, 0.0);
         // The open-loop override is held the same way.
@@ -1013,7 +1024,77 @@ mod tests {
             v_override: Some(-20.0),
             ..inp
         });
-        assert!((out.v_cmd + r_i).abs() < 1e-12, "{}", out.v_cmd);
+        assert!(out.v_cmd < 0.0 && out.v_cmd >= -r_i, "{}", out.v_cmd);
+    }
+
+    #[test]
+    fn the_measured_current_holds_the_limit_with_r_twice_too_high() {
+        // The model's R is twice the winding's: the model's window alone would allow
+        // 2·i_limit at standstill. With the measured current the current rises to the
+        // limit without passing it.
+        let (r_true, i_limit, lim) = (0.2, 10.0, 24.0);
+        let mut i = 0.0;
+        let mut u = 0.0;
+        for _ in 0..40 {
+            let m = MeasuredCurrent {
+                u_prev: u,
+                i,
+                emf_trend: 0.0,
+            };
+            let (_, hi) = measured_current_window(m, 2.0 * r_true, i_limit, 0.5, lim);
+            u = hi;
+            i = u / r_true;
+            assert!(i <= i_limit * (1.0 + 1e-12), "{i}");
+        }
+        assert!(i > 0.999 * i_limit, "{i}");
+        // A falling back-EMF under a positive current moves the upper edge down by as much.
+        let m = MeasuredCurrent {
+            u_prev: 10.0,
+            i: 5.0,
+            emf_trend: -0.5,
+        };
+        let flat = measured_current_window(
+            MeasuredCurrent {
+                emf_trend: 0.0,
+                ..m
+            },
+            0.2,
+            10.0,
+            0.5,
+            lim,
+        );
+        let (lo, hi) = measured_current_window(m, 0.2, 10.0, 0.5, lim);
+        assert!((hi - (flat.1 - 0.5)).abs() < 1e-12 && lo == flat.0);
+    }
+
+    #[test]
+    fn non_finite_window_inputs_and_a_negative_thermal_coefficient_give_no_runaway() {
+        assert_eq!(current_window(f64::NAN, 2.0, 12.0), (0.0, 0.0));
+        assert_eq!(current_window(f64::INFINITY, 2.0, 12.0), (0.0, 0.0));
+        assert_eq!(current_window(3.0, f64::NAN, 12.0), (0.0, 0.0));
+        assert_eq!(current_window(3.0, 2.0, f64::NAN), (0.0, 0.0));
+        assert_eq!(saturate(f64::NAN, -1.0, 1.0), 0.0);
+        assert_eq!(saturate(5.0, f64::NAN, f64::NAN), 0.0);
+        // A fitted thermal effect with a negative coefficient and a large current: R(1 + heat)
+        // turns negative, which would invert the window; the window uses the plain R.
+        let mut cfg = StepConfig::<f64>::paper();
+        cfg.observer = ObserverConfig::None;
+        cfg.i_limit = 10.0;
+        cfg.effects
+            .push(Effect::Thermal { k: -0.5, tau: 0.05 })
+            .unwrap();
+        let mut ctl = ControlStep::new(&cfg);
+        let r_i = cfg.motor.r * 10.0;
+        for _ in 0..100 {
+            let out = ctl.step(&StepInputs {
+                hall: 1,
+                v_bus: 24.0,
+                i_meas: 9.0,
+                v_override: Some(20.0),
+                ..Default::default()
+            });
+            assert!(out.v_cmd.abs() <= r_i + 1e-12, "{}", out.v_cmd);
+        }
     }
 
     #[test]
