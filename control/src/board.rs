@@ -202,6 +202,10 @@ pub struct Board {
     applied: Option<f32>,
     /// Bus voltage of the last period [V]: measured, or the nominal one while not measured.
     v_bus: f32,
+    /// The hardware over-current stop is armed ([`Board::set_hardware_stop`]).
+    hw_stop_armed: bool,
+    /// Speed and experiment runs are allowed without it (a firmware built so).
+    run_without_hw_stop: bool,
     commission: CommissionOutcome,
     commission_seq: u32,
     store_request: bool,
@@ -264,6 +268,8 @@ impl Board {
             last_volts: 0.0,
             applied: None,
             v_bus: v_bus_nominal,
+            hw_stop_armed: true,
+            run_without_hw_stop: false,
             commission: CommissionOutcome::NotRun,
             commission_seq: 0,
             store_request: false,
@@ -295,6 +301,15 @@ impl Board {
         self.coeffs = coeffs;
         self.coeff_seq = seq;
         self.run = Run::Idle;
+    }
+
+    /// Whether the transport's hardware over-current stop is armed (`armed`; the board
+    /// starts out assuming it is). While it is not, speed and experiment runs are refused
+    /// (`Nack::NoHardwareStop`; commissioning, at its limited current, stays allowed) unless
+    /// `run_without` says to run on the 12 ms software limit alone. `Identify` reports it.
+    pub fn set_hardware_stop(&mut self, armed: bool, run_without: bool) {
+        self.hw_stop_armed = armed;
+        self.run_without_hw_stop = run_without;
     }
 
     /// The coefficients in force.
@@ -427,6 +442,8 @@ impl Board {
                     model: self.coeffs.model,
                     coeff_seq: self.coeff_seq,
                     speed_max: self.speed_limit(),
+                    hw_stop_armed: self.hw_stop_armed,
+                    motor_identified: self.coeffs.motor_identified,
                 }
             }
             HostMsg::UploadBegin { .. }
@@ -463,6 +480,17 @@ impl Board {
                 BoardMsg::Ack
             }
             _ if self.coeff_seq == 0 => BoardMsg::Nack(Nack::NoCoefficients),
+            HostMsg::SetMode {
+                mode: Mode::Speed | Mode::Experiment,
+            }
+            | HostMsg::StartExperiment { .. }
+                if !(self.hw_stop_armed || self.run_without_hw_stop) =>
+            {
+                BoardMsg::Nack(Nack::NoHardwareStop)
+            }
+            HostMsg::SetMode { mode: Mode::Speed } if !self.coeffs.motor_identified => {
+                BoardMsg::Nack(Nack::MotorNotIdentified)
+            }
             HostMsg::SetMode { mode: Mode::Speed } => {
                 self.start(Run::Speed);
                 BoardMsg::Ack
@@ -516,9 +544,12 @@ impl Board {
         self.stop(send);
     }
 
+    /// A commissioning run ended with `r`; `resistance` [Ω] is the winding resistance its
+    /// holds measured, stored unless the motor constants were identified.
     fn commissioned(
         &mut self,
         r: Result<Commissioning, CommissionError>,
+        resistance: Option<f32>,
         send: &mut impl FnMut(BoardMsg),
     ) {
         self.run = Run::Idle;
@@ -526,6 +557,9 @@ impl Board {
             Ok(c) => {
                 let mut co = self.coeffs.clone();
                 co.apply_commissioning(c);
+                if let (Some(r), false) = (resistance, co.motor_identified) {
+                    co.motor.r = r;
+                }
                 self.step = ControlStep::new(&co.step_config(self.v_bus_nominal));
                 self.table = table_of(&co);
                 self.coeffs = co;
@@ -616,7 +650,8 @@ impl Board {
                     return Drive::Vector { step, volts };
                 }
                 CommissionStep::Done(r) => {
-                    self.commissioned(r, send);
+                    let resistance = c.resistance();
+                    self.commissioned(r, resistance, send);
                     self.last_volts = 0.0;
                     self.applied = None;
                     return Drive::Off;
@@ -814,8 +849,15 @@ mod tests {
         assert_eq!(temperature_derating(f32::NAN), 1.0);
     }
 
+    fn identified() -> Coefficients {
+        Coefficients {
+            motor_identified: true,
+            ..Coefficients::default()
+        }
+    }
+
     fn running_board() -> (Board, Vec<BoardMsg>) {
-        let mut b = Board::new(Some((Coefficients::default(), 1)), "test", 22.2);
+        let mut b = Board::new(Some((identified(), 1)), "test", 22.2);
         let mut out = Vec::new();
         b.handle(&HostMsg::SetMode { mode: Mode::Speed }, &mut |m| {
             out.push(m)
@@ -924,7 +966,7 @@ mod tests {
             out.push(m)
         });
         assert_eq!(out, [BoardMsg::Ack]);
-        let mut slow = Coefficients::default();
+        let mut slow = identified();
         slow.pi.u_max = 3.0; // 42 rad/s
         b.load(slow, 2);
         b.handle(&HostMsg::SetMode { mode: Mode::Speed }, &mut |m| {

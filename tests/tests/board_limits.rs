@@ -16,6 +16,7 @@ fn paper_coefficients(u_max: f32, i_max: f32) -> Coefficients {
     let mut co = Coefficients {
         model: ModelKind::Lugre,
         lugre: Some(LugreParams::paper()),
+        motor_identified: true,
         ..Coefficients::default()
     };
     co.pi.u_max = u_max;
@@ -476,4 +477,154 @@ fn a_load_step_at_speed_holds_the_current_limit() {
                 .any(|x| x.faults.contains(Faults::CURRENT_LIMIT)));
         }
     }
+}
+
+#[test]
+fn the_speed_limit_follows_the_measured_bus_voltage() {
+    // u_max 24 V: at the nominal 22.2 V the limit is 0.95·22.2/K_b = 296 rad/s; a bus
+    // sagging to 14 V lowers it to 187 rad/s: the running reference comes down to it, a
+    // SetSpeed beyond it is refused and the board reports it.
+    let co = paper_coefficients(24.0, 30.0);
+    let mut sim = board_with(&co);
+    let nominal = sim.board().speed_limit();
+    assert!(
+        (nominal - 0.95 * 22.2 / co.motor.kb).abs() < 0.1,
+        "{nominal}"
+    );
+    let (p, fault) = speed_run(&mut sim, 250.0, 150);
+    assert_eq!(fault, None);
+    assert!((mean_speed(&p[120..]) - 250.0).abs() < 5.0);
+    sim.hardware_mut().set_bus_voltage(14.0);
+    let (p, fault) = run(&mut sim, 150);
+    assert_eq!(fault, None);
+    let low = 0.95 * 14.0 / co.motor.kb;
+    assert!(
+        (sim.board().speed_limit() - low).abs() < 0.1,
+        "{}",
+        sim.board().speed_limit()
+    );
+    assert!(
+        sim.board().speed_reference() <= low,
+        "{}",
+        sim.board().speed_reference()
+    );
+    let w = mean_speed(&p[120..]);
+    // At its voltage limit the loop holds the speed friction leaves below the no-load one.
+    assert!(
+        w <= f64::from(low) + 2.0 && w > 0.85 * f64::from(low),
+        "{w} rad/s"
+    );
+    sim.handle(&HostMsg::SetSpeed { omega_ref: 200.0 });
+    let reply: BoardMsg = control::frame::decode_frame(&sim.take_output()).unwrap();
+    assert_eq!(reply, BoardMsg::Nack(control::frame::Nack::OutOfRange));
+    sim.handle(&HostMsg::Identify);
+    let id: BoardMsg = control::frame::decode_frame(&sim.take_output()).unwrap();
+    assert!(
+        matches!(id, BoardMsg::Identity { speed_max, .. } if (speed_max - low).abs() < 0.1),
+        "{id:?}"
+    );
+}
+
+/// The board's replies since the last call.
+fn replies(sim: &mut BoardSim) -> Vec<BoardMsg> {
+    sim.take_output()
+        .split_inclusive(|&b| b == 0)
+        .map(|f| control::frame::decode_frame(f).unwrap())
+        .collect()
+}
+
+#[test]
+fn without_an_armed_hardware_stop_only_commissioning_runs() {
+    use control::frame::{Nack, Warning};
+    let co = paper_coefficients(24.0, 30.0);
+    for run_without in [false, true] {
+        let mut sim = board_with(&co);
+        sim.set_hardware_stop(false, run_without);
+        assert_eq!(
+            replies(&mut sim),
+            [BoardMsg::Warning(Warning::NoHardwareStop)]
+        );
+        // Every later Identify reports it, not only the boot warning.
+        sim.handle(&HostMsg::Identify);
+        assert!(
+            matches!(
+                replies(&mut sim)[..],
+                [BoardMsg::Identity {
+                    hw_stop_armed: false,
+                    ..
+                }]
+            ),
+            "run_without {run_without}"
+        );
+        let want = if run_without {
+            BoardMsg::Ack
+        } else {
+            BoardMsg::Nack(Nack::NoHardwareStop)
+        };
+        sim.handle(&HostMsg::StartExperiment {
+            signal: Excitation::A,
+            duration_s: 1.0,
+        });
+        assert_eq!(replies(&mut sim), [want.clone()], "experiment");
+        sim.handle(&HostMsg::Stop);
+        replies(&mut sim);
+        sim.handle(&HostMsg::SetMode { mode: Mode::Speed });
+        assert_eq!(replies(&mut sim), [want], "speed");
+        sim.handle(&HostMsg::Stop);
+        replies(&mut sim);
+        sim.handle(&HostMsg::Commission);
+        assert_eq!(replies(&mut sim), [BoardMsg::Ack], "commissioning");
+    }
+}
+
+#[test]
+fn commissioning_measures_r_and_its_default_motor_allows_no_speed_mode() {
+    use control::frame::Nack;
+    // An emulated motor with 2.5 times the default winding resistance, on a board without
+    // coefficients.
+    let mut plant = EmulatorConfig::paper();
+    plant.motor.r *= 2.5;
+    let r_true = plant.motor.r;
+    let mut sim = BoardSim::new(plant, Wiring::default(), RamFlash::new(None)).unwrap();
+    replies(&mut sim);
+    sim.handle(&HostMsg::Commission);
+    for _ in 0..600 {
+        sim.tick();
+        if sim.coeff_seq() != 0 {
+            break;
+        }
+    }
+    assert_ne!(sim.coeff_seq(), 0, "commissioning did not store");
+    let co = sim.coefficients().clone();
+    assert!(!co.motor_identified);
+    let r = f64::from(co.motor.r);
+    eprintln!("commissioning measured R = {r:.4} Ω (true {r_true:.4} Ω)");
+    assert!((r - r_true).abs() < 0.05 * r_true, "R {r} vs {r_true}");
+    replies(&mut sim);
+    sim.handle(&HostMsg::Identify);
+    assert!(matches!(
+        replies(&mut sim)[..],
+        [BoardMsg::Identity {
+            motor_identified: false,
+            ..
+        }]
+    ));
+    // Speed mode is refused on the default constants; a sized experiment runs, and its
+    // current window uses the measured R.
+    sim.handle(&HostMsg::SetSpeed { omega_ref: 50.0 });
+    sim.handle(&HostMsg::SetMode { mode: Mode::Speed });
+    assert_eq!(
+        replies(&mut sim),
+        [BoardMsg::Ack, BoardMsg::Nack(Nack::MotorNotIdentified)]
+    );
+    sim.handle(&HostMsg::StartExperiment {
+        signal: Excitation::Steady { volts: 10.0 },
+        duration_s: 1.0,
+    });
+    assert_eq!(replies(&mut sim), [BoardMsg::Ack]);
+    let (p, fault) = run(&mut sim, 80);
+    assert_eq!(fault, None);
+    let lim = i_limit(&co);
+    let peak = peak_current(&p);
+    assert!(peak <= lim + margin(&co), "peak {peak} A, limit {lim} A");
 }
