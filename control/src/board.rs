@@ -200,8 +200,8 @@ pub struct Board {
     /// Voltage the bridge applied over the last period (`None`: off or holding a
     /// commissioning vector), for the step's measured-current window.
     applied: Option<f32>,
-    /// Bus voltage of the last period [V]: measured, or the nominal one while not measured.
-    v_bus: f32,
+    /// Speed limit at the bus voltage of the last period [rad/s] ([`Board::speed_limit`]).
+    w_max: f32,
     /// The hardware over-current stop is armed ([`Board::set_hardware_stop`]).
     hw_stop_armed: bool,
     /// Speed and experiment runs are allowed without it (a firmware built so).
@@ -267,7 +267,7 @@ impl Board {
             last_steps: 0,
             last_volts: 0.0,
             applied: None,
-            v_bus: v_bus_nominal,
+            w_max: 0.0,
             hw_stop_armed: true,
             run_without_hw_stop: false,
             commission: CommissionOutcome::NotRun,
@@ -279,6 +279,7 @@ impl Board {
             inp: StepInputs::default(),
         };
         b.coeff_seq = seq;
+        b.w_max = b.coeffs.speed_limit(v_bus_nominal);
         if seq != 0 {
             if let Some(c) = b.coeffs.commission {
                 b.commission = CommissionOutcome::Done(c);
@@ -298,6 +299,7 @@ impl Board {
             self.commission = CommissionOutcome::Done(c);
             self.commission_seq = seq;
         }
+        self.w_max = coeffs.speed_limit(self.v_bus_nominal);
         self.coeffs = coeffs;
         self.coeff_seq = seq;
         self.run = Run::Idle;
@@ -371,7 +373,7 @@ impl Board {
     /// the bus voltage of the last period: measured, or the nominal one while not measured).
     /// The running reference is held within it every period, so a sagging bus lowers it.
     pub fn speed_limit(&self) -> f32 {
-        self.coeffs.speed_limit(self.v_bus)
+        self.w_max
     }
 
     /// The control step's speed reference now [rad/s] (the ramp towards `SetSpeed`'s).
@@ -598,7 +600,7 @@ impl Board {
             }
         }
         let v_bus = self.v_bus_of(m.v_bus);
-        self.v_bus = v_bus;
+        self.w_max = self.coeffs.speed_limit(v_bus);
         let u_lim = self.u_limit(v_bus);
         let lim = self.coeffs.limits;
         let sign = self
@@ -691,7 +693,7 @@ impl Board {
             // within the speed limit at this period's bus voltage.
             let dw = self.coeffs.ramp_acceleration(self.step.current_limit()) * dt;
             let w = self.omega_ref;
-            let w_max = self.coeffs.speed_limit(v_bus);
+            let w_max = self.w_max;
             let target = crate::pi::saturate(self.omega_target, -w_max, w_max);
             self.omega_ref = crate::pi::saturate(target, w - dw, w + dw);
         }

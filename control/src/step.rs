@@ -1073,8 +1073,6 @@ mod tests {
         assert_eq!(current_window(f64::INFINITY, 2.0, 12.0), (0.0, 0.0));
         assert_eq!(current_window(3.0, f64::NAN, 12.0), (0.0, 0.0));
         assert_eq!(current_window(3.0, 2.0, f64::NAN), (0.0, 0.0));
-        assert_eq!(saturate(f64::NAN, -1.0, 1.0), 0.0);
-        assert_eq!(saturate(5.0, f64::NAN, f64::NAN), 0.0);
         // A fitted thermal effect with a negative coefficient and a large current: R(1 + heat)
         // turns negative, which would invert the window; the window uses the plain R.
         let mut cfg = StepConfig::<f64>::paper();
