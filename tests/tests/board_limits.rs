@@ -390,7 +390,8 @@ fn wrong_motor_constants_in_the_blob_do_not_lift_the_current_limit() {
     let base = paper_coefficients(24.0, 10.0);
     let lim = i_limit(&base);
     let i_max = f64::from(base.limits.i_max);
-    let cases: [(&str, fn(&mut Coefficients)); 5] = [
+    type Change = fn(&mut Coefficients);
+    let cases: [(&str, Change); 5] = [
         ("K_b x2", |c| c.motor.kb *= 2.0),
         ("K_b x0.5", |c| c.motor.kb *= 0.5),
         ("R x2", |c| c.motor.r *= 2.0),
@@ -565,7 +566,7 @@ fn without_an_armed_hardware_stop_only_commissioning_runs() {
             signal: Excitation::A,
             duration_s: 1.0,
         });
-        assert_eq!(replies(&mut sim), [want.clone()], "experiment");
+        assert_eq!(replies(&mut sim), std::slice::from_ref(&want), "experiment");
         sim.handle(&HostMsg::Stop);
         replies(&mut sim);
         sim.handle(&HostMsg::SetMode { mode: Mode::Speed });
