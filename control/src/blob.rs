@@ -41,7 +41,9 @@ pub const MAGIC: [u8; 4] = *b"MIDC";
 /// 3: [`PiGains::comp_gain`] is a weight (0 none, 1 full compensation, values between scale
 /// it); in versions 1 and 2 any positive value meant full compensation, so [`decode`] reads
 /// their positive gains as 1.
-pub const VERSION: u16 = 3;
+/// 4: adds [`Coefficients::motor_identified`] at the end; older blobs read as not
+/// identified (their motor constants may be the defaults commissioning stored).
+pub const VERSION: u16 = 4;
 /// The oldest format version [`decode`] reads.
 pub const OLDEST_VERSION: u16 = 1;
 /// Header size: magic, version, payload length.
@@ -173,6 +175,11 @@ pub struct Coefficients {
     pub limits: Limits,
     /// Hall commissioning result (format version 2); when present, `hall_table` is its table.
     pub commission: Option<Commissioning>,
+    /// The motor constants (`motor`) come from an identification of this motor (`motorid
+    /// export`), format version 4. False: defaults (the paper's motor), at most with R
+    /// measured by commissioning; speed mode is refused until an identified model is
+    /// uploaded. Blobs of versions 1 to 3 read as false.
+    pub motor_identified: bool,
 }
 
 /// Default Hall table for 120°-spaced sensors, sequence 1-3-2-6-4-5 for positive rotation
@@ -212,6 +219,7 @@ impl Default for Coefficients {
                 vbus_max: RATED_VBUS_MAX,
             },
             commission: None,
+            motor_identified: false,
         }
     }
 }
@@ -558,12 +566,18 @@ pub fn check(bytes: &[u8]) -> Result<&[u8], BlobError> {
 pub fn decode(bytes: &[u8]) -> Result<Coefficients, BlobError> {
     let payload = check(bytes)?;
     let version = u16::from_le_bytes([bytes[4], bytes[5]]);
-    // Version 1 lacks the trailing `commission` option: postcard writes `None` as one zero
-    // byte, so the payload plus that byte is the version-2 encoding.
-    let mut v1 = [0u8; MAX_PAYLOAD_LEN + 1];
-    let payload = if version == 1 {
-        v1[..payload.len()].copy_from_slice(payload);
-        &v1[..payload.len() + 1]
+    // Version 1 lacks the trailing `commission` option, versions 1 to 3 the trailing
+    // `motor_identified`: postcard writes `None` and `false` as one zero byte each, so the
+    // payload plus those bytes is the version-4 encoding.
+    let missing = match version {
+        1 => 2,
+        2 | 3 => 1,
+        _ => 0,
+    };
+    let mut old = [0u8; MAX_PAYLOAD_LEN + 2];
+    let payload = if missing > 0 {
+        old[..payload.len()].copy_from_slice(payload);
+        &old[..payload.len() + missing]
     } else {
         payload
     };
@@ -754,10 +768,30 @@ mod tests {
         let mut buf = [0u8; MAX_BLOB_LEN];
         let blob = encode(&Coefficients::default(), &mut buf).unwrap().to_vec();
         let mut b = blob.clone();
-        b[4] = 4;
-        assert_eq!(decode(&b), Err(BlobError::UnsupportedVersion(4)));
+        b[4] = 5;
+        assert_eq!(decode(&b), Err(BlobError::UnsupportedVersion(5)));
         b[4] = 0;
         assert_eq!(decode(&b), Err(BlobError::UnsupportedVersion(0)));
+    }
+
+    /// `c` encoded as a blob of an older `version`: the version-4 payload without the
+    /// trailing fields that version lacks (each a zero byte for `None` / `false`).
+    fn older(c: &Coefficients, version: u16) -> std::vec::Vec<u8> {
+        let mut buf = [0u8; MAX_BLOB_LEN];
+        let b = encode(c, &mut buf).unwrap().to_vec();
+        let drop = match version {
+            1 => 2,
+            2 | 3 => 1,
+            _ => 0,
+        };
+        let n = b.len() - HEADER_LEN - CRC_LEN - drop;
+        assert!(b[HEADER_LEN + n..b.len() - CRC_LEN].iter().all(|&x| x == 0));
+        let mut o = b[..HEADER_LEN + n].to_vec();
+        o[4..6].copy_from_slice(&version.to_le_bytes());
+        o[6..8].copy_from_slice(&(n as u16).to_le_bytes());
+        let crc = CRC32.checksum(&o);
+        o.extend_from_slice(&crc.to_le_bytes());
+        o
     }
 
     /// Before version 3 a positive `comp_gain` meant full compensation: such a blob still
@@ -771,45 +805,47 @@ mod tests {
             ..Coefficients::default()
         };
         c.pi.comp_gain = 0.5;
-        let v3 = encode(&c, &mut buf).unwrap().to_vec();
-        assert_eq!(decode(&v3).unwrap().pi.comp_gain, 0.5);
+        let v4 = encode(&c, &mut buf).unwrap().to_vec();
+        assert_eq!(decode(&v4).unwrap().pi.comp_gain, 0.5);
         let relabel = |version: u16, gain: f32| {
             let mut c = c.clone();
             c.pi.comp_gain = gain;
-            let mut b = encode(&c, &mut [0u8; MAX_BLOB_LEN]).unwrap().to_vec();
-            b[4..6].copy_from_slice(&version.to_le_bytes());
-            let end = b.len() - CRC_LEN;
-            let crc = CRC32.checksum(&b[..end]);
-            b[end..].copy_from_slice(&crc.to_le_bytes());
-            b
+            older(&c, version)
         };
         assert_eq!(decode(&relabel(2, 0.5)).unwrap().pi.comp_gain, 1.0);
         assert_eq!(decode(&relabel(2, 0.0)).unwrap().pi.comp_gain, 0.0);
         assert_eq!(decode(&relabel(3, 0.25)).unwrap().pi.comp_gain, 0.25);
     }
 
-    /// A version-1 blob (no `commission` field) still decodes, as having no result.
+    /// Blobs of versions 1 to 3 still decode: without a commissioning result (version 1)
+    /// and with motor constants not marked as identified.
     #[test]
-    fn version_1_blobs_are_read() {
+    fn older_blobs_are_read_as_not_identified() {
         let mut buf = [0u8; MAX_BLOB_LEN];
         let c = Coefficients {
             model: ModelKind::Lugre,
             lugre: Some(LugreParams::paper()),
+            motor_identified: true,
             ..Coefficients::default()
         };
-        let v2 = encode(&c, &mut buf).unwrap().to_vec();
-        // Version 1: the same payload without its last byte (the `None`).
-        let n = v2.len() - HEADER_LEN - CRC_LEN - 1;
-        assert_eq!(v2[HEADER_LEN + n], 0);
-        let mut v1 = v2[..HEADER_LEN + n].to_vec();
-        v1[4..6].copy_from_slice(&1u16.to_le_bytes());
-        v1[6..8].copy_from_slice(&(n as u16).to_le_bytes());
-        let crc = CRC32.checksum(&v1);
-        v1.extend_from_slice(&crc.to_le_bytes());
-        assert_eq!(decode(&v1).unwrap(), c);
-        // A version-2 payload labelled version 1 is refused (trailing bytes).
-        let mut w = v2.clone();
-        w[4..6].copy_from_slice(&1u16.to_le_bytes());
+        assert!(
+            decode(encode(&c, &mut buf).unwrap())
+                .unwrap()
+                .motor_identified
+        );
+        let not_identified = Coefficients {
+            motor_identified: false,
+            ..c.clone()
+        };
+        for version in 1..=3 {
+            assert_eq!(
+                decode(&older(&not_identified, version)).unwrap(),
+                not_identified
+            );
+        }
+        // A version-4 payload labelled version 3 is refused (trailing bytes).
+        let mut w = encode(&c, &mut buf).unwrap().to_vec();
+        w[4..6].copy_from_slice(&3u16.to_le_bytes());
         let end = w.len() - CRC_LEN;
         let crc = CRC32.checksum(&w[..end]);
         w[end..].copy_from_slice(&crc.to_le_bytes());

@@ -197,6 +197,15 @@ pub struct Board {
     last_steps: i32,
     /// Voltage commanded last period (its sign gives the current's).
     last_volts: f32,
+    /// Voltage the bridge applied over the last period (`None`: off or holding a
+    /// commissioning vector), for the step's measured-current window.
+    applied: Option<f32>,
+    /// Speed limit at the bus voltage of the last period [rad/s] ([`Board::speed_limit`]).
+    w_max: f32,
+    /// The hardware over-current stop is armed ([`Board::set_hardware_stop`]).
+    hw_stop_armed: bool,
+    /// Speed and experiment runs are allowed without it (a firmware built so).
+    run_without_hw_stop: bool,
     commission: CommissionOutcome,
     commission_seq: u32,
     store_request: bool,
@@ -257,6 +266,10 @@ impl Board {
             stall: 0,
             last_steps: 0,
             last_volts: 0.0,
+            applied: None,
+            w_max: 0.0,
+            hw_stop_armed: true,
+            run_without_hw_stop: false,
             commission: CommissionOutcome::NotRun,
             commission_seq: 0,
             store_request: false,
@@ -266,6 +279,7 @@ impl Board {
             inp: StepInputs::default(),
         };
         b.coeff_seq = seq;
+        b.w_max = b.coeffs.speed_limit(v_bus_nominal);
         if seq != 0 {
             if let Some(c) = b.coeffs.commission {
                 b.commission = CommissionOutcome::Done(c);
@@ -285,9 +299,19 @@ impl Board {
             self.commission = CommissionOutcome::Done(c);
             self.commission_seq = seq;
         }
+        self.w_max = coeffs.speed_limit(self.v_bus_nominal);
         self.coeffs = coeffs;
         self.coeff_seq = seq;
         self.run = Run::Idle;
+    }
+
+    /// Whether the transport's hardware over-current stop is armed (`armed`; the board
+    /// starts out assuming it is). While it is not, speed and experiment runs are refused
+    /// (`Nack::NoHardwareStop`; commissioning, at its limited current, stays allowed) unless
+    /// `run_without` says to run on the 12 ms software limit alone. `Identify` reports it.
+    pub fn set_hardware_stop(&mut self, armed: bool, run_without: bool) {
+        self.hw_stop_armed = armed;
+        self.run_without_hw_stop = run_without;
     }
 
     /// The coefficients in force.
@@ -346,9 +370,10 @@ impl Board {
     }
 
     /// Largest speed reference `SetSpeed` takes [rad/s] ([`Coefficients::speed_limit`] at
-    /// the nominal bus voltage).
+    /// the bus voltage of the last period: measured, or the nominal one while not measured).
+    /// The running reference is held within it every period, so a sagging bus lowers it.
     pub fn speed_limit(&self) -> f32 {
-        self.coeffs.speed_limit(self.v_bus_nominal)
+        self.w_max
     }
 
     /// The control step's speed reference now [rad/s] (the ramp towards `SetSpeed`'s).
@@ -356,9 +381,17 @@ impl Board {
         self.omega_ref
     }
 
+    /// Starts `run` from wherever the rotor is: the velocity estimate goes on (a rotor still
+    /// turning from an earlier run keeps its back-EMF in the current window), and the speed
+    /// reference starts at it (bumpless). Only speed mode keeps the speed asked for
+    /// (`SetSpeed` before `SetMode`); the other runs drop it.
     fn start(&mut self, run: Run) {
-        self.step.reset();
-        self.omega_ref = 0.0;
+        self.step.restart();
+        if run != Run::Speed {
+            self.omega_target = 0.0;
+        }
+        let w_max = self.speed_limit();
+        self.omega_ref = crate::pi::saturate(self.step.omega(), -w_max, w_max);
         self.run = run;
         self.seq = 0;
         self.k = 0;
@@ -367,11 +400,14 @@ impl Board {
         self.last_steps = self.step.decoder().steps();
     }
 
+    /// Ends any run; the speed asked for goes back to zero, so that it never carries over
+    /// to a later run.
     fn stop(&mut self, send: &mut impl FnMut(BoardMsg)) {
         if let Run::Commission(_) = self.run {
             self.commission = CommissionOutcome::Failed(CommissionError::Aborted);
             send(self.commission_msg());
         }
+        self.omega_target = 0.0;
         self.run = Run::Idle;
     }
 
@@ -408,6 +444,8 @@ impl Board {
                     model: self.coeffs.model,
                     coeff_seq: self.coeff_seq,
                     speed_max: self.speed_limit(),
+                    hw_stop_armed: self.hw_stop_armed,
+                    motor_identified: self.coeffs.motor_identified,
                 }
             }
             HostMsg::UploadBegin { .. }
@@ -444,6 +482,17 @@ impl Board {
                 BoardMsg::Ack
             }
             _ if self.coeff_seq == 0 => BoardMsg::Nack(Nack::NoCoefficients),
+            HostMsg::SetMode {
+                mode: Mode::Speed | Mode::Experiment,
+            }
+            | HostMsg::StartExperiment { .. }
+                if !(self.hw_stop_armed || self.run_without_hw_stop) =>
+            {
+                BoardMsg::Nack(Nack::NoHardwareStop)
+            }
+            HostMsg::SetMode { mode: Mode::Speed } if !self.coeffs.motor_identified => {
+                BoardMsg::Nack(Nack::MotorNotIdentified)
+            }
             HostMsg::SetMode { mode: Mode::Speed } => {
                 self.start(Run::Speed);
                 BoardMsg::Ack
@@ -497,9 +546,12 @@ impl Board {
         self.stop(send);
     }
 
+    /// A commissioning run ended with `r`; `resistance` [Ω] is the winding resistance its
+    /// holds measured, stored unless the motor constants were identified.
     fn commissioned(
         &mut self,
         r: Result<Commissioning, CommissionError>,
+        resistance: Option<f32>,
         send: &mut impl FnMut(BoardMsg),
     ) {
         self.run = Run::Idle;
@@ -507,6 +559,9 @@ impl Board {
             Ok(c) => {
                 let mut co = self.coeffs.clone();
                 co.apply_commissioning(c);
+                if let (Some(r), false) = (resistance, co.motor_identified) {
+                    co.motor.r = r;
+                }
                 self.step = ControlStep::new(&co.step_config(self.v_bus_nominal));
                 self.table = table_of(&co);
                 self.coeffs = co;
@@ -545,6 +600,7 @@ impl Board {
             }
         }
         let v_bus = self.v_bus_of(m.v_bus);
+        self.w_max = self.coeffs.speed_limit(v_bus);
         let u_lim = self.u_limit(v_bus);
         let lim = self.coeffs.limits;
         let sign = self
@@ -582,7 +638,7 @@ impl Board {
         if matches!(self.run, Run::Speed | Run::Experiment { .. })
             && self.quiet > LINK_TIMEOUT_PERIODS
         {
-            self.run = Run::Idle;
+            self.stop(send);
             send(BoardMsg::Warning(Warning::LinkLost));
         }
 
@@ -592,11 +648,14 @@ impl Board {
             match c.tick(m.hall, edges, m.edges_overflow, m.i_vector) {
                 CommissionStep::Hold { step, volts } => {
                     self.last_volts = volts;
+                    self.applied = None;
                     return Drive::Vector { step, volts };
                 }
                 CommissionStep::Done(r) => {
-                    self.commissioned(r, send);
+                    let resistance = c.resistance();
+                    self.commissioned(r, resistance, send);
                     self.last_volts = 0.0;
+                    self.applied = None;
                     return Drive::Off;
                 }
             }
@@ -624,10 +683,20 @@ impl Board {
         inp.now_ticks = m.now_ticks;
         inp.i_meas = i;
         inp.v_bus = u_lim;
-        // The speed ramp: at most the ramp's acceleration times the period per period.
-        let dw = self.coeffs.ramp_acceleration(self.step.current_limit()) * dt;
-        let w = self.omega_ref;
-        self.omega_ref = crate::pi::saturate(self.omega_target, w - dw, w + dw);
+        inp.v_applied = self.applied;
+        if v_override.is_some() {
+            // Experiments: the reference (and so the friction observer) follows the
+            // measured speed; the loop is open.
+            self.omega_ref = self.step.omega();
+        } else {
+            // The speed ramp: at most the ramp's acceleration times the period per period,
+            // within the speed limit at this period's bus voltage.
+            let dw = self.coeffs.ramp_acceleration(self.step.current_limit()) * dt;
+            let w = self.omega_ref;
+            let w_max = self.w_max;
+            let target = crate::pi::saturate(self.omega_target, -w_max, w_max);
+            self.omega_ref = crate::pi::saturate(target, w - dw, w + dw);
+        }
         inp.omega_ref = self.omega_ref;
         inp.v_override = v_override;
         let out = self.step.step(&self.inp);
@@ -656,9 +725,11 @@ impl Board {
 
         if self.run == Run::Idle || self.step.decoder().sector().is_none() {
             self.last_volts = 0.0;
+            self.applied = None;
             return Drive::Off;
         }
         self.last_volts = out.v_cmd;
+        self.applied = Some(out.v_cmd);
         send(BoardMsg::Sample(Sample {
             seq: self.seq,
             t: self.k as f32 * dt,
@@ -780,8 +851,15 @@ mod tests {
         assert_eq!(temperature_derating(f32::NAN), 1.0);
     }
 
+    fn identified() -> Coefficients {
+        Coefficients {
+            motor_identified: true,
+            ..Coefficients::default()
+        }
+    }
+
     fn running_board() -> (Board, Vec<BoardMsg>) {
-        let mut b = Board::new(Some((Coefficients::default(), 1)), "test", 22.2);
+        let mut b = Board::new(Some((identified(), 1)), "test", 22.2);
         let mut out = Vec::new();
         b.handle(&HostMsg::SetMode { mode: Mode::Speed }, &mut |m| {
             out.push(m)
@@ -890,7 +968,7 @@ mod tests {
             out.push(m)
         });
         assert_eq!(out, [BoardMsg::Ack]);
-        let mut slow = Coefficients::default();
+        let mut slow = identified();
         slow.pi.u_max = 3.0; // 42 rad/s
         b.load(slow, 2);
         b.handle(&HostMsg::SetMode { mode: Mode::Speed }, &mut |m| {

@@ -15,7 +15,11 @@
 //!   it, so a rotor that overshoots and settles back counts once) must be 6, or the Hall
 //!   magnet's pole count differs from the motor's;
 //! - the current-sense sign: with a positive voltage along the held vector the current
-//!   along it is positive; a negative mean says the sense is inverted (`current_sign` −1).
+//!   along it is positive; a negative mean says the sense is inverted (`current_sign` −1);
+//! - the winding resistance R = V/|Ī| [Ω] along a vector (two phases in series, the
+//!   DC-equivalent motor's R), from the mean current of the holds' second halves, where
+//!   the rotor rests (no back-EMF) and the current has settled (L/R is a few ms)
+//!   ([`Commissioner::resistance`]).
 //!
 //! Each hold lasts [`HOLD_PERIODS`] control periods; the current is averaged over the
 //! second half of every hold. The voltage is chosen by the caller (the board logic limits it
@@ -117,6 +121,8 @@ pub struct Commissioner {
     /// The path overflowed (far more than one revolution).
     path_full: bool,
     i_sum: f32,
+    /// Samples in `i_sum`.
+    i_count: u16,
     volts: f32,
 }
 
@@ -140,6 +146,7 @@ impl Commissioner {
             path: heapless::Vec::new(),
             path_full: false,
             i_sum: 0.0,
+            i_count: 0,
             volts,
         }
     }
@@ -190,6 +197,7 @@ impl Commissioner {
         }
         if self.period >= HOLD_PERIODS / 2 && i_vector.is_finite() {
             self.i_sum += i_vector;
+            self.i_count = self.i_count.saturating_add(1);
         }
         self.period += 1;
         if self.period > HOLD_PERIODS {
@@ -215,6 +223,18 @@ impl Commissioner {
             step: Self::step_of(self.hold),
             volts: self.volts,
         }
+    }
+
+    /// The winding resistance [Ω] from the holds so far: the hold voltage over the mean
+    /// current of the holds' second halves; `None` without samples or outside the physical
+    /// range [`crate::blob::MOTOR_R`].
+    pub fn resistance(&self) -> Option<f32> {
+        if self.i_count == 0 {
+            return None;
+        }
+        let r = self.volts / (self.i_sum / f32::from(self.i_count)).abs();
+        let (lo, hi) = crate::blob::MOTOR_R;
+        (r >= lo && r <= hi).then_some(r)
     }
 
     fn result(&self) -> Result<Commissioning, CommissionError> {

@@ -21,13 +21,13 @@
 //!
 //! | host sends | board answers |
 //! |---|---|
-//! | `Identify` | `Identity { protocol, firmware, model, coeff_seq, speed_max }` |
+//! | `Identify` | `Identity { protocol, firmware, model, coeff_seq, speed_max, hw_stop_armed, motor_identified }` |
 //! | `UploadBegin { total_len, crc }` | `UploadAck { index: 0xFFFF }` or `Nack` |
 //! | `UploadChunk { index, data }` (≤ [`CHUNK_LEN`] bytes, index 0, 1, ...) | `UploadAck { index }` or `Nack` |
 //! | `UploadCommit` | `Committed { seq }` after the flash write, or `Nack` (`Busy` unless idle) |
 //! | `UploadAbort` | `UploadAck { index: 0xFFFF }` |
 //! | `SetSpeed { omega_ref }` | `Ack`, or `Nack(OutOfRange)` when \|omega_ref\| exceeds `speed_max` (or is not finite) |
-//! | `SetMode { mode }` | `Ack`, or `Nack(Faulted)` with a latched fault, `Nack(NoCoefficients)` (see below), `Nack(Busy)` if the firmware's command queue is full |
+//! | `SetMode { mode }` | `Ack`, or `Nack(Faulted)` with a latched fault, `Nack(NoCoefficients)`, `Nack(NoHardwareStop)`, `Nack(MotorNotIdentified)` (see below), `Nack(Busy)` if the firmware's command queue is full |
 //! | `StartExperiment { signal, duration_s }` | `Ack`, then samples until done (`t` and `seq` restart at 0) |
 //! | `Stop` / `ClearFault` | `Ack` |
 //! | `Heartbeat` | nothing (any frame keeps a speed or experiment run alive) |
@@ -36,6 +36,10 @@
 //! | `ReadTelemetry` | `Telemetry(..)`: the last complete window of [`crate::telemetry`] |
 //! | (nothing) | `Sample { .. }` every 12 ms while running, `Telemetry(..)` every second while running, `Fault`, `Warning` |
 //!
+//! Version 5 adds `hw_stop_armed` and `motor_identified` to `Identity`, and refuses speed
+//! mode and experiments while the hardware over-current stop is not armed
+//! (`Nack(NoHardwareStop)`, unless the firmware was built to run without it) and speed mode
+//! while the coefficients' motor constants are not identified (`Nack(MotorNotIdentified)`).
 //! Version 4 adds `speed_max` to `Identity` and refuses a `SetSpeed` beyond it; version 3 adds `ReadTelemetry` and `Telemetry`. Refusals (since version 2): `SetMode { Speed }` and `StartExperiment` without valid
 //! coefficients (`Nack(NoCoefficients)`); an experiment whose duration is not finite, not
 //! positive or above [`crate::board::MAX_EXPERIMENT_S`], or a steady voltage beyond `u_max`
@@ -62,7 +66,7 @@ use serde::{Deserialize, Serialize};
 use crate::blob::{self, Coefficients, ModelKind, CRC32, MAX_BLOB_LEN};
 
 /// Protocol version reported by `Identity`.
-pub const PROTOCOL_VERSION: u16 = 4;
+pub const PROTOCOL_VERSION: u16 = 5;
 /// Largest upload chunk.
 pub const CHUNK_LEN: usize = 64;
 /// Largest body (postcard message + CRC).
@@ -166,6 +170,13 @@ pub enum Nack {
     NoCoefficients,
     /// A parameter is outside what the board allows (duration, voltage).
     OutOfRange,
+    /// The hardware over-current stop is not armed (speed and experiment runs need it;
+    /// commissioning, at its limited current, does not).
+    NoHardwareStop,
+    /// The coefficients' motor constants are defaults, not identified for this motor
+    /// ([`crate::blob::Coefficients::motor_identified`]): speed mode needs an identified
+    /// model; identify runs and experiments stay allowed.
+    MotorNotIdentified,
 }
 
 /// Latched faults: each turns the bridge off.
@@ -245,6 +256,13 @@ pub enum BoardMsg {
         /// Largest speed reference `SetSpeed` takes [rad/s]
         /// ([`crate::blob::Coefficients::speed_limit`]).
         speed_max: f32,
+        /// The hardware over-current stop is armed (false: it failed its self-test at
+        /// boot; speed and experiment runs are refused unless the firmware was built to
+        /// run without it).
+        hw_stop_armed: bool,
+        /// The motor constants of the loaded coefficients were identified
+        /// ([`crate::blob::Coefficients::motor_identified`]).
+        motor_identified: bool,
     },
     /// Request done.
     Ack,
@@ -581,6 +599,8 @@ mod tests {
             model: ModelKind::Lugre,
             coeff_seq: 7,
             speed_max: 336.8,
+            hw_stop_armed: true,
+            motor_identified: true,
         };
         for m in [
             id,

@@ -127,6 +127,12 @@ impl HallDecoder {
         self.steps = 0;
     }
 
+    /// Restart the count where the first valid state would set it (its sector), keeping
+    /// the present sector, so that the next edge is counted.
+    pub fn restart_count(&mut self) {
+        self.steps = self.last.map_or(0, i32::from);
+    }
+
     /// Decode one Hall state. The first valid state sets the step count to its sector, so
     /// that the angle is the true angle rounded to the nearest step when the rotor starts in
     /// its first electrical period, [−step/2, 6·step − step/2) (see [`hall_state_for_angle`]). An invalid state leaves everything

@@ -10,7 +10,9 @@ use num_traits::Float;
 use serde::{Deserialize, Serialize};
 
 /// Saturate `v` to `[lo, hi]` by comparisons (cheaper than `max`/`min` on a Cortex-M4F,
-/// where those are library calls); a NaN `v` passes through.
+/// where those are library calls); a NaN `v` or NaN bounds pass `v` through: the control
+/// step's voltage window never has NaN bounds ([`crate::step::current_window`]) and its
+/// command is checked for a finite value before it leaves the step.
 #[inline]
 pub fn saturate<F: Float>(v: F, lo: F, hi: F) -> F {
     if v > hi {

@@ -19,8 +19,9 @@
 //! 6. `V = PI(ω_ref − ω) + g·V_c + V_deadtime` (`g` the compensation weight
 //!    [`StepConfig::comp_gain`]), or the open-loop override in experiment mode, held in the
 //!    voltage window [`current_window`]: `[K_b·ω − R·i_limit, K_b·ω + R·i_limit]` [V]
-//!    (K_b [V·s/rad], ω [rad/s], R [Ω] with the heat of a `thermal` effect, i_limit [A])
-//!    intersected with ±min(u_max, V_bus). The window is standing: it bounds every command,
+//!    (K_b [V·s/rad], ω [rad/s], R [Ω] the plain winding resistance, i_limit [A]),
+//!    tightened by the measured current's window [`measured_current_window`]
+//!    `u_prev + g·R·(±i_limit − I)`, intersected with ±min(u_max, V_bus). The window is standing: it bounds every command,
 //!    so the current limit holds while the motor keeps running. The PI's anti-windup sees
 //!    the window (no integration while the command is held at an edge and the error pushes
 //!    further).
@@ -157,6 +158,10 @@ pub struct StepInputs<F> {
     pub omega_ref: F,
     /// Experiment mode: apply this voltage open loop (saturated at ±V_bus) instead of the PI.
     pub v_override: Option<F>,
+    /// Voltage [V] the bridge applied over the period that ended, whose current `i_meas` is
+    /// (`None`: the bridge was off; the window then rests on the motor model alone, see
+    /// [`measured_current_window`]).
+    pub v_applied: Option<F>,
 }
 
 /// Fault and status flags of one step (bit set).
@@ -239,6 +244,9 @@ pub struct ControlStep<F> {
     comp: Compensator<F>,
     /// Voltage commanded at the previous step (the SINDYc model's u).
     u_prev: F,
+    /// Back-EMF measured at the previous step, `u_applied − R·I` [V] (`None`: the bridge
+    /// was off), for the trend of [`MeasuredCurrent::emf_trend`].
+    emf_meas: Option<F>,
     /// Step count the estimator's angle is relative to.
     steps_ref: i32,
     step_angle: F,
@@ -290,13 +298,77 @@ pub fn observer_velocity<F: Float>(_omega_est: F, omega_ref: F, _v_res: F) -> F 
 /// within ±i_limit, so a current inside the limit stays inside. The rotor's own response
 /// to that current lowers |V − K_b·ω| during the period (motoring speeds it up, braking
 /// slows it down). What the window does not see is the error of the velocity estimate:
-/// `K_b·|ω − ω̂|/R` [A]. An infinite `r_i` gives `[−lim, lim]`; a window beyond `±lim` (a
-/// back-EMF above the voltage limit) collapses onto that edge.
+/// `K_b·|ω − ω̂|/R` [A], nor an error of the model's K_b or R: [`measured_current_window`]
+/// bounds those. An infinite `r_i` gives `[−lim, lim]`; a window beyond `±lim` (a back-EMF
+/// above the voltage limit) collapses onto that edge. A non-finite `emf`, or a NaN `r_i` or
+/// `lim`, gives `(0, 0)`: no drive.
 pub fn current_window<F: Float>(emf: F, r_i: F, lim: F) -> (F, F) {
+    if !(emf.is_finite() && r_i >= F::zero() && lim >= F::zero()) {
+        return (F::zero(), F::zero());
+    }
     (
         saturate(emf - r_i, -lim, lim),
         saturate(emf + r_i, -lim, lim),
     )
+}
+
+/// Gain `g` of the measured-current bound [`measured_current_window`].
+///
+/// After a change ΔV of the held voltage the current moves by ΔV/R_true, so the bound
+/// moves the current from `I` by at most `g·ρ·(±i_limit − I)`, with `ρ = R/R_true` the
+/// model's resistance error. It reaches the limit without overshoot while `g·ρ ≤ 1` and
+/// converges while `g·ρ < 2`: `g = 0.5` holds the limit with R up to 2× too high (the
+/// resistance is the constant identified least well: a cold winding, the cables, the
+/// bridge's on-resistance) and converges up to 4×. The price is the current's rise: from
+/// `I` it reaches `I + g·(i_limit − I)` in one period, so a step of the current (a speed
+/// step, a level change of an experiment signal at speed) takes two or three periods.
+pub const MEASURED_CURRENT_GAIN: f32 = 0.5;
+
+/// The measured current's part of the step's voltage window.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MeasuredCurrent<F> {
+    /// Voltage held over the last period [V] (after a period with the bridge off: the
+    /// model's back-EMF `K_b·ω̂`, the terminal voltage of an open winding).
+    pub u_prev: F,
+    /// Current it drove, measured at the period's end [A].
+    pub i: F,
+    /// Change of the measured back-EMF `u_prev − R·I` over the last period [V] (0 when not
+    /// known).
+    pub emf_trend: F,
+}
+
+/// The voltage window [V] from the measured current: `u_prev + g·R·(±i_limit − I)`, i.e.
+/// [`current_window`] around `u_prev − g·R·I` with the half-width `g·R·i_limit`, for the
+/// model's resistance `r` [Ω], the limit `i_limit` [A], the gain `g`
+/// ([`MEASURED_CURRENT_GAIN`]) and the voltage limit `lim` [V].
+///
+/// It rests on the measured back-EMF `u_prev − R·I` (the winding's L/R is short against the
+/// period), not on the model's `K_b·ω̂`: it holds the current when K_b, the pole pairs or
+/// the velocity estimate are wrong, e.g. a load step at speed while the estimate still
+/// reports the old speed. A back-EMF that falls while the current is positive (the drive
+/// accelerates, so a load slows the rotor) is expected to fall as much again over the next
+/// period, and the upper edge moves down by that much; likewise the lower edge for a
+/// rising back-EMF under a negative current. Without it a load rising over several
+/// periods would keep the current `ΔE/(g·R)` beyond the limit. A change the drive's own
+/// current makes (speeding up under a positive current) is not extrapolated: cutting the
+/// voltage stops it. The step takes the tighter of this and the model's window.
+pub fn measured_current_window<F: Float>(
+    m: MeasuredCurrent<F>,
+    r: F,
+    i_limit: F,
+    g: F,
+    lim: F,
+) -> (F, F) {
+    let g_r = g * r;
+    let (mut lo, mut hi) = current_window(m.u_prev - g_r * m.i, g_r * i_limit, lim);
+    if m.i > F::zero() && m.emf_trend < F::zero() {
+        hi = saturate(hi + m.emf_trend, -lim, lim);
+        lo = saturate(lo, -lim, hi);
+    } else if m.i < F::zero() && m.emf_trend > F::zero() {
+        lo = saturate(lo + m.emf_trend, -lim, lim);
+        hi = saturate(hi, lo, lim);
+    }
+    (lo, hi)
 }
 
 impl<F: Float> ControlStep<F> {
@@ -344,6 +416,7 @@ impl<F: Float> ControlStep<F> {
                 tau_d: cfg.tau_d,
             }),
             u_prev: F::zero(),
+            emf_meas: None,
             steps_ref: 0,
             step_angle: step,
             v_res: estimator_resolution(&cfg.estimator, step, dt),
@@ -365,6 +438,37 @@ impl<F: Float> ControlStep<F> {
         };
     }
 
+    /// Velocity estimate of the last step [rad/s].
+    pub fn omega(&self) -> F {
+        self.estimator.omega()
+    }
+
+    /// A new run from wherever the rotor is: the position count restarts at the present
+    /// sector, the observer, the compensation filter and the PI start again, but the
+    /// velocity estimate (and the heat state) go on: the rotor may still turn, and the
+    /// current window needs its back-EMF from the first period on. The PI's integral starts
+    /// at that back-EMF `K_b·ω̂`, the voltage that drives no current (a bumpless start).
+    pub fn restart(&mut self) {
+        let rel = self.decoder.steps().wrapping_sub(self.steps_ref);
+        self.decoder.restart_count();
+        self.steps_ref = self.decoder.steps();
+        self.estimator
+            .rebase(F::from(rel).unwrap() * self.step_angle);
+        match &mut self.observer {
+            Observer::None => {}
+            Observer::Lugre(o) => o.reset(),
+            Observer::Sindy(o) => o.reset(),
+        }
+        self.comp.reset();
+        self.pi.reset();
+        let emf = self.motor.kb * self.estimator.omega();
+        if emf.is_finite() {
+            self.pi.integral = emf;
+        }
+        self.u_prev = F::zero();
+        self.emf_meas = None;
+    }
+
     /// Back to rest: position count, estimator, observer, PI, compensation, heat.
     pub fn reset(&mut self) {
         self.decoder.reset();
@@ -378,6 +482,7 @@ impl<F: Float> ControlStep<F> {
         self.pi.reset();
         self.comp.reset();
         self.u_prev = F::zero();
+        self.emf_meas = None;
         self.steps_ref = 0;
     }
 
@@ -511,11 +616,36 @@ impl<F: Float> ControlStep<F> {
         } else {
             v_bus
         };
-        let (lo, hi) = current_window(
-            self.motor.kb * omega,
-            self.comp.params.r * self.i_limit,
+        // The model's window uses the plain winding resistance: the heat state of a thermal
+        // effect is fitted, may be of either sign, and would widen or invert the window.
+        let emf = self.motor.kb * omega;
+        let (lo, hi) = current_window(emf, self.motor.r * self.i_limit, lim);
+        // After a period with the bridge off the terminal voltage was the back-EMF, which
+        // only the model knows.
+        let r = self.motor.r;
+        let (u_prev, emf_meas) = match inp.v_applied {
+            Some(u) if u.is_finite() => (u, Some(u - r * current)),
+            _ => (emf, None),
+        };
+        let emf_trend = match (emf_meas, self.emf_meas) {
+            (Some(e), Some(p)) => e - p,
+            _ => F::zero(),
+        };
+        self.emf_meas = emf_meas;
+        let measured = MeasuredCurrent {
+            u_prev,
+            i: current,
+            emf_trend,
+        };
+        let (lo_m, hi_m) = measured_current_window(
+            measured,
+            r,
+            self.i_limit,
+            F::from(MEASURED_CURRENT_GAIN).unwrap(),
             lim,
         );
+        // The tighter of both; where they do not overlap the measured one wins.
+        let (lo, hi) = (saturate(lo, lo_m, hi_m), saturate(hi, lo_m, hi_m));
         self.pi.set_limits(lo, hi);
         let err = omega_ref - omega;
         let v_cmd = match inp.v_override {
@@ -858,24 +988,35 @@ mod tests {
 
     #[test]
     fn the_current_window_holds_the_command_and_stops_the_integrator() {
-        // At standstill with a large speed error the command is R·i_limit, not the
+        // At standstill with a large speed error the command rises to R·i_limit, by half
+        // the remaining distance per period (the measured current's window), not to the
         // 5 V the PI asks (kp·100 rad/s), and the integral does not grow meanwhile.
         let mut cfg = StepConfig::<f64>::paper();
         cfg.observer = ObserverConfig::None;
         cfg.i_limit = 10.0;
         let mut ctl = ControlStep::new(&cfg);
-        let inp = StepInputs {
+        let r = cfg.motor.r;
+        let r_i = r * 10.0;
+        let g = f64::from(MEASURED_CURRENT_GAIN);
+        let mut inp = StepInputs {
             hall: 1,
             v_bus: 24.0,
             omega_ref: 100.0,
             ..Default::default()
         };
-        let r_i = cfg.motor.r * 10.0;
-        for _ in 0..50 {
+        for k in 0..50 {
             let out = ctl.step(&inp);
-            assert!((out.v_cmd - r_i).abs() < 1e-12, "{}", out.v_cmd);
+            let want = r_i * (1.0 - (1.0 - g).powi(k + 1));
+            assert!(
+                (out.v_cmd - want).abs() < 1e-9,
+                "{k}: {} vs {want}",
+                out.v_cmd
+            );
             assert!(out.faults.contains(Faults::CURRENT_LIMIT));
             assert!(!out.faults.contains(Faults::SATURATED));
+            // A rotor held at standstill: the current is V/R.
+            inp.v_applied = Some(out.v_cmd);
+            inp.i_meas = out.v_cmd / r;
         }
         assert_eq!(ctl.pi().integral, 0.0);
         // The open-loop override is held the same way.
@@ -883,7 +1024,75 @@ mod tests {
             v_override: Some(-20.0),
             ..inp
         });
-        assert!((out.v_cmd + r_i).abs() < 1e-12, "{}", out.v_cmd);
+        assert!(out.v_cmd < 0.0 && out.v_cmd >= -r_i, "{}", out.v_cmd);
+    }
+
+    #[test]
+    fn the_measured_current_holds_the_limit_with_r_twice_too_high() {
+        // The model's R is twice the winding's: the model's window alone would allow
+        // 2·i_limit at standstill. With the measured current the current rises to the
+        // limit without passing it.
+        let (r_true, i_limit, lim) = (0.2, 10.0, 24.0);
+        let mut i = 0.0;
+        let mut u = 0.0;
+        for _ in 0..40 {
+            let m = MeasuredCurrent {
+                u_prev: u,
+                i,
+                emf_trend: 0.0,
+            };
+            let (_, hi) = measured_current_window(m, 2.0 * r_true, i_limit, 0.5, lim);
+            u = hi;
+            i = u / r_true;
+            assert!(i <= i_limit * (1.0 + 1e-12), "{i}");
+        }
+        assert!(i > 0.999 * i_limit, "{i}");
+        // A falling back-EMF under a positive current moves the upper edge down by as much.
+        let m = MeasuredCurrent {
+            u_prev: 10.0,
+            i: 5.0,
+            emf_trend: -0.5,
+        };
+        let flat = measured_current_window(
+            MeasuredCurrent {
+                emf_trend: 0.0,
+                ..m
+            },
+            0.2,
+            10.0,
+            0.5,
+            lim,
+        );
+        let (lo, hi) = measured_current_window(m, 0.2, 10.0, 0.5, lim);
+        assert!((hi - (flat.1 - 0.5)).abs() < 1e-12 && lo == flat.0);
+    }
+
+    #[test]
+    fn non_finite_window_inputs_and_a_negative_thermal_coefficient_give_no_runaway() {
+        assert_eq!(current_window(f64::NAN, 2.0, 12.0), (0.0, 0.0));
+        assert_eq!(current_window(f64::INFINITY, 2.0, 12.0), (0.0, 0.0));
+        assert_eq!(current_window(3.0, f64::NAN, 12.0), (0.0, 0.0));
+        assert_eq!(current_window(3.0, 2.0, f64::NAN), (0.0, 0.0));
+        // A fitted thermal effect with a negative coefficient and a large current: R(1 + heat)
+        // turns negative, which would invert the window; the window uses the plain R.
+        let mut cfg = StepConfig::<f64>::paper();
+        cfg.observer = ObserverConfig::None;
+        cfg.i_limit = 10.0;
+        cfg.effects
+            .push(Effect::Thermal { k: -0.5, tau: 0.05 })
+            .unwrap();
+        let mut ctl = ControlStep::new(&cfg);
+        let r_i = cfg.motor.r * 10.0;
+        for _ in 0..100 {
+            let out = ctl.step(&StepInputs {
+                hall: 1,
+                v_bus: 24.0,
+                i_meas: 9.0,
+                v_override: Some(20.0),
+                ..Default::default()
+            });
+            assert!(out.v_cmd.abs() <= r_i + 1e-12, "{}", out.v_cmd);
+        }
     }
 
     #[test]

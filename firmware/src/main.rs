@@ -137,7 +137,7 @@ async fn main(spawner: Spawner) {
     }
 
     // Hardware over-current stop: calibrated on the op-amps with the bridge off.
-    match overcurrent::arm(p.DAC3) {
+    let hw_stop_armed = match overcurrent::arm(p.DAC3) {
         Ok(a) => {
             defmt::info!("hardware over-current stop armed: {}", a);
             #[cfg(feature = "trip-test")]
@@ -145,12 +145,14 @@ async fn main(spawner: Spawner) {
                 "trip-test build: the stop trips at {=f32} A, not at the rating",
                 overcurrent::TRIP_TEST_A
             );
+            true
         }
         Err(why) => {
             defmt::error!("hardware over-current stop NOT armed: {=str}", why);
             let _ = OUTGOING.try_send(BoardMsg::Warning(Warning::NoHardwareStop));
+            false
         }
-    }
+    };
 
     // The watchdog runs from here on: a fault while reading the flash resets the MCU
     // instead of hanging it (TIM1's reset state has the outputs off).
@@ -179,6 +181,8 @@ async fn main(spawner: Spawner) {
         let _ = OUTGOING.try_send(BoardMsg::Warning(Warning::NoCoefficients));
     }
     let mut board = Board::new(loaded, env!("CARGO_PKG_VERSION"), V_BUS_NOMINAL);
+    // Reported at every Identify; speed and experiment runs are refused without it.
+    board.set_hardware_stop(hw_stop_armed, cfg!(feature = "run-without-hw-stop"));
 
     hall_capture::start(p.TIM4, p.PB6, p.PB7, p.PB8);
 

@@ -147,11 +147,15 @@ pub fn coefficients(
     lugre: &[u8],
     sindyc: &[u8],
 ) -> Result<Coefficients, blob::BlobError> {
-    match obs {
-        Observer::None => Ok(Coefficients::default()),
-        Observer::Lugre => blob::decode(lugre),
-        Observer::Sindyc => blob::decode(sindyc),
-    }
+    let mut co = match obs {
+        Observer::None => Coefficients::default(),
+        Observer::Lugre => blob::decode(lugre)?,
+        Observer::Sindyc => blob::decode(sindyc)?,
+    };
+    // The traced run is a speed run, which needs identified motor constants (the traced
+    // blobs are of format version 3, read as not identified).
+    co.motor_identified = true;
+    Ok(co)
 }
 
 /// The step's outputs as raw words, in a fixed order.

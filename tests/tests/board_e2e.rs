@@ -322,8 +322,26 @@ fn commissioning_learns_every_hall_order_and_the_motor_then_runs() {
         let w: serde_json::Value = serde_json::from_str(&again).unwrap();
         assert_eq!(w, v, "{what}");
 
-        // With the learned table the motor runs under speed control.
-        assert_runs_at_30(d, &board.port, &what);
+        // With the learned table the motor runs an experiment; speed mode waits for an
+        // identified model (the stored motor constants are defaults, with R measured).
+        assert_experiment_turns_the_motor(d, &board.port, &what);
+        let out = motorid(
+            d,
+            &[
+                "record",
+                "--port",
+                &board.port,
+                "--speed-ref",
+                "30",
+                "--duration",
+                "1",
+                "-o",
+                "x.csv",
+            ],
+        );
+        assert!(!out.status.success(), "{what}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains("not identified"), "{what}: {err}");
     }
     assert!(reversed_seen, "no case reversed the direction");
 }
@@ -361,6 +379,29 @@ fn an_uploaded_model_keeps_the_commissioned_hall_table() {
     let w: serde_json::Value = serde_json::from_str(&again).unwrap();
     assert_eq!(w["hall_sequence"], v["hall_sequence"], "{w}");
     assert_runs_at_30(d, &board.port, "after the upload");
+}
+
+/// An 8 s run of the sized signal d (levels held 1-3 s) turns the motor both
+/// ways, faster than 5 rad/s.
+fn assert_experiment_turns_the_motor(d: &Path, port: &str, what: &str) {
+    ok(&motorid(
+        d,
+        &[
+            "record",
+            "--port",
+            port,
+            "--signal",
+            "d",
+            "--duration",
+            "8",
+            "-o",
+            "e.csv",
+        ],
+    ));
+    let (_, rows, _) = read_log(&d.join("e.csv"));
+    let top = rows.iter().map(|r| r[4]).fold(f64::MIN, f64::max);
+    let bottom = rows.iter().map(|r| r[4]).fold(f64::MAX, f64::min);
+    assert!(top > 5.0 && bottom < -5.0, "{what}: speed {bottom}..{top}");
 }
 
 /// A 4 s speed run at 30 rad/s settles within 3 rad/s (mean of the last 80 samples, about 1 s).

@@ -4,7 +4,7 @@
 use control::blob::{Coefficients, ModelKind, DERATE_FRACTION};
 use control::frame::{BoardMsg, Excitation, Fault, HostMsg, Mode};
 use control::lugre::LugreParams;
-use control::step::Faults;
+use control::step::{Faults, MEASURED_CURRENT_GAIN};
 use motorid::board::flash::{RamFlash, PAGE};
 use motorid::board::hw::Wiring;
 use motorid::board::sim::BoardSim;
@@ -16,6 +16,7 @@ fn paper_coefficients(u_max: f32, i_max: f32) -> Coefficients {
     let mut co = Coefficients {
         model: ModelKind::Lugre,
         lugre: Some(LugreParams::paper()),
+        motor_identified: true,
         ..Coefficients::default()
     };
     co.pi.u_max = u_max;
@@ -42,6 +43,7 @@ fn board_with(co: &Coefficients) -> BoardSim {
 #[derive(Debug, Clone, Copy)]
 struct Period {
     peak_i: f64,
+    end_i: f64,
     omega: f64,
     faults: Faults,
     u: f32,
@@ -59,6 +61,7 @@ fn run(sim: &mut BoardSim, n: usize) -> (Vec<Period>, Option<Fault>) {
         let out = *sim.board().last_step_outputs();
         periods.push(Period {
             peak_i: sim.hardware().peak_current(),
+            end_i: sim.hardware().plant().truth().i.abs(),
             omega: sim.hardware().plant().truth().omega,
             faults: out.faults,
             u: out.v_cmd,
@@ -120,8 +123,13 @@ fn a_step_from_standstill_holds_the_current_limit_and_reaches_the_speed() {
             "speed, i_max {i_max}: overshoot to {top} rad/s"
         );
         if i_max == 10.0 {
-            // The ramp alone would ask 8 A of acceleration and friction: the limit acts.
-            assert!(peak > 0.85 * lim, "speed, i_max {i_max}: peak {peak} A");
+            // The ramp alone would ask 8 A of acceleration and friction: the limit acts
+            // (the model's window, or the measured current's, which lets the current rise
+            // by half its distance to the limit per period).
+            assert!(
+                peak > f64::from(MEASURED_CURRENT_GAIN) * lim,
+                "speed, i_max {i_max}: peak {peak} A"
+            );
             assert!(p.iter().any(|x| x.faults.contains(Faults::CURRENT_LIMIT)));
         }
 
@@ -133,8 +141,11 @@ fn a_step_from_standstill_holds_the_current_limit_and_reaches_the_speed() {
         let (p, fault) = run(&mut sim, 300);
         assert_eq!(fault, None, "20 V, i_max {i_max}");
         let peak = peak_current(&p);
+        // The measured-current window lets the current rise by half its distance to the
+        // limit each period ([`MEASURED_CURRENT_GAIN`]), and the rotor's back-EMF takes
+        // much of it away within the period: the peak lies between that half and the limit.
         assert!(
-            peak <= lim + margin(&co) && peak > 0.95 * lim,
+            peak <= lim + margin(&co) && peak > f64::from(MEASURED_CURRENT_GAIN) * lim,
             "20 V, i_max {i_max}: peak {peak} A, limit {lim} A + {} A",
             margin(&co)
         );
@@ -253,11 +264,16 @@ fn no_experiment_signal_exceeds_its_current_limit() {
             let (p, fault) = run(&mut sim, 3300);
             let what = format!("{signal:?} at u_max {u_max} V, i_max {i_max} A");
             assert_eq!(fault, None, "{what}");
-            // The signal itself stays inside the current window: never held at its edge.
-            assert!(
-                !p.iter().any(|x| x.faults.contains(Faults::CURRENT_LIMIT)),
-                "{what}"
-            );
+            // The signal itself stays inside the current window: a-c are never held at its
+            // edge; d only in the period after a level change at speed (the measured-current
+            // window lets the current rise by half its distance to the limit per period),
+            // a few of its 3300 periods.
+            let held = p
+                .iter()
+                .filter(|x| x.faults.contains(Faults::CURRENT_LIMIT))
+                .count();
+            let allowed = if signal == Excitation::D { 33 } else { 0 };
+            assert!(held <= allowed, "{what}: held {held} periods");
             let peak = peak_current(&p);
             assert!(peak < i_limit(&co), "{what}: peak {peak} A");
             // Sized by the smaller of the two, P·u_lim/24 V and 0.35·R·i_max (a multisine's
@@ -271,4 +287,345 @@ fn no_experiment_signal_exceeds_its_current_limit() {
             );
         }
     }
+}
+
+/// Runs speed mode to `w` [rad/s] for `n` periods from where the board is now.
+fn speed_run(sim: &mut BoardSim, w: f32, n: usize) -> (Vec<Period>, Option<Fault>) {
+    sim.handle(&HostMsg::SetSpeed { omega_ref: w });
+    sim.handle(&HostMsg::SetMode { mode: Mode::Speed });
+    run(sim, n)
+}
+
+#[test]
+fn a_run_started_while_the_rotor_turns_holds_the_current_limit() {
+    // Spin up to 200 rad/s, stop (the bridge turns off, the rotor coasts), then start the
+    // next run at once: its first period's window must sit around the back-EMF of the
+    // turning rotor (14 V), not around 0 V, which would brake with 65 A.
+    let co = paper_coefficients(24.0, 30.0);
+    let lim = i_limit(&co);
+    type Start = fn(&mut BoardSim);
+    let starts: [(&str, Start); 4] = [
+        ("speed 200", |s| {
+            s.handle(&HostMsg::SetSpeed { omega_ref: 200.0 });
+            s.handle(&HostMsg::SetMode { mode: Mode::Speed });
+        }),
+        ("speed without SetSpeed", |s| {
+            s.handle(&HostMsg::SetMode { mode: Mode::Speed });
+        }),
+        ("steady 0.8 V", |s| {
+            s.handle(&HostMsg::StartExperiment {
+                signal: Excitation::Steady { volts: 0.8 },
+                duration_s: 2.0,
+            });
+        }),
+        ("signal a", |s| {
+            s.handle(&HostMsg::StartExperiment {
+                signal: Excitation::A,
+                duration_s: 2.0,
+            });
+        }),
+    ];
+    for (what, start) in starts {
+        let mut sim = board_with(&co);
+        let (_, fault) = speed_run(&mut sim, 200.0, 250);
+        assert_eq!(fault, None, "{what}");
+        sim.handle(&HostMsg::Stop);
+        let (coast, _) = run(&mut sim, 1);
+        assert!(coast[0].omega > 150.0, "{what}: {}", coast[0].omega);
+        start(&mut sim);
+        let (p, fault) = run(&mut sim, 150);
+        let peak = peak_current(&p);
+        eprintln!("{what}: peak {peak:.2} A after a start at 200 rad/s");
+        assert_eq!(fault, None, "{what}: peak {peak} A");
+        assert!(
+            peak <= lim + margin(&co),
+            "{what}: peak {peak} A, limit {lim} A + {} A",
+            margin(&co)
+        );
+    }
+}
+
+#[test]
+fn a_speed_run_without_its_own_setspeed_does_not_reuse_the_last_one() {
+    let co = paper_coefficients(24.0, 30.0);
+    let mut sim = board_with(&co);
+    let (_, fault) = speed_run(&mut sim, 150.0, 200);
+    assert_eq!(fault, None);
+    sim.handle(&HostMsg::Stop);
+    // An experiment does not see the old target: its reference follows the measured speed.
+    sim.handle(&HostMsg::StartExperiment {
+        signal: Excitation::Steady { volts: 0.0 },
+        duration_s: 1.0,
+    });
+    run(&mut sim, 100);
+    let w = sim.board().control().omega();
+    assert!(
+        (sim.board().speed_reference() - w).abs() < 1e-3,
+        "reference {} vs ω̂ {w}",
+        sim.board().speed_reference()
+    );
+    // A new speed run starts at the speed the rotor has and is asked for zero.
+    sim.handle(&HostMsg::SetMode { mode: Mode::Speed });
+    let (p, fault) = run(&mut sim, 400);
+    assert_eq!(fault, None);
+    let w = mean_speed(&p[350..]);
+    assert!(w.abs() < 2.0, "{w} rad/s");
+    assert_eq!(sim.board().speed_reference(), 0.0);
+}
+
+/// Periods that ended with the current beyond `i_max` (the current then stayed beyond
+/// it for a whole period: the winding's L/R is 1.4 ms).
+fn beyond_trip(p: &[Period], i_max: f64) -> usize {
+    p.iter().filter(|x| x.end_i > i_max).count()
+}
+
+#[test]
+fn wrong_motor_constants_in_the_blob_do_not_lift_the_current_limit() {
+    // The emulated motor is the paper's; the blob's K_b, R or pole pairs are wrong. The
+    // model's window alone lets through up to K_b·Δω/R more: K_b×2 at 100 rad/s is 33 A
+    // beyond the limit, R×2 doubles it. The measured-current window holds the current at
+    // the limit plus the margin (R 2× too high: the overshoot of g·ρ = 1.25 from rest,
+    // the measured-current gain of one half keeps it within the limit), or a fault stops
+    // the run; never beyond i_max for more than one period.
+    let base = paper_coefficients(24.0, 10.0);
+    let lim = i_limit(&base);
+    let i_max = f64::from(base.limits.i_max);
+    type Change = fn(&mut Coefficients);
+    let cases: [(&str, Change); 5] = [
+        ("K_b x2", |c| c.motor.kb *= 2.0),
+        ("K_b x0.5", |c| c.motor.kb *= 0.5),
+        ("R x2", |c| c.motor.r *= 2.0),
+        ("5 pole pairs", |c| c.pole_pairs = 5),
+        ("22 pole pairs", |c| c.pole_pairs = 22),
+    ];
+    for (what, change) in cases {
+        let mut co = base.clone();
+        change(&mut co);
+        let allowed = lim + margin(&base);
+        let mut sim = board_with(&co);
+        let (mut p, mut fault) = speed_run(&mut sim, 100.0, 250);
+        if fault.is_none() {
+            let (q, f) = speed_run(&mut sim, -100.0, 300);
+            p.extend(q);
+            fault = f;
+        }
+        let peak = peak_current(&p);
+        let over = beyond_trip(&p, i_max);
+        eprintln!("{what}: peak {peak:.2} A (limit {lim} A), fault {fault:?}, {over} periods beyond i_max");
+        assert!(over <= 1, "{what}: {over} periods beyond i_max");
+        if fault.is_none() {
+            assert!(peak <= allowed, "{what}: peak {peak} A of {allowed} A");
+        }
+        // The open-loop 20 V step, held by the window alone.
+        let mut sim = board_with(&co);
+        sim.handle(&HostMsg::StartExperiment {
+            signal: Excitation::Steady { volts: 20.0 },
+            duration_s: 2.0,
+        });
+        let (p, fault) = run(&mut sim, 150);
+        let peak = peak_current(&p);
+        let over = beyond_trip(&p, i_max);
+        eprintln!("{what}, 20 V: peak {peak:.2} A, fault {fault:?}, {over} periods beyond i_max");
+        assert!(over <= 1, "{what}, 20 V: {over} periods beyond i_max");
+        if fault.is_none() {
+            assert!(
+                peak <= allowed,
+                "{what}, 20 V: peak {peak} A of {allowed} A"
+            );
+        }
+    }
+}
+
+#[test]
+fn a_load_step_at_speed_holds_the_current_limit() {
+    // At 150 rad/s a load rises to 0.6 N·m over 0.1 s (8.4 A of torque, beyond what the
+    // limit's 8 A give with friction): the rotor slows while the moving average still
+    // reports the old speed, so the model's window sits too high. The measured current
+    // holds the limit.
+    let co = paper_coefficients(24.0, 10.0);
+    let lim = i_limit(&co);
+    for (torque, rise, jam) in [(0.6, 0.1, false), (20.0, 0.0, true)] {
+        let plant = EmulatorConfig::paper().with_extra_load(move |x| {
+            let on = if rise > 0.0 {
+                ((x.t - 1.5) / rise).clamp(0.0, 1.0)
+            } else {
+                f64::from(u8::from(x.t > 1.5))
+            };
+            on * torque * (x.omega / 5.0).clamp(-1.0, 1.0)
+        });
+        let mut slots = control::slots::Slots::new(RamFlash::new(None), 0, PAGE as u32).unwrap();
+        slots
+            .store(&motorid::board::coeffs::encode(&co).unwrap())
+            .unwrap();
+        let mut sim = BoardSim::new(plant, Wiring::default(), slots.into_inner()).unwrap();
+        let (p, fault) = speed_run(&mut sim, 150.0, 300);
+        let peak = peak_current(&p);
+        let over = beyond_trip(&p, f64::from(co.limits.i_max));
+        eprintln!("load {torque} N·m: peak {peak:.2} A (limit {lim} A), fault {fault:?}, {over} periods beyond i_max");
+        assert!(over <= 1, "{torque} N·m: {over} periods beyond i_max");
+        if jam {
+            // A jam within one period cannot be held by a 12 ms loop: a fault stops it.
+            assert!(fault.is_some(), "{torque} N·m: peak {peak} A");
+        } else {
+            // The stated margin: the load's torque grows for 8 periods and the rotor's
+            // deceleration with it, faster than the back-EMF's trend of the last period
+            // predicts; the current stays below the trip i_max (10 A), never faulting.
+            assert_eq!(fault, None, "{torque} N·m");
+            let i_max = f64::from(co.limits.i_max);
+            assert!(peak < i_max, "{torque} N·m: peak {peak} A, trip {i_max} A");
+            assert!(p[200..]
+                .iter()
+                .any(|x| x.faults.contains(Faults::CURRENT_LIMIT)));
+        }
+    }
+}
+
+#[test]
+fn the_speed_limit_follows_the_measured_bus_voltage() {
+    // u_max 24 V: at the nominal 22.2 V the limit is 0.95·22.2/K_b = 296 rad/s; a bus
+    // sagging to 14 V lowers it to 187 rad/s: the running reference comes down to it, a
+    // SetSpeed beyond it is refused and the board reports it.
+    let co = paper_coefficients(24.0, 30.0);
+    let mut sim = board_with(&co);
+    let nominal = sim.board().speed_limit();
+    assert!(
+        (nominal - 0.95 * 22.2 / co.motor.kb).abs() < 0.1,
+        "{nominal}"
+    );
+    let (p, fault) = speed_run(&mut sim, 250.0, 150);
+    assert_eq!(fault, None);
+    assert!((mean_speed(&p[120..]) - 250.0).abs() < 5.0);
+    sim.hardware_mut().set_bus_voltage(14.0);
+    let (p, fault) = run(&mut sim, 150);
+    assert_eq!(fault, None);
+    let low = 0.95 * 14.0 / co.motor.kb;
+    assert!(
+        (sim.board().speed_limit() - low).abs() < 0.1,
+        "{}",
+        sim.board().speed_limit()
+    );
+    assert!(
+        sim.board().speed_reference() <= low,
+        "{}",
+        sim.board().speed_reference()
+    );
+    let w = mean_speed(&p[120..]);
+    // At its voltage limit the loop holds the speed friction leaves below the no-load one.
+    assert!(
+        w <= f64::from(low) + 2.0 && w > 0.85 * f64::from(low),
+        "{w} rad/s"
+    );
+    sim.handle(&HostMsg::SetSpeed { omega_ref: 200.0 });
+    let reply: BoardMsg = control::frame::decode_frame(&sim.take_output()).unwrap();
+    assert_eq!(reply, BoardMsg::Nack(control::frame::Nack::OutOfRange));
+    sim.handle(&HostMsg::Identify);
+    let id: BoardMsg = control::frame::decode_frame(&sim.take_output()).unwrap();
+    assert!(
+        matches!(id, BoardMsg::Identity { speed_max, .. } if (speed_max - low).abs() < 0.1),
+        "{id:?}"
+    );
+}
+
+/// The board's replies since the last call.
+fn replies(sim: &mut BoardSim) -> Vec<BoardMsg> {
+    sim.take_output()
+        .split_inclusive(|&b| b == 0)
+        .map(|f| control::frame::decode_frame(f).unwrap())
+        .collect()
+}
+
+#[test]
+fn without_an_armed_hardware_stop_only_commissioning_runs() {
+    use control::frame::{Nack, Warning};
+    let co = paper_coefficients(24.0, 30.0);
+    for run_without in [false, true] {
+        let mut sim = board_with(&co);
+        sim.set_hardware_stop(false, run_without);
+        assert_eq!(
+            replies(&mut sim),
+            [BoardMsg::Warning(Warning::NoHardwareStop)]
+        );
+        // Every later Identify reports it, not only the boot warning.
+        sim.handle(&HostMsg::Identify);
+        assert!(
+            matches!(
+                replies(&mut sim)[..],
+                [BoardMsg::Identity {
+                    hw_stop_armed: false,
+                    ..
+                }]
+            ),
+            "run_without {run_without}"
+        );
+        let want = if run_without {
+            BoardMsg::Ack
+        } else {
+            BoardMsg::Nack(Nack::NoHardwareStop)
+        };
+        sim.handle(&HostMsg::StartExperiment {
+            signal: Excitation::A,
+            duration_s: 1.0,
+        });
+        assert_eq!(replies(&mut sim), std::slice::from_ref(&want), "experiment");
+        sim.handle(&HostMsg::Stop);
+        replies(&mut sim);
+        sim.handle(&HostMsg::SetMode { mode: Mode::Speed });
+        assert_eq!(replies(&mut sim), [want], "speed");
+        sim.handle(&HostMsg::Stop);
+        replies(&mut sim);
+        sim.handle(&HostMsg::Commission);
+        assert_eq!(replies(&mut sim), [BoardMsg::Ack], "commissioning");
+    }
+}
+
+#[test]
+fn commissioning_measures_r_and_its_default_motor_allows_no_speed_mode() {
+    use control::frame::Nack;
+    // An emulated motor with 2.5 times the default winding resistance, on a board without
+    // coefficients.
+    let mut plant = EmulatorConfig::paper();
+    plant.motor.r *= 2.5;
+    let r_true = plant.motor.r;
+    let mut sim = BoardSim::new(plant, Wiring::default(), RamFlash::new(None)).unwrap();
+    replies(&mut sim);
+    sim.handle(&HostMsg::Commission);
+    for _ in 0..600 {
+        sim.tick();
+        if sim.coeff_seq() != 0 {
+            break;
+        }
+    }
+    assert_ne!(sim.coeff_seq(), 0, "commissioning did not store");
+    let co = sim.coefficients().clone();
+    assert!(!co.motor_identified);
+    let r = f64::from(co.motor.r);
+    eprintln!("commissioning measured R = {r:.4} Ω (true {r_true:.4} Ω)");
+    assert!((r - r_true).abs() < 0.05 * r_true, "R {r} vs {r_true}");
+    replies(&mut sim);
+    sim.handle(&HostMsg::Identify);
+    assert!(matches!(
+        replies(&mut sim)[..],
+        [BoardMsg::Identity {
+            motor_identified: false,
+            ..
+        }]
+    ));
+    // Speed mode is refused on the default constants; a sized experiment runs, and its
+    // current window uses the measured R.
+    sim.handle(&HostMsg::SetSpeed { omega_ref: 50.0 });
+    sim.handle(&HostMsg::SetMode { mode: Mode::Speed });
+    assert_eq!(
+        replies(&mut sim),
+        [BoardMsg::Ack, BoardMsg::Nack(Nack::MotorNotIdentified)]
+    );
+    sim.handle(&HostMsg::StartExperiment {
+        signal: Excitation::Steady { volts: 10.0 },
+        duration_s: 1.0,
+    });
+    assert_eq!(replies(&mut sim), [BoardMsg::Ack]);
+    let (p, fault) = run(&mut sim, 80);
+    assert_eq!(fault, None);
+    let lim = i_limit(&co);
+    let peak = peak_current(&p);
+    assert!(peak <= lim + margin(&co), "peak {peak} A, limit {lim} A");
 }

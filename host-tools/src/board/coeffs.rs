@@ -247,6 +247,8 @@ pub fn coefficients(model: &Model, loop_settings: LoopSettings) -> Result<Coeffi
             u_max: loop_settings.u_max,
             comp_gain: loop_settings.comp_gain,
         },
+        // The model's motor constants come from its identification.
+        motor_identified: true,
         ..Coefficients::default()
     };
     if let Some(l) = &model.lugre {

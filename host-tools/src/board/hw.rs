@@ -110,6 +110,10 @@ pub struct Hardware {
     edges_lost: u32,
     /// Largest |I| [A] of the winding over the fine steps of the last [`Hardware::apply`].
     peak_current: f64,
+    /// Bus voltage the board measures [V] (NaN: not measured, the board's nominal one).
+    v_bus: f32,
+    /// The hardware over-current stop is armed (false: it failed its self-test).
+    stop_armed: bool,
 }
 
 impl Hardware {
@@ -126,6 +130,8 @@ impl Hardware {
             tripped: false,
             edges_lost: 0,
             peak_current: 0.0,
+            v_bus: f32::NAN,
+            stop_armed: true,
         })
     }
 
@@ -145,7 +151,7 @@ impl Hardware {
             hall: self.wiring.hall(self.plant.hall_state()),
             now_ticks: ticks_at(truth.t),
             i_vector: i as f32,
-            v_bus: f32::NAN, // no bus measurement: the board's nominal voltage
+            v_bus: self.v_bus,
             hw_overcurrent: self.tripped,
             temperature_c: f32::NAN, // no board temperature model: no derating
             ..Measurements::default()
@@ -166,6 +172,19 @@ impl Hardware {
         self.peak_current
     }
 
+    /// Sets the bus voltage the board measures [V] (NaN: not measured, the board's nominal
+    /// one). The emulated motor takes the board's voltage command as it is; the board
+    /// bounds it by the bus.
+    pub fn set_bus_voltage(&mut self, v: f32) {
+        self.v_bus = v;
+    }
+
+    /// Emulates a hardware over-current stop that armed (`true`, the default) or failed
+    /// its self-test (`false`: it never trips).
+    pub fn set_stop_armed(&mut self, armed: bool) {
+        self.stop_armed = armed;
+    }
+
     /// Re-arms the hardware over-current stop (the firmware does it after `ClearFault`).
     pub fn rearm(&mut self) {
         self.tripped = false;
@@ -181,7 +200,7 @@ impl Hardware {
         let step = std::f64::consts::TAU / (6.0 * f64::from(self.plant.config().pole_pairs));
         self.peak_current = self.plant.truth().i.abs();
         for _ in 0..n {
-            if self.plant.truth().i.abs() > f64::from(HW_TRIP_A) {
+            if self.stop_armed && self.plant.truth().i.abs() > f64::from(HW_TRIP_A) {
                 self.tripped = true;
             }
             let drive = if self.tripped { Drive::Off } else { drive };

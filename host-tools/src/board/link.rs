@@ -3,7 +3,7 @@
 use anyhow::{anyhow, bail, Context, Result};
 use control::commission::CommissionOutcome;
 use control::frame::{
-    self, BoardMsg, Excitation, Fault, FrameDecoder, HostMsg, Nack, Sample, CHUNK_LEN,
+    self, BoardMsg, Excitation, Fault, FrameDecoder, HostMsg, Nack, Sample, Warning, CHUNK_LEN,
     MAX_ENCODED_LEN,
 };
 use control::telemetry::Telemetry;
@@ -27,6 +27,10 @@ pub struct Identity {
     pub coeff_seq: u32,
     /// Largest speed reference the board takes [rad/s].
     pub speed_max: f32,
+    /// The hardware over-current stop is armed.
+    pub hw_stop_armed: bool,
+    /// The loaded coefficients' motor constants were identified (not defaults).
+    pub motor_identified: bool,
 }
 
 /// An open link to a board.
@@ -76,6 +80,7 @@ impl Link {
 
     /// The next message from the board, or `None` after `timeout` without one. Frames that
     /// do not decode are skipped (the board's stream resynchronises at the next zero byte).
+    /// A board warning is printed on stderr as a `warning:` line (and returned).
     pub fn recv(&mut self, timeout: Duration) -> Result<Option<BoardMsg>> {
         let deadline = Instant::now() + timeout;
         let mut byte = [0u8; 1];
@@ -83,6 +88,9 @@ impl Link {
             match self.port.read(&mut byte) {
                 Ok(1) => {
                     if let Some(Ok(msg)) = self.decoder.push::<BoardMsg>(byte[0]) {
+                        if let BoardMsg::Warning(w) = msg {
+                            eprintln!("warning: {}: {}", self.name, warning_text(w));
+                        }
                         return Ok(Some(msg));
                     }
                 }
@@ -135,6 +143,8 @@ impl Link {
                 model,
                 coeff_seq,
                 speed_max,
+                hw_stop_armed,
+                motor_identified,
             } => {
                 if protocol != frame::PROTOCOL_VERSION {
                     bail!(
@@ -143,12 +153,30 @@ impl Link {
                         frame::PROTOCOL_VERSION
                     );
                 }
+                // The board reports the state at every Identify: every command that opens
+                // the link says so, not only the one that saw the boot warning.
+                if !hw_stop_armed {
+                    eprintln!(
+                        "warning: {}: {}",
+                        self.name,
+                        warning_text(Warning::NoHardwareStop)
+                    );
+                }
+                if !motor_identified && coeff_seq != 0 {
+                    eprintln!(
+                        "warning: {}: the motor constants on the board are defaults, not \
+                         identified: speed mode is refused until a fitted model is uploaded",
+                        self.name
+                    );
+                }
                 Ok(Identity {
                     protocol,
                     firmware: firmware.as_str().to_string(),
                     model,
                     coeff_seq,
                     speed_max,
+                    hw_stop_armed,
+                    motor_identified,
                 })
             }
             other => bail!("{}: unexpected answer to Identify: {other:?}", self.name),
@@ -341,5 +369,31 @@ pub fn nack_text(n: Nack) -> String {
             "the board has no valid coefficients (upload a blob, or run motorid commission)".into()
         }
         Nack::OutOfRange => "a parameter is outside what the board allows".into(),
+        Nack::NoHardwareStop => "the hardware over-current stop is not armed (see \
+             docs/bring-up.md: check the comparator wiring, or build the firmware with \
+             --features run-without-hw-stop to run on the software limit alone)"
+            .into(),
+        Nack::MotorNotIdentified => "the board's motor constants are defaults, not \
+             identified: record an experiment, fit and upload the model (motorid export) \
+             before speed mode"
+            .into(),
+    }
+}
+
+/// A board warning in words.
+pub fn warning_text(w: Warning) -> &'static str {
+    match w {
+        Warning::NoCoefficients => {
+            "no valid coefficients in flash: identify and commissioning only"
+        }
+        Warning::BadFrame => "the board received a damaged frame",
+        Warning::LinkLost => "the board lost the link and stopped the run",
+        Warning::NoHardwareStop => {
+            "the hardware over-current stop is NOT armed: speed and experiment runs are refused"
+        }
+        Warning::Boot0FromPin => {
+            "the option bytes take BOOT0 from pin PB8 (Hall H3); set nSWBOOT0 = 0, nBOOT0 = 1 \
+             (docs/bring-up.md)"
+        }
     }
 }

@@ -96,6 +96,22 @@ impl BoardSim {
         &self.hw
     }
 
+    /// Emulates the boot self-test of the hardware over-current stop: `armed` false is a
+    /// stop that failed to arm (it never trips, and the board is told so, as the firmware
+    /// does); `run_without` is the firmware's `run-without-hw-stop` build.
+    pub fn set_hardware_stop(&mut self, armed: bool, run_without: bool) {
+        self.hw.set_stop_armed(armed);
+        self.board.set_hardware_stop(armed, run_without);
+        if !armed {
+            put(&mut self.out, BoardMsg::Warning(Warning::NoHardwareStop));
+        }
+    }
+
+    /// The emulated hardware, to change what it measures (e.g. the bus voltage).
+    pub fn hardware_mut(&mut self) -> &mut Hardware {
+        &mut self.hw
+    }
+
     /// Bytes to send to the host (whole frames).
     pub fn take_output(&mut self) -> Vec<u8> {
         std::mem::take(&mut self.out)
@@ -200,7 +216,7 @@ mod tests {
         let co = Coefficients {
             model: control::blob::ModelKind::Lugre,
             lugre: Some(control::lugre::LugreParams::paper()),
-            ..Coefficients::default()
+            ..identified()
         };
         let blob = crate::board::coeffs::encode(&co).unwrap();
         let crc = control::blob::CRC32.checksum(&blob);
@@ -281,8 +297,16 @@ mod tests {
 
     /// R·i_max [V] of the default coefficients.
     fn co_default_r_i_max() -> f32 {
-        let co = Coefficients::default();
+        let co = identified();
         co.motor.r * co.limits.i_max
+    }
+
+    /// The default coefficients, marked as identified (speed mode needs it).
+    fn identified() -> Coefficients {
+        Coefficients {
+            motor_identified: true,
+            ..Coefficients::default()
+        }
     }
 
     fn sim_with(plant: EmulatorConfig, co: Option<&Coefficients>) -> BoardSim {
@@ -311,7 +335,7 @@ mod tests {
         );
         assert!(!sim.is_running());
         // A damaged upload is refused and changes nothing.
-        let blob = crate::board::coeffs::encode(&Coefficients::default()).unwrap();
+        let blob = crate::board::coeffs::encode(&identified()).unwrap();
         let mut bad = blob.clone();
         bad[20] ^= 0x40;
         sim.receive(&frame(&HostMsg::UploadBegin {
@@ -339,7 +363,7 @@ mod tests {
         sim.receive(&frame(&HostMsg::Stop));
         replies(&mut sim);
 
-        upload(&mut sim, &Coefficients::default());
+        upload(&mut sim, &identified());
         for (signal, duration_s) in [
             (Excitation::A, f32::NAN),
             (Excitation::A, f32::INFINITY),
@@ -372,7 +396,7 @@ mod tests {
 
     #[test]
     fn u_max_from_the_blob_bounds_the_speed_loop() {
-        let mut co = Coefficients::default();
+        let mut co = identified();
         co.pi.u_max = 3.0;
         let mut sim = sim_with(EmulatorConfig::paper(), Some(&co));
         // The speed limit is the no-load speed at u_max (42 rad/s): friction keeps the motor
@@ -389,11 +413,12 @@ mod tests {
 
     #[test]
     fn overcurrent_trips_and_turns_the_bridge_off() {
-        // A blob whose K_b is three times the motor's: the current window sits around a
-        // back-EMF twice too high once the rotor turns, and the current passes the trip.
-        let mut co = Coefficients::default();
+        // A blob whose R is five times the motor's: both current windows are five times
+        // too wide, and the measured current's gain of 0.5 over-corrects (g·ρ = 2.5): the
+        // current passes the trip in the first period.
+        let mut co = identified();
         co.limits.i_max = 5.0;
-        co.motor.kb *= 3.0;
+        co.motor.r *= 5.0;
         let mut sim = sim_with(EmulatorConfig::paper(), Some(&co));
         sim.receive(&frame(&HostMsg::StartExperiment {
             signal: Excitation::Steady { volts: 6.0 },
@@ -421,7 +446,7 @@ mod tests {
         // A locked rotor and a voltage ramp of 8 V/s: 44 A after 1.2 s without a limit.
         let mut plant = EmulatorConfig::paper();
         plant.extra_load = Some(std::sync::Arc::new(|x| 1.0e4 * x.omega));
-        let mut co = Coefficients::default();
+        let mut co = identified();
         co.pi.u_max = 20.0;
         co.limits.i_max = 20.0;
         let mut sim = sim_with(plant, Some(&co));
@@ -453,7 +478,7 @@ mod tests {
         // shorted winding would).
         let mut plant = EmulatorConfig::paper();
         plant.extra_load = Some(std::sync::Arc::new(|x| 1.0e4 * x.omega));
-        let mut co = Coefficients::default();
+        let mut co = identified();
         co.limits.i_max = control::board::HW_TRIP_A;
         co.motor.r *= 10.0;
         let mut sim = sim_with(plant, Some(&co));
@@ -483,7 +508,7 @@ mod tests {
         let mut plant = EmulatorConfig::paper();
         // A locked rotor: an enormous viscous load.
         plant.extra_load = Some(std::sync::Arc::new(|x| 1.0e4 * x.omega));
-        let mut co = Coefficients::default();
+        let mut co = identified();
         co.limits.i_max = control::board::HW_TRIP_A;
         let mut sim = sim_with(plant, Some(&co));
         sim.receive(&frame(&HostMsg::StartExperiment {
@@ -508,8 +533,8 @@ mod tests {
         // hanging, and the next upload rewrites slot 1.
         let mut slots =
             Slots::new(RamFlash::new(None), 0, super::super::flash::PAGE as u32).unwrap();
-        let old = Coefficients::default();
-        let mut new = Coefficients::default();
+        let old = identified();
+        let mut new = identified();
         new.pi.kp = 0.125;
         slots
             .store(&crate::board::coeffs::encode(&old).unwrap())
@@ -541,7 +566,7 @@ mod tests {
         let page = super::super::flash::PAGE as u32;
         let mut slots = Slots::new(RamFlash::new(Some(path.clone())), 0, page).unwrap();
         slots
-            .store(&crate::board::coeffs::encode(&Coefficients::default()).unwrap())
+            .store(&crate::board::coeffs::encode(&identified()).unwrap())
             .unwrap();
         drop(slots);
         let mut bytes = std::fs::read(&path).unwrap();
@@ -579,7 +604,7 @@ mod tests {
 
     #[test]
     fn silence_on_the_link_stops_a_run_and_heartbeats_keep_it() {
-        let mut sim = sim_with(EmulatorConfig::paper(), Some(&Coefficients::default()));
+        let mut sim = sim_with(EmulatorConfig::paper(), Some(&identified()));
         sim.receive(&frame(&HostMsg::SetSpeed { omega_ref: 20.0 }));
         sim.receive(&frame(&HostMsg::SetMode { mode: Mode::Speed }));
         replies(&mut sim);

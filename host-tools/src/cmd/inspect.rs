@@ -87,8 +87,17 @@ pub fn run(args: Args) -> Result<()> {
     );
     println!("model:      {}", kind_name(co.model));
     println!(
-        "motor:      R = {} Ω, L = {} H, Kt = {} N·m/A, Kb = {} V·s/rad, J = {} kg·m²",
-        m.r, m.l, m.kt, m.kb, m.j
+        "motor:      R = {} Ω, L = {} H, Kt = {} N·m/A, Kb = {} V·s/rad, J = {} kg·m² ({})",
+        m.r,
+        m.l,
+        m.kt,
+        m.kb,
+        m.j,
+        if co.motor_identified {
+            "identified"
+        } else {
+            "defaults, not identified: the board refuses speed mode"
+        }
     );
     if let Some(l) = &co.lugre {
         println!(
