@@ -16,7 +16,7 @@
 //!    bristle (a geared axis's compliance seen at the rotor, `presliding`'s default σ0 = 0.4,
 //!    a deflection of 2.6 Hall steps) is visible and identified (0.41 on 60 s of signal a).
 use super::free_params::{Free, Slot};
-use super::linear::{fixed_rows, motor_free, skeleton, weak_estimate, WeakFriction};
+use super::linear::{fixed_rows, motor_free, skeleton, weak_estimate};
 use super::{nlsq, sim_error, FitRequest};
 use crate::log::{MotorLog, Plant};
 use crate::model::{LugreParams, Model, ModelKind};
@@ -312,7 +312,7 @@ fn unstick_stribeck(
 /// Fit the LuGre model.
 pub fn fit(req: &FitRequest) -> Result<Model> {
     let mut m = skeleton(req, ModelKind::Lugre);
-    let (b, fc) = weak_estimate(&mut m, req.logs, WeakFriction::CoulombViscous);
+    let (b, fc) = weak_estimate(&mut m, req.logs, true);
     // Initial bristles: deflection of 1 mrad at breakaway, critically damped with the rotor
     // (σ1 = 2·sqrt(σ0·J)), the usual LuGre starting point (Canudas de Wit et al. 1995).
     let s_guess = fc.max(1e-4);
@@ -329,8 +329,6 @@ pub fn fit(req: &FitRequest) -> Result<Model> {
     let pts: Vec<SteadyPoint> = all_steady_points(&m, req.logs);
     let (lugre, _static_se) = fit_static(&pts, init, false)?;
     m.lugre = Some(lugre);
-    // The inertia again, with the static curve's Stribeck friction taken off the torque.
-    weak_estimate(&mut m, req.logs, WeakFriction::Stribeck(&lugre));
     // Dynamic step. The simulation error has local minima in (σ0, σ1) (σ1 → 0 with a
     // too-slow winding, for one): start from the best of a coarse grid over decades. The
     // soft end (0.3 and 3 N·m/rad; 0.3 is a breakaway deflection of 0.3 rad, 3 Hall steps,

@@ -84,7 +84,7 @@ fn bump(s: f64) -> f64 {
 /// `Σ w2·g ≈ ∫φ''·g dt` (the exact discrete differences of the module doc), and
 /// `Σ wz_k·u_k ≈ ∫φ·u dt` for `u` held over `[t_k, t_{k+1})` (`len − 1` intervals, each
 /// against the interval's mean of φ, `ψ_k = (φ_k + φ_{k+1})/2`, as [`WeakForm::integral_zoh`]).
-fn kernel(t: &[f64]) -> [Vec<f64>; 5] {
+fn kernel(t: &[f64]) -> [Vec<f64>; 4] {
     let n = t.len();
     let (t0, span) = (t[0], t[n - 1] - t[0]);
     let s_of = |tk: f64| 2.0 * (tk - t0) / span - 1.0;
@@ -101,13 +101,7 @@ fn kernel(t: &[f64]) -> [Vec<f64>; 5] {
         let k = k.clamp(0, n as isize - 2) as usize;
         t[k + 1] - t[k]
     };
-    let mut w = [
-        vec![0.0; n],
-        vec![0.0; n],
-        vec![0.0; n],
-        vec![0.0; n - 1],
-        vec![0.0; n - 1],
-    ];
+    let mut w = [vec![0.0; n], vec![0.0; n], vec![0.0; n], vec![0.0; n - 1]];
     for k in 0..n as isize {
         let j = k as usize;
         let left = if j > 0 { t[j] - t[j - 1] } else { 0.0 };
@@ -118,7 +112,6 @@ fn kernel(t: &[f64]) -> [Vec<f64>; 5] {
     }
     for j in 0..n - 1 {
         w[3][j] = 0.5 * (phi[j] + phi[j + 1]) * (t[j + 1] - t[j]);
-        w[4][j] = (phi[j + 1] - phi[j]) * (t[j + 1] - t[j]);
     }
     w
 }
@@ -136,9 +129,6 @@ pub struct Window {
     pub w2: Vec<f64>,
     /// `∫φ·u dt` weights for an input held between samples (one per interval).
     pub wz: Vec<f64>,
-    /// `(φ_{j+1} − φ_j)·dt` per interval: the interval weights' correction for a velocity
-    /// that settles after each input step ([`Window::int_held`]).
-    pub dphi: Vec<f64>,
 }
 
 impl Window {
@@ -162,19 +152,6 @@ impl Window {
     pub fn int_zoh(&self, u: &[f64]) -> f64 {
         dot(&self.wz, &u[self.start..self.end - 1])
     }
-
-    /// `Σψ̂_j·x_j·dt` with `ψ̂_j = ψ_j − κ·(φ_{j+1} − φ_j)` for a quantity held over each
-    /// interval (the module doc's interval form): with `κ` from [`held_step_lag`],
-    /// `Σψ̂_j·Δω_j` equals the acceleration term `int_dd(θ)` for a velocity that settles after
-    /// each step of a held voltage; `κ = 0` is [`Window::int_zoh`].
-    pub fn int_held(&self, x: &[f64], kappa: f64) -> f64 {
-        self.wz
-            .iter()
-            .zip(&self.dphi)
-            .zip(&x[self.start..self.end - 1])
-            .map(|((w, d), v)| (w - kappa * d) * v)
-            .sum()
-    }
 }
 
 fn dot(a: &[f64], b: &[f64]) -> f64 {
@@ -189,7 +166,7 @@ pub fn windows(t: &[f64], len: usize, hop: usize) -> Vec<Window> {
     let mut start = 0;
     while start + len <= t.len() {
         let end = start + len;
-        let [w0, w1, w2, wz, dphi] = kernel(&t[start..end]);
+        let [w0, w1, w2, wz] = kernel(&t[start..end]);
         out.push(Window {
             start,
             end,
@@ -197,7 +174,6 @@ pub fn windows(t: &[f64], len: usize, hop: usize) -> Vec<Window> {
             w1,
             w2,
             wz,
-            dphi,
         });
         start += hop.max(1);
     }
@@ -466,8 +442,6 @@ mod tests {
             (wf.derivative(&x)[0], -w.int_d(&x)),
             (wf.second_derivative(&x)[0], w.int_dd(&x)),
             (wf.integral_zoh(&x)[0], w.int_zoh(&x)),
-            (wf.integral_zoh(&x)[0], w.int_held(&x, 0.0)),
-            (wf.held(0.37).integral_zoh(&x)[0], w.int_held(&x, 0.37)),
         ] {
             assert!((a - b).abs() < 1e-12 * (1.0 + b.abs()), "{a} {b}");
         }
