@@ -292,14 +292,17 @@ fn unstick_stribeck(
     free.extend(super::linear::effect_free(&again));
     let report =
         |it: usize, c: f64| super::progress::report("refining from the new Stribeck start", it, c);
-    let rows = sim_error::refine_on(
+    // A restart that fails (a trial model that diverges throughout) keeps the first result.
+    let Ok(rows) = sim_error::refine_on(
         &mut again,
         &free,
         &res,
         sim_error::Jacobian::Sensitivities,
         nlsq::Options::default(),
         &mut { report },
-    )?;
+    ) else {
+        return Ok(None);
+    };
     let refined = sim_error::cost(&res, &again);
     tracing::debug!("Stribeck excess restart refined: cost {refined:.4e}");
     if refined < stuck_cost {
