@@ -80,7 +80,7 @@ impl Link {
 
     /// The next message from the board, or `None` after `timeout` without one. Frames that
     /// do not decode are skipped (the board's stream resynchronises at the next zero byte).
-    /// A board warning is printed on stderr as a `warning:` line (and returned).
+    /// A board warning is held as a `warning:` line ([`crate::warnings`]) and returned.
     pub fn recv(&mut self, timeout: Duration) -> Result<Option<BoardMsg>> {
         let deadline = Instant::now() + timeout;
         let mut byte = [0u8; 1];
@@ -89,7 +89,7 @@ impl Link {
                 Ok(1) => {
                     if let Some(Ok(msg)) = self.decoder.push::<BoardMsg>(byte[0]) {
                         if let BoardMsg::Warning(w) = msg {
-                            eprintln!("warning: {}: {}", self.name, warning_text(w));
+                            crate::warnings::hold(format!("{}: {}", self.name, warning_text(w)));
                         }
                         return Ok(Some(msg));
                     }
@@ -156,18 +156,18 @@ impl Link {
                 // The board reports the state at every Identify: every command that opens
                 // the link says so, not only the one that saw the boot warning.
                 if !hw_stop_armed {
-                    eprintln!(
-                        "warning: {}: {}",
+                    crate::warnings::hold(format!(
+                        "{}: {}",
                         self.name,
                         warning_text(Warning::NoHardwareStop)
-                    );
+                    ));
                 }
                 if !motor_identified && coeff_seq != 0 {
-                    eprintln!(
-                        "warning: {}: the motor constants on the board are defaults, not \
+                    crate::warnings::hold(format!(
+                        "{}: the motor constants on the board are defaults, not \
                          identified: speed mode is refused until a fitted model is uploaded",
                         self.name
-                    );
+                    ));
                 }
                 Ok(Identity {
                     protocol,

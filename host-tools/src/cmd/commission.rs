@@ -68,6 +68,7 @@ pub fn to_json(c: &Commissioning, seq: u32) -> serde_json::Value {
 pub fn run(args: Args) -> Result<()> {
     let mut link = Link::open(&args.port)?;
     link.identify()?;
+    crate::warnings::flush();
     let (outcome, seq) = if args.read {
         link.read_commission()?
     } else {

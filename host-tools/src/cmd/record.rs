@@ -234,6 +234,8 @@ pub fn run(args: Args) -> Result<()> {
     if let Some(w) = args.speed_ref {
         check_speed_ref(w, id.speed_max, "the board's")?;
     }
+    // The board's state (no hardware stop, default constants) is worth seeing before a run.
+    crate::warnings::flush();
     link.command(&HostMsg::Stop, "stop")?;
     let before = link.read_telemetry()?;
     link.pending_telemetry.clear();
