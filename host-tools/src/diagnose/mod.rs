@@ -23,6 +23,7 @@
 //!    `fit --add` accepts; its score is the fraction of the base residual it explains.
 pub mod candidates;
 pub mod carriers;
+mod forward_select;
 pub mod harmonics;
 pub mod lookalikes;
 pub mod regions;
@@ -30,12 +31,13 @@ pub mod verdict;
 
 use crate::effect_spec::EffectSpec;
 use crate::log::{MotorLog, Plant};
-use crate::numerics::least_squares::{self, Gram};
+use crate::numerics::least_squares;
 use crate::numerics::statistics;
 use crate::numerics::weak_form;
 use candidates::{Equation, Signals, Units, Variant};
 use control::effects::{Effect, EffectKind};
 use control::motor::MotorParams;
+use forward_select::select;
 use serde::Serialize;
 
 /// Family-wise false-alarm probability of one `diagnose` run: the chance that a correct model
@@ -196,18 +198,18 @@ pub struct Verdict {
     pub look_alikes: Vec<lookalikes::LookAlike>,
 }
 
-struct EqData {
-    eq: Equation,
-    y: Vec<f64>,
-    base_cols: Vec<Vec<f64>>,
+pub(super) struct EqData {
+    pub(super) eq: Equation,
+    pub(super) y: Vec<f64>,
+    pub(super) base_cols: Vec<Vec<f64>>,
     /// Sample-level columns to carry into the other equation's base.
-    base_sample: Vec<Vec<f64>>,
+    pub(super) base_sample: Vec<Vec<f64>>,
     /// Smallest torque [N·m] (RMS of the effect's term) worth reporting.
-    min_torque: f64,
+    pub(super) min_torque: f64,
     /// Base column of the model's Coulomb friction (`sgn ω`) when the model states no positive
     /// value for it: the threshold then follows the refitted Coulomb friction ([`min_torque`]).
-    coulomb_col: Option<usize>,
-    cand: Vec<(Variant, Vec<Vec<f64>>)>,
+    pub(super) coulomb_col: Option<usize>,
+    pub(super) cand: Vec<(Variant, Vec<Vec<f64>>)>,
 }
 
 /// Diagnose a log against a model structure.
@@ -344,7 +346,10 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
     };
     let centres = wf.centres.clone();
     let input: Vec<f64> = centres.iter().map(|&c| s.u[c]).collect();
-    let push_eq = |eq: Equation, out: &SelectOut, unit: &'static str, keep: Option<&[bool]>| {
+    let push_eq = |eq: Equation,
+                   out: &forward_select::Selection,
+                   unit: &'static str,
+                   keep: Option<&[bool]>| {
         let idx: Vec<usize> = (0..centres.len())
             .filter(|&r| keep.is_none_or(|k| k[r]))
             .collect();
@@ -353,20 +358,20 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
             equation: eq,
             t: idx.iter().map(|&r| s.t[centres[r]]).collect(),
             centres: idx.iter().map(|&r| centres[r]).collect(),
-            base: out.2.clone(),
-            after: out.3.clone(),
-            n_eff: out.4,
-            whiteness: statistics::whiteness(&out.2, &inp, 30),
+            base: out.base_resid.clone(),
+            after: out.final_resid.clone(),
+            n_eff: out.n_eff_base,
+            whiteness: statistics::whiteness(&out.base_resid, &inp, 30),
             unit,
         }
     };
     let mut kb = 0.0;
     let mech_keep: Option<Vec<bool>>;
     if voltage && !elec.y.is_empty() {
-        let out = forward_select(&elec, opts, alpha_per_test, &mut units);
-        kb = out.5.get(2).copied().unwrap_or(paper.kb);
+        let out = select(&elec, opts, alpha_per_test, &mut units);
+        kb = out.base_beta.get(2).copied().unwrap_or(paper.kb);
         // Voltage losses found here act in the torque equation (written in volts) too.
-        for f in &out.0 {
+        for f in &out.findings {
             if let Some(v) = elec.cand.iter().find(|(v, _)| {
                 Some(v.kind) == f.kind
                     && EffectSpec::parse(&f.spec)
@@ -383,14 +388,14 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
             scale: None,
             keep: vec![true; wf.rows()],
             given: given.as_ref().and_then(|g| g.1.clone()),
-            base: out.2.clone(),
-            after: out.3.clone(),
-            beta: out.5.clone(),
+            base: out.base_resid.clone(),
+            after: out.final_resid.clone(),
+            beta: out.base_beta.clone(),
             p: elec.base_cols.len(),
             input: wf.integral(&s.u),
         });
-        findings.extend(out.0);
-        tested.extend(out.1);
+        findings.extend(out.findings);
+        tested.extend(out.first_round);
     }
     if !wf.centres.is_empty() {
         if voltage {
@@ -473,8 +478,8 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
                 &wf_m.angle_error_variance(a1, a2, &s.theta_torque_var),
                 keep,
             );
-            let first = forward_select(&mech, opts, alpha_per_test, &mut units.clone());
-            row_scale(&first.2, &v)
+            let first = select(&mech, opts, alpha_per_test, &mut units.clone());
+            row_scale(&first.base_resid, &v)
         });
         if let Some(w) = &scale {
             let mul = |x: &mut Vec<f64>| x.iter_mut().zip(w).for_each(|(a, b)| *a *= b);
@@ -484,7 +489,7 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
                 cols.iter_mut().for_each(mul);
             }
         }
-        let out = forward_select(&mech, opts, alpha_per_test, &mut units);
+        let out = select(&mech, opts, alpha_per_test, &mut units);
         equations.push(push_eq(
             Equation::Mechanical,
             &out,
@@ -504,19 +509,19 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
             given: given.as_ref().map(|g| scaled(select_rows(&g.0, &keep))),
             input: scaled(select_rows(&wf_m.integral(&s.u), &keep)),
             keep,
-            base: out.2.clone(),
-            after: out.3.clone(),
-            beta: out.5.clone(),
+            base: out.base_resid.clone(),
+            after: out.final_resid.clone(),
+            beta: out.base_beta.clone(),
             p: mech.base_cols.len(),
         });
         if !pre_cand.is_empty() {
-            let pre = presliding_pass(&mech, &out.0, all_rows, pre_cand, &wf_m, &s);
-            let pout = forward_select(&pre, opts, alpha_per_test, &mut units);
-            findings.extend(pout.0);
-            tested.extend(pout.1);
+            let pre = presliding_pass(&mech, &out.findings, all_rows, pre_cand, &wf_m, &s);
+            let pout = select(&pre, opts, alpha_per_test, &mut units);
+            findings.extend(pout.findings);
+            tested.extend(pout.first_round);
         }
-        findings.extend(out.0);
-        tested.extend(out.1);
+        findings.extend(out.findings);
+        tested.extend(out.first_round);
     }
     resolve_offsets(&mut findings, st.kt);
     findings.sort_by(|a, b| b.score.total_cmp(&a.score));
@@ -894,207 +899,6 @@ fn modelled_drive(s: &Signals, st: &Structure) -> Vec<f64> {
     (0..s.len())
         .map(|k| cols.iter().zip(&fit.beta).map(|(c, b)| b * c[k]).sum())
         .collect()
-}
-
-/// (findings, first-round tests, base residual, final residual, n_eff, base coefficients)
-type SelectOut = (Vec<Finding>, Vec<Tested>, Vec<f64>, Vec<f64>, f64, Vec<f64>);
-
-fn forward_select(
-    data: &EqData,
-    opts: &Options,
-    alpha_per_test: f64,
-    units: &mut Units,
-) -> SelectOut {
-    let mut all_cols: Vec<Vec<f64>> = data.base_cols.clone();
-    let mut cand_idx: Vec<Vec<usize>> = Vec::new();
-    for (_, cols) in &data.cand {
-        let start = all_cols.len();
-        all_cols.extend(cols.iter().cloned());
-        cand_idx.push((start..start + cols.len()).collect());
-    }
-    let gram = Gram::new(&all_cols, &data.y);
-    let mut base: Vec<usize> = (0..data.base_cols.len()).collect();
-    let (beta0, rss0) = gram.fit(&base);
-    if data.eq == Equation::Electrical && beta0.first().is_some_and(|r| *r > 0.0) {
-        units.r = beta0[0];
-    }
-    let units = *units;
-    let resid_of = |subset: &[usize], beta: &[f64]| -> Vec<f64> {
-        let mut r = data.y.clone();
-        for (j, b) in subset.iter().zip(beta) {
-            for (v, c) in r.iter_mut().zip(&all_cols[*j]) {
-                *v -= b * c;
-            }
-        }
-        r
-    };
-    let base_resid = resid_of(&base, &beta0);
-    let n_eff_base = statistics::effective_n(&base_resid);
-    // Relevance threshold: from the model's Coulomb friction when it states one, else from the
-    // Coulomb friction refitted here (a model whose fit left fc at 0 still has one) or, once
-    // Coulomb friction is found, from the one found (see `MIN_TORQUE_FRACTION`).
-    let mut min_torque = data.min_torque;
-    if let Some(fc) = data.coulomb_col.and_then(|j| beta0.get(j)) {
-        if *fc > 0.0 {
-            min_torque = MIN_TORQUE_FRACTION * fc * units.mech_scale;
-        }
-    }
-
-    // Best variant per effect kind, tested against the current base.
-    let mut chosen_kinds: Vec<EffectKind> = Vec::new();
-    let mut findings = Vec::new();
-    let mut first_round: Vec<Tested> = Vec::new();
-    let mut rss_cur = rss0;
-    let mut resid_cur = base_resid.clone();
-    loop {
-        let n_eff = statistics::effective_n(&resid_cur);
-        let mut best_by_kind: Vec<(usize, f64, statistics::FTest)> = Vec::new();
-        let mut kind_score: Vec<f64> = Vec::new();
-        for (ci, (v, _)) in data.cand.iter().enumerate() {
-            if chosen_kinds.contains(&v.kind) {
-                continue;
-            }
-            let mut subset = base.clone();
-            subset.extend(&cand_idx[ci]);
-            let (b1, rss1) = gram.fit(&subset);
-            // A presliding column is the bristles' own torque: a gain far from 1 means it
-            // stands for something else (see `PRESLIDING_GAIN`).
-            if v.kind == EffectKind::Presliding
-                && !b1.last().is_some_and(|g| {
-                    (1.0 / PRESLIDING_GAIN..=PRESLIDING_GAIN).contains(&(g * units.mech_scale))
-                })
-            {
-                continue;
-            }
-            let t = statistics::f_test(rss_cur, rss1, cand_idx[ci].len(), base.len(), n_eff);
-            // Cogging harmonics compete by leave-one-out: a high harmonic's column lives in
-            // the few slow windows, where it can fit one window's error (see
-            // `harmonics::leave_one_out_rss`).
-            let score = if v.kind == EffectKind::Cogging {
-                let cols: Vec<&[f64]> = subset.iter().map(|&j| all_cols[j].as_slice()).collect();
-                harmonics::leave_one_out_rss(&cols, &data.y)
-            } else {
-                rss1
-            };
-            match best_by_kind
-                .iter()
-                .position(|(j, _, _)| data.cand[*j].0.kind == v.kind)
-            {
-                Some(k) if kind_score[k] <= score => {}
-                Some(k) => (best_by_kind[k], kind_score[k]) = ((ci, rss1, t), score),
-                None => {
-                    best_by_kind.push((ci, rss1, t));
-                    kind_score.push(score);
-                }
-            }
-        }
-        if first_round.is_empty() {
-            for (ci, _, t) in &best_by_kind {
-                let v = &data.cand[*ci].0;
-                let mut subset = base.clone();
-                subset.extend(&cand_idx[*ci]);
-                let (beta, _) = gram.fit(&subset);
-                first_round.push(Tested {
-                    name: v.kind.name().to_string(),
-                    equation: data.eq,
-                    spec: candidates::spec_of(v, &beta[base.len()..], units).to_string(),
-                    explained: t.explained,
-                    p_value: t.p_value,
-                    kept: false,
-                });
-            }
-        }
-        let spec_for = |ci: usize| {
-            let mut subset = base.clone();
-            subset.extend(&cand_idx[ci]);
-            let (beta, _) = gram.fit(&subset);
-            candidates::spec_of(&data.cand[ci].0, &beta[base.len()..], units)
-        };
-        // Size of the effect's torque [N·m]: RMS over the samples of its fitted term.
-        let size_of = |ci: usize| {
-            let mut subset = base.clone();
-            subset.extend(&cand_idx[ci]);
-            let (beta, _) = gram.fit(&subset);
-            let v = &data.cand[ci].0;
-            // Load friction's column is only its braking part: its size is its whole torque.
-            let cols = v
-                .torque
-                .as_ref()
-                .map_or(&v.columns[..], std::slice::from_ref);
-            let n = cols.first().map_or(0, |c| c.len());
-            let mut ss = 0.0;
-            for k in 0..n {
-                let v: f64 = cols
-                    .iter()
-                    .zip(&beta[base.len()..])
-                    .map(|(c, b)| b * c[k])
-                    .sum();
-                ss += v * v;
-            }
-            units.mech_scale * (ss / n.max(1) as f64).sqrt()
-        };
-        let Some(&(ci, rss1, t)) = best_by_kind
-            .iter()
-            .filter(|(ci, rss1, t)| {
-                // Relevance is measured against the model's own residual (rss0): an effect
-                // that removes 2 % of what is left after larger findings may still change the
-                // model's fit by a fraction of a percent.
-                t.p_value < alpha_per_test
-                    && (rss_cur - rss1) >= opts.min_explained * rss0
-                    && t.delta_bic < 0.0
-                    && plausible(&spec_for(*ci))
-                    && (data.eq != Equation::Mechanical || size_of(*ci) >= min_torque)
-            })
-            .max_by(|a, b| b.1.total_cmp(&a.1))
-        else {
-            break;
-        };
-        let v = &data.cand[ci].0;
-        let mut subset = base.clone();
-        subset.extend(&cand_idx[ci]);
-        let (beta, _) = gram.fit(&subset);
-        let spec = candidates::spec_of(v, &beta[base.len()..], units);
-        let score = if rss0 > 0.0 {
-            (rss_cur - rss1) / rss0
-        } else {
-            0.0
-        };
-        findings.push(Finding {
-            name: v.kind.name().to_string(),
-            explanation: explain(&spec, score, data.eq),
-            spec: spec.to_string(),
-            score,
-            equation: data.eq,
-            p_value: t.p_value,
-            f: t.f,
-            delta_bic: t.delta_bic,
-            kind: Some(v.kind),
-        });
-        if let Some(x) = first_round.iter_mut().find(|x| x.name == v.kind.name()) {
-            x.kept = true;
-        }
-        if v.kind == EffectKind::Coulomb && data.eq == Equation::Mechanical {
-            let fc = spec.get("fc");
-            if fc > 0.0 {
-                min_torque = MIN_TORQUE_FRACTION * fc;
-            }
-        }
-        chosen_kinds.push(v.kind);
-        base = subset;
-        rss_cur = rss1;
-        resid_cur = resid_of(&base, &beta);
-        if findings.len() >= MAX_FINDINGS {
-            break;
-        }
-    }
-    (
-        findings,
-        first_round,
-        base_resid,
-        resid_cur,
-        n_eff_base,
-        beta0,
-    )
 }
 
 /// The rows of `v` where `keep` is true.
