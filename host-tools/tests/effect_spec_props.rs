@@ -38,6 +38,11 @@ fn parse_checked(flag: &str, spec: &str) -> Result<(), TestCaseError> {
                     );
                 }
             }
+            // A table given without its range (`lo`, `hi`) takes it from the data when it is
+            // fitted: there is no effect to read back until then.
+            if s.kind == EffectKind::Table && s.get("lo") >= s.get("hi") {
+                return Ok(());
+            }
             // The effect the simulation and the fit use, and the spec it reads back as.
             let e = s.to_effect();
             let back = EffectSpec::from_effect(&e);
@@ -68,9 +73,14 @@ fn valid_spec() -> impl Strategy<Value = String> {
                 }
                 let (lo, hi) = key.range();
                 let v = match key.name {
+                    // A table's variable is a name.
+                    "var" => {
+                        let names = ["theta", "omega", "current"];
+                        names[((f * 3.0) as usize).min(2)].to_string()
+                    }
                     // Whole numbers where the key counts something.
-                    "harmonic" | "bins" | "var" => (lo + f * (hi - lo)).round(),
-                    _ => lo + f * (hi - lo),
+                    "harmonic" | "bins" => (lo + f * (hi - lo)).round().to_string(),
+                    _ => (lo + f * (hi - lo)).to_string(),
                 };
                 parts.push(format!("{}={v}", key.name));
             }
