@@ -72,6 +72,19 @@ fn sindyc_on_emulated_lugre_motor() {
         &["fit", "--model", "linear", "-o", "linear.toml", "a.csv"],
     );
     let toml = std::fs::read_to_string(dir.join("sindyc.toml")).unwrap();
+    // Where the data came from is recorded as for the other kinds: the log's sample period
+    // and Hall step, not zeros.
+    for key in ["sample_period", "hall_resolution_rad"] {
+        let values: Vec<f64> = toml
+            .lines()
+            .filter_map(|l| l.strip_prefix(key)?.trim_start().strip_prefix('='))
+            .map(|v| v.trim().parse().unwrap())
+            .collect();
+        assert!(
+            !values.is_empty() && values.iter().all(|v| *v > 0.0),
+            "{key}: {toml}"
+        );
+    }
     assert!(
         toml.contains("kind = \"sindyc\"") && toml.contains("[sindy.accel]"),
         "{toml}"

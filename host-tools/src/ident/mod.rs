@@ -191,6 +191,13 @@ pub fn fit(req: &FitRequest) -> Result<FitReport> {
         .map(|l| l.source.display().to_string())
         .collect();
     model.data.samples = req.logs.iter().map(MotorLog::len).sum();
+    // Where the data came from, the same for every kind of model.
+    model.data.sample_period = model.sample_period;
+    if model.sensor.hall_resolution_rad == 0.0 {
+        if let Some(first) = req.logs.first() {
+            model.sensor.hall_resolution_rad = sensor_chain::hall_resolution(first);
+        }
+    }
     model.data.units = declared_units(req.logs.iter().chain(req.validate));
     relabel_units(&mut model, req.logs);
     let scores = score_logs(&model, req);
