@@ -448,16 +448,6 @@ mod tests {
     use super::*;
     use crate::emulator::{simulate_signal, EmulatorConfig, SignalKind};
 
-    /// The emulator's own model (the truth a fit is measured against).
-    fn truth_model(cfg: &EmulatorConfig) -> Model {
-        let mut m = Model::new(ModelKind::Lugre, Plant::Voltage, 0.012);
-        m.motor = cfg.motor;
-        m.lugre = Some(cfg.effective_lugre());
-        m.effects = cfg.effects.clone();
-        m.sensor.hall_resolution_rad = cfg.hall_resolution();
-        m
-    }
-
     #[test]
     fn split_in_time_keeps_every_sample_once_and_names_the_parts() {
         let log = simulate_signal(&EmulatorConfig::paper(), SignalKind::A, 6.0)
@@ -488,7 +478,7 @@ mod tests {
         let offset = EffectSpec::parse("offset").unwrap();
         cfg.effects = vec![offset.to_effect()];
         let held_out = [simulate_signal(&cfg, SignalKind::B, 20.0).unwrap().log];
-        let truth = truth_model(&cfg);
+        let truth = cfg.truth_model();
         let mut without = truth.clone();
         without.effects.clear();
         let real = selection_test(&without, &truth, &offset, &held_out);
@@ -513,7 +503,7 @@ mod tests {
                 .to_effect(),
         ];
         let log = simulate_signal(&cfg, SignalKind::A, 40.0).unwrap().log;
-        let mut model = truth_model(&cfg);
+        let mut model = cfg.truth_model();
         model.effects.clear();
         let d = vec![diagnose::diagnose(
             &log,

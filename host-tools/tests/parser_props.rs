@@ -37,40 +37,8 @@ hall_resolution_rad = 0.0952
 velocity_window = 10
 "#;
 
-const SINDYC: &str = r#"kind = "sindyc"
-plant = "voltage"
-sample_period = 0.012
-
-[motor]
-r = 0.2162
-l = 0.0003
-kt = 0.07126
-kb = 0.07126
-j = 0.00083
-
-[sindy]
-a = 5.0
-hankel_components = [12, 60]
-hankel_delays = 60
-j = 0.00083
-vs = 1.0
-z_max = 7.8
-z_scale = 0.24
-
-[sindy.accel]
-i = 85.9
-"tanh(a*xdot)" = -168.2
-
-[sindy.idot]
-i = -833.3
-"tanh(a*xdot)" = 464.7
-u = 2188.2
-xdot = -149.2
-
-[sindy.zdot]
-z = -3.0
-xdot = 1.0
-"#;
+/// A SINDYc model of the paper's motor (voltage plant).
+const SINDYC: &str = include_str!("fixtures/paper_sindyc.toml");
 
 /// Load as `motorid` does (parse, then validate), then use the model as `export` does.
 /// Returns the error text, if any.

@@ -31,16 +31,6 @@ const FIT_SECONDS: f64 = 50.0;
 const VALIDATE_SECONDS: f64 = 40.0;
 const STEADY_SECONDS: f64 = 40.0;
 
-/// The emulator's own model as a [`Model`] (the truth the fits are measured against).
-fn truth_model(cfg: &EmulatorConfig) -> Model {
-    let mut m = Model::new(ModelKind::Lugre, Plant::Voltage, 0.012);
-    m.motor = cfg.motor;
-    m.lugre = Some(cfg.effective_lugre());
-    m.effects = cfg.effects.clone();
-    m.sensor.hall_resolution_rad = cfg.hall_resolution();
-    m
-}
-
 fn log(cfg: &EmulatorConfig, kind: SignalKind, seconds: f64, name: &str) -> (MotorLog, Vec<f64>) {
     let r = simulate_signal(cfg, kind, seconds).unwrap();
     let mut l = r.log;
@@ -130,10 +120,10 @@ fn case(effect: EffectKind) -> Row {
         refit: refit.map_or((f64::NAN, f64::NAN), |r| {
             scores(&r.model, &test_log, &omega_true)
         }),
-        truth: scores(&truth_model(&cfg), &test_log, &omega_true),
+        truth: scores(&cfg.truth_model(), &test_log, &omega_true),
         closed_on_selection: {
             let on = |m: &Model| scores(m, &select[0], &select_omega).0;
-            let (b, t) = (on(&out.rounds[0].model), on(&truth_model(&cfg)));
+            let (b, t) = (on(&out.rounds[0].model), on(&cfg.truth_model()));
             refit.map_or(f64::NAN, |r| (on(&r.model) - b) / (t - b))
         },
     }

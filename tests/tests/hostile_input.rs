@@ -1098,40 +1098,7 @@ fn echoed_values_are_cut_and_escaped_in_every_message() {
 }
 
 /// A SINDYc model of the paper's motor (voltage plant).
-const SINDYC_MODEL: &str = r#"kind = "sindyc"
-plant = "voltage"
-sample_period = 0.012
-
-[motor]
-r = 0.2162
-l = 0.0003
-kt = 0.07126
-kb = 0.07126
-j = 0.00083
-
-[sindy]
-a = 5.0
-hankel_components = [12, 60]
-hankel_delays = 60
-j = 0.00083
-vs = 1.0
-z_max = 7.8
-z_scale = 0.24
-
-[sindy.accel]
-i = 85.9
-"tanh(a*xdot)" = -168.2
-
-[sindy.idot]
-i = -833.3
-"tanh(a*xdot)" = 464.7
-u = 2188.2
-xdot = -149.2
-
-[sindy.zdot]
-z = -3.0
-xdot = 1.0
-"#;
+const SINDYC_MODEL: &str = include_str!("../../host-tools/tests/fixtures/paper_sindyc.toml");
 
 #[test]
 fn models_that_cannot_move_or_mix_kinds_are_refused() {

@@ -140,6 +140,19 @@ impl EmulatorConfig {
         p
     }
 
+    /// The emulated motor as a LuGre [`crate::model::Model`]: the truth a fit is measured
+    /// against (motor constants, LuGre parameters in force, effects, Hall step; the paper's
+    /// 12 ms sample period).
+    pub fn truth_model(&self) -> crate::model::Model {
+        use crate::model::{Model, ModelKind};
+        let mut m = Model::new(ModelKind::Lugre, crate::log::Plant::Voltage, SAMPLE_PERIOD);
+        m.motor = self.motor;
+        m.lugre = Some(self.effective_lugre());
+        m.effects = self.effects.clone();
+        m.sensor.hall_resolution_rad = self.hall_resolution();
+        m
+    }
+
     /// Hall resolution [rad].
     pub fn hall_resolution(&self) -> f64 {
         sensors::hall_resolution(self.pole_pairs)

@@ -302,20 +302,6 @@ mod tests {
         log
     }
 
-    fn truth_model() -> crate::model::Model {
-        use crate::model::{Model, ModelKind};
-        let cfg = EmulatorConfig::paper();
-        let mut m = Model::new(
-            ModelKind::Lugre,
-            Plant::Voltage,
-            crate::emulator::SAMPLE_PERIOD,
-        );
-        m.motor = cfg.motor;
-        m.lugre = Some(cfg.lugre);
-        m.sensor.hall_resolution_rad = cfg.hall_resolution();
-        m
-    }
-
     #[test]
     fn lugre_data_gives_a_stable_model_close_to_the_truth() {
         let a = emulated(SignalKind::A, 1);
@@ -331,7 +317,7 @@ mod tests {
         eprintln!("z correlation {:?}", res.z_correlation);
         let wb = sensor_chain::measured_velocity(&b, 10);
         // The emulator's own model scored by the same function (through the sensor chain).
-        let truth = crate::ident::score(&truth_model(), &b)
+        let truth = crate::ident::score(&EmulatorConfig::paper().truth_model(), &b)
             .unwrap()
             .fit_sensor
             .xdot;
