@@ -20,6 +20,10 @@
 //! - Hall faults (invalid state, impossible jump, edge overflow) while running;
 //! - stall: no Hall step for [`STALL_PERIODS`] while the command is held by the current
 //!   limit or above [`STALL_FRACTION`]·u_max;
+//! - model mismatch: the step's model and measured-current windows disjoint for
+//!   [`MISMATCH_PERIODS`] net periods (the command then follows the measured one alone);
+//! - over-speed: |ω̂| above [`OVERSPEED_FACTOR`] times the speed limit for
+//!   [`OVERSPEED_PERIODS`] in a row;
 //! - link loss (a stop, not a fault): no frame for [`LINK_TIMEOUT_PERIODS`] in speed or
 //!   experiment mode.
 //!
@@ -86,6 +90,14 @@ pub const LINK_TIMEOUT_PERIODS: u32 = 167;
 /// Periods with a voltage above the stall threshold and no Hall step before the stall
 /// fault (0.6 s).
 pub const STALL_PERIODS: u32 = 50;
+/// Net periods with disjoint model and measured-current windows (counting up on each,
+/// down on each period without) before the model-mismatch fault (0.3 s: over twice the velocity estimate's 0.12 s average, so a
+/// load step's lagging estimate does not trip it).
+pub const MISMATCH_PERIODS: u32 = 25;
+/// Over-speed threshold as a multiple of the speed limit ([`Board::speed_limit`]).
+pub const OVERSPEED_FACTOR: f32 = 1.25;
+/// Periods in a row beyond the over-speed threshold before the over-speed fault (0.1 s).
+pub const OVERSPEED_PERIODS: u32 = 8;
 /// Stall threshold as a fraction of the voltage limit.
 pub const STALL_FRACTION: f32 = 0.5;
 /// Commissioning voltage: at most this fraction of the voltage limit...
@@ -194,6 +206,10 @@ pub struct Board {
     quiet: u32,
     /// Periods in a row at a stall voltage without a Hall step.
     stall: u32,
+    /// Net periods with disjoint model and measured-current windows ([`MISMATCH_PERIODS`]).
+    mismatch: u32,
+    /// Periods in a row beyond the over-speed threshold.
+    overspeed: u32,
     last_steps: i32,
     /// Voltage commanded last period (its sign gives the current's).
     last_volts: f32,
@@ -264,6 +280,8 @@ impl Board {
             k: 0,
             quiet: 0,
             stall: 0,
+            mismatch: 0,
+            overspeed: 0,
             last_steps: 0,
             last_volts: 0.0,
             applied: None,
@@ -397,6 +415,8 @@ impl Board {
         self.k = 0;
         self.quiet = 0;
         self.stall = 0;
+        self.mismatch = 0;
+        self.overspeed = 0;
         self.last_steps = self.step.decoder().steps();
     }
 
@@ -712,8 +732,24 @@ impl Board {
             } else {
                 self.stall = 0;
             }
+            // Leaky: a mismatch that comes and goes (a speed estimate scaled by wrong pole
+            // pairs oscillates across the edge) still counts while it holds most periods.
+            self.mismatch = if out.faults.contains(Faults::MODEL_MISMATCH) {
+                self.mismatch + 1
+            } else {
+                self.mismatch.saturating_sub(1)
+            };
+            self.overspeed = if out.omega.abs() > OVERSPEED_FACTOR * self.w_max {
+                self.overspeed + 1
+            } else {
+                0
+            };
             let f = if self.stall >= STALL_PERIODS {
                 Some(Fault::Stall)
+            } else if self.mismatch >= MISMATCH_PERIODS {
+                Some(Fault::ModelMismatch)
+            } else if self.overspeed >= OVERSPEED_PERIODS {
+                Some(Fault::OverSpeed)
             } else {
                 fault_of(out.faults)
             };
