@@ -21,7 +21,7 @@
 //! - stall: no Hall step for [`STALL_PERIODS`] while the command is held by the current
 //!   limit or above [`STALL_FRACTION`]·u_max;
 //! - model mismatch: the step's model and measured-current windows disjoint for
-//!   [`MISMATCH_PERIODS`] net periods (the command then follows the measured one alone);
+//!   [`MISMATCH_PERIODS`] in a row (the command then follows the measured one alone);
 //! - over-speed: |ω̂| above [`OVERSPEED_FACTOR`] times the speed limit for
 //!   [`OVERSPEED_PERIODS`] in a row;
 //! - link loss (a stop, not a fault): no frame for [`LINK_TIMEOUT_PERIODS`] in speed or
@@ -90,8 +90,8 @@ pub const LINK_TIMEOUT_PERIODS: u32 = 167;
 /// Periods with a voltage above the stall threshold and no Hall step before the stall
 /// fault (0.6 s).
 pub const STALL_PERIODS: u32 = 50;
-/// Net periods with disjoint model and measured-current windows (counting up on each,
-/// down on each period without) before the model-mismatch fault (0.3 s: over twice the velocity estimate's 0.12 s average, so a
+/// Periods in a row with disjoint model and measured-current windows before the
+/// model-mismatch fault (0.3 s: over twice the velocity estimate's 0.12 s average, so a
 /// load step's lagging estimate does not trip it).
 pub const MISMATCH_PERIODS: u32 = 25;
 /// Over-speed threshold as a multiple of the speed limit ([`Board::speed_limit`]).
@@ -206,7 +206,7 @@ pub struct Board {
     quiet: u32,
     /// Periods in a row at a stall voltage without a Hall step.
     stall: u32,
-    /// Net periods with disjoint model and measured-current windows ([`MISMATCH_PERIODS`]).
+    /// Periods in a row with disjoint model and measured-current windows.
     mismatch: u32,
     /// Periods in a row beyond the over-speed threshold.
     overspeed: u32,
@@ -732,12 +732,10 @@ impl Board {
             } else {
                 self.stall = 0;
             }
-            // Leaky: a mismatch that comes and goes (a speed estimate scaled by wrong pole
-            // pairs oscillates across the edge) still counts while it holds most periods.
             self.mismatch = if out.faults.contains(Faults::MODEL_MISMATCH) {
                 self.mismatch + 1
             } else {
-                self.mismatch.saturating_sub(1)
+                0
             };
             self.overspeed = if out.omega.abs() > OVERSPEED_FACTOR * self.w_max {
                 self.overspeed + 1

@@ -204,7 +204,7 @@ pub enum Fault {
     /// The board temperature (its NTC) reached [`crate::board::TEMP_MAX_C`].
     OverTemperature,
     /// The model's current window (`K_b·ω̂ ± R·i_limit`) and the measured current's did
-    /// not overlap for [`crate::board::MISMATCH_PERIODS`] net periods: K_b or the
+    /// not overlap for [`crate::board::MISMATCH_PERIODS`] periods in a row: K_b or the
     /// pole pairs in the blob disagree with the motor.
     ModelMismatch,
     /// The speed estimate beyond [`crate::board::OVERSPEED_FACTOR`] times the speed limit
