@@ -691,3 +691,28 @@ fn commissioning_measures_r_and_its_default_motor_allows_no_speed_mode() {
     let peak = peak_current(&p);
     assert!(peak <= lim + margin(&co), "peak {peak} A, limit {lim} A");
 }
+
+#[test]
+fn an_inverted_current_sense_without_commissioning_stops_within_the_trip() {
+    // Without a commissioning result the board takes the sense's sign as +1; inverted, the
+    // measured-current window feeds back positively and the current grows each period. The
+    // software trip at i_max stops it: a fault within 20 periods, the true current beyond
+    // i_max for at most one period, its peak below the hardware trip.
+    let co = paper_coefficients(24.0, 10.0);
+    let mut slots = control::slots::Slots::new(RamFlash::new(None), 0, PAGE as u32).unwrap();
+    slots
+        .store(&motorid::board::coeffs::encode(&co).unwrap())
+        .unwrap();
+    let wiring = Wiring {
+        current_inverted: true,
+        ..Wiring::default()
+    };
+    let mut sim = BoardSim::new(EmulatorConfig::paper(), wiring, slots.into_inner()).unwrap();
+    let (p, fault) = speed_run(&mut sim, 100.0, 20);
+    let peak = peak_current(&p);
+    let over = beyond_trip(&p, f64::from(co.limits.i_max));
+    eprintln!("inverted sense: fault {fault:?}, peak {peak:.2} A, {over} periods beyond i_max");
+    assert!(fault.is_some(), "peak {peak} A");
+    assert!(over <= 1, "{over} periods beyond i_max");
+    assert!(peak < f64::from(control::board::HW_TRIP_A), "peak {peak} A");
+}
