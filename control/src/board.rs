@@ -218,7 +218,8 @@ pub struct Board {
     applied: Option<f32>,
     /// Speed limit at the bus voltage of the last period [rad/s] ([`Board::speed_limit`]).
     w_max: f32,
-    /// The hardware over-current stop is armed ([`Board::set_hardware_stop`]).
+    /// The hardware over-current stop is armed ([`Board::set_hardware_stop`]; false until
+    /// the transport says so).
     hw_stop_armed: bool,
     /// Speed and experiment runs are allowed without it (a firmware built so).
     run_without_hw_stop: bool,
@@ -286,7 +287,7 @@ impl Board {
             last_volts: 0.0,
             applied: None,
             w_max: 0.0,
-            hw_stop_armed: true,
+            hw_stop_armed: false,
             run_without_hw_stop: false,
             commission: CommissionOutcome::NotRun,
             commission_seq: 0,
@@ -575,6 +576,7 @@ impl Board {
         send: &mut impl FnMut(BoardMsg),
     ) {
         self.run = Run::Idle;
+        self.omega_target = 0.0;
         match r {
             Ok(c) => {
                 let mut co = self.coeffs.clone();
@@ -685,7 +687,9 @@ impl Board {
             Run::Experiment { signal, duration_s } => {
                 let t = self.k as f32 * dt;
                 if t >= duration_s {
+                    // Ends as a stop does: a speed asked meanwhile is dropped.
                     self.run = Run::Idle;
+                    self.omega_target = 0.0;
                     None
                 } else {
                     let r_i_max = self.coeffs.motor.r * lim.i_max;
@@ -894,6 +898,7 @@ mod tests {
 
     fn running_board() -> (Board, Vec<BoardMsg>) {
         let mut b = Board::new(Some((identified(), 1)), "test", 22.2);
+        b.set_hardware_stop(true, false);
         let mut out = Vec::new();
         b.handle(&HostMsg::SetMode { mode: Mode::Speed }, &mut |m| {
             out.push(m)
@@ -1013,6 +1018,25 @@ mod tests {
         }
         assert_eq!(b.speed_reference(), 0.0);
         assert!(b.speed_limit() < 43.0, "{}", b.speed_limit());
+    }
+
+    #[test]
+    fn a_new_board_refuses_runs_until_the_hardware_stop_is_armed() {
+        let mut b = Board::new(Some((identified(), 1)), "test", 22.2);
+        let mut out = Vec::new();
+        b.handle(&HostMsg::SetMode { mode: Mode::Speed }, &mut |m| {
+            out.push(m)
+        });
+        assert_eq!(out, [BoardMsg::Nack(Nack::NoHardwareStop)]);
+        b.set_hardware_stop(true, false);
+        out.clear();
+        b.handle(&HostMsg::SetMode { mode: Mode::Speed }, &mut |m| {
+            out.push(m)
+        });
+        assert!(
+            !out.contains(&BoardMsg::Nack(Nack::NoHardwareStop)),
+            "{out:?}"
+        );
     }
 
     #[test]

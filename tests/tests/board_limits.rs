@@ -716,3 +716,23 @@ fn an_inverted_current_sense_without_commissioning_stops_within_the_trip() {
     assert!(over <= 1, "{over} periods beyond i_max");
     assert!(peak < f64::from(control::board::HW_TRIP_A), "peak {peak} A");
 }
+
+#[test]
+fn a_speed_asked_during_an_experiment_is_dropped_when_it_ends() {
+    let co = paper_coefficients(24.0, 30.0);
+    let mut sim = board_with(&co);
+    sim.handle(&HostMsg::StartExperiment {
+        signal: Excitation::Steady { volts: 0.0 },
+        duration_s: 0.24,
+    });
+    sim.handle(&HostMsg::SetSpeed { omega_ref: 150.0 });
+    let (_, fault) = run(&mut sim, 40);
+    assert_eq!(fault, None);
+    // The experiment ended by its duration; a speed run now starts from a zero target.
+    sim.handle(&HostMsg::SetMode { mode: Mode::Speed });
+    let (p, fault) = run(&mut sim, 100);
+    assert_eq!(fault, None);
+    let top = p.iter().map(|x| x.omega.abs()).fold(0.0, f64::max);
+    assert!(top < 2.0, "{top} rad/s");
+    assert_eq!(sim.board().speed_reference(), 0.0);
+}
