@@ -20,6 +20,10 @@
 //! - Hall faults (invalid state, impossible jump, edge overflow) while running;
 //! - stall: no Hall step for [`STALL_PERIODS`] while the command is held by the current
 //!   limit or above [`STALL_FRACTION`]·u_max;
+//! - model mismatch: the step's model and measured-current windows disjoint for
+//!   [`MISMATCH_PERIODS`] in a row (the command then follows the measured one alone);
+//! - over-speed: |ω̂| above [`OVERSPEED_FACTOR`] times the speed limit for
+//!   [`OVERSPEED_PERIODS`] in a row;
 //! - link loss (a stop, not a fault): no frame for [`LINK_TIMEOUT_PERIODS`] in speed or
 //!   experiment mode.
 //!
@@ -86,6 +90,14 @@ pub const LINK_TIMEOUT_PERIODS: u32 = 167;
 /// Periods with a voltage above the stall threshold and no Hall step before the stall
 /// fault (0.6 s).
 pub const STALL_PERIODS: u32 = 50;
+/// Periods in a row with disjoint model and measured-current windows before the
+/// model-mismatch fault (0.3 s: over twice the velocity estimate's 0.12 s average, so a
+/// load step's lagging estimate does not trip it).
+pub const MISMATCH_PERIODS: u32 = 25;
+/// Over-speed threshold as a multiple of the speed limit ([`Board::speed_limit`]).
+pub const OVERSPEED_FACTOR: f32 = 1.25;
+/// Periods in a row beyond the over-speed threshold before the over-speed fault (0.1 s).
+pub const OVERSPEED_PERIODS: u32 = 8;
 /// Stall threshold as a fraction of the voltage limit.
 pub const STALL_FRACTION: f32 = 0.5;
 /// Commissioning voltage: at most this fraction of the voltage limit...
@@ -194,6 +206,10 @@ pub struct Board {
     quiet: u32,
     /// Periods in a row at a stall voltage without a Hall step.
     stall: u32,
+    /// Periods in a row with disjoint model and measured-current windows.
+    mismatch: u32,
+    /// Periods in a row beyond the over-speed threshold.
+    overspeed: u32,
     last_steps: i32,
     /// Voltage commanded last period (its sign gives the current's).
     last_volts: f32,
@@ -202,7 +218,8 @@ pub struct Board {
     applied: Option<f32>,
     /// Speed limit at the bus voltage of the last period [rad/s] ([`Board::speed_limit`]).
     w_max: f32,
-    /// The hardware over-current stop is armed ([`Board::set_hardware_stop`]).
+    /// The hardware over-current stop is armed ([`Board::set_hardware_stop`]; false until
+    /// the transport says so).
     hw_stop_armed: bool,
     /// Speed and experiment runs are allowed without it (a firmware built so).
     run_without_hw_stop: bool,
@@ -264,11 +281,13 @@ impl Board {
             k: 0,
             quiet: 0,
             stall: 0,
+            mismatch: 0,
+            overspeed: 0,
             last_steps: 0,
             last_volts: 0.0,
             applied: None,
             w_max: 0.0,
-            hw_stop_armed: true,
+            hw_stop_armed: false,
             run_without_hw_stop: false,
             commission: CommissionOutcome::NotRun,
             commission_seq: 0,
@@ -397,6 +416,8 @@ impl Board {
         self.k = 0;
         self.quiet = 0;
         self.stall = 0;
+        self.mismatch = 0;
+        self.overspeed = 0;
         self.last_steps = self.step.decoder().steps();
     }
 
@@ -555,6 +576,7 @@ impl Board {
         send: &mut impl FnMut(BoardMsg),
     ) {
         self.run = Run::Idle;
+        self.omega_target = 0.0;
         match r {
             Ok(c) => {
                 let mut co = self.coeffs.clone();
@@ -665,7 +687,9 @@ impl Board {
             Run::Experiment { signal, duration_s } => {
                 let t = self.k as f32 * dt;
                 if t >= duration_s {
+                    // Ends as a stop does: a speed asked meanwhile is dropped.
                     self.run = Run::Idle;
+                    self.omega_target = 0.0;
                     None
                 } else {
                     let r_i_max = self.coeffs.motor.r * lim.i_max;
@@ -712,8 +736,22 @@ impl Board {
             } else {
                 self.stall = 0;
             }
+            self.mismatch = if out.faults.contains(Faults::MODEL_MISMATCH) {
+                self.mismatch + 1
+            } else {
+                0
+            };
+            self.overspeed = if out.omega.abs() > OVERSPEED_FACTOR * self.w_max {
+                self.overspeed + 1
+            } else {
+                0
+            };
             let f = if self.stall >= STALL_PERIODS {
                 Some(Fault::Stall)
+            } else if self.mismatch >= MISMATCH_PERIODS {
+                Some(Fault::ModelMismatch)
+            } else if self.overspeed >= OVERSPEED_PERIODS {
+                Some(Fault::OverSpeed)
             } else {
                 fault_of(out.faults)
             };
@@ -860,6 +898,7 @@ mod tests {
 
     fn running_board() -> (Board, Vec<BoardMsg>) {
         let mut b = Board::new(Some((identified(), 1)), "test", 22.2);
+        b.set_hardware_stop(true, false);
         let mut out = Vec::new();
         b.handle(&HostMsg::SetMode { mode: Mode::Speed }, &mut |m| {
             out.push(m)
@@ -979,6 +1018,25 @@ mod tests {
         }
         assert_eq!(b.speed_reference(), 0.0);
         assert!(b.speed_limit() < 43.0, "{}", b.speed_limit());
+    }
+
+    #[test]
+    fn a_new_board_refuses_runs_until_the_hardware_stop_is_armed() {
+        let mut b = Board::new(Some((identified(), 1)), "test", 22.2);
+        let mut out = Vec::new();
+        b.handle(&HostMsg::SetMode { mode: Mode::Speed }, &mut |m| {
+            out.push(m)
+        });
+        assert_eq!(out, [BoardMsg::Nack(Nack::NoHardwareStop)]);
+        b.set_hardware_stop(true, false);
+        out.clear();
+        b.handle(&HostMsg::SetMode { mode: Mode::Speed }, &mut |m| {
+            out.push(m)
+        });
+        assert!(
+            !out.contains(&BoardMsg::Nack(Nack::NoHardwareStop)),
+            "{out:?}"
+        );
     }
 
     #[test]

@@ -40,7 +40,7 @@
 //! mode and experiments while the hardware over-current stop is not armed
 //! (`Nack(NoHardwareStop)`, unless the firmware was built to run without it) and speed mode
 //! while the coefficients' motor constants are not identified (`Nack(MotorNotIdentified)`).
-//! Version 4 adds `speed_max` to `Identity` and refuses a `SetSpeed` beyond it; version 3 adds `ReadTelemetry` and `Telemetry`. Refusals (since version 2): `SetMode { Speed }` and `StartExperiment` without valid
+//! Version 6 adds the faults `ModelMismatch` and `OverSpeed`. Version 4 adds `speed_max` to `Identity` and refuses a `SetSpeed` beyond it; version 3 adds `ReadTelemetry` and `Telemetry`. Refusals (since version 2): `SetMode { Speed }` and `StartExperiment` without valid
 //! coefficients (`Nack(NoCoefficients)`); an experiment whose duration is not finite, not
 //! positive or above [`crate::board::MAX_EXPERIMENT_S`], or a steady voltage beyond `u_max`
 //! (`Nack(OutOfRange)`); any start while a fault is latched (`Nack(Faulted)`). A speed or
@@ -66,7 +66,7 @@ use serde::{Deserialize, Serialize};
 use crate::blob::{self, Coefficients, ModelKind, CRC32, MAX_BLOB_LEN};
 
 /// Protocol version reported by `Identity`.
-pub const PROTOCOL_VERSION: u16 = 5;
+pub const PROTOCOL_VERSION: u16 = 6;
 /// Largest upload chunk.
 pub const CHUNK_LEN: usize = 64;
 /// Largest body (postcard message + CRC).
@@ -203,6 +203,13 @@ pub enum Fault {
     HardwareOverCurrent,
     /// The board temperature (its NTC) reached [`crate::board::TEMP_MAX_C`].
     OverTemperature,
+    /// The model's current window (`K_b·ω̂ ± R·i_limit`) and the measured current's did
+    /// not overlap for [`crate::board::MISMATCH_PERIODS`] periods in a row: K_b or the
+    /// pole pairs in the blob disagree with the motor.
+    ModelMismatch,
+    /// The speed estimate beyond [`crate::board::OVERSPEED_FACTOR`] times the speed limit
+    /// for [`crate::board::OVERSPEED_PERIODS`] periods in a row.
+    OverSpeed,
 }
 
 /// Warnings: logged, nothing stops.

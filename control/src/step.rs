@@ -186,6 +186,9 @@ impl Faults {
     /// The command is held at an edge of the current window `K_b·ω ± R·i_limit` (the
     /// current limit acts; see [`current_window`]).
     pub const CURRENT_LIMIT: u16 = 1 << 7;
+    /// The model's window `K_b·ω ± R·i_limit` and the measured-current window do not
+    /// overlap: the command was bounded by the measured one alone.
+    pub const MODEL_MISMATCH: u16 = 1 << 8;
 
     pub fn contains(self, flag: u16) -> bool {
         self.0 & flag != 0
@@ -644,8 +647,14 @@ impl<F: Float> ControlStep<F> {
             F::from(MEASURED_CURRENT_GAIN).unwrap(),
             lim,
         );
-        // The tighter of both; where they do not overlap the measured one wins.
-        let (lo, hi) = (saturate(lo, lo_m, hi_m), saturate(hi, lo_m, hi_m));
+        // The tighter of both; where they do not overlap the measurement wins over the
+        // model, whole: the model's constants (K_b, pole pairs) disagree with the motor.
+        let (lo, hi) = if hi < lo_m || lo > hi_m {
+            faults.set(Faults::MODEL_MISMATCH);
+            (lo_m, hi_m)
+        } else {
+            (saturate(lo, lo_m, hi_m), saturate(hi, lo_m, hi_m))
+        };
         self.pi.set_limits(lo, hi);
         let err = omega_ref - omega;
         let v_cmd = match inp.v_override {

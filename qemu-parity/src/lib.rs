@@ -206,6 +206,7 @@ pub fn run_trace(
     for obs in Observer::ALL {
         let co = coefficients(obs, lugre_blob, sindyc_blob)?;
         let mut board = Board::new(Some((co, 1)), "qemu-parity", V_BUS);
+        board.set_hardware_stop(true, false);
         board.handle(&HostMsg::SetMode { mode: Mode::Speed }, &mut |_| {});
         let mut last_v = 0.0f32;
         for (k, inp) in trace.inputs().enumerate() {

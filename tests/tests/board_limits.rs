@@ -437,6 +437,68 @@ fn wrong_motor_constants_in_the_blob_do_not_lift_the_current_limit() {
 }
 
 #[test]
+fn wrong_motor_constants_never_run_the_rotor_away() {
+    // With K_b too high or the pole pairs wrong the model's window can lie wholly beside the
+    // measured current's; the command then follows the measurement. Asked for +100 rad/s,
+    // then -100 rad/s, the rotor either tracks the reference (in the blob's speed scale,
+    // within 10 rad/s at the end of each run) or the board stops with a fault; its true
+    // speed stays within 1.5 times the larger of the reference and its true equivalent,
+    // and below the no-load speed at u_max (the runaway).
+    let base = paper_coefficients(24.0, 10.0);
+    let pp_true = f64::from(control::hall::PAPER_POLE_PAIRS);
+    let runaway = 24.0 / f64::from(base.motor.kb);
+    type Change = fn(&mut Coefficients);
+    // The flag: the model's back-EMF lies below the motor's, so its window caps the voltage
+    // and the rotor may fall short of the reference (never beyond it).
+    let cases: [(&str, Change, bool); 5] = [
+        ("K_b x2", |c| c.motor.kb *= 2.0, false),
+        ("K_b x1.5", |c| c.motor.kb *= 1.5, false),
+        ("K_b x0.5", |c| c.motor.kb *= 0.5, true),
+        ("5 pole pairs", |c| c.pole_pairs = 5, false),
+        ("22 pole pairs", |c| c.pole_pairs = 22, true),
+    ];
+    for (what, change, short) in cases {
+        let mut co = base.clone();
+        change(&mut co);
+        // True speed [rad/s] per estimated speed: the estimate counts the blob's pole pairs.
+        let scale = f64::from(co.pole_pairs) / pp_true;
+        let bound = 1.5 * 100.0 * scale.max(1.0);
+        let mut sim = board_with(&co);
+        let mut fault = None;
+        for w in [100.0f32, -100.0] {
+            let (p, f) = speed_run(&mut sim, w, 400);
+            let top = p.iter().map(|x| x.omega.abs()).fold(0.0, f64::max);
+            let end = mean_speed(&p[350..]) / scale;
+            let mismatched = p
+                .iter()
+                .filter(|x| x.faults.contains(Faults::MODEL_MISMATCH))
+                .count();
+            eprintln!("{what}, {w} rad/s: true top {top:.1} rad/s (bound {bound:.0}, runaway {runaway:.0}), end {end:.1} rad/s in the blob's scale, {mismatched} disjoint periods, fault {f:?}");
+            assert!(top < bound && top < runaway, "{what}, {w}: top {top} rad/s");
+            if f.is_some() {
+                fault = f;
+                break;
+            }
+            let w = f64::from(w);
+            if short {
+                assert!(
+                    end * w > 0.0 && end.abs() < w.abs() + 10.0,
+                    "{what}, {w}: {end} rad/s"
+                );
+            } else {
+                assert!((end - w).abs() < 10.0, "{what}, {w}: {end} rad/s");
+            }
+        }
+        if let Some(f) = fault {
+            assert!(
+                matches!(f, Fault::ModelMismatch | Fault::OverSpeed | Fault::Stall),
+                "{what}: {f:?}"
+            );
+        }
+    }
+}
+
+#[test]
 fn a_load_step_at_speed_holds_the_current_limit() {
     // At 150 rad/s a load rises to 0.6 N·m over 0.1 s (8.4 A of torque, beyond what the
     // limit's 8 A give with friction): the rotor slows while the moving average still
@@ -628,4 +690,49 @@ fn commissioning_measures_r_and_its_default_motor_allows_no_speed_mode() {
     let lim = i_limit(&co);
     let peak = peak_current(&p);
     assert!(peak <= lim + margin(&co), "peak {peak} A, limit {lim} A");
+}
+
+#[test]
+fn an_inverted_current_sense_without_commissioning_stops_within_the_trip() {
+    // Without a commissioning result the board takes the sense's sign as +1; inverted, the
+    // measured-current window feeds back positively and the current grows each period. The
+    // software trip at i_max stops it: a fault within 20 periods, the true current beyond
+    // i_max for at most one period, its peak below the hardware trip.
+    let co = paper_coefficients(24.0, 10.0);
+    let mut slots = control::slots::Slots::new(RamFlash::new(None), 0, PAGE as u32).unwrap();
+    slots
+        .store(&motorid::board::coeffs::encode(&co).unwrap())
+        .unwrap();
+    let wiring = Wiring {
+        current_inverted: true,
+        ..Wiring::default()
+    };
+    let mut sim = BoardSim::new(EmulatorConfig::paper(), wiring, slots.into_inner()).unwrap();
+    let (p, fault) = speed_run(&mut sim, 100.0, 20);
+    let peak = peak_current(&p);
+    let over = beyond_trip(&p, f64::from(co.limits.i_max));
+    eprintln!("inverted sense: fault {fault:?}, peak {peak:.2} A, {over} periods beyond i_max");
+    assert!(fault.is_some(), "peak {peak} A");
+    assert!(over <= 1, "{over} periods beyond i_max");
+    assert!(peak < f64::from(control::board::HW_TRIP_A), "peak {peak} A");
+}
+
+#[test]
+fn a_speed_asked_during_an_experiment_is_dropped_when_it_ends() {
+    let co = paper_coefficients(24.0, 30.0);
+    let mut sim = board_with(&co);
+    sim.handle(&HostMsg::StartExperiment {
+        signal: Excitation::Steady { volts: 0.0 },
+        duration_s: 0.24,
+    });
+    sim.handle(&HostMsg::SetSpeed { omega_ref: 150.0 });
+    let (_, fault) = run(&mut sim, 40);
+    assert_eq!(fault, None);
+    // The experiment ended by its duration; a speed run now starts from a zero target.
+    sim.handle(&HostMsg::SetMode { mode: Mode::Speed });
+    let (p, fault) = run(&mut sim, 100);
+    assert_eq!(fault, None);
+    let top = p.iter().map(|x| x.omega.abs()).fold(0.0, f64::max);
+    assert!(top < 2.0, "{top} rad/s");
+    assert_eq!(sim.board().speed_reference(), 0.0);
 }

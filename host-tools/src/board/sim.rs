@@ -52,11 +52,13 @@ impl BoardSim {
         let loaded = loaded.map(|(info, c)| (c, info.seq));
         let none = loaded.is_none();
         // "emu-" marks the emulated board; the version is the firmware crate's.
-        let board = Board::new(
+        let mut board = Board::new(
             loaded,
             concat!("emu-", env!("CARGO_PKG_VERSION")),
             V_BUS_NOMINAL,
         );
+        // The emulated stop arms at once; the board learns it as from the firmware's boot.
+        board.set_hardware_stop(true, false);
         let mut sim = BoardSim {
             hw: Hardware::new(plant, wiring)?,
             board,
