@@ -147,7 +147,8 @@ fn known_parameters_are_fixed_or_bounded_and_recorded() {
     // A motor constant outside the range every model is held to names the flag.
     run(&["--fix", "J=-1"], &["--fix J=-1", "outside", "inertia"]);
     run(&["--bound", "J=1"], &["--bound J=1", "LO..HI"]);
-    run(&["--fix", "R=abc"], &["--fix R=abc", "not a finite number"]);
+    run(&["--fix", "R=abc"], &["--fix R=abc", "is not a number"]);
+    run(&["--fix", "R=inf"], &["--fix R=inf", "not a finite number"]);
     run(&["--fix", "R=1", "--bound", "R=0..2"], &["R", "give one"]);
     // An added effect's keys can be fixed, and a validation log does not undo it.
     let c: Value = serde_json::from_str(&ok(

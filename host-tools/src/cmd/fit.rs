@@ -164,8 +164,13 @@ pub fn parse_constraints(fix: &[String], bound: &[String]) -> Result<Constraints
     let number = |flag: &str, arg: &str, text: &str| -> Result<f64> {
         match text.trim().parse::<f64>() {
             Ok(v) if v.is_finite() => Ok(v),
-            _ => anyhow::bail!(
+            Ok(_) => anyhow::bail!(
                 "{flag} {}: '{}' is not a finite number",
+                echo(arg),
+                echo(text)
+            ),
+            Err(_) => anyhow::bail!(
+                "{flag} {}: '{}' is not a number (write it as 0.5, -2 or 1e-3)",
                 echo(arg),
                 echo(text)
             ),
