@@ -448,6 +448,22 @@ mod tests {
     use super::*;
     use crate::emulator::{simulate_signal, EmulatorConfig, SignalKind};
 
+    static NO_CONSTRAINTS: Constraints = Constraints::NONE;
+
+    /// The loop from a linear model on `logs`, selection held out of them, no constraints.
+    fn linear_loop(logs: &[MotorLog], max_rounds: usize) -> Config<'_> {
+        Config {
+            kind: ModelKind::Linear,
+            plant: Plant::Voltage,
+            fit_logs: logs,
+            select_logs: &[],
+            start: Vec::new(),
+            constraints: &NO_CONSTRAINTS,
+            max_rounds,
+            diagnose: diagnose::Options::default(),
+        }
+    }
+
     #[test]
     fn split_in_time_keeps_every_sample_once_and_names_the_parts() {
         let log = simulate_signal(&EmulatorConfig::paper(), SignalKind::A, 6.0)
@@ -526,16 +542,7 @@ mod tests {
         cfg.seed = 4;
         cfg.effects = vec![EffectSpec::parse("offset").unwrap().to_effect()];
         let logs = [simulate_signal(&cfg, SignalKind::A, 30.0).unwrap().log];
-        let loop_cfg = Config {
-            kind: ModelKind::Linear,
-            plant: Plant::Voltage,
-            fit_logs: &logs,
-            select_logs: &[],
-            start: Vec::new(),
-            constraints: &Constraints::NONE,
-            max_rounds: 1,
-            diagnose: diagnose::Options::default(),
-        };
+        let loop_cfg = linear_loop(&logs, 1);
         let mut refused: Option<EffectKind> = None;
         let out = run(
             &loop_cfg,
@@ -573,16 +580,7 @@ mod tests {
         cfg.effects = vec![EffectSpec::parse("offset").unwrap().to_effect()];
         let log = simulate_signal(&cfg, SignalKind::A, 40.0).unwrap().log;
         let logs = [log];
-        let loop_cfg = Config {
-            kind: ModelKind::Linear,
-            plant: Plant::Voltage,
-            fit_logs: &logs,
-            select_logs: &[],
-            start: Vec::new(),
-            constraints: &Constraints::NONE,
-            max_rounds: 2,
-            diagnose: diagnose::Options::default(),
-        };
+        let loop_cfg = linear_loop(&logs, 2);
         let mut seen = Vec::new();
         let out = run(&loop_cfg, &mut |req| Ok(ident::fit(req)?.model), &mut |r| {
             seen.push(r.adds.len())

@@ -189,26 +189,26 @@ fn upload_record_and_speed_control_over_a_pty() {
     );
 }
 
+/// `record` with no board behind `--port`: it must fail with one `error:` line and write
+/// nothing; returns that line.
+fn record_without_board(extra: &[&str]) -> String {
+    let dir = tempfile::tempdir().unwrap();
+    let mut args = vec!["record", "--port", "/dev/nonexistent-tty"];
+    args.extend(extra);
+    args.extend(["-o", "x.csv"]);
+    let out = motorid(dir.path(), &args);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr).to_string();
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(!dir.path().join("x.csv").exists());
+    err
+}
+
 #[test]
 fn a_speed_beyond_the_hall_capture_is_refused_before_connecting() {
     // 400 rad/s with 11 pole pairs is 4200 Hall edges/s, beyond the 3920 /s the board's
     // capture queue holds: refused before the port is opened (it does not exist).
-    let dir = tempfile::tempdir().unwrap();
-    let out = motorid(
-        dir.path(),
-        &[
-            "record",
-            "--port",
-            "/dev/nonexistent-tty",
-            "--speed-ref",
-            "400",
-            "-o",
-            "x.csv",
-        ],
-    );
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(err.lines().count(), 1, "{err}");
+    let err = record_without_board(&["--speed-ref", "400"]);
     assert!(
         err.starts_with(
             "error: --speed-ref: 400 rad/s is beyond the Hall capture's speed limit of 373"
@@ -219,27 +219,10 @@ fn a_speed_beyond_the_hall_capture_is_refused_before_connecting() {
 
 #[test]
 fn no_board_is_one_error_line() {
-    let dir = tempfile::tempdir().unwrap();
-    let out = motorid(
-        dir.path(),
-        &[
-            "record",
-            "--port",
-            "/dev/nonexistent-tty",
-            "--signal",
-            "a",
-            "-o",
-            "x.csv",
-        ],
-    );
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(err.lines().count(), 1, "{err}");
+    let err = record_without_board(&["--signal", "a"]);
     assert!(err.starts_with("error: /dev/nonexistent-tty"), "{err}");
-    assert!(!dir.path().join("x.csv").exists());
 }
 
-/// The Hall state sequence a motor wired as (`hall`, `phase`) shows under bridge steps 0..5.
 fn expected_sequence(hall: &str, phase: &str) -> [u8; 6] {
     use motorid::board::hw::{parse_order, Wiring};
     let w = Wiring {
