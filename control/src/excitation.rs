@@ -47,10 +47,10 @@ fn multisine(m: &Multisine, t: f32) -> f32 {
         let r = k as f32 / (m.n - 1) as f32;
         let f = m.f_lo + (m.f_hi - m.f_lo) * r;
         let phase = -PI * (k * (k + 1)) as f32 / m.n as f32;
-        s += libm::sinf(2.0 * PI * f * t + phase);
+        s += crate::trig::sin(2.0 * PI * f * t + phase);
     }
-    // 0.5·(1 − cos 2a) = sin²a: one transcendental function (sinf) on the board, not two.
-    let half = libm::sinf(PI * t / m.env_period);
+    // 0.5·(1 − cos 2a) = sin²a: one transcendental function (sin) on the board, not two.
+    let half = crate::trig::sin(PI * t / m.env_period);
     let env = m.env_min + (1.0 - m.env_min) * half * half;
     let fade = (t / 1.0).clamp(0.0, 1.0);
     m.peak * env * fade * s / m.n as f32

@@ -21,6 +21,7 @@
 //! | [`frame`] | the serial frame codec (COBS + postcard + CRC) |
 //! | [`slots`] | two-slot flash storage of coefficients, power-cut safe |
 //! | [`telemetry`] | loop period, jitter, overruns, cycles per step, lost Hall edges |
+//! | [`trig`] | sine and cosine in f32 arithmetic for the board |
 #![no_std]
 #![forbid(unsafe_code)]
 
@@ -39,6 +40,7 @@ pub mod sindy;
 pub mod slots;
 pub mod step;
 pub mod telemetry;
+pub mod trig;
 pub mod velocity;
 
 /// Control period of the paper and of the firmware: 12 ms.

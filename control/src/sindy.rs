@@ -308,8 +308,8 @@ impl Term {
                 let r = xd / vs;
                 (-(r * r)).exp() * sgn_xd()
             }
-            Term::SinTheta(k) => (F::from(k).unwrap() * x).sin(),
-            Term::CosTheta(k) => (F::from(k).unwrap() * x).cos(),
+            Term::SinTheta(k) => crate::trig::sin_of(F::from(k).unwrap() * x),
+            Term::CosTheta(k) => crate::trig::cos_of(F::from(k).unwrap() * x),
             Term::SgnI => (i / F::from(CURRENT_EPS).unwrap()).tanh(),
             Term::AbsISgnXdot => i.abs() * sgn_xd(),
             // The polynomial factors, handled inline by `z_free_factor`.
