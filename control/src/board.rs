@@ -22,6 +22,10 @@
 //!   limit or above [`STALL_FRACTION`]·u_max;
 //! - model mismatch: the step's model and measured-current windows disjoint for
 //!   [`MISMATCH_PERIODS`] in a row (the command then follows the measured one alone);
+//! - current sense: the measured current flowing against the voltage that drives it
+//!   ([`crate::step::current_sign_implausible`]) for [`CURRENT_SENSE_PERIODS`] in a row (an
+//!   inverted current sense before commissioning; the command follows the model's window
+//!   meanwhile);
 //! - over-speed: |ω̂| above [`OVERSPEED_FACTOR`] times the speed limit for
 //!   [`OVERSPEED_PERIODS`] in a row;
 //! - link loss (a stop, not a fault): no frame for [`LINK_TIMEOUT_PERIODS`] in speed or
@@ -94,6 +98,10 @@ pub const STALL_PERIODS: u32 = 50;
 /// model-mismatch fault (0.3 s: over twice the velocity estimate's 0.12 s average, so a
 /// load step's lagging estimate does not trip it).
 pub const MISMATCH_PERIODS: u32 = 25;
+/// Current-sense fault: the measured current against its driving voltage
+/// ([`crate::step::current_sign_implausible`]) this many periods in a row (36 ms; the
+/// model's window holds the current at its limit meanwhile).
+pub const CURRENT_SENSE_PERIODS: u32 = 3;
 /// Over-speed threshold as a multiple of the speed limit ([`Board::speed_limit`]).
 pub const OVERSPEED_FACTOR: f32 = 1.25;
 /// Periods in a row beyond the over-speed threshold before the over-speed fault (0.1 s).
@@ -210,6 +218,8 @@ pub struct Board {
     mismatch: u32,
     /// Periods in a row beyond the over-speed threshold.
     overspeed: u32,
+    /// Periods in a row with the measured current against its driving voltage.
+    sense: u32,
     last_steps: i32,
     /// Voltage commanded last period (its sign gives the current's).
     last_volts: f32,
@@ -283,6 +293,7 @@ impl Board {
             stall: 0,
             mismatch: 0,
             overspeed: 0,
+            sense: 0,
             last_steps: 0,
             last_volts: 0.0,
             applied: None,
@@ -418,6 +429,7 @@ impl Board {
         self.stall = 0;
         self.mismatch = 0;
         self.overspeed = 0;
+        self.sense = 0;
         self.last_steps = self.step.decoder().steps();
     }
 
@@ -746,7 +758,14 @@ impl Board {
             } else {
                 0
             };
-            let f = if self.stall >= STALL_PERIODS {
+            self.sense = if out.faults.contains(Faults::CURRENT_SENSE) {
+                self.sense + 1
+            } else {
+                0
+            };
+            let f = if self.sense >= CURRENT_SENSE_PERIODS {
+                Some(Fault::CurrentSense)
+            } else if self.stall >= STALL_PERIODS {
                 Some(Fault::Stall)
             } else if self.mismatch >= MISMATCH_PERIODS {
                 Some(Fault::ModelMismatch)

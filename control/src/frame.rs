@@ -40,7 +40,8 @@
 //! mode and experiments while the hardware over-current stop is not armed
 //! (`Nack(NoHardwareStop)`, unless the firmware was built to run without it) and speed mode
 //! while the coefficients' motor constants are not identified (`Nack(MotorNotIdentified)`).
-//! Version 6 adds the faults `ModelMismatch` and `OverSpeed`. Version 4 adds `speed_max` to `Identity` and refuses a `SetSpeed` beyond it; version 3 adds `ReadTelemetry` and `Telemetry`. Refusals (since version 2): `SetMode { Speed }` and `StartExperiment` without valid
+//! Version 7 adds the fault `CurrentSense`. Version 6 adds the faults `ModelMismatch` and
+//! `OverSpeed`. Version 4 adds `speed_max` to `Identity` and refuses a `SetSpeed` beyond it; version 3 adds `ReadTelemetry` and `Telemetry`. Refusals (since version 2): `SetMode { Speed }` and `StartExperiment` without valid
 //! coefficients (`Nack(NoCoefficients)`); an experiment whose duration is not finite, not
 //! positive or above [`crate::board::MAX_EXPERIMENT_S`], or a steady voltage beyond `u_max`
 //! (`Nack(OutOfRange)`); any start while a fault is latched (`Nack(Faulted)`). A speed or
@@ -66,7 +67,7 @@ use serde::{Deserialize, Serialize};
 use crate::blob::{self, Coefficients, ModelKind, CRC32, MAX_BLOB_LEN};
 
 /// Protocol version reported by `Identity`.
-pub const PROTOCOL_VERSION: u16 = 6;
+pub const PROTOCOL_VERSION: u16 = 7;
 /// Largest upload chunk.
 pub const CHUNK_LEN: usize = 64;
 /// Largest body (postcard message + CRC).
@@ -210,6 +211,11 @@ pub enum Fault {
     /// The speed estimate beyond [`crate::board::OVERSPEED_FACTOR`] times the speed limit
     /// for [`crate::board::OVERSPEED_PERIODS`] periods in a row.
     OverSpeed,
+    /// The measured current flowed against the voltage driving it for
+    /// [`crate::board::CURRENT_SENSE_PERIODS`] periods in a row
+    /// ([`crate::step::current_sign_implausible`]): the current sense's sign is inverted
+    /// (commissioning measures it), or the blob's K_b is far off the motor's.
+    CurrentSense,
 }
 
 /// Warnings: logged, nothing stops.

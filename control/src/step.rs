@@ -189,6 +189,9 @@ impl Faults {
     /// The model's window `K_b·ω ± R·i_limit` and the measured-current window do not
     /// overlap: the command was bounded by the measured one alone.
     pub const MODEL_MISMATCH: u16 = 1 << 8;
+    /// The measured current flows against the voltage that drives it
+    /// ([`current_sign_implausible`]): the command was bounded by the model's window alone.
+    pub const CURRENT_SENSE: u16 = 1 << 9;
 
     pub fn contains(self, flag: u16) -> bool {
         self.0 & flag != 0
@@ -372,6 +375,48 @@ pub fn measured_current_window<F: Float>(
         hi = saturate(hi, lo, lim);
     }
     (lo, hi)
+}
+
+/// Smallest current [fraction of i_limit] [`current_sign_implausible`] counts as flowing:
+/// a quarter of the limit, far above the current sense's offset and noise (tens of mA) and
+/// above the current's change within a period from the rotor's acceleration, which the
+/// quasi-static model `(u − K_b·ω̂)/R` does not follow.
+pub const SENSE_SIGNIFICANCE: f32 = 0.25;
+/// Relative error of the model's back-EMF `K_b·ω̂` [`current_sign_implausible`] allows: its
+/// own size. A blob's K_b or pole pairs off by any factor above 1 (the model's back-EMF too
+/// high), or by up to 2 below, and the moving average's lag while the speed changes, then
+/// never make a correct current look implausible; the measured-current window, which
+/// bounds the current in those cases, stays in force.
+pub const EMF_TOLERANCE: f32 = 1.0;
+
+/// The measured current `i` [A] flows against the voltage that drives it, significantly:
+/// an inverted current sense (or a blob's K_b far off the motor's).
+///
+/// The model's driving voltage over the last period is `e = u_prev − K_b·ω̂` [V]
+/// (`u_prev` the applied voltage, `emf = K_b·ω̂` the model's back-EMF); the winding's L/R
+/// is short against the period, so the current at its end has the sign of the true driving
+/// voltage (eq. 2 held over the period). `e` is trusted where it exceeds its error,
+/// [`EMF_TOLERANCE`]`·|emf| + emf_res` (`emf_res` = K_b times one estimator resolution),
+/// by the resistive drop of a significant current `R·i_sig`, `i_sig` =
+/// [`SENSE_SIGNIFICANCE`]`·i_limit`; the measurement contradicts it when `i` flows the
+/// other way by more than `i_sig`. With the sense inverted, the measured-current window
+/// would feed the current back positively (it grows by `1 + g` a period); with the model's
+/// window alone it stays at `i_limit`. The check speaks where the drive, not the back-EMF,
+/// sets the current: from standstill and at low speed, where every run starts; at speed
+/// (`|u_prev| < 2·|emf|`) it stays silent and the `i_max` trip remains the stop.
+/// Non-finite inputs or an infinite limit: false.
+pub fn current_sign_implausible<F: Float>(
+    u_prev: F,
+    emf: F,
+    emf_res: F,
+    i: F,
+    r: F,
+    i_limit: F,
+) -> bool {
+    let i_sig = F::from(SENSE_SIGNIFICANCE).unwrap() * i_limit;
+    let e = u_prev - emf;
+    let e_err = F::from(EMF_TOLERANCE).unwrap() * emf.abs() + emf_res.abs();
+    e.abs() > e_err + r * i_sig && i * e.signum() < -i_sig
 }
 
 impl<F: Float> ControlStep<F> {
@@ -649,7 +694,21 @@ impl<F: Float> ControlStep<F> {
         );
         // The tighter of both; where they do not overlap the measurement wins over the
         // model, whole: the model's constants (K_b, pole pairs) disagree with the motor.
-        let (lo, hi) = if hi < lo_m || lo > hi_m {
+        // A measured current against its driving voltage is not trusted: the model's
+        // window alone bounds the command.
+        let sense_implausible = emf_meas.is_some()
+            && current_sign_implausible(
+                u_prev,
+                emf,
+                self.motor.kb * self.v_res,
+                current,
+                r,
+                self.i_limit,
+            );
+        let (lo, hi) = if sense_implausible {
+            faults.set(Faults::CURRENT_SENSE);
+            (lo, hi)
+        } else if hi < lo_m || lo > hi_m {
             faults.set(Faults::MODEL_MISMATCH);
             (lo_m, hi_m)
         } else {
@@ -993,6 +1052,34 @@ mod tests {
         assert_eq!(current_window(20.0, 2.0, 12.0), (12.0, 12.0));
         // No current limit: the voltage limit alone.
         assert_eq!(current_window(-3.0, f64::INFINITY, 12.0), (-12.0, 12.0));
+    }
+
+    #[test]
+    fn a_current_against_its_driving_voltage_is_implausible_only_where_the_drive_dominates() {
+        // R = 0.2 Ω, i_limit = 8 A: a significant current is 2 A, its drop 0.4 V.
+        let check = |u: f64, emf: f64, i: f64| current_sign_implausible(u, emf, 0.05, i, 0.2, 8.0);
+        // At standstill 1.6 V drive 8 A: measured −8 A (an inverted sense) is implausible,
+        // +8 A or a small −1 A is not.
+        assert!(check(1.6, 0.0, -8.0));
+        assert!(check(-1.6, 0.0, 8.0));
+        assert!(!check(1.6, 0.0, 8.0));
+        assert!(!check(1.6, 0.0, -1.0));
+        // A drive too small to say which way the current flows.
+        assert!(!check(0.3, 0.0, -8.0));
+        // At speed the back-EMF sets the current: a model back-EMF wrong by its own size
+        // (K_b twice the motor's) never makes a braking current look implausible.
+        assert!(!check(6.0, 14.0, -8.0));
+        assert!(!check(14.0, 7.0, 8.0));
+        // Non-finite inputs or no current limit: never.
+        assert!(!check(f64::NAN, 0.0, -8.0));
+        assert!(!current_sign_implausible(
+            1.6,
+            0.0,
+            0.05,
+            -8.0,
+            0.2,
+            f64::INFINITY
+        ));
     }
 
     #[test]

@@ -491,7 +491,10 @@ fn wrong_motor_constants_never_run_the_rotor_away() {
         }
         if let Some(f) = fault {
             assert!(
-                matches!(f, Fault::ModelMismatch | Fault::OverSpeed | Fault::Stall),
+                matches!(
+                    f,
+                    Fault::ModelMismatch | Fault::OverSpeed | Fault::Stall | Fault::CurrentSense
+                ),
                 "{what}: {f:?}"
             );
         }
@@ -693,11 +696,12 @@ fn commissioning_measures_r_and_its_default_motor_allows_no_speed_mode() {
 }
 
 #[test]
-fn an_inverted_current_sense_without_commissioning_stops_within_the_trip() {
+fn an_inverted_current_sense_without_commissioning_stops_near_the_current_limit() {
     // Without a commissioning result the board takes the sense's sign as +1; inverted, the
-    // measured-current window feeds back positively and the current grows each period. The
-    // software trip at i_max stops it: a fault within 20 periods, the true current beyond
-    // i_max for at most one period, its peak below the hardware trip.
+    // measured-current window would feed the current back positively. The board sees the
+    // measured current flow against the voltage driving it, bounds the command by the
+    // model's window alone and stops with a current-sense fault within a few periods: the
+    // true current never goes much beyond the standing limit, let alone the trip.
     let co = paper_coefficients(24.0, 10.0);
     let mut slots = control::slots::Slots::new(RamFlash::new(None), 0, PAGE as u32).unwrap();
     slots
@@ -710,11 +714,20 @@ fn an_inverted_current_sense_without_commissioning_stops_within_the_trip() {
     let mut sim = BoardSim::new(EmulatorConfig::paper(), wiring, slots.into_inner()).unwrap();
     let (p, fault) = speed_run(&mut sim, 100.0, 20);
     let peak = peak_current(&p);
-    let over = beyond_trip(&p, f64::from(co.limits.i_max));
-    eprintln!("inverted sense: fault {fault:?}, peak {peak:.2} A, {over} periods beyond i_max");
-    assert!(fault.is_some(), "peak {peak} A");
-    assert!(over <= 1, "{over} periods beyond i_max");
-    assert!(peak < f64::from(control::board::HW_TRIP_A), "peak {peak} A");
+    let lim = i_limit(&co);
+    let first = p
+        .iter()
+        .position(|x| x.faults.contains(Faults::CURRENT_SENSE))
+        .expect("the implausible current is flagged");
+    let stop = first + control::board::CURRENT_SENSE_PERIODS as usize;
+    eprintln!(
+        "inverted sense: fault {fault:?} after {stop} periods, peak {peak:.2} A, limit {lim:.1} A"
+    );
+    assert_eq!(fault, Some(Fault::CurrentSense), "peak {peak} A");
+    assert!(stop <= 5, "flagged first in period {first}");
+    assert!(peak <= lim + margin(&co), "peak {peak} A, limit {lim} A");
+    // After the fault the bridge is off: the current decays to nothing.
+    assert!(p.last().unwrap().end_i < 0.1, "{:?}", p.last());
 }
 
 #[test]
