@@ -110,8 +110,23 @@ pub const OVERSPEED_PERIODS: u32 = 8;
 pub const STALL_FRACTION: f32 = 0.5;
 /// Commissioning voltage: at most this fraction of the voltage limit...
 pub const COMMISSION_U_FRACTION: f32 = 0.25;
-/// ...and at most the voltage that drives this fraction of `i_max` through R at standstill.
+/// ...and at most the voltage that drives this fraction of `i_max` through R at standstill;
+/// the measured current then holds the run to this fraction of `i_max` whatever the blob's R
+/// ([`crate::commission`]).
 pub const COMMISSION_I_FRACTION: f32 = 0.3;
+
+/// PWM carrier frequency of the bridge [Hz] (centre-aligned TIM1).
+pub const PWM_HZ: u32 = 20_000;
+/// Dead time of the bridge's complementary outputs [ns].
+pub const DEAD_TIME_NS: u32 = 500;
+
+/// Voltage [V] the bridge's dead time takes from a vector (two half-bridges in series) with
+/// a current of one sign, at bus voltage `v_bus` [V]: during each dead time the off
+/// half-bridge's diode conducts and clamps its phase to the rail against the command,
+/// `t_d·f_PWM·V_bus` per half-bridge (0.47 V at 500 ns, 20 kHz and 23.5 V).
+pub fn dead_time_drop(v_bus: f32) -> f32 {
+    2.0 * (DEAD_TIME_NS as f32 * 1e-9) * PWM_HZ as f32 * v_bus
+}
 
 /// Bridge step (0..5) that drives a rotor in Hall sector `sector`: one vector ahead
 /// (forward, positive voltage) or four ahead (reverse, negative voltage). With a
@@ -510,7 +525,9 @@ impl Board {
             }
             | HostMsg::Commission => {
                 let volts = self.commission_volts();
-                self.start(Run::Commission(Commissioner::new(volts)));
+                let i_limit = COMMISSION_I_FRACTION * self.coeffs.limits.i_max;
+                let v_dead = dead_time_drop(self.v_bus_nominal);
+                self.start(Run::Commission(Commissioner::new(volts, i_limit, v_dead)));
                 self.commission = CommissionOutcome::Running;
                 BoardMsg::Ack
             }

@@ -16,14 +16,30 @@
 //!   magnet's pole count differs from the motor's;
 //! - the current-sense sign: with a positive voltage along the held vector the current
 //!   along it is positive; a negative mean says the sense is inverted (`current_sign` −1);
-//! - the winding resistance R = V/|Ī| [Ω] along a vector (two phases in series, the
-//!   DC-equivalent motor's R), from the mean current of the holds' second halves, where
-//!   the rotor rests (no back-EMF) and the current has settled (L/R is a few ms)
-//!   ([`Commissioner::resistance`]).
+//! - the winding resistance R [Ω] along a vector (two phases in series, the DC-equivalent
+//!   motor's R) from two voltage levels held while the rotor rests (no back-EMF) and the
+//!   current has settled (L/R is a few ms): `R = (V_hi − V_lo)/(Ī_hi − Ī_lo)`. The bridge's
+//!   dead time takes a constant voltage from a current of one sign (`2·t_d·f_PWM·V_bus`, about
+//!   0.5 V at 500 ns, 20 kHz and 24 V: a third of a 1.5 V hold), and the difference cancels it,
+//!   as it does the current sense's offset ([`Commissioner::resistance`]).
 //!
-//! Each hold lasts [`HOLD_PERIODS`] control periods; the current is averaged over the
-//! second half of every hold. The voltage is chosen by the caller (the board logic limits it
-//! to a fraction of `u_max` and to the voltage that drives a fraction of `i_max` through R).
+//! Each hold lasts [`HOLD_PERIODS`] control periods: the first half at the run's voltage
+//! `V_hi` (the rotor turns and settles), then a quarter at the lower level
+//! `V_lo = V_d + `[`LOW_LEVEL`]`·(V_hi − V_d)` and the last quarter at `V_hi` again (the Hall
+//! state is read at the end, under full torque); the current is averaged over each of the
+//! two quarters. `V_d` is the dead time's drop the caller expects: placing the lower level
+//! above it keeps its current at about half the higher level's, of the same sign, where the
+//! drop is constant; an error of `V_d` moves that current, not R.
+//!
+//! The voltage is chosen by the caller (the board logic limits it to a fraction of `u_max`
+//! and to the voltage that drives a fraction of `i_max` through the blob's R, which may not
+//! be the motor's); the measured current then bounds it:
+//! - the first hold starts at [`RAMP_START`] of the way from `V_d` to `V_hi` and grows by
+//!   [`RAMP_GROWTH`] a period, so the current approaches the limit from below (by at most
+//!   that factor past it) whatever the winding's R;
+//! - whenever `|I|` exceeds the run's current limit `i_limit`, `V_hi` falls to the voltage
+//!   that drives the limit, `V_d + (V − V_d)·i_limit/|I|` for the voltage `V` that drove
+//!   `I` (the current at rest is `(V − V_d)/R`), and stays there for the rest of the run.
 use serde::{Deserialize, Serialize};
 
 use crate::hall::HallTable;
@@ -32,6 +48,16 @@ use crate::hall::HallTable;
 pub const HOLD_PERIODS: u16 = 25;
 /// Holds in a run: two forward passes and one backward pass.
 pub const HOLDS: u8 = 18;
+/// The lower of a hold's two voltage levels, as a fraction of the higher above the dead
+/// time's drop: the current's difference between them is half the higher level's, enough
+/// against the sense's noise, and the lower level's current keeps its sign.
+pub const LOW_LEVEL: f32 = 0.5;
+/// Where the first hold's voltage starts, as a fraction of the way from the dead time's drop
+/// to the run's voltage.
+pub const RAMP_START: f32 = 1.0 / 16.0;
+/// Growth of the first hold's voltage above the dead time's drop per period: 16 times in
+/// 13 periods, within the first hold's settling half.
+pub const RAMP_GROWTH: f32 = 1.25;
 
 /// The default Hall state sequence of [`HallTable::DEFAULT_120`] (sectors 0..5).
 pub const DEFAULT_SEQUENCE: [u8; 6] = [1, 3, 2, 6, 4, 5];
@@ -109,6 +135,32 @@ fn gray(seq: &[u8; 6]) -> bool {
     (0..6).all(|k| (seq[k] ^ seq[(k + 1) % 6]).count_ones() == 1)
 }
 
+/// Mean of the current samples at one voltage level.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+struct LevelMean {
+    /// Sum of the held voltages [V].
+    v_sum: f32,
+    /// Sum of the currents [A] (sign as measured).
+    i_sum: f32,
+    n: u16,
+}
+
+impl LevelMean {
+    fn add(&mut self, v: f32, i: f32) {
+        self.v_sum += v;
+        self.i_sum += i;
+        self.n = self.n.saturating_add(1);
+    }
+
+    /// (mean voltage, mean |current|) [V, A].
+    fn mean(&self) -> Option<(f32, f32)> {
+        (self.n > 0).then(|| {
+            let n = f32::from(self.n);
+            (self.v_sum / n, (self.i_sum / n).abs())
+        })
+    }
+}
+
 /// The commissioning sequencer: which vector to hold, what was read.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Commissioner {
@@ -120,10 +172,20 @@ pub struct Commissioner {
     path: heapless::Vec<u8, 16>,
     /// The path overflowed (far more than one revolution).
     path_full: bool,
-    i_sum: f32,
-    /// Samples in `i_sum`.
-    i_count: u16,
+    /// Current samples at the higher and the lower level.
+    hi: LevelMean,
+    lo: LevelMean,
+    /// The higher level [V] (lowered by the current limit).
     volts: f32,
+    /// Current limit of the run [A].
+    i_limit: f32,
+    /// Voltage the bridge's dead time is expected to take [V].
+    v_dead: f32,
+    /// Fraction of the way from `v_dead` to `volts` the ramp has reached (1: done).
+    ramp: f32,
+    /// The drive returned last period: its voltage, and the level its current samples
+    /// (`None`: not sampled).
+    last: (f32, Option<bool>),
 }
 
 /// What the sequencer wants this period.
@@ -136,8 +198,10 @@ pub enum CommissionStep {
 }
 
 impl Commissioner {
-    /// A run at `volts` [V] along each vector.
-    pub fn new(volts: f32) -> Self {
+    /// A run at `volts` [V] along each vector, at most `i_limit` [A] (non-finite or not
+    /// positive: no current limit), on a bridge whose dead time takes `v_dead` [V] (below 0
+    /// or not finite: 0).
+    pub fn new(volts: f32, i_limit: f32, v_dead: f32) -> Self {
         Commissioner {
             hold: 0,
             period: 0,
@@ -145,10 +209,36 @@ impl Commissioner {
             bwd: [0; 6],
             path: heapless::Vec::new(),
             path_full: false,
-            i_sum: 0.0,
-            i_count: 0,
+            hi: LevelMean::default(),
+            lo: LevelMean::default(),
             volts,
+            i_limit: if i_limit > 0.0 {
+                i_limit
+            } else {
+                f32::INFINITY
+            },
+            v_dead: if v_dead > 0.0 && v_dead.is_finite() {
+                v_dead
+            } else {
+                0.0
+            },
+            ramp: RAMP_START,
+            last: (0.0, None),
         }
+    }
+
+    /// The voltage a fraction `x` of the way from the dead time's drop to `v_hi` [V].
+    fn above_drop(&self, v_hi: f32, x: f32) -> f32 {
+        if v_hi > self.v_dead {
+            self.v_dead + x * (v_hi - self.v_dead)
+        } else {
+            x * v_hi
+        }
+    }
+
+    /// The higher voltage level now [V] (the run's voltage, lowered by the current limit).
+    pub fn volts(&self) -> f32 {
+        self.volts
     }
 
     /// Bridge step of hold `h`: 0..5, 0..5, then 5..0.
@@ -195,10 +285,7 @@ impl Commissioner {
                 }
             }
         }
-        if self.period >= HOLD_PERIODS / 2 && i_vector.is_finite() {
-            self.i_sum += i_vector;
-            self.i_count = self.i_count.saturating_add(1);
-        }
+        self.measured(i_vector);
         self.period += 1;
         if self.period > HOLD_PERIODS {
             // The hold is over: the state now is that vector's sector.
@@ -219,20 +306,54 @@ impl Commissioner {
                 return CommissionStep::Done(self.result());
             }
         }
+        // Settle, then a quarter at the lower level and a quarter at the higher one.
+        let level = match self.period {
+            p if p < HOLD_PERIODS / 2 => None,
+            p if p < 3 * HOLD_PERIODS / 4 => Some(false),
+            _ => Some(true),
+        };
+        let v_hi = self.above_drop(self.volts, self.ramp);
+        self.ramp = (self.ramp * RAMP_GROWTH).min(1.0);
+        let volts = if level == Some(false) {
+            self.above_drop(v_hi, LOW_LEVEL)
+        } else {
+            v_hi
+        };
+        self.last = (volts, level);
         CommissionStep::Hold {
             step: Self::step_of(self.hold),
-            volts: self.volts,
+            volts,
         }
     }
 
-    /// The winding resistance [Ω] from the holds so far: the hold voltage over the mean
-    /// current of the holds' second halves; `None` without samples or outside the physical
-    /// range [`crate::blob::MOTOR_R`].
-    pub fn resistance(&self) -> Option<f32> {
-        if self.i_count == 0 {
-            return None;
+    /// The current `i` [A] the last drive made: the current limit, and a sample of its level.
+    fn measured(&mut self, i: f32) {
+        if !i.is_finite() {
+            return;
         }
-        let r = self.volts / (self.i_sum / f32::from(self.i_count)).abs();
+        let (v, level) = self.last;
+        if i.abs() > self.i_limit {
+            let v_limit = self.above_drop(v, self.i_limit / i.abs());
+            if v_limit < self.volts {
+                self.volts = v_limit;
+                self.ramp = 1.0;
+            }
+        }
+        match level {
+            Some(true) => self.hi.add(v, i),
+            Some(false) => self.lo.add(v, i),
+            None => {}
+        }
+    }
+
+    /// The winding resistance [Ω] from the holds so far: the difference of the two levels'
+    /// mean voltages over that of their mean currents (module docs); `None` without samples
+    /// at both levels, without a current difference, or outside the physical range
+    /// [`crate::blob::MOTOR_R`].
+    pub fn resistance(&self) -> Option<f32> {
+        let (v_hi, i_hi) = self.hi.mean()?;
+        let (v_lo, i_lo) = self.lo.mean()?;
+        let r = (v_hi - v_lo) / (i_hi - i_lo);
         let (lo, hi) = crate::blob::MOTOR_R;
         (r >= lo && r <= hi).then_some(r)
     }
@@ -266,7 +387,11 @@ impl Commissioner {
             sequence: seq,
             reversed,
             permuted: !forward && !reversed,
-            current_sign: if self.i_sum < 0.0 { -1 } else { 1 },
+            current_sign: if self.hi.i_sum + self.lo.i_sum < 0.0 {
+                -1
+            } else {
+                1
+            },
             edges_per_elec_rev: self.net_edges().min(255) as u8,
             volts: self.volts,
         })
@@ -281,7 +406,7 @@ mod tests {
     /// An ideal rotor that jumps into the held vector's sector; Hall states of a given
     /// sequence; current of a given sign.
     fn run(seq: [u8; 6], sign: f32, start: u8) -> Result<Commissioning, CommissionError> {
-        let mut c = Commissioner::new(2.0);
+        let mut c = Commissioner::new(2.0, 10.0, 0.4);
         let mut sector = start;
         let mut hall = seq[sector as usize];
         // Edges arrive with the next period's measurement.
@@ -334,9 +459,52 @@ mod tests {
         assert!(r.is_valid());
     }
 
+    /// Runs a whole commissioning on a resting winding of resistance `r` [Ω] behind a
+    /// dead time of `vd` [V] (the current a voltage drives is `(V − vd)/R`, of its sign);
+    /// returns the sequencer and the largest current [A].
+    fn resting_winding(c: &mut Commissioner, r: f32, vd: f32) -> f32 {
+        let mut i = 0.0f32;
+        let mut peak = 0.0f32;
+        for _ in 0..10_000 {
+            match c.tick(1, [], false, i) {
+                CommissionStep::Done(_) => return peak,
+                CommissionStep::Hold { volts, .. } => {
+                    i = (volts - vd).max(0.0) / r;
+                    peak = peak.max(i);
+                }
+            }
+        }
+        panic!("never finished");
+    }
+
+    #[test]
+    fn two_levels_measure_r_without_the_dead_time_drop() {
+        // 2 V across 0.2 Ω behind a 0.5 V drop: V/I would read 0.267 Ω (a third high).
+        for (vd_expected, r, vd) in [(0.5, 0.2, 0.5), (0.4, 0.2, 0.5), (0.0, 0.5, 0.3)] {
+            let mut c = Commissioner::new(2.0, f32::INFINITY, vd_expected);
+            resting_winding(&mut c, r, vd);
+            let got = c.resistance().unwrap();
+            assert!(
+                (got - r).abs() < 1e-3 * r,
+                "R {got} vs {r} (drop {vd}, expected {vd_expected})"
+            );
+        }
+    }
+
+    #[test]
+    fn the_measured_current_lowers_the_hold_voltage_to_the_limit() {
+        // The caller sized 2 V for a 0.2 Ω winding (7.5 A); the winding has 0.05 Ω (30 A).
+        let mut c = Commissioner::new(2.0, 7.5, 0.5);
+        let peak = resting_winding(&mut c, 0.05, 0.5);
+        assert!(peak <= RAMP_GROWTH * 7.5 + 1e-3, "peak {peak} A");
+        // The voltage that drives the limit: 0.5 V + 7.5 A · 0.05 Ω.
+        assert!((c.volts() - 0.875).abs() < 1e-3, "{} V", c.volts());
+        assert!((c.resistance().unwrap() - 0.05).abs() < 1e-4);
+    }
+
     #[test]
     fn a_blocked_rotor_is_no_motion() {
-        let mut c = Commissioner::new(2.0);
+        let mut c = Commissioner::new(2.0, 10.0, 0.4);
         let r = loop {
             if let CommissionStep::Done(r) = c.tick(1, [], false, 1.0) {
                 break r;

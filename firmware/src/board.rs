@@ -49,10 +49,12 @@ pub fn config() -> embassy_stm32::Config {
 }
 
 /// PWM carrier: 20 kHz, centre-aligned (at or above 20 kHz: inaudible).
-pub const PWM_HZ: u32 = 20_000;
+pub const PWM_HZ: u32 = control::board::PWM_HZ;
 /// Dead time in TIM1 clock ticks: 85 × 5.88 ns = 500 ns, the value NuttX uses for this board
 /// (`PWM_DEADTIME_NS 500` in src/stm32_foc.c). The L6387ED adds its own ≈ 320 ns interlock.
 pub const DEAD_TIME_TICKS: u16 = 85;
+// The board logic's dead-time drop (commissioning) assumes the same dead time: 170 MHz TIM1.
+const _: () = assert!(DEAD_TIME_TICKS as u32 * 1000 / 170 == control::board::DEAD_TIME_NS);
 /// Largest duty cycle: 95 %, so the bootstrap capacitors of the L6387ED high-side drivers
 /// recharge every period [NuttX src/stm32_foc.c, MAX_DUTY_B16 = 0.95].
 pub const MAX_DUTY: f32 = control::board::MAX_DUTY;

@@ -2,6 +2,7 @@
 //! (`control::board::Board` in `motorid::board::sim::BoardSim`): the standing current limit,
 //! the speed ramp, the speed limit and the size of the experiment signals.
 use control::blob::{Coefficients, ModelKind, DERATE_FRACTION};
+use control::effects::Effect;
 use control::frame::{BoardMsg, Excitation, Fault, HostMsg, Mode};
 use control::lugre::LugreParams;
 use control::step::{Faults, MEASURED_CURRENT_GAIN};
@@ -643,13 +644,65 @@ fn without_an_armed_hardware_stop_only_commissioning_runs() {
     }
 }
 
+/// Voltage the emulated board's bridge loses to its dead time along a vector, at its
+/// nominal bus voltage [V].
+fn dead_time_drop() -> f64 {
+    f64::from(control::board::dead_time_drop(
+        motorid::board::sim::V_BUS_NOMINAL,
+    ))
+}
+
+/// Runs commissioning to its end (at most `n` periods); returns the true peak current [A].
+fn commission(sim: &mut BoardSim, n: usize) -> f64 {
+    replies(sim);
+    sim.handle(&HostMsg::Commission);
+    let mut peak = 0.0f64;
+    for _ in 0..n {
+        sim.tick();
+        peak = peak.max(sim.hardware().peak_current());
+        if sim.board().mode() == Mode::Idle {
+            break;
+        }
+    }
+    peak
+}
+
+#[test]
+fn commissioning_holds_its_current_on_a_winding_far_below_the_blobs_r() {
+    // The default blob's R is 0.22 Ω; a winding of a quarter of it would take four times
+    // the commissioning current at the voltage sized from the blob. The measured current
+    // lowers the vector's voltage: the run still learns the wiring and R.
+    let mut plant = EmulatorConfig::paper();
+    plant.motor.r *= 0.25;
+    plant.effects.push(Effect::Deadtime {
+        vd: dead_time_drop(),
+    });
+    let r_true = plant.motor.r;
+    let mut sim = BoardSim::new(plant, Wiring::default(), RamFlash::new(None)).unwrap();
+    let i_max = sim.coefficients().limits.i_max;
+    let i_comm = f64::from(control::board::COMMISSION_I_FRACTION * i_max);
+    let peak = commission(&mut sim, 600);
+    let co = sim.coefficients().clone();
+    let r = f64::from(co.motor.r);
+    eprintln!("R/4 winding: commissioning peak {peak:.2} A (its limit {i_comm:.1} A), R {r:.4} Ω (true {r_true:.4} Ω)");
+    assert!(co.commission.is_some(), "commissioning failed");
+    assert!((r - r_true).abs() < 0.1 * r_true, "R {r} vs {r_true}");
+    // The first hold's ramp meets the limit from below: at most one growth step past it,
+    // not the four times the open-loop hold would draw.
+    let bound = f64::from(control::commission::RAMP_GROWTH) * i_comm;
+    assert!(peak <= bound, "peak {peak} A, limit {i_comm} A");
+}
+
 #[test]
 fn commissioning_measures_r_and_its_default_motor_allows_no_speed_mode() {
     use control::frame::Nack;
-    // An emulated motor with 2.5 times the default winding resistance, on a board without
-    // coefficients.
+    // An emulated motor with 2.5 times the default winding resistance, behind a bridge
+    // whose dead time takes its drop from the voltage, on a board without coefficients.
     let mut plant = EmulatorConfig::paper();
     plant.motor.r *= 2.5;
+    plant.effects.push(Effect::Deadtime {
+        vd: dead_time_drop(),
+    });
     let r_true = plant.motor.r;
     let mut sim = BoardSim::new(plant, Wiring::default(), RamFlash::new(None)).unwrap();
     replies(&mut sim);
@@ -665,7 +718,7 @@ fn commissioning_measures_r_and_its_default_motor_allows_no_speed_mode() {
     assert!(!co.motor_identified);
     let r = f64::from(co.motor.r);
     eprintln!("commissioning measured R = {r:.4} Ω (true {r_true:.4} Ω)");
-    assert!((r - r_true).abs() < 0.05 * r_true, "R {r} vs {r_true}");
+    assert!((r - r_true).abs() < 0.1 * r_true, "R {r} vs {r_true}");
     replies(&mut sim);
     sim.handle(&HostMsg::Identify);
     assert!(matches!(
