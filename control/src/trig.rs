@@ -33,10 +33,11 @@ pub const EXACT_RANGE: f32 = 6400.0;
 /// From this `|x|` [rad] on, f32 arguments are more than π apart: sin and cos return 0.
 pub const PHASELESS: f32 = 33_554_432.0; // 2^25
 
-/// π/2 in three parts: `P1` and `P2` with 12 significant bits each, `P3` the rest.
-const P1: f32 = 1.570_312_5; // 0x3FC9_0000: 12 bits
-const P2: f32 = 4.837_512_969_970_703e-4; // 0x39FD_A000: 12 bits
-const P3: f32 = 7.549_789_954_891_882e-8; // the remainder of π/2, rounded to f32
+/// π/2 in three parts: `P1` and `P2` with 12 significant bits each, `P3` the rest rounded to
+/// f32 (1.5703125, 4.8375130e-4, 7.5497901e-8).
+const P1: f32 = f32::from_bits(0x3FC9_0000);
+const P2: f32 = f32::from_bits(0x39FD_A000);
+const P3: f32 = f32::from_bits(0x33A2_2169);
 const FRAC_2_PI: f32 = core::f32::consts::FRAC_2_PI;
 
 /// `(k mod 4, r)` with `x = k·π/2 + r`, `|r| ≤ π/4` (module docs, step 1).

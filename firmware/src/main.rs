@@ -9,6 +9,8 @@
 //!   coefficient uploads into the two flash slots of `control::slots`.
 //! - [`storage`]: the flash behind those slots, a double ECC error (NMI) turned into a
 //!   failed read.
+//! - [`sense`]: the ADC readings of a period: bus voltage, NTC, the current along the
+//!   applied vector (zero offsets measured at boot).
 //! - [`overcurrent`]: comparators on the shunts into TIM1's break input, armed at boot: the
 //!   bridge turns off within a PWM period above the board's 40 A rating.
 //! - this file: start-up and the 12 ms control loop: measurements in, `control::board::Board`
@@ -37,6 +39,7 @@ mod bridge;
 mod hall_capture;
 mod link;
 mod overcurrent;
+mod sense;
 mod storage;
 
 use core::sync::atomic::Ordering;
@@ -47,7 +50,7 @@ use control::slots::Slots;
 use cortex_m::peripheral::DWT;
 use defmt_rtt as _;
 use embassy_executor::Spawner;
-use embassy_stm32::adc::{Adc, AdcConfig, SampleTime};
+use embassy_stm32::adc::{Adc, AdcConfig};
 use embassy_stm32::flash::Flash;
 use embassy_stm32::gpio::{Level, Output, OutputType, Speed};
 use embassy_stm32::opamp::{OpAmp, OpAmpGain, OpAmpSpeed};
@@ -57,12 +60,13 @@ use embassy_stm32::timer::low_level::CountingMode;
 use embassy_stm32::timer::simple_pwm::PwmPin;
 use embassy_stm32::usart::{self, BufferedUart};
 use embassy_stm32::wdg::IndependentWatchdog;
-use embassy_stm32::{bind_interrupts, pac, peripherals};
+use embassy_stm32::{bind_interrupts, pac, peripherals, Peri};
 use embassy_time::{Duration, Ticker};
 use static_cell::StaticCell;
 
 use crate::bridge::Bridge;
 use crate::link::{COMMANDS, MODE, NEW_COEFFS, OUTGOING, SLOTS};
+use crate::sense::Sense;
 
 bind_interrupts!(struct Irqs {
     USART2 => usart::BufferedInterruptHandler<peripherals::USART2>;
@@ -71,8 +75,6 @@ bind_interrupts!(struct Irqs {
 /// Nominal bus voltage [V] when the measurement is missing: a 6S LiPo is 22.2 V nominal
 /// (UM2516: up to 6S); the board logic uses the measured value whenever it is valid.
 const V_BUS_NOMINAL: f32 = 22.2;
-/// Samples averaged for the zero-current offset of each op-amp at boot (bridge off).
-const ZERO_SAMPLES: u32 = 64;
 
 #[embassy_executor::main]
 async fn main(spawner: Spawner) {
@@ -80,64 +82,112 @@ async fn main(spawner: Spawner) {
     defmt::info!("B-G431B-ESC1 firmware {}", env!("CARGO_PKG_VERSION"));
 
     // Bridge first, outputs off: TIM1 CH1-3 PA8/PA9/PA10, CH1N-3N PC13/PA12/PB15.
+    let mut bridge = start_bridge(p.TIM1, (p.PA8, p.PC13), (p.PA9, p.PA12), (p.PA10, p.PB15));
+    let mut led = Output::new(p.PC6, Level::Low, Speed::Low);
+
+    // Current sense: OPAMP1/2/3 as PGA ×16 with the board's bias on VINM0 (board.rs); the
+    // zero-current offsets are measured now, with the bridge off.
+    let mut op1 = OpAmp::new(p.OPAMP1, OpAmpSpeed::HighSpeed);
+    let mut op2 = OpAmp::new(p.OPAMP2, OpAmpSpeed::HighSpeed);
+    let mut op3 = OpAmp::new(p.OPAMP3, OpAmpSpeed::HighSpeed);
+    let mut sense = Sense::new(
+        (
+            Adc::new(p.ADC1, AdcConfig::default()),
+            Adc::new(p.ADC2, AdcConfig::default()),
+        ),
+        op1.pga_biased_ext(p.PA1, p.PA3, p.PA2, OpAmpGain::Mul16),
+        op2.pga_biased_ext(p.PA7, p.PA5, p.PA6, OpAmpGain::Mul16),
+        op3.pga_biased_ext(p.PB0, p.PB2, p.PB1, OpAmpGain::Mul16),
+        p.PA0,
+        p.PB14,
+    );
+
+    check_option_bytes();
+    let hw_stop_armed = arm_hardware_stop(p.DAC3);
+    // The watchdog runs from here on: a fault while reading the flash resets the MCU
+    // instead of hanging it (TIM1's reset state has the outputs off).
+    let mut wdg = IndependentWatchdog::new(p.IWDG, board::WATCHDOG_US);
+    wdg.unleash();
+    let mut board = Board::new(
+        load_coefficients(p.FLASH),
+        env!("CARGO_PKG_VERSION"),
+        V_BUS_NOMINAL,
+    );
+    // Reported at every Identify; speed and experiment runs are refused without it.
+    board.set_hardware_stop(hw_stop_armed, cfg!(feature = "run-without-hw-stop"));
+    hall_capture::start(p.TIM4, p.PB6, p.PB7, p.PB8);
+    start_link(spawner, p.USART2, p.PB4, p.PB3);
+    wdg.pet();
+
+    let mut timer = LoopTimer::start();
+    let mut ticker = Ticker::every(Duration::from_micros(
+        (control::CONTROL_PERIOD_S * 1.0e6) as u64,
+    ));
+    let mut send = |m: BoardMsg| link::send(m);
+    loop {
+        ticker.next().await;
+        let timing = timer.begin();
+        wdg.pet();
+        take_host_messages(&mut board, &mut send);
+        let m = measure(&mut sense, &bridge, timing);
+        let drive = board.tick(&m, &mut send);
+        store_if_idle(&mut board, &mut send);
+        actuate(&mut bridge, drive, m.v_bus);
+        publish(&mut board, &bridge, &mut led);
+        timer.end();
+    }
+}
+
+/// TIM1's complementary PWM on the three (high, low) gate pin pairs, outputs off.
+fn start_bridge(
+    tim: Peri<'static, peripherals::TIM1>,
+    u: (
+        Peri<'static, peripherals::PA8>,
+        Peri<'static, peripherals::PC13>,
+    ),
+    v: (
+        Peri<'static, peripherals::PA9>,
+        Peri<'static, peripherals::PA12>,
+    ),
+    w: (
+        Peri<'static, peripherals::PA10>,
+        Peri<'static, peripherals::PB15>,
+    ),
+) -> Bridge<'static> {
     let mut pwm = ComplementaryPwm::new(
-        p.TIM1,
-        Some(PwmPin::new(p.PA8, OutputType::PushPull)),
-        Some(ComplementaryPwmPin::new(p.PC13, OutputType::PushPull)),
-        Some(PwmPin::new(p.PA9, OutputType::PushPull)),
-        Some(ComplementaryPwmPin::new(p.PA12, OutputType::PushPull)),
-        Some(PwmPin::new(p.PA10, OutputType::PushPull)),
-        Some(ComplementaryPwmPin::new(p.PB15, OutputType::PushPull)),
+        tim,
+        Some(PwmPin::new(u.0, OutputType::PushPull)),
+        Some(ComplementaryPwmPin::new(u.1, OutputType::PushPull)),
+        Some(PwmPin::new(v.0, OutputType::PushPull)),
+        Some(ComplementaryPwmPin::new(v.1, OutputType::PushPull)),
+        Some(PwmPin::new(w.0, OutputType::PushPull)),
+        Some(ComplementaryPwmPin::new(w.1, OutputType::PushPull)),
         None,
         None,
         Hertz(board::PWM_HZ),
         CountingMode::CenterAlignedBothInterrupts,
     );
     pwm.set_dead_time(board::DEAD_TIME_TICKS);
-    let mut bridge = Bridge::new(pwm);
+    Bridge::new(pwm)
+}
 
-    let mut led = Output::new(p.PC6, Level::Low, Speed::Low);
-
-    // Current sense: OPAMP1/2/3 as PGA ×16 with the board's bias on VINM0 (board.rs).
-    let mut op1 = OpAmp::new(p.OPAMP1, OpAmpSpeed::HighSpeed);
-    let mut op2 = OpAmp::new(p.OPAMP2, OpAmpSpeed::HighSpeed);
-    let mut op3 = OpAmp::new(p.OPAMP3, OpAmpSpeed::HighSpeed);
-    let mut i_u = op1.pga_biased_ext(p.PA1, p.PA3, p.PA2, OpAmpGain::Mul16);
-    let mut i_v = op2.pga_biased_ext(p.PA7, p.PA5, p.PA6, OpAmpGain::Mul16);
-    let mut i_w = op3.pga_biased_ext(p.PB0, p.PB2, p.PB1, OpAmpGain::Mul16);
-    let mut adc1 = Adc::new(p.ADC1, AdcConfig::default());
-    let mut adc2 = Adc::new(p.ADC2, AdcConfig::default());
-    let mut vbus_pin = p.PA0;
-    let mut ntc_pin = p.PB14;
-    const ST_CURRENT: SampleTime = SampleTime::CYCLES24_5;
-    const ST_VBUS: SampleTime = SampleTime::CYCLES247_5;
-
-    // Zero-current offsets with the bridge off.
-    let (mut zu, mut zv, mut zw) = (0u32, 0u32, 0u32);
-    for _ in 0..ZERO_SAMPLES {
-        zu += adc1.blocking_read(&mut i_u, ST_CURRENT) as u32;
-        zv += adc2.blocking_read(&mut i_v, ST_CURRENT) as u32;
-        zw += adc1.blocking_read(&mut i_w, ST_CURRENT) as u32;
-    }
-    let zero = [
-        (zu / ZERO_SAMPLES) as u16,
-        (zv / ZERO_SAMPLES) as u16,
-        (zw / ZERO_SAMPLES) as u16,
-    ];
-
-    // PB8 is both Hall H3 and BOOT0: unless the option bytes take BOOT0 from nBOOT0
-    // (nSWBOOT0 = 0), a high H3 at reset boots the ROM. Programming option bytes from the
-    // firmware could brick the board on a power cut: report, the engineer sets them once
-    // (docs/bring-up.md).
+/// PB8 is both Hall H3 and BOOT0: unless the option bytes take BOOT0 from nBOOT0
+/// (nSWBOOT0 = 0), a high H3 at reset boots the ROM. Programming option bytes from the
+/// firmware could brick the board on a power cut: report, the engineer sets them once
+/// (docs/bring-up.md).
+fn check_option_bytes() {
     if pac::FLASH.optr().read().n_swboot0() {
         defmt::warn!(
             "option byte nSWBOOT0 = 1: BOOT0 follows PB8 = Hall H3; set nSWBOOT0 = 0, nBOOT0 = 1"
         );
         let _ = OUTGOING.try_send(BoardMsg::Warning(Warning::Boot0FromPin));
     }
+}
 
-    // Hardware over-current stop: calibrated on the op-amps with the bridge off.
-    let hw_stop_armed = match overcurrent::arm(p.DAC3) {
+/// Arms the hardware over-current stop, calibrated on the op-amps with the bridge off;
+/// whether it is armed.
+fn arm_hardware_stop(dac: Peri<'static, peripherals::DAC3>) -> bool {
+    match overcurrent::arm(dac) {
         Ok(a) => {
             defmt::info!("hardware over-current stop armed: {}", a);
             #[cfg(feature = "trip-test")]
@@ -152,17 +202,17 @@ async fn main(spawner: Spawner) {
             let _ = OUTGOING.try_send(BoardMsg::Warning(Warning::NoHardwareStop));
             false
         }
-    };
+    }
+}
 
-    // The watchdog runs from here on: a fault while reading the flash resets the MCU
-    // instead of hanging it (TIM1's reset state has the outputs off).
-    let mut wdg = IndependentWatchdog::new(p.IWDG, board::WATCHDOG_US);
-    wdg.unleash();
-
-    // Coefficients from flash: newest valid slot, or none (identify and commissioning only,
-    // a warning). A slot with a flash ECC error counts as invalid (`storage`).
+/// Coefficients from flash: the newest valid slot, or none (identify and commissioning
+/// only, a warning). A slot with a flash ECC error counts as invalid (`storage`). The slots
+/// go to the serial link's uploads.
+fn load_coefficients(
+    flash: Peri<'static, peripherals::FLASH>,
+) -> Option<(control::blob::Coefficients, u32)> {
     let slots = Slots::new(
-        storage::EccFlash(Flash::new_blocking(p.FLASH)),
+        storage::EccFlash(Flash::new_blocking(flash)),
         link::SLOTS_OFFSET,
         link::SLOT_SIZE,
     );
@@ -180,21 +230,24 @@ async fn main(spawner: Spawner) {
     if loaded.is_none() {
         let _ = OUTGOING.try_send(BoardMsg::Warning(Warning::NoCoefficients));
     }
-    let mut board = Board::new(loaded, env!("CARGO_PKG_VERSION"), V_BUS_NOMINAL);
-    // Reported at every Identify; speed and experiment runs are refused without it.
-    board.set_hardware_stop(hw_stop_armed, cfg!(feature = "run-without-hw-stop"));
+    loaded
+}
 
-    hall_capture::start(p.TIM4, p.PB6, p.PB7, p.PB8);
-
-    // ST-LINK virtual COM port: USART2 TX PB3, RX PB4.
+/// The serial link on the ST-LINK virtual COM port: USART2 RX PB4, TX PB3.
+fn start_link(
+    spawner: Spawner,
+    usart: Peri<'static, peripherals::USART2>,
+    rx: Peri<'static, peripherals::PB4>,
+    tx: Peri<'static, peripherals::PB3>,
+) {
     static TX_BUF: StaticCell<[u8; 512]> = StaticCell::new();
     static RX_BUF: StaticCell<[u8; 256]> = StaticCell::new();
     let mut ucfg = usart::Config::default();
     ucfg.baudrate = board::BAUD;
     let uart = BufferedUart::new(
-        p.USART2,
-        p.PB4,
-        p.PB3,
+        usart,
+        rx,
+        tx,
         TX_BUF.init([0; 512]),
         RX_BUF.init([0; 256]),
         Irqs,
@@ -213,135 +266,156 @@ async fn main(spawner: Spawner) {
         }
         _ => defmt::error!("serial link not started"),
     }
+}
 
-    wdg.pet();
+/// The loop's period and work, timed by the DWT cycle counter (170 MHz; it wraps after
+/// 25 s, far beyond one period, so wrapping differences are exact).
+struct LoopTimer {
+    last_start: Option<u32>,
+    start: u32,
+    /// Cycles the previous period's work took.
+    step_cycles: u32,
+}
 
-    // Loop telemetry from the DWT cycle counter (170 MHz; it wraps after 25 s, far beyond
-    // one period, so wrapping differences are exact).
-    // SAFETY: only DCB and DWT are touched, and nothing else in the firmware uses them.
-    let mut core = unsafe { cortex_m::Peripherals::steal() };
-    core.DCB.enable_trace();
-    core.DWT.enable_cycle_counter();
+/// The timing of the period that starts ([`LoopTimer::begin`]).
+struct Timing {
+    period_us: f32,
+    overrun: bool,
+    step_cycles: u32,
+}
+
+impl LoopTimer {
     const CYCLES_PER_US: f32 = (board::SYSCLK_HZ / 1_000_000) as f32;
     const PERIOD_CYCLES: u32 = (control::CONTROL_PERIOD_S * board::SYSCLK_HZ as f32) as u32;
 
-    let mut ticker = Ticker::every(Duration::from_micros(
-        (control::CONTROL_PERIOD_S * 1.0e6) as u64,
-    ));
-    let mut last_start: Option<u32> = None;
-    let mut step_cycles = 0u32;
-    let mut send = |m: BoardMsg| link::send(m);
-    loop {
-        ticker.next().await;
+    fn start() -> Self {
+        // SAFETY: only DCB and DWT are touched, and nothing else in the firmware uses them.
+        let mut core = unsafe { cortex_m::Peripherals::steal() };
+        core.DCB.enable_trace();
+        core.DWT.enable_cycle_counter();
+        LoopTimer {
+            last_start: None,
+            start: 0,
+            step_cycles: 0,
+        }
+    }
+
+    /// A period starts: its length since the last start; more than one period late means
+    /// the loop overran (the ticker catches up).
+    fn begin(&mut self) -> Timing {
         let start = DWT::cycle_count();
-        wdg.pet();
-        // A tick more than one period late means the loop overran (the ticker catches up).
-        let period_cycles = last_start.map(|s| start.wrapping_sub(s));
-        last_start = Some(start);
-        let overrun = period_cycles.is_some_and(|c| c > 2 * PERIOD_CYCLES);
-        let period_us = period_cycles.map_or(f32::NAN, |c| c as f32 / CYCLES_PER_US);
-
-        // New coefficients (only committed in Idle).
-        if let Ok((c, seq)) = NEW_COEFFS.try_receive() {
-            board.load(c, seq);
+        let period_cycles = self.last_start.map(|s| start.wrapping_sub(s));
+        self.last_start = Some(start);
+        self.start = start;
+        Timing {
+            period_us: period_cycles.map_or(f32::NAN, |c| c as f32 / Self::CYCLES_PER_US),
+            overrun: period_cycles.is_some_and(|c| c > 2 * Self::PERIOD_CYCLES),
+            step_cycles: self.step_cycles,
         }
-        // Host commands: the board logic answers them. A cleared fault re-arms the
-        // hardware over-current stop (while a fault is latched the bridge is off, so a
-        // break flag set meanwhile is stale).
-        while let Ok(msg) = COMMANDS.try_receive() {
-            let faulted = board.fault().is_some();
-            board.handle(&msg, &mut send);
-            if faulted && board.fault().is_none() {
-                bridge::rearm();
+    }
+
+    /// The period's work is done.
+    fn end(&mut self) {
+        self.step_cycles = DWT::cycle_count().wrapping_sub(self.start);
+    }
+}
+
+/// New coefficients (only committed in Idle), then the host's commands: the board logic
+/// answers them. A cleared fault re-arms the hardware over-current stop (while a fault is
+/// latched the bridge is off, so a break flag set meanwhile is stale).
+fn take_host_messages(board: &mut Board, send: &mut impl FnMut(BoardMsg)) {
+    if let Ok((c, seq)) = NEW_COEFFS.try_receive() {
+        board.load(c, seq);
+    }
+    while let Ok(msg) = COMMANDS.try_receive() {
+        let faulted = board.fault().is_some();
+        board.handle(&msg, send);
+        if faulted && board.fault().is_none() {
+            bridge::rearm();
+        }
+    }
+}
+
+/// This period's measurements for the board logic.
+fn measure(sense: &mut Sense, bridge: &Bridge, timing: Timing) -> Measurements {
+    let r = sense.read(bridge);
+    let (edges, edges_overflow, edges_lost) = hall_capture::take_edges();
+    Measurements {
+        hall: hall_capture::hall_state(),
+        edges,
+        edges_overflow,
+        edges_lost,
+        period_us: timing.period_us,
+        step_cycles: timing.step_cycles,
+        now_ticks: hall_capture::now_ticks(),
+        i_vector: r.i_vector,
+        v_bus: r.v_bus,
+        overrun: timing.overrun,
+        hw_overcurrent: bridge::hw_tripped(),
+        temperature_c: r.temperature_c,
+    }
+}
+
+/// A commissioning result to store, once the board is idle (the bridge is off: erasing
+/// stalls the CPU).
+fn store_if_idle(board: &mut Board, send: &mut impl FnMut(BoardMsg)) {
+    if board.mode() == Mode::Idle {
+        SLOTS.lock(|cell| {
+            if let Some(slots) = cell.borrow_mut().as_mut() {
+                store_coefficients(board, slots, send);
             }
-        }
-
-        // Measurements.
-        let v_bus = board::vbus_from_raw(adc1.blocking_read(&mut vbus_pin, ST_VBUS));
-        let temperature_c = board::ntc_celsius(adc1.blocking_read(&mut ntc_pin, ST_VBUS));
-        let lo = bridge::low_phase(bridge::last_step());
-        let raw = match lo {
-            0 => adc1.blocking_read(&mut i_u, ST_CURRENT),
-            1 => adc2.blocking_read(&mut i_v, ST_CURRENT),
-            _ => adc1.blocking_read(&mut i_w, ST_CURRENT),
-        };
-        // The winding current leaves through the low phase's shunt: along the applied vector
-        // it is −i_phase (ASSUMED sign convention; commissioning measures and stores the
-        // sign, `Commissioning::current_sign`).
-        let i_vector = if bridge.is_on() {
-            -board::current_from_raw(raw, zero[lo])
-        } else {
-            0.0
-        };
-        let (edges, edges_overflow, edges_lost) = hall_capture::take_edges();
-        let m = Measurements {
-            hall: hall_capture::hall_state(),
-            edges,
-            edges_overflow,
-            edges_lost,
-            period_us,
-            step_cycles,
-            now_ticks: hall_capture::now_ticks(),
-            i_vector,
-            v_bus,
-            overrun,
-            hw_overcurrent: bridge::hw_tripped(),
-            temperature_c,
-        };
-        let drive = board.tick(&m, &mut send);
-        if board.mode() == Mode::Idle {
-            // A commissioning result to store (the bridge is off: erasing stalls the CPU).
-            SLOTS.lock(|cell| {
-                if let Some(slots) = cell.borrow_mut().as_mut() {
-                    store_coefficients(&mut board, slots, &mut send);
-                }
-            });
-        }
-
-        // Actuation: set the drive; the Hall-edge interrupt commutates between samples.
-        // (volts, reverse, Hall table, held step) of a drive that turns the bridge on.
-        let on = match drive {
-            Drive::Off => None,
-            Drive::SixStep { volts, table } => Some((volts, volts < 0.0, table.sector, None)),
-            Drive::Vector { step, volts } => Some((volts, false, [-1; 8], Some(step))),
-        };
-        match on {
-            None => bridge.off(),
-            Some((volts, reverse, table, hold)) => {
-                bridge::set_drive(bridge::Drive {
-                    on: true,
-                    reverse,
-                    duty: bridge.duty_counts(bridge::duty(volts, v_bus)),
-                    table,
-                    hold,
-                });
-                bridge::commutate();
-            }
-        }
-        MODE.store(
-            if board.mode() == Mode::Idle {
-                link::MODE_IDLE
-            } else {
-                link::MODE_RUNNING
-            },
-            Ordering::Relaxed,
-        );
-        led.set_level(if bridge.is_on() {
-            Level::High
-        } else {
-            Level::Low
         });
-        if let Some(t) = board.take_report() {
-            defmt::info!(
-                "loop: period {=f32} us, jitter {=f32} us, overruns {=u32}, step cycles max {=u32}, Hall edges lost {=u32}",
-                t.period_us,
-                t.jitter_us,
-                t.overruns,
-                t.step_cycles_max,
-                t.edges_lost
-            );
+    }
+}
+
+/// Sets the drive; the Hall-edge interrupt commutates between samples.
+fn actuate(bridge: &mut Bridge, drive: Drive, v_bus: f32) {
+    // (volts, reverse, Hall table, held step) of a drive that turns the bridge on.
+    let on = match drive {
+        Drive::Off => None,
+        Drive::SixStep { volts, table } => Some((volts, volts < 0.0, table.sector, None)),
+        Drive::Vector { step, volts } => Some((volts, false, [-1; 8], Some(step))),
+    };
+    match on {
+        None => bridge.off(),
+        Some((volts, reverse, table, hold)) => {
+            bridge::set_drive(bridge::Drive {
+                on: true,
+                reverse,
+                duty: bridge.duty_counts(bridge::duty(volts, v_bus)),
+                table,
+                hold,
+            });
+            bridge::commutate();
         }
-        step_cycles = DWT::cycle_count().wrapping_sub(start);
+    }
+}
+
+/// The mode for the link task, the LED (on while the bridge is), and the telemetry report
+/// of a completed second through defmt.
+fn publish(board: &mut Board, bridge: &Bridge, led: &mut Output) {
+    MODE.store(
+        if board.mode() == Mode::Idle {
+            link::MODE_IDLE
+        } else {
+            link::MODE_RUNNING
+        },
+        Ordering::Relaxed,
+    );
+    led.set_level(if bridge.is_on() {
+        Level::High
+    } else {
+        Level::Low
+    });
+    if let Some(t) = board.take_report() {
+        defmt::info!(
+            "loop: period {=f32} us, jitter {=f32} us, overruns {=u32}, step cycles max {=u32}, Hall edges lost {=u32}",
+            t.period_us,
+            t.jitter_us,
+            t.overruns,
+            t.step_cycles_max,
+            t.edges_lost
+        );
     }
 }
 
