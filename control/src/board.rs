@@ -633,36 +633,72 @@ impl Board {
         self.report.take()
     }
 
-    /// One control period.
+    /// One control period: telemetry, the faults that need no step, the link watch, then
+    /// commissioning's vector or the control step with its supervision, and the drive.
     pub fn tick(&mut self, m: &Measurements, send: &mut impl FnMut(BoardMsg)) -> Drive {
-        let dt = crate::CONTROL_PERIOD_S;
         self.quiet = self.quiet.saturating_add(1);
+        self.record_timing(m, send);
+        let v_bus = self.v_bus_of(m.v_bus);
+        self.w_max = self.coeffs.speed_limit(v_bus);
+        let u_lim = self.u_limit(v_bus);
+        let i = self.signed_current(m.i_vector);
+        self.hard_faults(m, i, send);
+        self.step.set_current_limit(
+            blob::DERATE_FRACTION
+                * self.coeffs.limits.i_max
+                * temperature_derating(m.temperature_c),
+        );
+        self.watch_link(send);
+        if let Some(drive) = self.commissioning(m, send) {
+            return drive;
+        }
+        let v_override = self.experiment_voltage(u_lim);
+        self.fill_inputs(m, i, u_lim, v_override);
+        let out = self.step.step(&self.inp);
+        self.last_out = out;
+        if self.run != Run::Idle {
+            self.supervise(&out, u_lim, send);
+        }
+        self.last_steps = out.steps;
+        self.drive(&out, i, send)
+    }
+
+    /// The period's timing into the telemetry window; a completed window goes to the host
+    /// while a run streams samples (it logs the telemetry beside them).
+    #[inline(always)]
+    fn record_timing(&mut self, m: &Measurements, send: &mut impl FnMut(BoardMsg)) {
         let timing = PeriodTiming {
             period_us: m.period_us,
             step_cycles: m.step_cycles,
             overrun: m.overrun,
             edges_lost: m.edges_lost,
         };
-        self.report = self.stats.record(timing, dt * 1.0e6);
+        self.report = self.stats.record(timing, crate::CONTROL_PERIOD_S * 1.0e6);
         if let Some(t) = self.report {
-            // While a run streams samples the host logs the telemetry beside them.
             if self.run != Run::Idle {
                 send(BoardMsg::Telemetry(t));
             }
         }
-        let v_bus = self.v_bus_of(m.v_bus);
-        self.w_max = self.coeffs.speed_limit(v_bus);
-        let u_lim = self.u_limit(v_bus);
-        let lim = self.coeffs.limits;
+    }
+
+    /// The current [A] along the applied vector, signed by the drive's direction and the
+    /// commissioned sense sign (+1 without commissioning).
+    #[inline(always)]
+    fn signed_current(&self, i_vector: f32) -> f32 {
         let sign = self
             .coeffs
             .commission
             .map_or(1.0, |c| f32::from(c.current_sign));
         let dir = if self.last_volts < 0.0 { -1.0 } else { 1.0 };
-        let i = m.i_vector * dir * sign;
-        let active = self.run != Run::Idle;
+        i_vector * dir * sign
+    }
 
-        // Faults that do not need the step.
+    /// Latches the faults that need no step: hardware and software over-current,
+    /// temperature, bus voltage, overrun.
+    #[inline(always)]
+    fn hard_faults(&mut self, m: &Measurements, i: f32, send: &mut impl FnMut(BoardMsg)) {
+        let lim = self.coeffs.limits;
+        let active = self.run != Run::Idle;
         let hard = if m.hw_overcurrent {
             Some(Fault::HardwareOverCurrent)
         } else if i.abs() > lim.i_max {
@@ -681,52 +717,70 @@ impl Board {
         if let Some(f) = hard {
             self.latch(f, send);
         }
-        self.step.set_current_limit(
-            blob::DERATE_FRACTION * lim.i_max * temperature_derating(m.temperature_c),
-        );
+    }
 
-        // Link loss.
+    /// Link loss: a speed or experiment run without a frame for [`LINK_TIMEOUT_PERIODS`]
+    /// stops.
+    #[inline(always)]
+    fn watch_link(&mut self, send: &mut impl FnMut(BoardMsg)) {
         if matches!(self.run, Run::Speed | Run::Experiment { .. })
             && self.quiet > LINK_TIMEOUT_PERIODS
         {
             self.stop(send);
             send(BoardMsg::Warning(Warning::LinkLost));
         }
+    }
 
-        // Commissioning: vectors held open loop, no speed loop.
-        if let Run::Commission(c) = &mut self.run {
-            let edges = m.edges.iter().map(|e| e.state);
-            match c.tick(m.hall, edges, m.edges_overflow, m.i_vector) {
-                CommissionStep::Hold { step, volts } => {
-                    self.last_volts = volts;
-                    self.applied = None;
-                    return Drive::Vector { step, volts };
-                }
-                CommissionStep::Done(r) => {
-                    let resistance = c.resistance();
-                    self.commissioned(r, resistance, send);
-                    self.last_volts = 0.0;
-                    self.applied = None;
-                    return Drive::Off;
-                }
-            }
-        }
-
-        let v_override = match self.run {
-            Run::Experiment { signal, duration_s } => {
-                let t = self.k as f32 * dt;
-                if t >= duration_s {
-                    // Ends as a stop does: a speed asked meanwhile is dropped.
-                    self.run = Run::Idle;
-                    self.omega_target = 0.0;
-                    None
-                } else {
-                    let r_i_max = self.coeffs.motor.r * lim.i_max;
-                    Some(excitation::voltage(signal, t, u_lim, r_i_max))
-                }
-            }
-            _ => None,
+    /// Commissioning: the vector to hold open loop (no speed loop), or the end of the run
+    /// (the bridge off); `None` outside commissioning.
+    #[inline(always)]
+    fn commissioning(
+        &mut self,
+        m: &Measurements,
+        send: &mut impl FnMut(BoardMsg),
+    ) -> Option<Drive> {
+        let Run::Commission(c) = &mut self.run else {
+            return None;
         };
+        let edges = m.edges.iter().map(|e| e.state);
+        self.applied = None;
+        Some(match c.tick(m.hall, edges, m.edges_overflow, m.i_vector) {
+            CommissionStep::Hold { step, volts } => {
+                self.last_volts = volts;
+                Drive::Vector { step, volts }
+            }
+            CommissionStep::Done(r) => {
+                let resistance = c.resistance();
+                self.commissioned(r, resistance, send);
+                self.last_volts = 0.0;
+                Drive::Off
+            }
+        })
+    }
+
+    /// The experiment's open-loop voltage now [V] (`None` outside an experiment, or at its
+    /// end, which stops as a stop does: a speed asked meanwhile is dropped).
+    #[inline(always)]
+    fn experiment_voltage(&mut self, u_lim: f32) -> Option<f32> {
+        let Run::Experiment { signal, duration_s } = self.run else {
+            return None;
+        };
+        let t = self.k as f32 * crate::CONTROL_PERIOD_S;
+        if t >= duration_s {
+            self.run = Run::Idle;
+            self.omega_target = 0.0;
+            None
+        } else {
+            let r_i_max = self.coeffs.motor.r * self.coeffs.limits.i_max;
+            Some(excitation::voltage(signal, t, u_lim, r_i_max))
+        }
+    }
+
+    /// The control step's inputs, in place, with the speed reference: the ramp towards the
+    /// asked speed within the speed limit, or in an experiment the measured speed (the
+    /// friction observer follows it; the loop is open).
+    #[inline(always)]
+    fn fill_inputs(&mut self, m: &Measurements, i: f32, u_lim: f32, v_override: Option<f32>) {
         let inp = &mut self.inp;
         inp.hall = m.hall;
         inp.edges.clear();
@@ -738,13 +792,12 @@ impl Board {
         inp.v_bus = u_lim;
         inp.v_applied = self.applied;
         if v_override.is_some() {
-            // Experiments: the reference (and so the friction observer) follows the
-            // measured speed; the loop is open.
             self.omega_ref = self.step.omega();
         } else {
-            // The speed ramp: at most the ramp's acceleration times the period per period,
-            // within the speed limit at this period's bus voltage.
-            let dw = self.coeffs.ramp_acceleration(self.step.current_limit()) * dt;
+            // At most the ramp's acceleration times the period per period, within the speed
+            // limit at this period's bus voltage.
+            let dw =
+                self.coeffs.ramp_acceleration(self.step.current_limit()) * crate::CONTROL_PERIOD_S;
             let w = self.omega_ref;
             let w_max = self.w_max;
             let target = crate::pi::saturate(self.omega_target, -w_max, w_max);
@@ -752,51 +805,44 @@ impl Board {
         }
         inp.omega_ref = self.omega_ref;
         inp.v_override = v_override;
-        let out = self.step.step(&self.inp);
-        self.last_out = out;
+    }
 
-        if self.run != Run::Idle {
-            // Stall: the drive pushes (a large voltage, or held by the current limit) and
-            // the rotor does not step.
-            let pushing = out.v_cmd.abs() > STALL_FRACTION * u_lim
-                || out.faults.contains(Faults::CURRENT_LIMIT);
-            if pushing && out.steps == self.last_steps {
-                self.stall += 1;
-            } else {
-                self.stall = 0;
-            }
-            self.mismatch = if out.faults.contains(Faults::MODEL_MISMATCH) {
-                self.mismatch + 1
-            } else {
-                0
-            };
-            self.overspeed = if out.omega.abs() > OVERSPEED_FACTOR * self.w_max {
-                self.overspeed + 1
-            } else {
-                0
-            };
-            self.sense = if out.faults.contains(Faults::CURRENT_SENSE) {
-                self.sense + 1
-            } else {
-                0
-            };
-            let f = if self.sense >= CURRENT_SENSE_PERIODS {
-                Some(Fault::CurrentSense)
-            } else if self.stall >= STALL_PERIODS {
-                Some(Fault::Stall)
-            } else if self.mismatch >= MISMATCH_PERIODS {
-                Some(Fault::ModelMismatch)
-            } else if self.overspeed >= OVERSPEED_PERIODS {
-                Some(Fault::OverSpeed)
-            } else {
-                fault_of(out.faults)
-            };
-            if let Some(f) = f {
-                self.latch(f, send);
-            }
+    /// Run supervision: stall, model mismatch, current sense, over-speed, the Hall faults;
+    /// counts periods in a row and latches the first fault due.
+    #[inline(always)]
+    fn supervise(&mut self, out: &StepOutputs<f32>, u_lim: f32, send: &mut impl FnMut(BoardMsg)) {
+        let in_row = |n: u32, now: bool| if now { n + 1 } else { 0 };
+        // Stall: the drive pushes (a large voltage, or held by the current limit) and the
+        // rotor does not step.
+        let pushing =
+            out.v_cmd.abs() > STALL_FRACTION * u_lim || out.faults.contains(Faults::CURRENT_LIMIT);
+        self.stall = in_row(self.stall, pushing && out.steps == self.last_steps);
+        self.mismatch = in_row(self.mismatch, out.faults.contains(Faults::MODEL_MISMATCH));
+        self.overspeed = in_row(
+            self.overspeed,
+            out.omega.abs() > OVERSPEED_FACTOR * self.w_max,
+        );
+        self.sense = in_row(self.sense, out.faults.contains(Faults::CURRENT_SENSE));
+        let f = if self.sense >= CURRENT_SENSE_PERIODS {
+            Some(Fault::CurrentSense)
+        } else if self.stall >= STALL_PERIODS {
+            Some(Fault::Stall)
+        } else if self.mismatch >= MISMATCH_PERIODS {
+            Some(Fault::ModelMismatch)
+        } else if self.overspeed >= OVERSPEED_PERIODS {
+            Some(Fault::OverSpeed)
+        } else {
+            fault_of(out.faults)
+        };
+        if let Some(f) = f {
+            self.latch(f, send);
         }
-        self.last_steps = out.steps;
+    }
 
+    /// The drive for the step's command: off while idle or without a valid sector; else
+    /// six-step at the command, with a sample to the host.
+    #[inline(always)]
+    fn drive(&mut self, out: &StepOutputs<f32>, i: f32, send: &mut impl FnMut(BoardMsg)) -> Drive {
         if self.run == Run::Idle || self.step.decoder().sector().is_none() {
             self.last_volts = 0.0;
             self.applied = None;
@@ -806,7 +852,7 @@ impl Board {
         self.applied = Some(out.v_cmd);
         send(BoardMsg::Sample(Sample {
             seq: self.seq,
-            t: self.k as f32 * dt,
+            t: self.k as f32 * crate::CONTROL_PERIOD_S,
             u: out.v_cmd,
             i,
             theta: out.theta,

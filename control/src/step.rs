@@ -552,38 +552,67 @@ impl<F: Float> ControlStep<F> {
         }
     }
 
-    /// One control step.
+    /// One control step: the stages of the module docs, in order.
     pub fn step(&mut self, inp: &StepInputs<F>) -> StepOutputs<F> {
         let mut faults = Faults::default();
-        let dt = self.dt;
-        let finite_or_zero = |x: F, faults: &mut Faults| {
-            if x.is_finite() {
-                x
-            } else {
-                faults.set(Faults::NONFINITE_INPUT);
-                F::zero()
-            }
-        };
-
         // 1-2. Hall edges, present state, angle, velocity.
+        let pos = self.position(inp, &mut faults);
+        // 3. Current corrected for the sensor offset (measured = I + i0).
+        let current =
+            finite_or_flag(inp.i_meas, &mut faults) - effects::total_sensor_offset(&self.effects);
+        let omega_ref = finite_or_flag(inp.omega_ref, &mut faults);
+        let v_bus = self.bus_voltage(inp.v_bus, &mut faults);
+        // 4. Friction: observer + torque effects.
+        let (friction, z) = self.friction(&pos, omega_ref, current, &mut faults);
+        // 5. Compensation voltage and the dead time's loss.
+        let (v_comp, ff) = self.feed_forward(friction, current, v_bus);
+        // 6. PI with feed-forward, or the open-loop override, within the voltage window.
+        let lim = if self.u_max < v_bus {
+            self.u_max
+        } else {
+            v_bus
+        };
+        let (lo, hi) = self.voltage_window(inp.v_applied, pos.omega, current, lim, &mut faults);
+        let v_cmd = self.command(
+            inp.v_override,
+            omega_ref - pos.omega,
+            ff,
+            (lo, hi, lim),
+            &mut faults,
+        );
+        StepOutputs {
+            v_cmd,
+            theta: pos.theta,
+            steps: pos.steps,
+            omega: pos.omega,
+            friction,
+            v_comp,
+            z,
+            faults,
+        }
+    }
+
+    /// Stages 1-2: the Hall edges and the present state through the decoder, the angle and
+    /// the velocity estimate.
+    #[inline(always)]
+    fn position(&mut self, inp: &StepInputs<F>, faults: &mut Faults) -> Position<F> {
         if inp.edges_overflow {
             faults.set(Faults::EDGE_OVERFLOW);
         }
         for e in &inp.edges {
             let u = self.decoder.update(e.state);
-            Self::hall_fault(&mut faults, u.fault);
+            Self::hall_fault(faults, u.fault);
             if u.dir != 0 {
                 self.estimator.on_edge(e.ticks, u.dir);
             }
         }
         let u = self.decoder.update(inp.hall);
-        Self::hall_fault(&mut faults, u.fault);
+        Self::hall_fault(faults, u.fault);
         if u.dir != 0 {
             // A change without a captured edge: time it at the sample.
             self.estimator.on_edge(inp.now_ticks, u.dir);
         }
         let steps = self.decoder.steps();
-        let theta: F = self.decoder.angle();
         // The estimator sees the angle relative to a reference re-based every REBASE_STEPS
         // steps, so that f32 angle differences stay exact over long runs.
         let rel = steps.wrapping_sub(self.steps_ref);
@@ -593,32 +622,47 @@ impl<F: Float> ControlStep<F> {
                 .rebase(F::from(rel).unwrap() * self.step_angle);
         }
         let theta_rel = F::from(steps.wrapping_sub(self.steps_ref)).unwrap() * self.step_angle;
-        let omega = self.estimator.update(theta_rel, inp.now_ticks);
-        // Periodic position terms see the angle within one revolution (exact in f32); the
-        // SINDYc model sees the unwrapped angle, as the fit does (module docs).
-        let theta_rev: F = self.decoder.angle_in_rev();
+        Position {
+            steps,
+            theta: self.decoder.angle(),
+            // Periodic position terms see the angle within one revolution (exact in f32);
+            // the SINDYc model sees the unwrapped angle, as the fit does (module docs).
+            theta_rev: self.decoder.angle_in_rev(),
+            omega: self.estimator.update(theta_rel, inp.now_ticks),
+        }
+    }
 
-        // 3. Current corrected for the sensor offset (measured = I + i0).
-        let i_meas = finite_or_zero(inp.i_meas, &mut faults);
-        let current = i_meas - effects::total_sensor_offset(&self.effects);
-        let omega_ref = finite_or_zero(inp.omega_ref, &mut faults);
-        let v_bus = if inp.v_bus.is_finite() && inp.v_bus > F::zero() {
-            inp.v_bus
+    /// The measured bus voltage, or the nominal one (flagged) when it is not valid.
+    #[inline(always)]
+    fn bus_voltage(&self, v_bus: F, faults: &mut Faults) -> F {
+        if v_bus.is_finite() && v_bus > F::zero() {
+            v_bus
         } else {
             faults.set(Faults::BUS_INVALID);
             self.v_bus_nominal
-        };
+        }
+    }
 
-        // 4. Friction: observer + torque effects.
-        let v_obs = observer_velocity(omega, omega_ref, self.v_res);
+    /// Stage 4: the friction torque F_f [N·m] (observer + torque effects) and the
+    /// observer's state z; a non-finite estimate resets the observer.
+    #[inline(always)]
+    fn friction(
+        &mut self,
+        pos: &Position<F>,
+        omega_ref: F,
+        current: F,
+        faults: &mut Faults,
+    ) -> (F, F) {
+        let dt = self.dt;
+        let v_obs = observer_velocity(pos.omega, omega_ref, self.v_res);
         let (f_obs, z) = match &mut self.observer {
             Observer::None => (F::zero(), F::zero()),
             Observer::Lugre(o) => (o.step_compensation(v_obs, dt), o.z),
-            Observer::Sindy(o) => (o.step(theta, v_obs, current, self.u_prev, dt), o.z),
+            Observer::Sindy(o) => (o.step(pos.theta, v_obs, current, self.u_prev, dt), o.z),
         };
         let ex = EffectInputs {
-            theta: theta_rev,
-            omega,
+            theta: pos.theta_rev,
+            omega: pos.omega,
             current,
             kt: self.motor.kt,
         };
@@ -632,8 +676,14 @@ impl<F: Float> ControlStep<F> {
                 Observer::Sindy(o) => o.reset(),
             }
         }
+        (friction, z)
+    }
 
-        // 5. Compensation voltage (R follows the heat state of a thermal effect).
+    /// Stage 5: the weighted compensation voltage `g·V_c` [V] (R follows the heat state of
+    /// a thermal effect), and the whole feed-forward with the dead time's loss [V].
+    #[inline(always)]
+    fn feed_forward(&mut self, friction: F, current: F, v_bus: F) -> (F, F) {
+        let dt = self.dt;
         let mut heat = F::zero();
         for (h, e) in self.heat.iter_mut().zip(self.effects.iter()) {
             if let Effect::Thermal { .. } = e {
@@ -657,13 +707,21 @@ impl<F: Float> ControlStep<F> {
             } else {
                 F::zero()
             };
+        (v_comp, ff)
+    }
 
-        // 6. PI with feed-forward, or the open-loop override, within the voltage window.
-        let lim = if self.u_max < v_bus {
-            self.u_max
-        } else {
-            v_bus
-        };
+    /// Stage 6a: the voltage window [V] within the limit `lim` from the model
+    /// ([`current_window`]) and from the measured current ([`measured_current_window`]),
+    /// the tighter of both, or the one to trust when they contradict each other.
+    #[inline(always)]
+    fn voltage_window(
+        &mut self,
+        v_applied: Option<F>,
+        omega: F,
+        current: F,
+        lim: F,
+        faults: &mut Faults,
+    ) -> (F, F) {
         // The model's window uses the plain winding resistance: the heat state of a thermal
         // effect is fitted, may be of either sign, and would widen or invert the window.
         let emf = self.motor.kb * omega;
@@ -671,7 +729,7 @@ impl<F: Float> ControlStep<F> {
         // After a period with the bridge off the terminal voltage was the back-EMF, which
         // only the model knows.
         let r = self.motor.r;
-        let (u_prev, emf_meas) = match inp.v_applied {
+        let (u_prev, emf_meas) = match v_applied {
             Some(u) if u.is_finite() => (u, Some(u - r * current)),
             _ => (emf, None),
         };
@@ -705,7 +763,7 @@ impl<F: Float> ControlStep<F> {
                 r,
                 self.i_limit,
             );
-        let (lo, hi) = if sense_implausible {
+        if sense_implausible {
             faults.set(Faults::CURRENT_SENSE);
             (lo, hi)
         } else if hi < lo_m || lo > hi_m {
@@ -713,18 +771,30 @@ impl<F: Float> ControlStep<F> {
             (lo_m, hi_m)
         } else {
             (saturate(lo, lo_m, hi_m), saturate(hi, lo_m, hi_m))
-        };
+        }
+    }
+
+    /// Stage 6b: the voltage command [V] in the window `(lo, hi)` within `lim`: the PI on the
+    /// speed error `err` with the feed-forward `ff`, or the open-loop override.
+    #[inline(always)]
+    fn command(
+        &mut self,
+        v_override: Option<F>,
+        err: F,
+        ff: F,
+        (lo, hi, lim): (F, F, F),
+        faults: &mut Faults,
+    ) -> F {
         self.pi.set_limits(lo, hi);
-        let err = omega_ref - omega;
-        let v_cmd = match inp.v_override {
+        let v_cmd = match v_override {
             Some(v) => {
-                let v = saturate(finite_or_zero(v, &mut faults), lo, hi);
+                let v = saturate(finite_or_flag(v, faults), lo, hi);
                 // Bumpless return to closed loop: the integral takes what the PI would need.
                 let p = self.pi.params;
                 self.pi.integral = saturate(v - p.kp * err - ff, lo, hi);
                 v
             }
-            None => self.pi.step_ff(err, ff, dt),
+            None => self.pi.step_ff(err, ff, self.dt),
         };
         let v_cmd = if v_cmd.is_finite() {
             v_cmd
@@ -740,16 +810,30 @@ impl<F: Float> ControlStep<F> {
             faults.set(Faults::CURRENT_LIMIT);
         }
         self.u_prev = v_cmd;
-        StepOutputs {
-            v_cmd,
-            theta,
-            steps,
-            omega,
-            friction,
-            v_comp,
-            z,
-            faults,
-        }
+        v_cmd
+    }
+}
+
+/// The rotor's position and speed from stages 1-2 of [`ControlStep::step`].
+struct Position<F> {
+    /// Hall steps since the start (exact).
+    steps: i32,
+    /// Unwrapped angle [rad].
+    theta: F,
+    /// Angle within one revolution [rad].
+    theta_rev: F,
+    /// Velocity estimate [rad/s].
+    omega: F,
+}
+
+/// `x`, or 0 with [`Faults::NONFINITE_INPUT`] set when it is not finite.
+#[inline(always)]
+fn finite_or_flag<F: Float>(x: F, faults: &mut Faults) -> F {
+    if x.is_finite() {
+        x
+    } else {
+        faults.set(Faults::NONFINITE_INPUT);
+        F::zero()
     }
 }
 
