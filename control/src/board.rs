@@ -1025,6 +1025,64 @@ mod tests {
     }
 
     #[test]
+    fn bus_voltage_overrun_and_invalid_hall_faults_stop_a_run() {
+        let lim = identified().limits;
+        let cases = [
+            (
+                Measurements {
+                    v_bus: lim.vbus_max + 1.0,
+                    ..at(25.0)
+                },
+                Fault::OverVoltage,
+            ),
+            (
+                Measurements {
+                    v_bus: lim.vbus_min - 1.0,
+                    ..at(25.0)
+                },
+                Fault::UnderVoltage,
+            ),
+            (
+                Measurements {
+                    overrun: true,
+                    ..at(25.0)
+                },
+                Fault::Overrun,
+            ),
+            (
+                Measurements {
+                    hall: 0b111,
+                    ..at(25.0)
+                },
+                Fault::InvalidHall,
+            ),
+        ];
+        for (m, fault) in cases {
+            let (mut b, mut out) = running_board();
+            assert_eq!(b.tick(&m, &mut |m| out.push(m)), Drive::Off, "{fault:?}");
+            assert_eq!(b.fault(), Some(fault));
+            assert_eq!(b.mode(), Mode::Idle);
+            assert!(out.contains(&BoardMsg::Fault(fault)), "{out:?}");
+        }
+        // Idle, an under-voltage or an overrun is no fault (the supply may be off); an
+        // over-voltage always is.
+        let mut b = Board::new(Some((identified(), 1)), "test", 22.2);
+        let low = Measurements {
+            v_bus: lim.vbus_min - 1.0,
+            overrun: true,
+            ..at(25.0)
+        };
+        b.tick(&low, &mut |_| {});
+        assert_eq!(b.fault(), None);
+        let high = Measurements {
+            v_bus: lim.vbus_max + 1.0,
+            ..at(25.0)
+        };
+        b.tick(&high, &mut |_| {});
+        assert_eq!(b.fault(), Some(Fault::OverVoltage));
+    }
+
+    #[test]
     fn lost_hall_edges_stop_a_run_and_are_reported() {
         let (mut b, mut out) = running_board();
         let m = Measurements {

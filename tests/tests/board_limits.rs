@@ -547,6 +547,47 @@ fn a_load_step_at_speed_holds_the_current_limit() {
 }
 
 #[test]
+fn a_load_that_drives_the_motor_past_the_speed_limit_is_an_over_speed_fault() {
+    // A 2 Ω winding (so that the bridge can still hold the braking current well past the
+    // speed limit: `(K_b·ω − V_bus)/R` stays below i_max up to about 570 rad/s) at 200 rad/s,
+    // then a load drives the rotor with 1.1 N·m, more than the current limit's 8 A can brake
+    // (0.57 N·m). The speed estimate passes 1.25 times the speed limit and the board stops
+    // with an over-speed fault before the current reaches its trip.
+    let mut co = paper_coefficients(24.0, 10.0);
+    co.motor.r = 2.0;
+    let mut plant = EmulatorConfig::paper().with_extra_load(|x| if x.t > 1.5 { -1.1 } else { 0.0 });
+    plant.motor.r = 2.0;
+    let mut slots = control::slots::Slots::new(RamFlash::new(None), 0, PAGE as u32).unwrap();
+    slots
+        .store(&motorid::board::coeffs::encode(&co).unwrap())
+        .unwrap();
+    let mut sim = BoardSim::new(plant, Wiring::default(), slots.into_inner()).unwrap();
+    let w_max = f64::from(sim.board().speed_limit());
+    sim.handle(&HostMsg::SetSpeed { omega_ref: 200.0 });
+    sim.handle(&HostMsg::SetMode { mode: Mode::Speed });
+    // Up to the fault: the true top speed, the estimate's and the peak current.
+    let (mut top, mut top_est, mut peak, mut fault) = (0.0f64, 0.0f32, 0.0f64, None);
+    for k in 0..400 {
+        if k % 50 == 0 {
+            sim.handle(&HostMsg::Heartbeat);
+        }
+        sim.tick();
+        top = top.max(sim.hardware().plant().truth().omega);
+        top_est = top_est.max(sim.board().last_step_outputs().omega);
+        peak = peak.max(sim.hardware().peak_current());
+        fault = sim.board().fault();
+        if fault.is_some() {
+            break;
+        }
+    }
+    eprintln!("driving load: fault {fault:?}, top {top:.0} rad/s (estimate {top_est:.0}, limit {w_max:.0}), peak {peak:.2} A");
+    assert_eq!(fault, Some(Fault::OverSpeed), "top {top} rad/s");
+    let threshold = control::board::OVERSPEED_FACTOR * w_max as f32;
+    assert!(top_est > threshold, "estimate {top_est} rad/s");
+    assert!(peak < f64::from(co.limits.i_max), "peak {peak} A");
+}
+
+#[test]
 fn the_speed_limit_follows_the_measured_bus_voltage() {
     // u_max 24 V: at the nominal 22.2 V the limit is 0.95·22.2/K_b = 296 rad/s; a bus
     // sagging to 14 V lowers it to 187 rad/s: the running reference comes down to it, a
