@@ -3,7 +3,7 @@
 //! The periodic terms the board evaluates (cogging `sin(k·θ)`, SINDYc's `sin(k·x)` and
 //! `cos(k·x)`, the multisine excitations) need a sine and a cosine. `libm`'s `sinf`/`cosf`
 //! reduce their argument and evaluate their kernels in f64, which a Cortex-M4F does in
-//! software (about 5.6 KiB of flash for the f64 routines). Here everything is f32:
+//! software (about 7 KB of flash with the f64 routines they pull in). Here everything is f32:
 //!
 //! 1. Range reduction (Cody-Waite): `k = round(x·2/π)`, `r = x − k·π/2` with π/2 split into
 //!    three f32 parts `P1 + P2 + P3`; `P1` and `P2` have at most 12 significant bits, so
