@@ -243,6 +243,8 @@ pub struct Board {
     applied: Option<f32>,
     /// Speed limit at the bus voltage of the last period [rad/s] ([`Board::speed_limit`]).
     w_max: f32,
+    /// Bus voltage of the last period [V] (measured, else the nominal one).
+    v_bus: f32,
     /// The hardware over-current stop is armed ([`Board::set_hardware_stop`]; false until
     /// the transport says so).
     hw_stop_armed: bool,
@@ -313,6 +315,7 @@ impl Board {
             last_volts: 0.0,
             applied: None,
             w_max: 0.0,
+            v_bus: v_bus_nominal,
             hw_stop_armed: false,
             run_without_hw_stop: false,
             commission: CommissionOutcome::NotRun,
@@ -526,7 +529,7 @@ impl Board {
             | HostMsg::Commission => {
                 let volts = self.commission_volts();
                 let i_limit = COMMISSION_I_FRACTION * self.coeffs.limits.i_max;
-                let v_dead = dead_time_drop(self.v_bus_nominal);
+                let v_dead = dead_time_drop(self.v_bus);
                 self.start(Run::Commission(Commissioner::new(volts, i_limit, v_dead)));
                 self.commission = CommissionOutcome::Running;
                 BoardMsg::Ack
@@ -639,6 +642,7 @@ impl Board {
         self.quiet = self.quiet.saturating_add(1);
         self.record_timing(m, send);
         let v_bus = self.v_bus_of(m.v_bus);
+        self.v_bus = v_bus;
         self.w_max = self.coeffs.speed_limit(v_bus);
         let u_lim = self.u_limit(v_bus);
         let i = self.signed_current(m.i_vector);
