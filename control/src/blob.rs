@@ -166,6 +166,7 @@ pub struct Coefficients {
     pub pole_pairs: u8,
     /// Hall state (bits H3 H2 H1, 0..7) to commutation sector (0..5, electrical angle
     /// sector·60°); [`HALL_INVALID`] marks the two impossible states.
+    #[serde(with = "crate::serde_array")]
     pub hall_table: [u8; 8],
     /// Velocity estimator.
     pub estimator: Estimator,

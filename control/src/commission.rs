@@ -66,6 +66,7 @@ pub const DEFAULT_SEQUENCE: [u8; 6] = [1, 3, 2, 6, 4, 5];
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Commissioning {
     /// Hall state seen with bridge step `k` held, k = 0..5 (sector `k`'s state).
+    #[serde(with = "crate::serde_array")]
     pub sequence: [u8; 6],
     /// The sequence is the default 1-3-2-6-4-5 order backward (motor phases or Hall
     /// sensors wired for the other direction).

@@ -206,6 +206,7 @@ pub struct EffectInputs<F> {
 
 /// One physical effect with its parameters (SI units).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(bound(deserialize = "F: Deserialize<'de> + Copy + Default"))]
 pub enum Effect<F> {
     /// Coulomb friction `fc·sgn(ω)` [N·m].
     Coulomb { fc: F },
@@ -258,6 +259,7 @@ pub enum Effect<F> {
         bins: u8,
         lo: F,
         hi: F,
+        #[serde(with = "crate::serde_array")]
         values: [F; TABLE_MAX_BINS],
     },
 }

@@ -19,6 +19,7 @@
 //! | [`excitation`] | open-loop experiment signals, relative to the voltage limit |
 //! | [`blob`] | the coefficient blob (postcard + magic + version + CRC32) |
 //! | [`frame`] | the serial frame codec (COBS + postcard + CRC) |
+//! | [`serde_array`] | fixed-size arrays through serde in a loop (smaller decoder) |
 //! | [`slots`] | two-slot flash storage of coefficients, power-cut safe |
 //! | [`telemetry`] | loop period, jitter, overruns, cycles per step, lost Hall edges |
 //! | [`trig`] | sine and cosine in f32 arithmetic for the board |
@@ -36,6 +37,7 @@ pub mod hall;
 pub mod lugre;
 pub mod motor;
 pub mod pi;
+pub mod serde_array;
 pub mod sindy;
 pub mod slots;
 pub mod step;

@@ -86,6 +86,7 @@ pub enum ObserverConfig<F> {
 /// Everything the step needs, serialisable (the coefficient blob carries it or converts into
 /// it).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(bound(deserialize = "F: Deserialize<'de> + Copy + Default"))]
 pub struct StepConfig<F> {
     pub motor: MotorParams<F>,
     pub pole_pairs: u16,
