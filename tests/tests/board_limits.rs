@@ -822,6 +822,23 @@ fn an_inverted_current_sense_without_commissioning_stops_near_the_current_limit(
     assert!(peak <= lim + margin(&co), "peak {peak} A, limit {lim} A");
     // After the fault the bridge is off: the current decays to nothing.
     assert!(p.last().unwrap().end_i < 0.1, "{:?}", p.last());
+
+    // An open-loop experiment from rest (a steady 10 V, far above the 1.7 V that drive the
+    // limit at standstill) goes through the same window: the same stop.
+    let mut slots = control::slots::Slots::new(RamFlash::new(None), 0, PAGE as u32).unwrap();
+    slots
+        .store(&motorid::board::coeffs::encode(&co).unwrap())
+        .unwrap();
+    let mut sim = BoardSim::new(EmulatorConfig::paper(), wiring, slots.into_inner()).unwrap();
+    sim.handle(&HostMsg::StartExperiment {
+        signal: Excitation::Steady { volts: 10.0 },
+        duration_s: 1.0,
+    });
+    let (p, fault) = run(&mut sim, 20);
+    let peak = peak_current(&p);
+    eprintln!("inverted sense, steady 10 V: fault {fault:?}, peak {peak:.2} A");
+    assert_eq!(fault, Some(Fault::CurrentSense), "peak {peak} A");
+    assert!(peak <= lim + margin(&co), "peak {peak} A, limit {lim} A");
 }
 
 #[test]
