@@ -2,7 +2,7 @@
 //! `z` from the time-delay (Hankel) embedding of that velocity (the paper's §4.3, eq. 46),
 //! fitted on all fitting logs and scaled to unit RMS (the paper normalises `z` too; its scale
 //! is arbitrary and absorbed by the coefficients).
-use super::{SindycOptions, VELOCITY_HALF};
+use super::{velocity_half, SindycOptions};
 use crate::ident::hankel::{HankelEmbedding, Selection};
 use crate::log::MotorLog;
 use anyhow::{bail, Context, Result};
@@ -30,7 +30,7 @@ impl HiddenState {
     pub fn of_logs(logs: &[MotorLog], opts: &SindycOptions) -> Result<HiddenState> {
         let xdot: Vec<Vec<f64>> = logs
             .iter()
-            .map(|l| centred_velocity(&l.t, &l.theta, VELOCITY_HALF))
+            .map(|l| centred_velocity(&l.t, &l.theta, velocity_half(l)))
             .collect();
         let all: Vec<f64> = xdot.iter().flatten().copied().collect();
         let embedding = match HankelEmbedding::fit(&all, opts.delays, opts.selection) {
@@ -117,7 +117,7 @@ mod tests {
     fn the_centred_velocity_of_a_ramp_is_its_slope_everywhere() {
         let t: Vec<f64> = (0..50).map(|k| 0.012 * k as f64).collect();
         let theta: Vec<f64> = t.iter().map(|t| 3.0 * t - 1.0).collect();
-        let v = centred_velocity(&t, &theta, VELOCITY_HALF);
+        let v = centred_velocity(&t, &theta, 5);
         assert!(v.iter().all(|v| (v - 3.0).abs() < 1e-9), "{v:?}");
     }
 
@@ -166,7 +166,7 @@ mod tests {
             .unwrap()
             .log_with_truth();
         let zt = a.extra("z_true").unwrap();
-        let v = centred_velocity(&a.t, &a.theta, VELOCITY_HALF);
+        let v = centred_velocity(&a.t, &a.theta, velocity_half(&a));
         let paper = HankelEmbedding::fit(&v, 60, Selection::EnergyBelow(0.001)).unwrap();
         let zp = paper.extract(&v).unwrap();
         let broad = HankelEmbedding::fit(&v, 60, Selection::Range(2, 60)).unwrap();
