@@ -26,19 +26,18 @@ impl HiddenState {
     /// Velocities, the Hankel embedding fitted on all of them, and `z` of each log. When no
     /// component is below the energy threshold (a noisy velocity has a flat tail), the
     /// embedding falls back to the paper's split: the lower half of the spectrum (its
-    /// k = 31..60).
+    /// k = 31..60 of 60 delays).
     pub fn of_logs(logs: &[MotorLog], opts: &SindycOptions) -> Result<HiddenState> {
         let xdot: Vec<Vec<f64>> = logs
             .iter()
             .map(|l| centred_velocity(&l.t, &l.theta, velocity_half(l)))
             .collect();
         let all: Vec<f64> = xdot.iter().flatten().copied().collect();
-        let embedding = match HankelEmbedding::fit(&all, opts.delays, opts.selection) {
-            Err(_) if matches!(opts.selection, Selection::EnergyBelow(_)) => HankelEmbedding::fit(
-                &all,
-                opts.delays,
-                Selection::Range(opts.delays / 2 + 1, opts.delays),
-            ),
+        let delays = opts.delays(logs[0].sample_period());
+        let embedding = match HankelEmbedding::fit(&all, delays, opts.selection) {
+            Err(_) if matches!(opts.selection, Selection::EnergyBelow(_)) => {
+                HankelEmbedding::fit(&all, delays, Selection::Range(delays / 2 + 1, delays))
+            }
             r => r,
         }
         .with_context(|| format!("{}: column 'theta'", crate::log::echo_path(&logs[0].source)))?;

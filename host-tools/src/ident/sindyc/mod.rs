@@ -5,11 +5,11 @@
 //! # Stages
 //! 1. **Embedding** ([`embedding`]): `x` = the log's angle; `ẋ` = centred slope of the angle
 //!    over ±[`VELOCITY_HALF_S`] (±5 samples at 12 ms: the same span as the firmware's
-//!    10-sample moving average, but
-//!    centred, so it is not 54 ms late; a Hall-quantised angle allows no sharper estimate);
-//!    `z` = the Hankel embedding of `ẋ` (60 delays, energy < 0.001: the paper's settings;
-//!    the lower half of the spectrum when nothing is below 0.001), fitted on all fitting
-//!    logs and scaled to unit RMS.
+//!    10-sample moving average, but centred, so it is not 54 ms late; a Hall-quantised
+//!    angle allows no sharper estimate); `z` = the Hankel embedding of `ẋ` (delays over
+//!    0.72 s, energy < 0.001: the paper's settings, 60 delays at 12 ms; the lower half of
+//!    the spectrum when nothing is below 0.001), fitted on all fitting logs and scaled to
+//!    unit RMS.
 //! 2. **Regression rows** ([`rows`]): the weak form of each equation (no derivative of
 //!    quantised data is taken), stacked over the logs into normal equations.
 //! 3. **Structure search** ([`search`]): STLSQ for several thresholds, each also without the
@@ -71,6 +71,12 @@ use search::Search;
 /// 0.5 rad/s, below the 0.79 rad/s velocity resolution of the paper's sensor. With `z`
 /// normalised to unit RMS, `tanh(a·z)` is then a sign of `z` too.
 pub const DEFAULT_A: f64 = 5.0;
+/// Sample period [s] of the paper's logs, for which its settings in samples were made.
+const PAPER_SAMPLE_PERIOD: f64 = 0.012;
+/// Most delays of the Hankel embedding (the model file's bound): its eigen-decomposition
+/// costs `m³`, a second at 1000.
+pub const MAX_DELAYS: usize = 1000;
+
 /// Start of the Stribeck velocity `vs` [rad/s] of the Stribeck term the refinement tries,
 /// times the logs' [`crate::scales::velocity_scale`]: the middle (geometrically) of the
 /// decade either side the refinement may move it over, 0.5–50 rad/s on the paper's motor.
@@ -88,8 +94,8 @@ pub fn velocity_half(log: &MotorLog) -> usize {
 #[derive(Debug, Clone, PartialEq)]
 pub struct SindycOptions {
     pub plant: Plant,
-    /// Number of delays of the Hankel embedding (paper: 60).
-    pub delays: usize,
+    /// Time [s] the delays of the Hankel embedding span (paper: 60 delays at 12 ms).
+    pub delay_span: f64,
     /// Which singular components make `z` (paper: energy below 0.001).
     pub selection: Selection,
     /// tanh gain `a`.
@@ -107,13 +113,21 @@ impl Default for SindycOptions {
     fn default() -> Self {
         SindycOptions {
             plant: Plant::Voltage,
-            delays: DEFAULT_DELAYS,
+            delay_span: DEFAULT_DELAYS as f64 * PAPER_SAMPLE_PERIOD,
             selection: Selection::EnergyBelow(DEFAULT_ENERGY),
             a: DEFAULT_A,
             stlsq: StlsqOptions::default(),
             tolerance: 0.5,
             velocity_window: 10,
         }
+    }
+}
+
+impl SindycOptions {
+    /// Delays of the Hankel embedding of logs sampled every `dt` [s]: [`Self::delay_span`]
+    /// in samples, from 2 to [`MAX_DELAYS`].
+    pub fn delays(&self, dt: f64) -> usize {
+        crate::scales::samples_for(self.delay_span, dt, MAX_DELAYS).max(2)
     }
 }
 
@@ -238,7 +252,9 @@ fn check_logs(fit_logs: &[MotorLog], val_logs: &[MotorLog], opts: &SindycOptions
         bail!("SINDYc: no data to fit");
     }
     let voltage = opts.plant == Plant::Voltage;
-    let needed = 2 * opts.delays.max(weak_form::WINDOW);
+    let needed = 2 * opts
+        .delays(fit_logs[0].sample_period())
+        .max(weak_form::WINDOW);
     for log in fit_logs.iter().chain(val_logs) {
         if voltage && log.i.is_none() {
             bail!(
@@ -339,7 +355,7 @@ mod tests {
     }
 
     #[test]
-    fn the_velocity_span_is_a_duration_of_the_log() {
+    fn the_velocity_span_and_the_delays_are_durations_of_the_log() {
         let log_at = |dt: f64| MotorLog {
             t: (0..2000).map(|k| k as f64 * dt).collect(),
             u: vec![0.0; 2000],
@@ -349,6 +365,12 @@ mod tests {
         assert_eq!(velocity_half(&log_at(0.012)), 5);
         assert_eq!(velocity_half(&log_at(0.001)), 60);
         assert_eq!(velocity_half(&log_at(0.1)), 1);
+        // The embedding's delays: the paper's 60 at 12 ms, the same span at 1 ms, bounded.
+        let opts = SindycOptions::default();
+        assert_eq!(opts.delays(0.012), 60);
+        assert_eq!(opts.delays(0.001), 720);
+        assert_eq!(opts.delays(1e-5), MAX_DELAYS);
+        assert_eq!(opts.delays(1.0), 2);
     }
 
     #[test]
