@@ -2,7 +2,7 @@
 //! `z` from the time-delay (Hankel) embedding of that velocity (the paper's §4.3, eq. 46),
 //! fitted on all fitting logs and scaled to unit RMS (the paper normalises `z` too; its scale
 //! is arbitrary and absorbed by the coefficients).
-use super::{SindycOptions, VELOCITY_HALF};
+use super::{velocity_half, SindycOptions};
 use crate::ident::hankel::{HankelEmbedding, Selection};
 use crate::log::MotorLog;
 use anyhow::{bail, Context, Result};
@@ -26,19 +26,18 @@ impl HiddenState {
     /// Velocities, the Hankel embedding fitted on all of them, and `z` of each log. When no
     /// component is below the energy threshold (a noisy velocity has a flat tail), the
     /// embedding falls back to the paper's split: the lower half of the spectrum (its
-    /// k = 31..60).
+    /// k = 31..60 of 60 delays).
     pub fn of_logs(logs: &[MotorLog], opts: &SindycOptions) -> Result<HiddenState> {
         let xdot: Vec<Vec<f64>> = logs
             .iter()
-            .map(|l| centred_velocity(&l.t, &l.theta, VELOCITY_HALF))
+            .map(|l| centred_velocity(&l.t, &l.theta, velocity_half(l)))
             .collect();
         let all: Vec<f64> = xdot.iter().flatten().copied().collect();
-        let embedding = match HankelEmbedding::fit(&all, opts.delays, opts.selection) {
-            Err(_) if matches!(opts.selection, Selection::EnergyBelow(_)) => HankelEmbedding::fit(
-                &all,
-                opts.delays,
-                Selection::Range(opts.delays / 2 + 1, opts.delays),
-            ),
+        let delays = opts.delays(logs[0].sample_period());
+        let embedding = match HankelEmbedding::fit(&all, delays, opts.selection) {
+            Err(_) if matches!(opts.selection, Selection::EnergyBelow(_)) => {
+                HankelEmbedding::fit(&all, delays, Selection::Range(delays / 2 + 1, delays))
+            }
             r => r,
         }
         .with_context(|| format!("{}: column 'theta'", crate::log::echo_path(&logs[0].source)))?;
@@ -117,7 +116,7 @@ mod tests {
     fn the_centred_velocity_of_a_ramp_is_its_slope_everywhere() {
         let t: Vec<f64> = (0..50).map(|k| 0.012 * k as f64).collect();
         let theta: Vec<f64> = t.iter().map(|t| 3.0 * t - 1.0).collect();
-        let v = centred_velocity(&t, &theta, VELOCITY_HALF);
+        let v = centred_velocity(&t, &theta, 5);
         assert!(v.iter().all(|v| (v - 3.0).abs() < 1e-9), "{v:?}");
     }
 
@@ -166,7 +165,7 @@ mod tests {
             .unwrap()
             .log_with_truth();
         let zt = a.extra("z_true").unwrap();
-        let v = centred_velocity(&a.t, &a.theta, VELOCITY_HALF);
+        let v = centred_velocity(&a.t, &a.theta, velocity_half(&a));
         let paper = HankelEmbedding::fit(&v, 60, Selection::EnergyBelow(0.001)).unwrap();
         let zp = paper.extract(&v).unwrap();
         let broad = HankelEmbedding::fit(&v, 60, Selection::Range(2, 60)).unwrap();

@@ -4,11 +4,12 @@
 //!
 //! # Stages
 //! 1. **Embedding** ([`embedding`]): `x` = the log's angle; `ẋ` = centred slope of the angle
-//!    over ±5 samples (the same 10-sample span as the firmware's moving average, but
-//!    centred, so it is not 54 ms late; a Hall-quantised angle allows no sharper estimate);
-//!    `z` = the Hankel embedding of `ẋ` (60 delays, energy < 0.001: the paper's settings;
-//!    the lower half of the spectrum when nothing is below 0.001), fitted on all fitting
-//!    logs and scaled to unit RMS.
+//!    over ±[`VELOCITY_HALF_S`] (±5 samples at 12 ms: the same span as the firmware's
+//!    10-sample moving average, but centred, so it is not 54 ms late; a Hall-quantised
+//!    angle allows no sharper estimate); `z` = the Hankel embedding of `ẋ` (delays over
+//!    0.72 s, energy < 0.001: the paper's settings, 60 delays at 12 ms; the lower half of
+//!    the spectrum when nothing is below 0.001), fitted on all fitting logs and scaled to
+//!    unit RMS.
 //! 2. **Regression rows** ([`rows`]): the weak form of each equation (no derivative of
 //!    quantised data is taken), stacked over the logs into normal equations.
 //! 3. **Structure search** ([`search`]): STLSQ for several thresholds, each also without the
@@ -21,13 +22,17 @@
 //!    so it lives in the high-energy part the paper's method discards), so the z terms only
 //!    enter a model when they predict better.
 //! 4. **Refinement** ([`refine`]): the nonzero coefficients of the mechanical equations and
-//!    the tanh gain `a` of the thresholded model refined by bounded Levenberg–Marquardt on
-//!    the free-run error of the fitting logs (velocity, current, angle); the refined model
-//!    replaces the result only if its validation fit is higher. The current equation keeps
+//!    the shape parameters (tanh gain `a`, Stribeck velocity `vs`) refined by bounded
+//!    Levenberg–Marquardt on the free-run error of the fitting logs (velocity, current,
+//!    angle), from two starts: the thresholded model, and the same with a Stribeck term
+//!    `exp(−(ẋ/vs)²)·sgn(ẋ)` added to the acceleration equation (refitted on the weak form;
+//!    the paper's library has no term that falls with speed, and the friction of a real
+//!    motor does). A refined model replaces the result only if its validation fit is
+//!    higher. The current equation keeps
 //!    the coefficients of its held-voltage regression ([`rows::held_current_normal`]).
 //!
 //! Every free run that judges a candidate (search and refinement) runs on at most
-//! [`EVALUATION_SAMPLES`] samples ([`bounded_segments`]), so the cost of identification is
+//! [`evaluation_budget`] samples ([`bounded_segments`]), so the cost of identification is
 //! one linear pass over the data plus a bounded search.
 //! 5. **Simulation** ([`simulate`]): the free run every stage above is judged by, and
 //!    `compare`'s.
@@ -44,13 +49,14 @@ pub use embedding::{centred_velocity, correlation};
 pub use model_file::{equations_text, from_table, pareto_text, to_table};
 pub use rows::{weak_rows, weak_rows_generic, weak_rows_uniform};
 pub use simulate::{
-    bounded_segments, simulate, validation_fit, Limits, EVALUATION_SAMPLES, SUBSTEPS,
+    bounded_segments, evaluation_budget, simulate, validation_fit, Limits, EVALUATION_SECONDS,
+    SUBSTEPS,
 };
 
 use crate::effect_spec::EffectSpec;
 use crate::ident::freerun::Prediction;
 use crate::ident::hankel::{Selection, DEFAULT_DELAYS, DEFAULT_ENERGY};
-use crate::ident::library::Library;
+use crate::ident::library::{Library, ACCEL};
 use crate::ident::stlsq::StlsqOptions;
 use crate::log::{MotorLog, Plant};
 use crate::numerics::weak_form;
@@ -65,15 +71,31 @@ use search::Search;
 /// 0.5 rad/s, below the 0.79 rad/s velocity resolution of the paper's sensor. With `z`
 /// normalised to unit RMS, `tanh(a·z)` is then a sign of `z` too.
 pub const DEFAULT_A: f64 = 5.0;
-/// Half-width [samples] of the centred velocity estimate (10-sample span as the paper's).
-pub const VELOCITY_HALF: usize = 5;
+/// Sample period [s] of the paper's logs, for which its settings in samples were made.
+const PAPER_SAMPLE_PERIOD: f64 = 0.012;
+/// Most delays of the Hankel embedding (the model file's bound): its eigen-decomposition
+/// costs `m³`, a second at 1000.
+pub const MAX_DELAYS: usize = 1000;
+
+/// Start of the Stribeck velocity `vs` [rad/s] of the Stribeck term the refinement tries,
+/// times the logs' [`crate::scales::velocity_scale`]: the middle (geometrically) of the
+/// decade either side the refinement may move it over, 0.5–50 rad/s on the paper's motor.
+pub const STRIBECK_START: f64 = 5.0;
+/// Half-width [s] of the centred velocity estimate: ±5 samples at 12 ms, the 10-sample span
+/// of the paper's estimator.
+pub const VELOCITY_HALF_S: f64 = 0.06;
+
+/// [`VELOCITY_HALF_S`] in samples of `log` (at least one).
+pub fn velocity_half(log: &MotorLog) -> usize {
+    crate::scales::samples_for(VELOCITY_HALF_S, log.sample_period(), log.len())
+}
 
 /// Settings of [`identify`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct SindycOptions {
     pub plant: Plant,
-    /// Number of delays of the Hankel embedding (paper: 60).
-    pub delays: usize,
+    /// Time [s] the delays of the Hankel embedding span (paper: 60 delays at 12 ms).
+    pub delay_span: f64,
     /// Which singular components make `z` (paper: energy below 0.001).
     pub selection: Selection,
     /// tanh gain `a`.
@@ -91,13 +113,21 @@ impl Default for SindycOptions {
     fn default() -> Self {
         SindycOptions {
             plant: Plant::Voltage,
-            delays: DEFAULT_DELAYS,
+            delay_span: DEFAULT_DELAYS as f64 * PAPER_SAMPLE_PERIOD,
             selection: Selection::EnergyBelow(DEFAULT_ENERGY),
             a: DEFAULT_A,
             stlsq: StlsqOptions::default(),
             tolerance: 0.5,
             velocity_window: 10,
         }
+    }
+}
+
+impl SindycOptions {
+    /// Delays of the Hankel embedding of logs sampled every `dt` [s]: [`Self::delay_span`]
+    /// in samples, from 2 to [`MAX_DELAYS`].
+    pub fn delays(&self, dt: f64) -> usize {
+        crate::scales::samples_for(self.delay_span, dt, MAX_DELAYS).max(2)
     }
 }
 
@@ -151,7 +181,17 @@ pub fn identify(
 ) -> Result<SindycResult> {
     check_logs(fit_logs, val_logs, opts)?;
     let hidden = HiddenState::of_logs(fit_logs, opts)?;
-    let lib = Library::with_effects(opts.plant, opts.a, 1.0, adds)?;
+    let mut lib = Library::with_effects(opts.plant, opts.a, 1.0, adds)?;
+    // The Stribeck column the refinement may add (see `stribeck_start`); the structure
+    // search does not use it unless `--add stribeck` asked for it.
+    let stribeck = if lib.candidates.iter().any(|c| c.term == Term::StribeckXdot) {
+        None
+    } else {
+        let all: Vec<f64> = hidden.xdot.iter().flatten().copied().collect();
+        lib.vs = STRIBECK_START * crate::scales::velocity_scale(&all);
+        lib.add(Term::StribeckXdot, [true, false, false], opts.plant);
+        Some(lib.len() - 1)
+    };
     let nes = rows::normal_equations(&lib, fit_logs, &hidden, opts.plant)?;
     let held = match opts.plant {
         Plant::Voltage => rows::held_current_normal(&lib, fit_logs, &hidden),
@@ -159,7 +199,10 @@ pub fn identify(
     };
     let mut search = Search::new(&lib, nes, held, fit_logs, val_logs, &hidden, opts);
     let mut pareto = Vec::new();
-    let allowed = search.allowed();
+    let mut allowed = search.allowed();
+    if let Some(j) = stribeck {
+        allowed[ACCEL][j] = false;
+    }
     let (start, start_fit) = search.stlsq_start(&allowed, &opts.stlsq, &mut pareto);
     let (sparse, fit) = search.threshold_one_by_one(start, start_fit, opts.tolerance, &mut pareto);
     let Some(fit) = fit else {
@@ -169,8 +212,15 @@ pub fn identify(
         );
     };
     let thresholded = search.model(&sparse);
-    let starts = vec![("the thresholded model", thresholded.clone())];
-    let fit_runs = bounded_segments(fit_logs, EVALUATION_SAMPLES);
+    let mut starts = vec![("the thresholded model", thresholded.clone())];
+    if let Some(j) = stribeck {
+        let with = search.with_term(&sparse, ACCEL, j);
+        starts.push((
+            "the thresholded model with a Stribeck term",
+            search.model(&with),
+        ));
+    }
+    let fit_runs = bounded_segments(fit_logs, evaluation_budget(fit_logs));
     let res = SimResiduals::new(&fit_runs, opts.plant, opts.velocity_window, search.limits());
     let (model, validation_fit) = refine::refine_and_choose(
         thresholded,
@@ -202,7 +252,9 @@ fn check_logs(fit_logs: &[MotorLog], val_logs: &[MotorLog], opts: &SindycOptions
         bail!("SINDYc: no data to fit");
     }
     let voltage = opts.plant == Plant::Voltage;
-    let needed = 2 * opts.delays.max(weak_form::WINDOW);
+    let needed = 2 * opts
+        .delays(fit_logs[0].sample_period())
+        .max(weak_form::WINDOW);
     for log in fit_logs.iter().chain(val_logs) {
         if voltage && log.i.is_none() {
             bail!(
@@ -300,6 +352,25 @@ mod tests {
         let mut log = simulate_signal(&cfg, kind, 90.0).unwrap().log_with_truth();
         log.source = format!("{}.csv", kind.name()).into();
         log
+    }
+
+    #[test]
+    fn the_velocity_span_and_the_delays_are_durations_of_the_log() {
+        let log_at = |dt: f64| MotorLog {
+            t: (0..2000).map(|k| k as f64 * dt).collect(),
+            u: vec![0.0; 2000],
+            theta: vec![0.0; 2000],
+            ..MotorLog::default()
+        };
+        assert_eq!(velocity_half(&log_at(0.012)), 5);
+        assert_eq!(velocity_half(&log_at(0.001)), 60);
+        assert_eq!(velocity_half(&log_at(0.1)), 1);
+        // The embedding's delays: the paper's 60 at 12 ms, the same span at 1 ms, bounded.
+        let opts = SindycOptions::default();
+        assert_eq!(opts.delays(0.012), 60);
+        assert_eq!(opts.delays(0.001), 720);
+        assert_eq!(opts.delays(1e-5), MAX_DELAYS);
+        assert_eq!(opts.delays(1.0), 2);
     }
 
     #[test]

@@ -74,7 +74,7 @@ pub fn normal_equations(
 /// sample: the `I_j` measured at `t_j` is the current of the whole interval
 /// `[t_{j−1}, t_j]`, driven by the voltage `u_{j−1}` held over it. Integrating
 /// `u = R·I + L·dI/dt + Σ c_k·θ_k` over the `W` intervals around `t_k` (a box test function
-/// of the centred velocity's span, `W` = 2·[`super::VELOCITY_HALF`]) gives exactly, for the
+/// of the centred velocity's span, `W` = 2·[`super::velocity_half`]) gives exactly, for the
 /// linear terms: mean of `u_{j−1}` = `R`·mean of `I_j` + `K_b`·(centred slope of θ) + the
 /// negligible `L·ΔI/(W·h)`. So every signal is averaged over the same `W` intervals (the
 /// angle's mean slope is the centred velocity; nonlinear terms are evaluated on the averaged
@@ -87,13 +87,16 @@ pub fn held_current_normal(
     logs: &[MotorLog],
     hidden: &HiddenState,
 ) -> Option<Normal> {
-    const W: usize = 2 * super::VELOCITY_HALF;
-    let n: usize = logs.iter().map(|l| l.len().saturating_sub(W)).sum();
+    let n: usize = logs
+        .iter()
+        .map(|l| l.len().saturating_sub(2 * super::velocity_half(l)))
+        .sum();
     let mut cols: [Vec<f64>; 5] = std::array::from_fn(|_| Vec::with_capacity(n));
     for (log, z) in logs.iter().zip(&hidden.z) {
         let i = log.i.as_ref()?;
         let m = log.len();
-        if m <= W {
+        let w = 2 * super::velocity_half(log);
+        if m <= w {
             continue;
         }
         // Interval j = 1..m: [t_{j−1}, t_j]; its mean velocity, held voltage, current.
@@ -102,7 +105,7 @@ pub fn held_current_normal(
             .collect();
         let series: [&[f64]; 5] = [&log.theta[1..], &slope, &z[1..m], &i[1..], &log.u[..m - 1]];
         for (col, v) in cols.iter_mut().zip(series) {
-            box_mean_into(v, W, col);
+            box_mean_into(v, w, col);
         }
     }
     let [x, xdot, z, i, u] = &cols;
@@ -281,7 +284,7 @@ pub fn weak_rows_generic(lib: &Library, t: &[f64], s: &Signals) -> (Mat<f64>, Ma
 mod tests {
     use super::*;
     use crate::emulator::{simulate_signal, EmulatorConfig, SignalKind};
-    use crate::ident::sindyc::{centred_velocity, DEFAULT_A, VELOCITY_HALF};
+    use crate::ident::sindyc::{centred_velocity, velocity_half, DEFAULT_A};
 
     #[test]
     fn uniform_weak_rows_equal_the_window_by_window_rows() {
@@ -290,7 +293,7 @@ mod tests {
             ..EmulatorConfig::paper()
         };
         let a = simulate_signal(&cfg, SignalKind::A, 20.0).unwrap().log;
-        let v = centred_velocity(&a.t, &a.theta, VELOCITY_HALF);
+        let v = centred_velocity(&a.t, &a.theta, velocity_half(&a));
         let z: Vec<f64> = v.iter().map(|w| (0.3 * w).sin()).collect();
         let lib = Library::paper(Plant::Voltage, DEFAULT_A, 1.0);
         // 17 extra samples: the last partial hop is not part of any window.

@@ -3,7 +3,7 @@
 //! ([`super::simulate::validation_fit`]), with divergent candidates rejected. Every candidate
 //! examined is a row of the Pareto table (number of terms vs validation fit).
 use super::embedding::HiddenState;
-use super::simulate::{bounded_segments, validation_fit, Limits, EVALUATION_SAMPLES};
+use super::simulate::{bounded_segments, evaluation_budget, validation_fit, Limits};
 use super::{ParetoRow, SindycOptions};
 use crate::ident::library::{Library, ACCEL, EQUATION_NAMES, IDOT, ZDOT};
 use crate::ident::sensor_chain;
@@ -43,7 +43,7 @@ pub struct Search<'a> {
     /// Sample period (for the fallback inductance).
     dt: f64,
     plant: Plant,
-    /// The validation runs (at most [`EVALUATION_SAMPLES`] samples).
+    /// The validation runs (at most [`evaluation_budget`] samples).
     val: Vec<MotorLog>,
     val_omega: Vec<Vec<f64>>,
     /// Velocity-estimator window of the sensor chain.
@@ -67,10 +67,8 @@ impl<'a> Search<'a> {
         hidden: &HiddenState,
         opts: &SindycOptions,
     ) -> Self {
-        let val = bounded_segments(
-            if val.is_empty() { fit_logs } else { val },
-            EVALUATION_SAMPLES,
-        );
+        let val = if val.is_empty() { fit_logs } else { val };
+        let val = bounded_segments(val, evaluation_budget(val));
         let val_omega: Vec<Vec<f64>> = val
             .iter()
             .map(|l| sensor_chain::measured_velocity(l, opts.velocity_window))
@@ -208,8 +206,18 @@ impl<'a> Search<'a> {
 
     /// Remove term `j` from equation `e` and refit that equation.
     fn without(&self, c: &Candidate, e: usize, j: usize) -> Candidate {
+        self.with_support(c, e, j, false)
+    }
+
+    /// Add term `j` to equation `e` and refit that equation (on the weak form).
+    pub fn with_term(&self, c: &Candidate, e: usize, j: usize) -> Candidate {
+        self.with_support(c, e, j, true)
+    }
+
+    /// Set whether term `j` is in equation `e` and refit that equation on its support.
+    fn with_support(&self, c: &Candidate, e: usize, j: usize, on: bool) -> Candidate {
         let mut sup: Vec<bool> = c.xn[e].iter().map(|v| *v != 0.0).collect();
-        sup[j] = false;
+        sup[j] = on;
         let mut next = c.clone();
         next.xn[e] = self.nes[e].solve_normalised(0, &sup);
         // Keep the support exact (a refit may produce an exact zero only by accident).
