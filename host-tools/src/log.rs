@@ -546,42 +546,9 @@ impl MotorLog {
         if text.contains('\r') && !text.contains('\n') {
             bail!("{p}:1: {}", crate::input::LONE_CR);
         }
-        let mut meta = BTreeMap::new();
-        let mut meta_line: BTreeMap<String, usize> = BTreeMap::new();
-        let mut header_line = 0usize;
-        let mut body_start = 0usize;
-        let mut offset = 0usize;
-        for (n, line) in text.split_inclusive('\n').enumerate() {
-            let trimmed = line.trim();
-            if let Some(rest) = trimmed.strip_prefix('#') {
-                if let Some((k, v)) = rest.split_once('=') {
-                    let k = k.trim();
-                    if let Some(first) = meta_line.get(k).filter(|_| known_meta_key(k)) {
-                        bail!(
-                            "{p}:{}: {}: given twice (first on line {first}); keep one",
-                            n + 1,
-                            echo(k)
-                        );
-                    }
-                    meta.insert(k.to_string(), v.trim().to_string());
-                    meta_line.insert(k.to_string(), n + 1);
-                }
-                offset += line.len();
-                continue;
-            }
-            if trimmed.is_empty() {
-                offset += line.len();
-                continue;
-            }
-            header_line = n + 1;
-            body_start = offset;
-            break;
-        }
-        if header_line == 0 {
-            bail!("{p}: no header row (expected a line like 't,u,i,theta')");
-        }
-        let header_text = text[body_start..].lines().next().unwrap_or("");
-        let delimiter = sniff_delimiter(header_text);
+        let pre = Preamble::scan(text, &p)?;
+        let body = &text[pre.body_start..];
+        let delimiter = sniff_delimiter(body.lines().next().unwrap_or(""));
         let mut rdr = csv::ReaderBuilder::new()
             .has_headers(true)
             .delimiter(delimiter)
@@ -589,7 +556,8 @@ impl MotorLog {
             .comment(Some(b'#'))
             // A row with another number of fields is reported below, with its one line.
             .flexible(true)
-            .from_reader(&text.as_bytes()[body_start..]);
+            .from_reader(body.as_bytes());
+        let header_line = pre.header_line;
         let headers: Vec<String> = rdr
             .headers()
             .map_err(|e| {
@@ -603,70 +571,23 @@ impl MotorLog {
             .collect();
         let mut places = Places::Csv {
             header_line,
-            meta_line,
+            meta_line: pre.meta_line,
             row_lines: Vec::new(),
         };
         let columns = StdColumns::find(&headers, map, plant, &places.header(path))?;
-        let std_cols = columns.indices();
-
-        let mut cols: Vec<Vec<f64>> = vec![Vec::new(); headers.len()];
-        let mut row_lines: Vec<usize> = Vec::new();
-        let mut rec = csv::StringRecord::new();
-        loop {
-            let more = rdr.read_record(&mut rec).map_err(|e| {
-                let line = e
-                    .position()
-                    .map(|q| q.line() as usize + header_line - 1)
-                    .unwrap_or(0);
-                anyhow!("{p}:{line}: {}", csv_problem(&e))
-            })?;
-            if !more {
-                break;
-            }
-            let line = rec
-                .position()
-                .map(|q| q.line() as usize + header_line - 1)
-                .unwrap_or(0);
-            row_lines.push(line);
-            if rec.len() != headers.len() {
-                bail!(
-                    "{p}:{line}: {} fields, but the header has {}",
-                    rec.len(),
-                    headers.len()
-                );
-            }
-            for (c, field) in rec.iter().enumerate() {
-                let v: f64 = match field.parse() {
-                    Ok(v) => v,
-                    Err(_) if delimiter != b',' && looks_like_decimal_comma(field) => bail!(
-                        "{p}:{line}: column '{}': '{}' has a decimal comma; decimal commas are \
-                         not supported, write numbers with a decimal point ({})",
-                        echo(&headers[c]),
-                        echo(field),
-                        echo(&field.replace(',', "."))
-                    ),
-                    Err(_) if !std_cols.contains(&c) => f64::NAN,
-                    Err(_) => bail!(
-                        "{p}:{line}: column '{}': '{}' is not a number",
-                        echo(&headers[c]),
-                        echo(field)
-                    ),
-                };
-                if std_cols.contains(&c) && !v.is_finite() {
-                    bail!(
-                        "{p}:{line}: column '{}': value '{}' is not finite",
-                        echo(&headers[c]),
-                        echo(field)
-                    );
-                }
-                cols[c].push(v);
-            }
-        }
+        let rows = CsvRows {
+            p: &p,
+            header_line,
+            headers: &headers,
+            std_cols: &columns.indices(),
+            delimiter,
+        };
+        let (cols, row_lines) = rows.read(&mut rdr)?;
         if let Places::Csv { row_lines: r, .. } = &mut places {
             *r = row_lines;
         }
         Table {
-            meta,
+            meta: pre.meta,
             places,
             headers,
             cols,
@@ -1040,6 +961,136 @@ pub const METADATA_KEYS: &[(&str, MetaCheck)] = &[
 /// True for a metadata key whose value the tools read (a repeated one is an error).
 fn known_meta_key(key: &str) -> bool {
     key.starts_with("unit.") || METADATA_KEYS.iter().any(|(k, _)| *k == key)
+}
+
+/// The lines before a CSV log's header row: `# key=value` metadata, comments and blanks.
+struct Preamble {
+    meta: BTreeMap<String, String>,
+    /// Line (1-based) of each metadata key.
+    meta_line: BTreeMap<String, usize>,
+    /// Line (1-based) of the header row.
+    header_line: usize,
+    /// Byte offset of the header row in the text.
+    body_start: usize,
+}
+
+impl Preamble {
+    /// Read the metadata lines up to the header row; `p` names the file in messages.
+    fn scan(text: &str, p: &str) -> Result<Preamble> {
+        let mut meta = BTreeMap::new();
+        let mut meta_line: BTreeMap<String, usize> = BTreeMap::new();
+        let mut offset = 0usize;
+        for (n, line) in text.split_inclusive('\n').enumerate() {
+            let trimmed = line.trim();
+            if let Some(rest) = trimmed.strip_prefix('#') {
+                if let Some((k, v)) = rest.split_once('=') {
+                    let k = k.trim();
+                    if let Some(first) = meta_line.get(k).filter(|_| known_meta_key(k)) {
+                        bail!(
+                            "{p}:{}: {}: given twice (first on line {first}); keep one",
+                            n + 1,
+                            echo(k)
+                        );
+                    }
+                    meta.insert(k.to_string(), v.trim().to_string());
+                    meta_line.insert(k.to_string(), n + 1);
+                }
+                offset += line.len();
+                continue;
+            }
+            if trimmed.is_empty() {
+                offset += line.len();
+                continue;
+            }
+            return Ok(Preamble {
+                meta,
+                meta_line,
+                header_line: n + 1,
+                body_start: offset,
+            });
+        }
+        bail!("{p}: no header row (expected a line like 't,u,i,theta')")
+    }
+}
+
+/// The data rows of a CSV log: what a row is checked against.
+struct CsvRows<'a> {
+    /// The file, as messages name it.
+    p: &'a str,
+    header_line: usize,
+    headers: &'a [String],
+    /// Indices of the standard columns (must be finite numbers).
+    std_cols: &'a [usize],
+    delimiter: u8,
+}
+
+impl CsvRows<'_> {
+    /// Every row's fields as numbers, one series per header, and each row's line.
+    fn read(&self, rdr: &mut csv::Reader<&[u8]>) -> Result<(Vec<Vec<f64>>, Vec<usize>)> {
+        let (p, header_line) = (self.p, self.header_line);
+        let mut cols: Vec<Vec<f64>> = vec![Vec::new(); self.headers.len()];
+        let mut row_lines: Vec<usize> = Vec::new();
+        let mut rec = csv::StringRecord::new();
+        loop {
+            let more = rdr.read_record(&mut rec).map_err(|e| {
+                let line = e
+                    .position()
+                    .map(|q| q.line() as usize + header_line - 1)
+                    .unwrap_or(0);
+                anyhow!("{p}:{line}: {}", csv_problem(&e))
+            })?;
+            if !more {
+                break;
+            }
+            let line = rec
+                .position()
+                .map(|q| q.line() as usize + header_line - 1)
+                .unwrap_or(0);
+            row_lines.push(line);
+            if rec.len() != self.headers.len() {
+                bail!(
+                    "{p}:{line}: {} fields, but the header has {}",
+                    rec.len(),
+                    self.headers.len()
+                );
+            }
+            for (c, field) in rec.iter().enumerate() {
+                cols[c].push(self.field(line, c, field)?);
+            }
+        }
+        Ok((cols, row_lines))
+    }
+
+    /// One field as a number: NaN where an extra column is not numeric; an error for a
+    /// decimal comma, and where a standard column is not a finite number.
+    fn field(&self, line: usize, c: usize, field: &str) -> Result<f64> {
+        let p = self.p;
+        let std_col = self.std_cols.contains(&c);
+        let v: f64 = match field.parse() {
+            Ok(v) => v,
+            Err(_) if self.delimiter != b',' && looks_like_decimal_comma(field) => bail!(
+                "{p}:{line}: column '{}': '{}' has a decimal comma; decimal commas are \
+                 not supported, write numbers with a decimal point ({})",
+                echo(&self.headers[c]),
+                echo(field),
+                echo(&field.replace(',', "."))
+            ),
+            Err(_) if !std_col => f64::NAN,
+            Err(_) => bail!(
+                "{p}:{line}: column '{}': '{}' is not a number",
+                echo(&self.headers[c]),
+                echo(field)
+            ),
+        };
+        if std_col && !v.is_finite() {
+            bail!(
+                "{p}:{line}: column '{}': value '{}' is not finite",
+                echo(&self.headers[c]),
+                echo(field)
+            );
+        }
+        Ok(v)
+    }
 }
 
 /// A log's columns as read, before units and checks: what CSV and MAT-files have in common.
