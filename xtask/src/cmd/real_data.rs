@@ -420,13 +420,10 @@ fn emps_figure(
 /// The loop's final model beside the authors' parameters, and the offset/asymmetry tests.
 fn loop_result(
     md: &mut String,
-    train: &motorid::log::MotorLog,
+    train: &MotorLog,
     rounds: &[emps_loop::Round],
     last: &emps_loop::Round,
 ) -> Result<()> {
-    let g = emps::GTAU;
-    let p = emps_loop::physical(&last.model, g);
-    let (fvp, fcp, fvm, fcm) = emps_loop::per_direction(&p);
     let found: Vec<&str> = rounds[0]
         .diagnosis
         .iter()
@@ -452,9 +449,21 @@ fn loop_result(
         "| parameter | authors, symmetric | authors, per direction | generic loop |"
     );
     let _ = writeln!(md, "|---|---|---|---|");
+    let p = emps_loop::physical(&last.model, emps::GTAU);
+    for (name, sym, asym, ours) in parameter_rows(&p) {
+        let _ = writeln!(md, "| {name} | {sym} | {asym} | {ours} |");
+    }
+    offset_note(md, train, rounds);
+    Ok(())
+}
+
+/// The rows of [`loop_result`]'s table: (parameter, the authors' symmetric value, their
+/// per-direction value, the generic loop's).
+fn parameter_rows(p: &emps_loop::Physical) -> [(&'static str, String, String, String); 8] {
+    let (fvp, fcp, fvm, fcm) = emps_loop::per_direction(p);
     let a = emps::REFERENCE_ASYM;
     let opt = |v: Option<f64>| v.map_or("–".to_string(), |x| format!("{x:.2}"));
-    let rows: [(&str, String, String, String); 8] = [
+    [
         (
             "M [kg]",
             "95.11".into(),
@@ -498,53 +507,52 @@ fn loop_result(
             format!("{:.2} / {:.2}", a[2].1, a[4].1),
             format!("{fcp:.2} / {fcm:.2}"),
         ),
-    ];
-    for (name, sym, asym, ours) in rows {
-        let _ = writeln!(md, "| {name} | {sym} | {asym} | {ours} |");
-    }
-    // Offset against asymmetry once Coulomb friction is in the model.
+    ]
+}
+
+/// Offset against asymmetry once Coulomb friction is in the model: why the loop keeps no
+/// separate offset (nothing when the first diagnosis found no Coulomb friction).
+fn offset_note(md: &mut String, train: &MotorLog, rounds: &[emps_loop::Round]) {
+    let spec_value =
+        |spec: &str, key: &str| motorid::effect_spec::EffectSpec::parse(spec).map(|s| s.get(key));
     let fc = rounds[0]
         .diagnosis
         .iter()
         .flat_map(|d| &d.effects)
         .find(|f| f.name == "coulomb")
-        .and_then(|f| motorid::effect_spec::EffectSpec::parse(&f.spec).ok())
-        .map(|s| s.get("fc"));
-    if let Some(fc) = fc {
-        let d = emps_loop::after_coulomb(train, &rounds[0].model, fc);
-        let t = |name: &str| d.tested.iter().find(|t| t.name == name);
-        if let (Some(o), Some(a)) = (t("offset"), t("asymmetry")) {
-            let _ = writeln!(
-                md,
-                "\nWhy no separate offset: with Coulomb friction in the model, `diagnose` tests \
-                 the offset (explains {:.0} % of the residual, p = {:.1e}, `{}` = {:.2} N) and \
-                 the asymmetry (explains {:.0} %, p = {:.1e}); both are significant, and it keeps \
-                 the one that explains more. On this trajectory the axis moves at nearly the same \
-                 speed in both directions and the standstill windows are left out, so `dv·|v|` \
-                 and a constant are nearly the same column: the symmetric model's OF is the \
-                 asymmetry seen at the typical speed. With the asymmetry in, the offset explains \
-                 {} of what is left.",
-                100.0 * o.explained,
-                o.p_value,
-                o.spec,
-                g * motorid::effect_spec::EffectSpec::parse(&o.spec)
-                    .map_or(f64::NAN, |s| s.get("t0")),
-                100.0 * a.explained,
-                a.p_value,
-                rounds
-                    .iter()
-                    .find(|r| r.kept && r.adds.iter().any(|a| a.starts_with("asymmetry")))
-                    .and_then(|r| r.diagnosis.as_ref())
-                    .and_then(|d| d.tested.iter().find(|t| t.name == "offset"))
-                    .map_or("–".to_string(), |t| format!(
-                        "{:.1} % (p = {:.1e})",
-                        100.0 * t.explained,
-                        t.p_value
-                    ))
-            );
-        }
-    }
-    Ok(())
+        .and_then(|f| spec_value(&f.spec, "fc").ok());
+    let Some(fc) = fc else { return };
+    let d = emps_loop::after_coulomb(train, &rounds[0].model, fc);
+    let t = |name: &str| d.tested.iter().find(|t| t.name == name);
+    let (Some(o), Some(a)) = (t("offset"), t("asymmetry")) else {
+        return;
+    };
+    let offset_after_asymmetry = rounds
+        .iter()
+        .find(|r| r.kept && r.adds.iter().any(|a| a.starts_with("asymmetry")))
+        .and_then(|r| r.diagnosis.as_ref())
+        .and_then(|d| d.tested.iter().find(|t| t.name == "offset"))
+        .map_or("–".to_string(), |t| {
+            format!("{:.1} % (p = {:.1e})", 100.0 * t.explained, t.p_value)
+        });
+    let _ = writeln!(
+        md,
+        "\nWhy no separate offset: with Coulomb friction in the model, `diagnose` tests \
+         the offset (explains {:.0} % of the residual, p = {:.1e}, `{}` = {:.2} N) and \
+         the asymmetry (explains {:.0} %, p = {:.1e}); both are significant, and it keeps \
+         the one that explains more. On this trajectory the axis moves at nearly the same \
+         speed in both directions and the standstill windows are left out, so `dv·|v|` \
+         and a constant are nearly the same column: the symmetric model's OF is the \
+         asymmetry seen at the typical speed. With the asymmetry in, the offset explains \
+         {} of what is left.",
+        100.0 * o.explained,
+        o.p_value,
+        o.spec,
+        emps::GTAU * spec_value(&o.spec, "t0").unwrap_or(f64::NAN),
+        100.0 * a.explained,
+        a.p_value,
+        offset_after_asymmetry
+    );
 }
 
 fn benchmark_train(model: &motorid::model::Model, train: &motorid::log::MotorLog) -> f64 {
