@@ -30,7 +30,8 @@ pub struct Args {
     /// Folder for the figures and the tables (real-data.md); created if missing.
     #[arg(long, value_name = "DIR", default_value = "real-data")]
     pub out: PathBuf,
-    /// Skip the generic fit/diagnose loop on EMPS (the slow part: a few seconds).
+    /// Skip the generic fit/diagnose loops on EMPS and the refits that compare final
+    /// criteria (the slow part: several minutes).
     #[arg(long)]
     pub no_generic: bool,
 }

@@ -10,7 +10,12 @@
 //!
 //! The benchmark's test is a free run `vir` → `qm` after a 20-sample initialisation window
 //! ([`benchmark_rmse_mm`]): the generic free-run simulation is started at sample 19 from the
-//! state that a straight line through the first 20 measured positions gives.
+//! state that a straight line through the first 20 measured positions gives
+//! ([`protocol_tail`]).
+//!
+//! The free run of an integrating axis drifts with any force error, so its RMSE depends on
+//! the criterion the final parameters minimise: [`criteria`] refits the loop's structure by
+//! each [`Criterion`] and [`choose`] picks one on the held-out end of the training log alone.
 use super::emps;
 use anyhow::{Context, Result};
 use control::effects::Effect;
@@ -324,12 +329,14 @@ pub enum Criterion {
 }
 
 impl Criterion {
+    /// Every criterion, in the order the page lists them.
     pub const ALL: [Criterion; 3] = [
         Criterion::AsFitted,
         Criterion::FreeRun,
         Criterion::OutputError,
     ];
 
+    /// How the page names the route.
     pub fn describe(self) -> &'static str {
         match self {
             Criterion::AsFitted => "as `fit` leaves it (simulation error over 2 s segments)",
