@@ -186,20 +186,7 @@ pub fn run_loop(
         max_rounds: MAX_ROUNDS,
         diagnose: Options::default(),
     };
-    let mut round = 0;
-    let mut fit = |req: &FitRequest| -> Result<Model> {
-        let what = format!("round {round}: fitting {}", label(req.adds));
-        round += 1;
-        bar.set_message(what.clone());
-        let b = bar.clone();
-        let show = move |u: &ident::progress::Update| {
-            b.set_message(format!("{what}: {}", super::fit::progress_message(u)))
-        };
-        let model = ident::progress::observe(show, || ident::fit(req))?.model;
-        bar.inc(1);
-        bar.set_message("scoring on signal b and diagnosing on a and d");
-        Ok(model)
-    };
+    let mut fit = fit_on_bar(bar);
     let mut iterations = Vec::new();
     let mut scored: Result<()> = Ok(());
     let mut on_round = |r: &workflow::Round| {
@@ -223,6 +210,47 @@ pub fn run_loop(
     };
     let out = workflow::run(&loop_cfg, &mut fit, &mut on_round)?;
     scored?;
+    let last = out.final_round();
+    let pred = say_final(say, &out, test_log)?;
+    let mut outcome = Outcome {
+        hidden: hidden.to_vec(),
+        unnamed,
+        iterations,
+        added: last.adds.clone(),
+        report: None,
+    };
+    if let Some(dir) = report_dir {
+        bar.set_message("writing the report");
+        outcome.report = Some(write_report(dir, &outcome, last, test_log, &pred)?);
+    }
+    Ok(outcome)
+}
+
+/// The loop's fit, its stage and progress shown on `bar`, one round after another.
+fn fit_on_bar(bar: &ProgressBar) -> impl FnMut(&FitRequest) -> Result<Model> + '_ {
+    let mut round = 0;
+    move |req: &FitRequest| -> Result<Model> {
+        let what = format!("round {round}: fitting {}", label(req.adds));
+        round += 1;
+        bar.set_message(what.clone());
+        let b = bar.clone();
+        let show = move |u: &ident::progress::Update| {
+            b.set_message(format!("{what}: {}", super::fit::progress_message(u)))
+        };
+        let model = ident::progress::observe(show, || ident::fit(req))?.model;
+        bar.inc(1);
+        bar.set_message("scoring on signal b and diagnosing on a and d");
+        Ok(model)
+    }
+}
+
+/// The effects set aside and the final model's test fit; returns its free run on the test
+/// log.
+fn say_final(
+    say: &mut dyn FnMut(&str),
+    out: &workflow::Outcome,
+    test_log: &MotorLog,
+) -> Result<ident::Prediction> {
     for (spec, why) in &out.not_fitted {
         say(&format!(
             "set aside: {} was named but cannot be fitted: {}",
@@ -240,18 +268,7 @@ pub fn run_loop(
         sc.fit.xdot,
         sc.fit.i.map(|v| format!("{v:.2} %")).unwrap_or_else(|| "-".into())
     ));
-    let mut outcome = Outcome {
-        hidden: hidden.to_vec(),
-        unnamed,
-        iterations,
-        added: last.adds.clone(),
-        report: None,
-    };
-    if let Some(dir) = report_dir {
-        bar.set_message("writing the report");
-        outcome.report = Some(write_report(dir, &outcome, last, test_log, &pred)?);
-    }
-    Ok(outcome)
+    Ok(pred)
 }
 
 /// The demo's emulated logs: signals a and d to fit, b to select refits, a fresh b to test.
