@@ -245,12 +245,36 @@ fn final_routes(
                 .join(" + ")
         }
     );
+    routes_table(md, &routes, rows);
+    if let Some(whole) = rounds.iter().find(|r| r.whole_log) {
+        let forces = [-0.5, -0.25, 0.0, 0.25, 0.5];
+        let sens = emps_loop::force_bias_sensitivity(&whole.model, test, emps::GTAU, &forces)?;
+        let _ = writeln!(
+            md,
+            "\nWhy the routes disagree: the linear loop's final model with a constant force \
+             added scores {} on the test log, while the authors' standard deviations are 0.04 N \
+             on their offset and 0.10 N on Coulomb friction. A force bias the training data \
+             cannot pin down moves the free run by millimetres, in a direction that differs \
+             between the held-out part and the test log.",
+            sens.iter()
+                .map(|(f, r)| format!("{f:+.2} N → {r:.2} mm"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
+    md.push('\n');
+    Ok(())
+}
+
+/// The routes' table; adds a benchmark row for each route other than the loop's own final
+/// model (already in `rows`).
+fn routes_table(md: &mut String, routes: &[emps_loop::Route], rows: &mut Vec<(String, f64, f64)>) {
     let _ = writeln!(
         md,
         "| model | final parameters | held-out RMSE [mm] (fit on first 70 %) | train RMSE [mm] | test RMSE [mm] | chosen |"
     );
     let _ = writeln!(md, "|---|---|---|---|---|---|");
-    for r in &routes {
+    for r in routes {
         let model = match r.kind {
             motorid::model::ModelKind::Lugre => "LuGre loop",
             _ => "linear loop",
@@ -282,24 +306,6 @@ fn final_routes(
             ));
         }
     }
-    if let Some(whole) = rounds.iter().find(|r| r.whole_log) {
-        let forces = [-0.5, -0.25, 0.0, 0.25, 0.5];
-        let sens = emps_loop::force_bias_sensitivity(&whole.model, test, emps::GTAU, &forces)?;
-        let _ = writeln!(
-            md,
-            "\nWhy the routes disagree: the linear loop's final model with a constant force \
-             added scores {} on the test log, while the authors' standard deviations are 0.04 N \
-             on their offset and 0.10 N on Coulomb friction. A force bias the training data \
-             cannot pin down moves the free run by millimetres, in a direction that differs \
-             between the held-out part and the test log.",
-            sens.iter()
-                .map(|(f, r)| format!("{f:+.2} N → {r:.2} mm"))
-                .collect::<Vec<_>>()
-                .join(", ")
-        );
-    }
-    md.push('\n');
-    Ok(())
 }
 
 /// One row per round of the loop (the first `n_loop`), then per authors' structure.
