@@ -546,42 +546,9 @@ impl MotorLog {
         if text.contains('\r') && !text.contains('\n') {
             bail!("{p}:1: {}", crate::input::LONE_CR);
         }
-        let mut meta = BTreeMap::new();
-        let mut meta_line: BTreeMap<String, usize> = BTreeMap::new();
-        let mut header_line = 0usize;
-        let mut body_start = 0usize;
-        let mut offset = 0usize;
-        for (n, line) in text.split_inclusive('\n').enumerate() {
-            let trimmed = line.trim();
-            if let Some(rest) = trimmed.strip_prefix('#') {
-                if let Some((k, v)) = rest.split_once('=') {
-                    let k = k.trim();
-                    if let Some(first) = meta_line.get(k).filter(|_| known_meta_key(k)) {
-                        bail!(
-                            "{p}:{}: {}: given twice (first on line {first}); keep one",
-                            n + 1,
-                            echo(k)
-                        );
-                    }
-                    meta.insert(k.to_string(), v.trim().to_string());
-                    meta_line.insert(k.to_string(), n + 1);
-                }
-                offset += line.len();
-                continue;
-            }
-            if trimmed.is_empty() {
-                offset += line.len();
-                continue;
-            }
-            header_line = n + 1;
-            body_start = offset;
-            break;
-        }
-        if header_line == 0 {
-            bail!("{p}: no header row (expected a line like 't,u,i,theta')");
-        }
-        let header_text = text[body_start..].lines().next().unwrap_or("");
-        let delimiter = sniff_delimiter(header_text);
+        let pre = Preamble::scan(text, &p)?;
+        let body = &text[pre.body_start..];
+        let delimiter = sniff_delimiter(body.lines().next().unwrap_or(""));
         let mut rdr = csv::ReaderBuilder::new()
             .has_headers(true)
             .delimiter(delimiter)
@@ -589,7 +556,8 @@ impl MotorLog {
             .comment(Some(b'#'))
             // A row with another number of fields is reported below, with its one line.
             .flexible(true)
-            .from_reader(&text.as_bytes()[body_start..]);
+            .from_reader(body.as_bytes());
+        let header_line = pre.header_line;
         let headers: Vec<String> = rdr
             .headers()
             .map_err(|e| {
@@ -603,70 +571,23 @@ impl MotorLog {
             .collect();
         let mut places = Places::Csv {
             header_line,
-            meta_line,
+            meta_line: pre.meta_line,
             row_lines: Vec::new(),
         };
         let columns = StdColumns::find(&headers, map, plant, &places.header(path))?;
-        let std_cols = columns.indices();
-
-        let mut cols: Vec<Vec<f64>> = vec![Vec::new(); headers.len()];
-        let mut row_lines: Vec<usize> = Vec::new();
-        let mut rec = csv::StringRecord::new();
-        loop {
-            let more = rdr.read_record(&mut rec).map_err(|e| {
-                let line = e
-                    .position()
-                    .map(|q| q.line() as usize + header_line - 1)
-                    .unwrap_or(0);
-                anyhow!("{p}:{line}: {}", csv_problem(&e))
-            })?;
-            if !more {
-                break;
-            }
-            let line = rec
-                .position()
-                .map(|q| q.line() as usize + header_line - 1)
-                .unwrap_or(0);
-            row_lines.push(line);
-            if rec.len() != headers.len() {
-                bail!(
-                    "{p}:{line}: {} fields, but the header has {}",
-                    rec.len(),
-                    headers.len()
-                );
-            }
-            for (c, field) in rec.iter().enumerate() {
-                let v: f64 = match field.parse() {
-                    Ok(v) => v,
-                    Err(_) if delimiter != b',' && looks_like_decimal_comma(field) => bail!(
-                        "{p}:{line}: column '{}': '{}' has a decimal comma; decimal commas are \
-                         not supported, write numbers with a decimal point ({})",
-                        echo(&headers[c]),
-                        echo(field),
-                        echo(&field.replace(',', "."))
-                    ),
-                    Err(_) if !std_cols.contains(&c) => f64::NAN,
-                    Err(_) => bail!(
-                        "{p}:{line}: column '{}': '{}' is not a number",
-                        echo(&headers[c]),
-                        echo(field)
-                    ),
-                };
-                if std_cols.contains(&c) && !v.is_finite() {
-                    bail!(
-                        "{p}:{line}: column '{}': value '{}' is not finite",
-                        echo(&headers[c]),
-                        echo(field)
-                    );
-                }
-                cols[c].push(v);
-            }
-        }
+        let rows = CsvRows {
+            p: &p,
+            header_line,
+            headers: &headers,
+            std_cols: &columns.indices(),
+            delimiter,
+        };
+        let (cols, row_lines) = rows.read(&mut rdr)?;
         if let Places::Csv { row_lines: r, .. } = &mut places {
             *r = row_lines;
         }
         Table {
-            meta,
+            meta: pre.meta,
             places,
             headers,
             cols,
@@ -1042,6 +963,136 @@ fn known_meta_key(key: &str) -> bool {
     key.starts_with("unit.") || METADATA_KEYS.iter().any(|(k, _)| *k == key)
 }
 
+/// The lines before a CSV log's header row: `# key=value` metadata, comments and blanks.
+struct Preamble {
+    meta: BTreeMap<String, String>,
+    /// Line (1-based) of each metadata key.
+    meta_line: BTreeMap<String, usize>,
+    /// Line (1-based) of the header row.
+    header_line: usize,
+    /// Byte offset of the header row in the text.
+    body_start: usize,
+}
+
+impl Preamble {
+    /// Read the metadata lines up to the header row; `p` names the file in messages.
+    fn scan(text: &str, p: &str) -> Result<Preamble> {
+        let mut meta = BTreeMap::new();
+        let mut meta_line: BTreeMap<String, usize> = BTreeMap::new();
+        let mut offset = 0usize;
+        for (n, line) in text.split_inclusive('\n').enumerate() {
+            let trimmed = line.trim();
+            if let Some(rest) = trimmed.strip_prefix('#') {
+                if let Some((k, v)) = rest.split_once('=') {
+                    let k = k.trim();
+                    if let Some(first) = meta_line.get(k).filter(|_| known_meta_key(k)) {
+                        bail!(
+                            "{p}:{}: {}: given twice (first on line {first}); keep one",
+                            n + 1,
+                            echo(k)
+                        );
+                    }
+                    meta.insert(k.to_string(), v.trim().to_string());
+                    meta_line.insert(k.to_string(), n + 1);
+                }
+                offset += line.len();
+                continue;
+            }
+            if trimmed.is_empty() {
+                offset += line.len();
+                continue;
+            }
+            return Ok(Preamble {
+                meta,
+                meta_line,
+                header_line: n + 1,
+                body_start: offset,
+            });
+        }
+        bail!("{p}: no header row (expected a line like 't,u,i,theta')")
+    }
+}
+
+/// The data rows of a CSV log: what a row is checked against.
+struct CsvRows<'a> {
+    /// The file, as messages name it.
+    p: &'a str,
+    header_line: usize,
+    headers: &'a [String],
+    /// Indices of the standard columns (must be finite numbers).
+    std_cols: &'a [usize],
+    delimiter: u8,
+}
+
+impl CsvRows<'_> {
+    /// Every row's fields as numbers, one series per header, and each row's line.
+    fn read(&self, rdr: &mut csv::Reader<&[u8]>) -> Result<(Vec<Vec<f64>>, Vec<usize>)> {
+        let (p, header_line) = (self.p, self.header_line);
+        let mut cols: Vec<Vec<f64>> = vec![Vec::new(); self.headers.len()];
+        let mut row_lines: Vec<usize> = Vec::new();
+        let mut rec = csv::StringRecord::new();
+        loop {
+            let more = rdr.read_record(&mut rec).map_err(|e| {
+                let line = e
+                    .position()
+                    .map(|q| q.line() as usize + header_line - 1)
+                    .unwrap_or(0);
+                anyhow!("{p}:{line}: {}", csv_problem(&e))
+            })?;
+            if !more {
+                break;
+            }
+            let line = rec
+                .position()
+                .map(|q| q.line() as usize + header_line - 1)
+                .unwrap_or(0);
+            row_lines.push(line);
+            if rec.len() != self.headers.len() {
+                bail!(
+                    "{p}:{line}: {} fields, but the header has {}",
+                    rec.len(),
+                    self.headers.len()
+                );
+            }
+            for (c, field) in rec.iter().enumerate() {
+                cols[c].push(self.field(line, c, field)?);
+            }
+        }
+        Ok((cols, row_lines))
+    }
+
+    /// One field as a number: NaN where an extra column is not numeric; an error for a
+    /// decimal comma, and where a standard column is not a finite number.
+    fn field(&self, line: usize, c: usize, field: &str) -> Result<f64> {
+        let p = self.p;
+        let std_col = self.std_cols.contains(&c);
+        let v: f64 = match field.parse() {
+            Ok(v) => v,
+            Err(_) if self.delimiter != b',' && looks_like_decimal_comma(field) => bail!(
+                "{p}:{line}: column '{}': '{}' has a decimal comma; decimal commas are \
+                 not supported, write numbers with a decimal point ({})",
+                echo(&self.headers[c]),
+                echo(field),
+                echo(&field.replace(',', "."))
+            ),
+            Err(_) if !std_col => f64::NAN,
+            Err(_) => bail!(
+                "{p}:{line}: column '{}': '{}' is not a number",
+                echo(&self.headers[c]),
+                echo(field)
+            ),
+        };
+        if std_col && !v.is_finite() {
+            bail!(
+                "{p}:{line}: column '{}': value '{}' is not finite",
+                echo(&self.headers[c]),
+                echo(field)
+            );
+        }
+        Ok(v)
+    }
+}
+
 /// A log's columns as read, before units and checks: what CSV and MAT-files have in common.
 struct Table {
     meta: BTreeMap<String, String>,
@@ -1063,110 +1114,21 @@ impl Table {
         plant: Plant,
     ) -> Result<MotorLog> {
         let p = crate::log::echo_path(path);
+        self.check_metadata(path, &p)?;
+        let declared = self.declared_units(path, columns, map, units, plant)?;
+        check_declared_kinds(&declared)?;
+        self.check_time_column(path, columns)?;
         let Table {
             mut meta,
             places,
             headers,
             mut cols,
         } = self;
-        for (key, value) in &meta {
-            match METADATA_KEYS.iter().find(|(k, _)| k == key) {
-                Some((_, check)) => check(value)
-                    .map_err(|e| anyhow!("{}: {}: {e}", places.meta(path, key), echo(key)))?,
-                None if key.starts_with("unit.") => {}
-                None => tracing::debug!(
-                    file = %p,
-                    key = %echo(key),
-                    "metadata key not used by motorid, ignored"
-                ),
-            }
-        }
-        // Declared units: the file's `# unit.X` lines, then --units over them.
-        let mut declared: BTreeMap<&'static str, (&'static UnitDef, UnitSource)> = BTreeMap::new();
-        let unit_keys: Vec<String> = meta
-            .keys()
-            .filter(|k| k.starts_with("unit."))
-            .cloned()
-            .collect();
-        for key in unit_keys {
-            let col = &key["unit.".len()..];
-            let at = places.meta(path, &key);
-            let Some(std) = map.standard_of(col) else {
-                if headers.iter().any(|h| h == col) {
-                    // The unit of an extra column: kept in the metadata, not converted.
-                    continue;
-                }
-                bail!(
-                    "{at}: unit.{}: no column '{}' in the header ({})",
-                    echo(col),
-                    echo(col),
-                    header_list(&headers)
-                );
-            };
-            let value = meta.remove(&key).unwrap_or_default();
-            let def = check_unit(std, &value, plant)
-                .map_err(|e| anyhow!("{at}: unit.{}={}: {e}", echo(col), echo(&value)))?;
-            declared.insert(std, (def, UnitSource::Line(at)));
-        }
-        for (col, value) in &units.0 {
-            let std = map.standard_of(col).ok_or_else(|| {
-                anyhow!(
-                    "--units: '{}' is not a standard column (t, u, i, theta, omega) nor a \
-                     column mapped to one with --map",
-                    echo(col)
-                )
-            })?;
-            let def = check_unit(std, value, plant)
-                .map_err(|e| anyhow!("--units: {}={}: {e}", echo(col), echo(value)))?;
-            declared.insert(std, (def, UnitSource::Flag));
-        }
-        declared.retain(|std, _| columns.present(std));
-        if let (Some((a, sa)), Some((w, sw))) = (declared.get("theta"), declared.get("omega")) {
-            if a.linear != w.linear {
-                let at = |s: &UnitSource| match s {
-                    UnitSource::Line(at) => at.clone(),
-                    UnitSource::Flag => "--units".to_string(),
-                };
-                bail!(
-                    "{}: unit of omega '{}' does not match unit of theta '{}' ({}): one is \
-                     rotary, the other linear",
-                    at(sw),
-                    w.name(),
-                    a.name(),
-                    at(sa)
-                );
-            }
-        }
-
-        let ct = &cols[columns.t];
-        let n = ct.len();
-        if n < 2 {
-            bail!("{p}: only {n} data rows; a log needs at least 2");
-        }
-        for k in 1..n {
-            let step = ct[k] - ct[k - 1];
-            if step > crate::validate::MAX_TIME_STEP {
-                bail!(
-                    "{}: column '{}': time jumps by {} s (from {} to {}); a step longer \
-                     than {} s is not a recording's",
-                    places.row(path, k),
-                    echo(&headers[columns.t]),
-                    crate::validate::show(step),
-                    crate::validate::show(ct[k - 1]),
-                    crate::validate::show(ct[k]),
-                    crate::validate::show(crate::validate::MAX_TIME_STEP)
-                );
-            }
-            if ct[k] <= ct[k - 1] {
-                bail!(
-                    "{}: column '{}': time does not increase ({} after {})",
-                    places.row(path, k),
-                    echo(&headers[columns.t]),
-                    ct[k],
-                    ct[k - 1]
-                );
-            }
-        }
+        // The unit lines of standard columns are read; those of extra columns stay.
+        meta.retain(|k, _| {
+            k.strip_prefix("unit.")
+                .is_none_or(|col| map.standard_of(col).is_none())
+        });
         let take = |c: usize, cols: &mut Vec<Vec<f64>>| std::mem::take(&mut cols[c]);
         let convert = |std: &str, mut v: Vec<f64>| {
             if let Some((d, _)) = declared.get(std) {
@@ -1202,61 +1164,13 @@ impl Table {
             .filter(|(c, _)| !std_cols.contains(c))
             .map(|(c, h)| (h.clone(), std::mem::take(&mut cols[c])))
             .collect();
-        // `# sample_period` is in the unit of `t`.
-        if let Some((d, _)) = declared.get("t") {
-            if let Some(sp) = meta
-                .get("sample_period")
-                .and_then(|v| v.parse::<f64>().ok())
-            {
-                meta.insert("sample_period".to_string(), format!("{}", d.to_si(sp)));
-            }
-        }
-        // The sample period sizes every window and loop downstream: it must be physical.
-        // Too long and undeclared: perhaps t is in ms or us.
-        let hint = |dt: f64| {
-            if declared.contains_key("t") || dt <= crate::validate::MAX_SAMPLE_PERIOD {
-                return String::new();
-            }
-            [(1e3, "ms"), (1e6, "us")]
-                .iter()
-                .find(|(f, _)| crate::validate::sample_period(dt / f).is_ok())
-                .map(|(_, u)| {
-                    format!(
-                        " (is t in {u}? declare it with a line '# unit.t={u}' or --units t={u})"
-                    )
-                })
-                .unwrap_or_default()
+        let time = TimeChecks {
+            path,
+            places: &places,
+            t_header: &headers[columns.t],
+            declared: &declared,
         };
-        if let Some(v) = meta.get("sample_period") {
-            let at = places.meta(path, "sample_period");
-            let sp: f64 = v
-                .parse()
-                .map_err(|_| anyhow!("{at}: sample_period: '{}' is not a number", echo(v)))?;
-            crate::validate::sample_period(sp)
-                .map_err(|e| anyhow!("{at}: sample_period: {e}{}", hint(sp)))?;
-        }
-        let dt = median(t.windows(2).map(|w| w[1] - w[0]).collect()).unwrap_or(0.0);
-        if let Err(e) = crate::validate::sample_period(dt) {
-            bail!(
-                "{p}: column '{}': median time step: {e}{}",
-                echo(&headers[columns.t]),
-                hint(dt)
-            );
-        }
-        // A gap: the model would be run across time the log does not cover, and every
-        // simulated state after it compared with a motor that moved unseen.
-        if let Some(k) = (1..t.len()).find(|&k| t[k] - t[k - 1] > MAX_GAP_STEPS * dt) {
-            bail!(
-                "{}: column '{}': time jumps by {} s (from {} to {}), more than {MAX_GAP_STEPS} \
-                 median steps ({} s): the log has a gap; split it there into two logs",
-                places.row(path, k),
-                echo(&headers[columns.t]),
-                crate::validate::show(t[k] - t[k - 1]),
-                crate::validate::show(t[k - 1]),
-                crate::validate::show(t[k]),
-                crate::validate::show(dt)
-            );
-        }
+        time.sample_period(&mut meta, &t)?;
         let units = declared
             .iter()
             .map(|(std, (d, _))| (std.to_string(), d.name().to_string()))
@@ -1272,6 +1186,201 @@ impl Table {
             extra,
             units,
         })
+    }
+
+    /// Every metadata value motorid reads passes its check; other keys are ignored.
+    fn check_metadata(&self, path: &Path, p: &str) -> Result<()> {
+        for (key, value) in &self.meta {
+            match METADATA_KEYS.iter().find(|(k, _)| k == key) {
+                Some((_, check)) => check(value)
+                    .map_err(|e| anyhow!("{}: {}: {e}", self.places.meta(path, key), echo(key)))?,
+                None if key.starts_with("unit.") => {}
+                None => tracing::debug!(
+                    file = %p,
+                    key = %echo(key),
+                    "metadata key not used by motorid, ignored"
+                ),
+            }
+        }
+        Ok(())
+    }
+
+    /// Declared units of the standard columns present: the file's `# unit.X` lines, then
+    /// --units over them.
+    fn declared_units(
+        &self,
+        path: &Path,
+        columns: &StdColumns,
+        map: &ColumnMap,
+        units: &Units,
+        plant: Plant,
+    ) -> Result<Declared> {
+        let mut declared = Declared::new();
+        for (key, value) in self.meta.iter().filter(|(k, _)| k.starts_with("unit.")) {
+            let col = &key["unit.".len()..];
+            let at = self.places.meta(path, key);
+            let Some(std) = map.standard_of(col) else {
+                if self.headers.iter().any(|h| h == col) {
+                    // The unit of an extra column: kept in the metadata, not converted.
+                    continue;
+                }
+                bail!(
+                    "{at}: unit.{}: no column '{}' in the header ({})",
+                    echo(col),
+                    echo(col),
+                    header_list(&self.headers)
+                );
+            };
+            let def = check_unit(std, value, plant)
+                .map_err(|e| anyhow!("{at}: unit.{}={}: {e}", echo(col), echo(value)))?;
+            declared.insert(std, (def, UnitSource::Line(at)));
+        }
+        for (col, value) in &units.0 {
+            let std = map.standard_of(col).ok_or_else(|| {
+                anyhow!(
+                    "--units: '{}' is not a standard column (t, u, i, theta, omega) nor a \
+                     column mapped to one with --map",
+                    echo(col)
+                )
+            })?;
+            let def = check_unit(std, value, plant)
+                .map_err(|e| anyhow!("--units: {}={}: {e}", echo(col), echo(value)))?;
+            declared.insert(std, (def, UnitSource::Flag));
+        }
+        declared.retain(|std, _| columns.present(std));
+        Ok(declared)
+    }
+
+    /// The time column as written: at least two rows, increasing, no step longer than a
+    /// recording's.
+    fn check_time_column(&self, path: &Path, columns: &StdColumns) -> Result<()> {
+        let p = crate::log::echo_path(path);
+        let ct = &self.cols[columns.t];
+        let n = ct.len();
+        if n < 2 {
+            bail!("{p}: only {n} data rows; a log needs at least 2");
+        }
+        for k in 1..n {
+            let step = ct[k] - ct[k - 1];
+            if step > crate::validate::MAX_TIME_STEP {
+                bail!(
+                    "{}: column '{}': time jumps by {} s (from {} to {}); a step longer \
+                     than {} s is not a recording's",
+                    self.places.row(path, k),
+                    echo(&self.headers[columns.t]),
+                    crate::validate::show(step),
+                    crate::validate::show(ct[k - 1]),
+                    crate::validate::show(ct[k]),
+                    crate::validate::show(crate::validate::MAX_TIME_STEP)
+                );
+            }
+            if ct[k] <= ct[k - 1] {
+                bail!(
+                    "{}: column '{}': time does not increase ({} after {})",
+                    self.places.row(path, k),
+                    echo(&self.headers[columns.t]),
+                    ct[k],
+                    ct[k - 1]
+                );
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The unit declared for each standard column, and where it was declared.
+type Declared = BTreeMap<&'static str, (&'static UnitDef, UnitSource)>;
+
+/// The angle and the velocity must both be rotary or both linear.
+fn check_declared_kinds(declared: &Declared) -> Result<()> {
+    let (Some((a, sa)), Some((w, sw))) = (declared.get("theta"), declared.get("omega")) else {
+        return Ok(());
+    };
+    if a.linear == w.linear {
+        return Ok(());
+    }
+    let at = |s: &UnitSource| match s {
+        UnitSource::Line(at) => at.clone(),
+        UnitSource::Flag => "--units".to_string(),
+    };
+    bail!(
+        "{}: unit of omega '{}' does not match unit of theta '{}' ({}): one is \
+         rotary, the other linear",
+        at(sw),
+        w.name(),
+        a.name(),
+        at(sa)
+    )
+}
+
+/// The checks of a log's sample period, once its time is in seconds.
+struct TimeChecks<'a> {
+    path: &'a Path,
+    places: &'a Places,
+    t_header: &'a str,
+    declared: &'a Declared,
+}
+
+impl TimeChecks<'_> {
+    /// `# sample_period` converted to seconds and checked, then the median step of `t` [s],
+    /// and no gap longer than [`MAX_GAP_STEPS`] median steps.
+    fn sample_period(&self, meta: &mut BTreeMap<String, String>, t: &[f64]) -> Result<()> {
+        let p = crate::log::echo_path(self.path);
+        // `# sample_period` is in the unit of `t`.
+        if let Some((d, _)) = self.declared.get("t") {
+            if let Some(sp) = meta
+                .get("sample_period")
+                .and_then(|v| v.parse::<f64>().ok())
+            {
+                meta.insert("sample_period".to_string(), format!("{}", d.to_si(sp)));
+            }
+        }
+        // The sample period sizes every window and loop downstream: it must be physical.
+        if let Some(v) = meta.get("sample_period") {
+            let at = self.places.meta(self.path, "sample_period");
+            let sp: f64 = v
+                .parse()
+                .map_err(|_| anyhow!("{at}: sample_period: '{}' is not a number", echo(v)))?;
+            crate::validate::sample_period(sp)
+                .map_err(|e| anyhow!("{at}: sample_period: {e}{}", self.unit_hint(sp)))?;
+        }
+        let dt = median(t.windows(2).map(|w| w[1] - w[0]).collect()).unwrap_or(0.0);
+        if let Err(e) = crate::validate::sample_period(dt) {
+            bail!(
+                "{p}: column '{}': median time step: {e}{}",
+                echo(self.t_header),
+                self.unit_hint(dt)
+            );
+        }
+        // A gap: the model would be run across time the log does not cover, and every
+        // simulated state after it compared with a motor that moved unseen.
+        if let Some(k) = (1..t.len()).find(|&k| t[k] - t[k - 1] > MAX_GAP_STEPS * dt) {
+            bail!(
+                "{}: column '{}': time jumps by {} s (from {} to {}), more than {MAX_GAP_STEPS} \
+                 median steps ({} s): the log has a gap; split it there into two logs",
+                self.places.row(self.path, k),
+                echo(self.t_header),
+                crate::validate::show(t[k] - t[k - 1]),
+                crate::validate::show(t[k - 1]),
+                crate::validate::show(t[k]),
+                crate::validate::show(dt)
+            );
+        }
+        Ok(())
+    }
+
+    /// A sample period `dt` too long for an undeclared time unit: perhaps t is in ms or us.
+    fn unit_hint(&self, dt: f64) -> String {
+        if self.declared.contains_key("t") || dt <= crate::validate::MAX_SAMPLE_PERIOD {
+            return String::new();
+        }
+        [(1e3, "ms"), (1e6, "us")]
+            .iter()
+            .find(|(f, _)| crate::validate::sample_period(dt / f).is_ok())
+            .map(|(_, u)| {
+                format!(" (is t in {u}? declare it with a line '# unit.t={u}' or --units t={u})")
+            })
+            .unwrap_or_default()
     }
 }
 

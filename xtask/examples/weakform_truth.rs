@@ -8,343 +8,482 @@
 //!
 //! `cargo run --release -p host-tools --example weakform_truth -- [a|b|steady] [seconds]`
 use control::lugre::LugreParams;
+use motorid::diagnose::candidates::Signals;
 use motorid::emulator::{signal, EmulatorConfig, Plant, SignalKind, SAMPLE_PERIOD};
 use motorid::ident::sindyc::correlation as corr;
 use motorid::log::MotorLog;
 use motorid::numerics::differentiation::smooth_velocity;
 use motorid::numerics::statistics::rms;
-use motorid::numerics::weak_form::{windows, Window, HOP, WINDOW};
+use motorid::numerics::weak_form::{windows, WeakForm, Window, HOP, WINDOW};
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     let kind = SignalKind::from_name(args.get(1).map(|s| s.as_str()).unwrap_or("a")).unwrap();
     let dur: f64 = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(90.0);
-    let cfg = EmulatorConfig::paper();
-    let m = cfg.motor;
-    let lg: LugreParams<f64> = cfg.lugre;
-    let u = signal(kind, dur, cfg.seed);
-    let nf = 60usize;
-    let hf = SAMPLE_PERIOD / nf as f64;
-    let mut plant = Plant::new(cfg.clone()).unwrap();
-    // fine grid (state at t = j·hf), and samples
-    let (mut tf, mut thf, mut wf, mut if_, mut ff, mut zf) =
-        (vec![], vec![], vec![], vec![], vec![], vec![]);
-    let mut log = MotorLog::default();
-    let mut imeas = vec![];
-    let mut tru = (vec![], vec![], vec![], vec![], vec![]); // theta, omega, i, F, z
-    for (k, &v) in u.iter().enumerate() {
-        let s = plant.truth();
-        log.t.push(k as f64 * SAMPLE_PERIOD);
-        log.u.push(v);
-        log.theta.push(plant.hall_angle());
-        imeas.push(plant.measured_current());
-        tru.0.push(s.theta);
-        tru.1.push(s.omega);
-        tru.2.push(s.i);
-        tru.3.push(s.friction);
-        tru.4.push(s.z);
-        for _ in 0..nf {
+    let run = FineRun::simulate(kind, dur);
+    window_residuals(&run);
+    bump_residuals(&run);
+    diagnose_true(kind, dur);
+}
+
+/// The true states, one value per grid point.
+#[derive(Default)]
+struct Truth {
+    t: Vec<f64>,
+    theta: Vec<f64>,
+    omega: Vec<f64>,
+    i: Vec<f64>,
+    friction: Vec<f64>,
+    z: Vec<f64>,
+}
+
+impl Truth {
+    fn push(&mut self, s: &motorid::emulator::TrueState) {
+        self.t.push(s.t);
+        self.theta.push(s.theta);
+        self.omega.push(s.omega);
+        self.i.push(s.i);
+        self.friction.push(s.friction);
+        self.z.push(s.z);
+    }
+}
+
+/// The paper's emulated motor run with one signal, stepped [`FineRun::nf`] fine steps per
+/// sample.
+struct FineRun {
+    cfg: EmulatorConfig,
+    /// The input, one value per sample [V].
+    u: Vec<f64>,
+    /// Fine steps per sample, and the fine step [s].
+    nf: usize,
+    hf: f64,
+    /// The sampled log: t, u, the Hall angle and the measured current.
+    log: MotorLog,
+    imeas: Vec<f64>,
+    /// The true states at the samples and on the fine grid (one more point at the end).
+    tru: Truth,
+    fine: Truth,
+}
+
+impl FineRun {
+    fn simulate(kind: SignalKind, dur: f64) -> FineRun {
+        let cfg = EmulatorConfig::paper();
+        let u = signal(kind, dur, cfg.seed);
+        let nf = 60usize;
+        let hf = SAMPLE_PERIOD / nf as f64;
+        let mut plant = Plant::new(cfg.clone()).unwrap();
+        let mut fine = Truth::default();
+        let mut log = MotorLog::default();
+        let mut imeas = vec![];
+        let mut tru = Truth::default();
+        for (k, &v) in u.iter().enumerate() {
             let s = plant.truth();
-            tf.push(s.t);
-            thf.push(s.theta);
-            wf.push(s.omega);
-            if_.push(s.i);
-            ff.push(s.friction);
-            zf.push(s.z);
-            plant.apply(v, hf);
+            log.t.push(k as f64 * SAMPLE_PERIOD);
+            log.u.push(v);
+            log.theta.push(plant.hall_angle());
+            imeas.push(plant.measured_current());
+            tru.push(&s);
+            for _ in 0..nf {
+                fine.push(&plant.truth());
+                plant.apply(v, hf);
+            }
+        }
+        fine.push(&plant.truth());
+        log.i = Some(imeas.clone());
+        FineRun {
+            cfg,
+            u,
+            nf,
+            hf,
+            log,
+            imeas,
+            tru,
+            fine,
         }
     }
-    let s = plant.truth();
-    tf.push(s.t);
-    thf.push(s.theta);
-    wf.push(s.omega);
-    if_.push(s.i);
-    ff.push(s.friction);
-    zf.push(s.z);
-    log.i = Some(imeas.clone());
-    let n = log.len();
-    let wins = windows(&log.t, WINDOW, HOP);
-    // The same windows on the fine grid.
-    let fine_t: Vec<f64> = tf.clone();
-    let fwins: Vec<Window> = wins
-        .iter()
-        .map(|w| {
-            let a = w.start * nf;
-            let b = (w.end - 1) * nf + 1;
-            windows(&fine_t[a..b], b - a, b - a).remove(0)
-        })
-        .collect();
-    let fwin_off: Vec<usize> = wins.iter().map(|w| w.start * nf).collect();
-    let fint = |k: usize, g: &[f64]| {
-        let o = fwin_off[k];
-        fwins[k].int(&g[o..])
-    };
-    let fint_dd = |k: usize, g: &[f64]| {
-        let o = fwin_off[k];
-        fwins[k].int_dd(&g[o..])
-    };
-    let fint_d = |k: usize, g: &[f64]| {
-        let o = fwin_off[k];
-        fwins[k].int_d(&g[o..])
-    };
-    let ones = vec![1.0; n];
-    let norm: Vec<f64> = wins.iter().map(|w| w.int(&ones)).collect();
-    let steady = |w: f64| lg.steady_friction(w);
-    let s_true: Vec<f64> = tru.1.iter().map(|&w| steady(w)).collect();
-    let ws = smooth_velocity(&log, 5);
-    let s_meas: Vec<f64> = ws.iter().map(|&w| steady(w)).collect();
-    let sf_true: Vec<f64> = wf.iter().map(|&w| steady(w)).collect();
-    let z_f: Vec<f64> = zf.clone();
-    let sig = |w: f64| {
-        if w > 0.0 {
-            1.0
-        } else if w < 0.0 {
-            -1.0
-        } else {
-            0.0
+
+    fn lugre(&self) -> LugreParams<f64> {
+        self.cfg.lugre
+    }
+
+    fn steady(&self, w: &[f64]) -> Vec<f64> {
+        let lg = self.lugre();
+        w.iter().map(|&w| lg.steady_friction(w)).collect()
+    }
+}
+
+fn sig(w: f64) -> f64 {
+    if w > 0.0 {
+        1.0
+    } else if w < 0.0 {
+        -1.0
+    } else {
+        0.0
+    }
+}
+
+/// The identification's sample windows, the same windows on the fine grid, the windows kept
+/// and the effect regressors on them.
+struct Windows {
+    wins: Vec<Window>,
+    fwins: Vec<Window>,
+    fwin_off: Vec<usize>,
+    norm: Vec<f64>,
+    keep: Vec<bool>,
+    reg_names: [&'static str; 5],
+    regs: Vec<Vec<f64>>,
+}
+
+impl Windows {
+    fn new(run: &FineRun) -> Windows {
+        let (log, nf, tru, lg) = (&run.log, run.nf, &run.tru, run.lugre());
+        let n = log.len();
+        let wins = windows(&log.t, WINDOW, HOP);
+        // The same windows on the fine grid.
+        let fine_t: Vec<f64> = run.fine.t.clone();
+        let fwins: Vec<Window> = wins
+            .iter()
+            .map(|w| {
+                let a = w.start * nf;
+                let b = (w.end - 1) * nf + 1;
+                windows(&fine_t[a..b], b - a, b - a).remove(0)
+            })
+            .collect();
+        let fwin_off: Vec<usize> = wins.iter().map(|w| w.start * nf).collect();
+        let ones = vec![1.0; n];
+        let norm: Vec<f64> = wins.iter().map(|w| w.int(&ones)).collect();
+        let s_true = run.steady(&tru.omega);
+        // Regressors (per window, ∫φ·g / ∫φ).
+        let reg_names = ["1", "sgn(w)", "w", "|KtI|sgn(w)", "-(s1/s0)∫φ'S(w)"];
+        let g_sgn: Vec<f64> = tru.omega.iter().map(|&w| sig(w)).collect();
+        let kt = run.cfg.motor.kt;
+        let g_lf: Vec<f64> = tru
+            .omega
+            .iter()
+            .zip(&tru.i)
+            .map(|(&w, &i)| (kt * i).abs() * sig(w))
+            .collect();
+        let per_window = |f: &dyn Fn(&Window) -> f64| -> Vec<f64> {
+            wins.iter().zip(&norm).map(|(w, c)| f(w) / c).collect()
+        };
+        let regs: Vec<Vec<f64>> = vec![
+            per_window(&|w| w.int(&ones)),
+            per_window(&|w| w.int(&g_sgn)),
+            per_window(&|w| w.int(&tru.omega)),
+            per_window(&|w| w.int(&g_lf)),
+            per_window(&|w| -lg.sigma1 / lg.sigma0 * w.int_d(&s_true)),
+        ];
+        // Windows where the rotor moves throughout (|ω_true| ≥ 1 rad/s), as diagnose keeps.
+        let moving_only = std::env::var("MOVING").is_ok_and(|v| v == "1");
+        let keep: Vec<bool> = wins
+            .iter()
+            .map(|w| !moving_only || tru.omega[w.start..w.end].iter().all(|v| v.abs() >= 1.0))
+            .collect();
+        let regs: Vec<Vec<f64>> = regs
+            .iter()
+            .map(|g| {
+                g.iter()
+                    .zip(&keep)
+                    .filter(|(_, k)| **k)
+                    .map(|(v, _)| *v)
+                    .collect()
+            })
+            .collect();
+        Windows {
+            wins,
+            fwins,
+            fwin_off,
+            norm,
+            keep,
+            reg_names,
+            regs,
         }
-    };
-    // Regressors (per window, ∫φ·g / ∫φ).
-    let reg_names = ["1", "sgn(w)", "w", "|KtI|sgn(w)", "-(s1/s0)∫φ'S(w)"];
-    let g_sgn: Vec<f64> = tru.1.iter().map(|&w| sig(w)).collect();
-    let g_lf: Vec<f64> = tru
-        .1
-        .iter()
-        .zip(&tru.2)
-        .map(|(&w, &i)| (m.kt * i).abs() * sig(w))
-        .collect();
-    let regs: Vec<Vec<f64>> = vec![
-        wins.iter()
-            .zip(&norm)
-            .map(|(w, c)| w.int(&ones) / c)
-            .collect(),
-        wins.iter()
-            .zip(&norm)
-            .map(|(w, c)| w.int(&g_sgn) / c)
-            .collect(),
-        wins.iter()
-            .zip(&norm)
-            .map(|(w, c)| w.int(&tru.1) / c)
-            .collect(),
-        wins.iter()
-            .zip(&norm)
-            .map(|(w, c)| w.int(&g_lf) / c)
-            .collect(),
-        wins.iter()
-            .zip(&norm)
-            .map(|(w, c)| -lg.sigma1 / lg.sigma0 * w.int_d(&s_true) / c)
-            .collect(),
-    ];
-    // Windows where the rotor moves throughout (|ω_true| ≥ 1 rad/s), as diagnose keeps.
-    let moving_only = std::env::var("MOVING").is_ok_and(|v| v == "1");
-    let keep: Vec<bool> = wins
-        .iter()
-        .map(|w| !moving_only || tru.1[w.start..w.end].iter().all(|v| v.abs() >= 1.0))
-        .collect();
-    let regs: Vec<Vec<f64>> = regs
-        .iter()
-        .map(|g| {
-            g.iter()
-                .zip(&keep)
-                .filter(|(_, k)| **k)
-                .map(|(v, _)| *v)
-                .collect()
-        })
-        .collect();
-    let report = |name: &str, r: Vec<f64>| {
+    }
+
+    fn fint(&self, k: usize, g: &[f64]) -> f64 {
+        self.fwins[k].int(&g[self.fwin_off[k]..])
+    }
+
+    fn fint_dd(&self, k: usize, g: &[f64]) -> f64 {
+        self.fwins[k].int_dd(&g[self.fwin_off[k]..])
+    }
+
+    fn fint_d(&self, k: usize, g: &[f64]) -> f64 {
+        self.fwins[k].int_d(&g[self.fwin_off[k]..])
+    }
+
+    /// One line: the residual's RMS and mean [N·m] over the kept windows, and its
+    /// correlation with each regressor.
+    fn report(&self, name: &str, r: Vec<f64>) {
         let r: Vec<f64> = r
             .iter()
-            .zip(&norm)
-            .zip(&keep)
+            .zip(&self.norm)
+            .zip(&self.keep)
             .filter(|(_, k)| **k)
             .map(|((a, b), _)| a / b)
             .collect();
         let mean = r.iter().sum::<f64>() / r.len() as f64;
         print!("{name:<58} rms {:.5} mean {:+.5} |", rms(&r), mean);
-        for (nm, g) in reg_names.iter().zip(&regs) {
+        for (nm, g) in self.reg_names.iter().zip(&self.regs) {
             print!(" {nm} {:+.2}", corr(&r, g));
         }
         println!();
+    }
+}
+
+/// The residual of the true model on the identification's windows, each approximation of
+/// the sample level swapped in one at a time.
+fn window_residuals(run: &FineRun) {
+    let w = Windows::new(run);
+    let nw = w.wins.len();
+    println!("{nw} windows; torque scale alpha0 = {}", run.lugre().alpha0);
+    fine_grid_reports(run, &w);
+    let m = run.cfg.motor;
+    let ex_i: Vec<f64> = (0..nw).map(|k| m.kt * w.fint(k, &run.fine.i)).collect();
+    let ex_th: Vec<f64> = (0..nw)
+        .map(|k| m.j * w.fint_dd(k, &run.fine.theta))
+        .collect();
+    let ex_f: Vec<f64> = (0..nw).map(|k| w.fint(k, &run.fine.friction)).collect();
+    let exact = Exact {
+        i: ex_i,
+        th: ex_th,
+        f: ex_f,
     };
-    let kt = m.kt;
-    let j = m.j;
-    let nw = wins.len();
-    println!("{nw} windows; torque scale alpha0 = {}", lg.alpha0);
-    // 0: everything exact on the fine grid.
-    report(
+    sample_reports(run, &w, &exact);
+    volts_reports(run, &w, &exact);
+    println!("kept {} windows", w.keep.iter().filter(|k| **k).count());
+}
+
+/// Window integrals taken exactly on the fine grid: K_t∫φI, J∫φ''θ and ∫φF [N·m·s].
+struct Exact {
+    i: Vec<f64>,
+    th: Vec<f64>,
+    f: Vec<f64>,
+}
+
+/// Everything exact on the fine grid, with the friction in its LuGre and steady forms.
+fn fine_grid_reports(run: &FineRun, w: &Windows) {
+    let (m, lg, fine) = (run.cfg.motor, run.lugre(), &run.fine);
+    let (kt, j) = (m.kt, m.j);
+    let nw = w.wins.len();
+    let sf_true = run.steady(&fine.omega);
+    w.report(
         "fine: Kt∫φI − J∫φ''θ − ∫φF (all fine)",
         (0..nw)
-            .map(|k| kt * fint(k, &if_) - j * fint_dd(k, &thf) - fint(k, &ff))
+            .map(|k| {
+                kt * w.fint(k, &fine.i) - j * w.fint_dd(k, &fine.theta) - w.fint(k, &fine.friction)
+            })
             .collect(),
     );
-    report(
+    w.report(
         "fine, F = sigma0 z + sigma1 zdot via -s1∫φ'z",
         (0..nw)
             .map(|k| {
-                kt * fint(k, &if_) - j * fint_dd(k, &thf) - lg.sigma0 * fint(k, &z_f)
-                    + lg.sigma1 * fint_d(k, &z_f)
-                    - lg.alpha2 * fint(k, &wf)
+                kt * w.fint(k, &fine.i)
+                    - j * w.fint_dd(k, &fine.theta)
+                    - lg.sigma0 * w.fint(k, &fine.z)
+                    + lg.sigma1 * w.fint_d(k, &fine.z)
+                    - lg.alpha2 * w.fint(k, &fine.omega)
             })
             .collect(),
     );
-    report(
+    w.report(
         "fine, F = steady S(w_true)",
         (0..nw)
-            .map(|k| kt * fint(k, &if_) - j * fint_dd(k, &thf) - fint(k, &sf_true))
+            .map(|k| kt * w.fint(k, &fine.i) - j * w.fint_dd(k, &fine.theta) - w.fint(k, &sf_true))
             .collect(),
     );
-    report(
+    w.report(
         "fine, F = S(w) - (s1/s0)∫φ' S(w)",
         (0..nw)
             .map(|k| {
-                kt * fint(k, &if_) - j * fint_dd(k, &thf) - fint(k, &sf_true)
-                    + lg.sigma1 / lg.sigma0 * fint_d(k, &sf_true)
+                kt * w.fint(k, &fine.i) - j * w.fint_dd(k, &fine.theta) - w.fint(k, &sf_true)
+                    + lg.sigma1 / lg.sigma0 * w.fint_d(k, &sf_true)
             })
             .collect(),
     );
-    // sample level, truth
-    let ex_i: Vec<f64> = (0..nw).map(|k| kt * fint(k, &if_)).collect();
-    let ex_th: Vec<f64> = (0..nw).map(|k| j * fint_dd(k, &thf)).collect();
-    let ex_f: Vec<f64> = (0..nw).map(|k| fint(k, &ff)).collect();
-    report(
+}
+
+/// The sample-level current swapped in, with and without the input steps' share.
+fn sample_reports(run: &FineRun, w: &Windows, ex: &Exact) {
+    let (m, tru, log) = (run.cfg.motor, &run.tru, &run.log);
+    let (kt, j) = (m.kt, m.j);
+    let (wins, nw) = (&w.wins, w.wins.len());
+    let s_meas = run.steady(&smooth_velocity(log, 5));
+    w.report(
         "samples: I_true, θ_true, F_true",
         wins.iter()
-            .map(|w| kt * w.int(&tru.2) - j * w.int_dd(&tru.0) - w.int(&tru.3))
+            .map(|w| kt * w.int(&tru.i) - j * w.int_dd(&tru.theta) - w.int(&tru.friction))
             .collect(),
     );
-    report(
+    w.report(
         "exact I,θ; F_true samples",
         (0..nw)
-            .map(|k| ex_i[k] - ex_th[k] - wins[k].int(&tru.3))
+            .map(|k| ex.i[k] - ex.th[k] - wins[k].int(&tru.friction))
             .collect(),
     );
-    report(
+    w.report(
         "exact F,θ; I_true samples",
         (0..nw)
-            .map(|k| kt * wins[k].int(&tru.2) - ex_th[k] - ex_f[k])
+            .map(|k| kt * wins[k].int(&tru.i) - ex.th[k] - ex.f[k])
             .collect(),
     );
-    // Trapezoid of the sampled current plus the input steps' share: the current jumps to its
-    // new quasi-static value within L/R of each step, the trapezoid assumes a ramp.
-    let tau = m.l / m.r;
-    let du: Vec<f64> = (0..n)
-        .map(|k| if k == 0 { 0.0 } else { (u[k] - u[k - 1]) / m.r })
-        .collect();
-    let step_corr = |w: &Window| -> f64 {
-        (w.start..w.end)
-            .map(|k| w.w0[k - w.start] / SAMPLE_PERIOD * (0.5 * SAMPLE_PERIOD - tau) * du[k])
-            .sum()
-    };
-    report(
+    let step_corr = step_correction(run);
+    w.report(
         "exact F,θ; I_true samples + step correction",
         (0..nw)
-            .map(|k| kt * (wins[k].int(&tru.2) + step_corr(&wins[k])) - ex_th[k] - ex_f[k])
+            .map(|k| kt * (wins[k].int(&tru.i) + step_corr(&wins[k])) - ex.th[k] - ex.f[k])
             .collect(),
     );
-    report(
+    w.report(
         "exact F,θ; I_meas samples + step correction",
         (0..nw)
-            .map(|k| kt * (wins[k].int(&imeas) + step_corr(&wins[k])) - ex_th[k] - ex_f[k])
+            .map(|k| kt * (wins[k].int(&run.imeas) + step_corr(&wins[k])) - ex.th[k] - ex.f[k])
             .collect(),
     );
-    report(
+    w.report(
         "effect_residual + step correction",
         wins.iter()
             .map(|w| {
-                kt * (w.int(&imeas) + step_corr(w)) - j * w.int_dd(&log.theta) - w.int(&s_meas)
+                kt * (w.int(&run.imeas) + step_corr(w)) - j * w.int_dd(&log.theta) - w.int(&s_meas)
             })
             .collect(),
     );
-    report(
+    angle_and_friction_reports(run, w, ex);
+}
+
+/// The sample-level angle, then the friction from the true and the estimated velocity.
+fn angle_and_friction_reports(run: &FineRun, w: &Windows, ex: &Exact) {
+    let (m, lg, tru, log) = (run.cfg.motor, run.lugre(), &run.tru, &run.log);
+    let (kt, j) = (m.kt, m.j);
+    let (wins, nw) = (&w.wins, w.wins.len());
+    let s_true = run.steady(&tru.omega);
+    let s_meas = run.steady(&smooth_velocity(log, 5));
+    w.report(
         "exact I,F; θ_true samples",
         (0..nw)
-            .map(|k| ex_i[k] - j * wins[k].int_dd(&tru.0) - ex_f[k])
+            .map(|k| ex.i[k] - j * wins[k].int_dd(&tru.theta) - ex.f[k])
             .collect(),
     );
-    report(
+    w.report(
         "exact I,F; θ Hall",
         (0..nw)
-            .map(|k| ex_i[k] - j * wins[k].int_dd(&log.theta) - ex_f[k])
+            .map(|k| ex.i[k] - j * wins[k].int_dd(&log.theta) - ex.f[k])
             .collect(),
     );
-    report(
+    w.report(
         "exact I,θ; F = S(w_true) samples",
         (0..nw)
-            .map(|k| ex_i[k] - ex_th[k] - wins[k].int(&s_true))
+            .map(|k| ex.i[k] - ex.th[k] - wins[k].int(&s_true))
             .collect(),
     );
-    report(
+    w.report(
         "exact I,θ; F = S(smooth_velocity(Hall))",
         (0..nw)
-            .map(|k| ex_i[k] - ex_th[k] - wins[k].int(&s_meas))
+            .map(|k| ex.i[k] - ex.th[k] - wins[k].int(&s_meas))
             .collect(),
     );
-    report(
+    w.report(
         "exact I,θ; F = S(w_true) - (s1/s0)∫φ'S",
         (0..nw)
             .map(|k| {
-                ex_i[k] - ex_th[k] - wins[k].int(&s_true)
+                ex.i[k] - ex.th[k] - wins[k].int(&s_true)
                     + lg.sigma1 / lg.sigma0 * wins[k].int_d(&s_true)
             })
             .collect(),
     );
-    report(
+    w.report(
         "exact I,θ; F = S(ws) - (s1/s0)∫φ'S(ws)",
         (0..nw)
             .map(|k| {
-                ex_i[k] - ex_th[k] - wins[k].int(&s_meas)
+                ex.i[k] - ex.th[k] - wins[k].int(&s_meas)
                     + lg.sigma1 / lg.sigma0 * wins[k].int_d(&s_meas)
             })
             .collect(),
     );
-    report(
+    w.report(
         "as effect_residual: I_meas, θ Hall, S(ws)",
         wins.iter()
-            .map(|w| kt * w.int(&imeas) - j * w.int_dd(&log.theta) - w.int(&s_meas))
+            .map(|w| kt * w.int(&run.imeas) - j * w.int_dd(&log.theta) - w.int(&s_meas))
             .collect(),
     );
-    report(
+    w.report(
         "effect_residual + -(s1/s0)∫φ'S(ws)",
         wins.iter()
             .map(|w| {
-                kt * w.int(&imeas) - j * w.int_dd(&log.theta) - w.int(&s_meas)
+                kt * w.int(&run.imeas) - j * w.int_dd(&log.theta) - w.int(&s_meas)
                     + lg.sigma1 / lg.sigma0 * w.int_d(&s_meas)
             })
             .collect(),
     );
-    // Current through the voltage equation (what diagnose does): K_t∫φI =
-    // (K_t/R)(∫φ_zoh u − K_b∫φω − L∫φİ), ∫φω = −∫φ'θ, ∫φİ = −∫φ'I.
+}
+
+/// Trapezoid of the sampled current plus the input steps' share: the current jumps to its
+/// new quasi-static value within L/R of each step, the trapezoid assumes a ramp.
+fn step_correction(run: &FineRun) -> impl Fn(&Window) -> f64 + '_ {
+    let m = run.cfg.motor;
+    let tau = m.l / m.r;
+    let u = &run.u;
+    let du: Vec<f64> = (0..run.log.len())
+        .map(|k| if k == 0 { 0.0 } else { (u[k] - u[k - 1]) / m.r })
+        .collect();
+    move |w: &Window| -> f64 {
+        (w.start..w.end)
+            .map(|k| w.w0[k - w.start] / SAMPLE_PERIOD * (0.5 * SAMPLE_PERIOD - tau) * du[k])
+            .sum()
+    }
+}
+
+/// The current through the voltage equation (what diagnose does): K_t∫φI =
+/// (K_t/R)(∫φ_zoh u − K_b∫φω − L∫φİ), ∫φω = −∫φ'θ, ∫φİ = −∫φ'I.
+fn volts_reports(run: &FineRun, w: &Windows, ex: &Exact) {
+    let (m, log) = (run.cfg.motor, &run.log);
+    let (wins, nw) = (&w.wins, w.wins.len());
+    let s_meas = run.steady(&smooth_velocity(log, 5));
     let i_volt: Vec<f64> = wins
         .iter()
         .map(|w| {
-            kt / m.r * (w.int_zoh(&log.u) + m.kb * w.int_d(&log.theta) + m.l * w.int_d(&imeas))
+            m.kt / m.r
+                * (w.int_zoh(&log.u) + m.kb * w.int_d(&log.theta) + m.l * w.int_d(&run.imeas))
         })
         .collect();
-    report(
+    w.report(
         "exact θ,F; I via volts (u zoh, θ Hall, I_meas)",
-        (0..nw).map(|k| i_volt[k] - ex_th[k] - ex_f[k]).collect(),
+        (0..nw).map(|k| i_volt[k] - ex.th[k] - ex.f[k]).collect(),
     );
-    report(
+    w.report(
         "volts, θ Hall, S(ws)",
         (0..nw)
-            .map(|k| i_volt[k] - j * wins[k].int_dd(&log.theta) - wins[k].int(&s_meas))
+            .map(|k| i_volt[k] - m.j * wins[k].int_dd(&log.theta) - wins[k].int(&s_meas))
             .collect(),
     );
-    println!("kept {} windows", keep.iter().filter(|k| **k).count());
-    let _ = (&z_f, &fint_d);
-    // diagnose's bump (half-width 8 samples), torque form in N·m, rows as diagnose keeps them.
-    {
-        use motorid::diagnose::candidates::Signals;
-        use motorid::numerics::weak_form::WeakForm;
+}
+
+/// diagnose's bump (half-width 8 samples) on the samples and on the fine grid, at the rows
+/// both grids share, kept as diagnose keeps them; torque form in N·m.
+struct Bump {
+    h: usize,
+    wc: WeakForm,
+    wfn: WeakForm,
+    rows: Vec<usize>,
+    sg: Signals,
+    keep: Vec<bool>,
+    norm: Vec<f64>,
+    regs: [(&'static str, Vec<f64>); 4],
+}
+
+impl Bump {
+    fn new(run: &FineRun) -> Bump {
+        let (log, nf, fine) = (&run.log, run.nf, &run.fine);
+        let kt = run.cfg.motor.kt;
+        let n = log.len();
         let h = 8usize;
         let wc = WeakForm::new(n, SAMPLE_PERIOD, h, h);
-        let nfine = tf.len();
-        let wfn = WeakForm::new(nfine, hf, h * nf, h * nf);
-        let uf: Vec<f64> = (0..nfine).map(|j| u[(j / nf).min(n - 1)]).collect();
+        let wfn = WeakForm::new(fine.t.len(), run.hf, h * nf, h * nf);
         let rows: Vec<usize> = (0..wc.rows())
             .filter(|&r| wfn.centres.get(r) == Some(&(wc.centres[r] * nf)))
             .collect();
-        let sg = Signals::from_log(&log, motorid::log::Plant::Voltage, kt);
+        let sg = Signals::from_log(log, motorid::log::Plant::Voltage, kt);
         let keep: Vec<bool> = rows
             .iter()
             .map(|&r| {
@@ -354,194 +493,221 @@ fn main() {
                     .all(|w| w.abs() >= 1.0)
             })
             .collect();
-        let pick = |v: Vec<f64>| -> Vec<f64> { rows.iter().map(|&r| v[r]).collect() };
-        let norm = pick(wc.integral(&ones));
-        let ex_u = wfn.integral_zoh(&uf);
-        let ex_w = wfn.integral(&wf);
-        let ex_di = wfn.derivative(&if_);
-        let ex_i = wfn.integral(&if_);
-        let ex_th = wfn.second_derivative(&thf);
-        let ex_f = wfn.integral(&ff);
-        let g_ex_sgn = wfn.integral(&wf.iter().map(|&w| sig(w)).collect::<Vec<_>>());
+        let ones = wc.integral(&vec![1.0; n]);
+        let norm: Vec<f64> = rows.iter().map(|&r| ones[r]).collect();
+        let g_ex_sgn = wfn.integral(&fine.omega.iter().map(|&w| sig(w)).collect::<Vec<_>>());
         let g_ex_lf = wfn.integral(
-            &wf.iter()
-                .zip(&if_)
+            &fine
+                .omega
+                .iter()
+                .zip(&fine.i)
                 .map(|(&w, &i)| (kt * i).abs() * sig(w))
                 .collect::<Vec<_>>(),
         );
-        let g_ex_w = wfn.integral(&wf);
+        let g_ex_w = wfn.integral(&fine.omega);
         let regs = [
             ("1", vec![1.0; rows.len()]),
             ("sgn", g_ex_sgn),
             ("w", g_ex_w),
             ("|KtI|sgn", g_ex_lf),
         ];
-        let rep = |name: &str, r: Vec<f64>| {
-            let v: Vec<f64> = r
-                .iter()
-                .zip(&norm)
-                .zip(&keep)
-                .filter(|(_, k)| **k)
-                .map(|((a, b), _)| a / b)
-                .collect();
-            let mean = v.iter().sum::<f64>() / v.len() as f64;
-            print!("D {name:<56} rms {:.5} mean {:+.5} |", rms(&v), mean);
-            for (nm, g) in &regs {
-                let gg: Vec<f64> = g
-                    .iter()
-                    .zip(&norm)
-                    .zip(&keep)
-                    .filter(|(_, k)| **k)
-                    .map(|((a, b), _)| a / b)
-                    .collect();
-                print!(" {nm} {:+.2}", corr(&v, &gg));
-            }
-            println!();
-        };
-        let q = kt / m.r;
-        rep(
-            "fine: Kt∫φI − J∫φ''θ − ∫φF",
-            pick(
-                (0..nfine.min(ex_i.len()))
-                    .map(|r| kt * ex_i[r] - j * ex_th[r] - ex_f[r])
-                    .collect(),
-            ),
-        );
-        let volts = |uu: &[f64], ww: &[f64], di: &[f64]| -> Vec<f64> {
-            (0..uu.len())
-                .map(|r| q * (uu[r] - m.kb * ww[r] - m.l * di[r]))
-                .collect()
-        };
-        let ex_v = volts(&ex_u, &ex_w, &ex_di);
-        rep(
-            "fine volts: q(∫u − Kb∫ω − L∫İ) − J∫θ'' − ∫F",
-            pick(
-                (0..ex_v.len())
-                    .map(|r| ex_v[r] - j * ex_th[r] - ex_f[r])
-                    .collect(),
-            ),
-        );
-        let c_u = wc.integral_zoh(&log.u);
-        let c_w_true = wc.integral(&tru.1);
-        let c_w_hall = wc.derivative(&log.theta);
-        let c_di = wc.derivative(&imeas);
-        let c_di_true = wc.derivative(&tru.2);
-        let exv = pick(ex_v.clone());
-        let exth: Vec<f64> = pick(ex_th.clone()).iter().map(|v| j * v).collect();
-        let exf = pick(ex_f.clone());
-        let pu = pick(c_u.clone());
-        let pw_h = pick(c_w_hall.clone());
-        let pw_t = pick(c_w_true.clone());
-        let pdi = pick(c_di.clone());
-        let pdi_t = pick(c_di_true.clone());
-        let pexw = pick(ex_w.clone());
-        let pexdi = pick(ex_di.clone());
-        let nr = rows.len();
-        // The torque balance with the exact inertia and friction terms and one (u, ω, İ) choice.
-        let with_drive = |u: &[f64], w: &[f64], di: &[f64]| -> Vec<f64> {
-            (0..nr)
-                .map(|r| q * (u[r] - m.kb * w[r] - m.l * di[r]) - exth[r] - exf[r])
-                .collect()
-        };
-        rep("samples u zoh (else exact)", with_drive(&pu, &pexw, &pexdi));
-        rep(
-            "∫ω from θ_Hall (else exact)",
-            with_drive(&pu, &pw_h, &pexdi),
-        );
-        rep("∫ω from ω_true samples", with_drive(&pu, &pw_t, &pexdi));
-        rep("L∫İ from I_true samples", with_drive(&pu, &pexw, &pdi_t));
-        rep("L∫İ from I_meas samples", with_drive(&pu, &pexw, &pdi));
-        let pth_h = pick(wc.second_derivative(&log.theta));
-        let pth_t = pick(wc.second_derivative(&tru.0));
-        rep(
-            "J∫θ'' θ_true samples",
-            (0..nr).map(|r| exv[r] - j * pth_t[r] - exf[r]).collect(),
-        );
-        rep(
-            "J∫θ'' θ_Hall",
-            (0..nr).map(|r| exv[r] - j * pth_h[r] - exf[r]).collect(),
-        );
-        let pf_t = pick(wc.integral(&tru.3));
-        let s_w_true: Vec<f64> = tru.1.iter().map(|&w| steady(w)).collect();
-        let s_sg: Vec<f64> = sg.omega.iter().map(|&w| steady(w)).collect();
-        let pf_s = pick(wc.integral(&s_w_true));
-        let pf_sg = pick(wc.integral(&s_sg));
-        rep(
-            "F_true samples",
-            (0..nr).map(|r| exv[r] - exth[r] - pf_t[r]).collect(),
-        );
-        rep(
-            "F = S(ω_true) samples",
-            (0..nr).map(|r| exv[r] - exth[r] - pf_s[r]).collect(),
-        );
-        rep(
-            "F = S(ω_smoothed Hall) (diagnose's ω)",
-            (0..nr).map(|r| exv[r] - exth[r] - pf_sg[r]).collect(),
-        );
-        rep(
-            "all sample-level: u, θ_Hall, I_meas, S(ω_s)",
-            (0..nr)
-                .map(|r| q * (pu[r] - m.kb * pw_h[r] - m.l * pdi[r]) - j * pth_h[r] - pf_sg[r])
-                .collect(),
-        );
-        // The sampled analytic φ'' as weights (their sum is not 0), for comparison.
-        let big_t = h as f64 * SAMPLE_PERIOD;
-        let w2_old: Vec<f64> = (-(h as isize)..=(h as isize))
-            .map(|k| {
-                let s = k as f64 / h as f64;
-                let q = 1.0 - s * s;
-                (-8.0 * q.powi(3) + 48.0 * s * s * q.powi(2)) / (big_t * big_t) * SAMPLE_PERIOD
-            })
-            .collect();
-        let old_acc: Vec<f64> = rows
-            .iter()
-            .map(|&r| {
-                let c = wc.centres[r];
-                w2_old
-                    .iter()
-                    .zip(&log.theta[c - h..])
-                    .map(|(a, b)| a * b)
-                    .sum()
-            })
-            .collect();
-        let th_int = pick(wc.integral(&log.theta));
-        let all_new: Vec<f64> = (0..nr)
-            .map(|r| q * (pu[r] - m.kb * pw_h[r] - m.l * pdi[r]) - j * pth_h[r] - pf_sg[r])
-            .collect();
-        let all_old: Vec<f64> = (0..nr)
-            .map(|r| q * (pu[r] - m.kb * pw_h[r] - m.l * pdi[r]) - j * old_acc[r] - pf_sg[r])
-            .collect();
-        rep(
-            "all sample-level, OLD analytic φ'' weights",
-            all_old.clone(),
-        );
-        for (nm, v) in [("new", &all_new), ("old", &all_old)] {
-            let a: Vec<f64> = v
-                .iter()
-                .zip(&norm)
-                .zip(&keep)
-                .filter(|(_, k)| **k)
-                .map(|((a, b), _)| a / b)
-                .collect();
-            let b: Vec<f64> = th_int
-                .iter()
-                .zip(&norm)
-                .zip(&keep)
-                .filter(|(_, k)| **k)
-                .map(|((a, b), _)| a / b)
-                .collect();
-            println!(
-                "D {nm}: corr(residual, window-mean θ) = {:+.3}",
-                corr(&a, &b)
-            );
+        Bump {
+            h,
+            wc,
+            wfn,
+            rows,
+            sg,
+            keep,
+            norm,
+            regs,
         }
+    }
+
+    /// The values of `v` at the shared rows.
+    fn pick(&self, v: Vec<f64>) -> Vec<f64> {
+        self.rows.iter().map(|&r| v[r]).collect()
+    }
+
+    /// `v` per unit ∫φ at the kept rows.
+    fn kept(&self, v: &[f64]) -> Vec<f64> {
+        v.iter()
+            .zip(&self.norm)
+            .zip(&self.keep)
+            .filter(|(_, k)| **k)
+            .map(|((a, b), _)| a / b)
+            .collect()
+    }
+
+    /// One line: the residual's RMS and mean [N·m] over the kept rows, and its correlation
+    /// with each regressor.
+    fn rep(&self, name: &str, r: Vec<f64>) {
+        let v = self.kept(&r);
+        let mean = v.iter().sum::<f64>() / v.len() as f64;
+        print!("D {name:<56} rms {:.5} mean {:+.5} |", rms(&v), mean);
+        for (nm, g) in &self.regs {
+            print!(" {nm} {:+.2}", corr(&v, &self.kept(g)));
+        }
+        println!();
+    }
+}
+
+/// The bump's integrals taken exactly on the fine grid, at the shared rows: the drive
+/// q(∫u − K_b∫ω − L∫İ) with q = K_t/R, J∫θ'' and ∫F.
+struct BumpExact {
+    volts: Vec<f64>,
+    th: Vec<f64>,
+    f: Vec<f64>,
+    w: Vec<f64>,
+    di: Vec<f64>,
+}
+
+/// The residual of the true model under diagnose's bump, each sample-level approximation
+/// swapped in one at a time.
+fn bump_residuals(run: &FineRun) {
+    let b = Bump::new(run);
+    let (m, fine, nf) = (run.cfg.motor, &run.fine, run.nf);
+    let (kt, j, q) = (m.kt, m.j, m.kt / m.r);
+    let n = run.log.len();
+    let nfine = fine.t.len();
+    let uf: Vec<f64> = (0..nfine).map(|j| run.u[(j / nf).min(n - 1)]).collect();
+    let wfn = &b.wfn;
+    let ex_u = wfn.integral_zoh(&uf);
+    let ex_w = wfn.integral(&fine.omega);
+    let ex_di = wfn.derivative(&fine.i);
+    let ex_i = wfn.integral(&fine.i);
+    let ex_th = wfn.second_derivative(&fine.theta);
+    let ex_f = wfn.integral(&fine.friction);
+    b.rep(
+        "fine: Kt∫φI − J∫φ''θ − ∫φF",
+        b.pick(
+            (0..nfine.min(ex_i.len()))
+                .map(|r| kt * ex_i[r] - j * ex_th[r] - ex_f[r])
+                .collect(),
+        ),
+    );
+    let ex_v: Vec<f64> = (0..ex_u.len())
+        .map(|r| q * (ex_u[r] - m.kb * ex_w[r] - m.l * ex_di[r]))
+        .collect();
+    b.rep(
+        "fine volts: q(∫u − Kb∫ω − L∫İ) − J∫θ'' − ∫F",
+        b.pick(
+            (0..ex_v.len())
+                .map(|r| ex_v[r] - j * ex_th[r] - ex_f[r])
+                .collect(),
+        ),
+    );
+    let ex = BumpExact {
+        volts: b.pick(ex_v),
+        th: b.pick(ex_th).iter().map(|v| j * v).collect(),
+        f: b.pick(ex_f),
+        w: b.pick(ex_w),
+        di: b.pick(ex_di),
+    };
+    bump_sample_reports(run, &b, &ex);
+    println!(
+        "D kept {} of {} rows",
+        b.keep.iter().filter(|k| **k).count(),
+        b.rows.len()
+    );
+}
+
+/// Drive, inertia and friction terms from the samples in turn, then all of them, with the
+/// sampled analytic φ'' weights for comparison.
+fn bump_sample_reports(run: &FineRun, b: &Bump, ex: &BumpExact) {
+    let (m, log, tru) = (run.cfg.motor, &run.log, &run.tru);
+    let (j, q) = (m.j, m.kt / m.r);
+    let wc = &b.wc;
+    let nr = b.rows.len();
+    let pu = b.pick(wc.integral_zoh(&log.u));
+    let pw_h = b.pick(wc.derivative(&log.theta));
+    let pw_t = b.pick(wc.integral(&tru.omega));
+    let pdi = b.pick(wc.derivative(&run.imeas));
+    let pdi_t = b.pick(wc.derivative(&tru.i));
+    // The torque balance with the exact inertia and friction terms and one (u, ω, İ) choice.
+    let with_drive = |u: &[f64], w: &[f64], di: &[f64]| -> Vec<f64> {
+        (0..nr)
+            .map(|r| q * (u[r] - m.kb * w[r] - m.l * di[r]) - ex.th[r] - ex.f[r])
+            .collect()
+    };
+    b.rep("samples u zoh (else exact)", with_drive(&pu, &ex.w, &ex.di));
+    b.rep(
+        "∫ω from θ_Hall (else exact)",
+        with_drive(&pu, &pw_h, &ex.di),
+    );
+    b.rep("∫ω from ω_true samples", with_drive(&pu, &pw_t, &ex.di));
+    b.rep("L∫İ from I_true samples", with_drive(&pu, &ex.w, &pdi_t));
+    b.rep("L∫İ from I_meas samples", with_drive(&pu, &ex.w, &pdi));
+    let pth_h = b.pick(wc.second_derivative(&log.theta));
+    let pth_t = b.pick(wc.second_derivative(&tru.theta));
+    b.rep(
+        "J∫θ'' θ_true samples",
+        (0..nr)
+            .map(|r| ex.volts[r] - j * pth_t[r] - ex.f[r])
+            .collect(),
+    );
+    b.rep(
+        "J∫θ'' θ_Hall",
+        (0..nr)
+            .map(|r| ex.volts[r] - j * pth_h[r] - ex.f[r])
+            .collect(),
+    );
+    let pf_t = b.pick(wc.integral(&tru.friction));
+    let pf_s = b.pick(wc.integral(&run.steady(&tru.omega)));
+    let pf_sg = b.pick(wc.integral(&run.steady(&b.sg.omega)));
+    b.rep(
+        "F_true samples",
+        (0..nr).map(|r| ex.volts[r] - ex.th[r] - pf_t[r]).collect(),
+    );
+    b.rep(
+        "F = S(ω_true) samples",
+        (0..nr).map(|r| ex.volts[r] - ex.th[r] - pf_s[r]).collect(),
+    );
+    b.rep(
+        "F = S(ω_smoothed Hall) (diagnose's ω)",
+        (0..nr).map(|r| ex.volts[r] - ex.th[r] - pf_sg[r]).collect(),
+    );
+    let all_new: Vec<f64> = (0..nr)
+        .map(|r| q * (pu[r] - m.kb * pw_h[r] - m.l * pdi[r]) - j * pth_h[r] - pf_sg[r])
+        .collect();
+    b.rep(
+        "all sample-level: u, θ_Hall, I_meas, S(ω_s)",
+        all_new.clone(),
+    );
+    let old_acc = analytic_acceleration(b, &log.theta);
+    let all_old: Vec<f64> = (0..nr)
+        .map(|r| q * (pu[r] - m.kb * pw_h[r] - m.l * pdi[r]) - j * old_acc[r] - pf_sg[r])
+        .collect();
+    b.rep(
+        "all sample-level, OLD analytic φ'' weights",
+        all_old.clone(),
+    );
+    let th_int = b.kept(&b.pick(wc.integral(&log.theta)));
+    for (nm, v) in [("new", &all_new), ("old", &all_old)] {
         println!(
-            "D kept {} of {} rows",
-            keep.iter().filter(|k| **k).count(),
-            nr
+            "D {nm}: corr(residual, window-mean θ) = {:+.3}",
+            corr(&b.kept(v), &th_int)
         );
     }
-    diagnose_true(kind, dur);
+}
+
+/// ∫φ''θ at the shared rows with the sampled analytic φ'' as weights (their sum is not 0).
+fn analytic_acceleration(b: &Bump, theta: &[f64]) -> Vec<f64> {
+    let h = b.h;
+    let big_t = h as f64 * SAMPLE_PERIOD;
+    let w2_old: Vec<f64> = (-(h as isize)..=(h as isize))
+        .map(|k| {
+            let s = k as f64 / h as f64;
+            let q = 1.0 - s * s;
+            (-8.0 * q.powi(3) + 48.0 * s * s * q.powi(2)) / (big_t * big_t) * SAMPLE_PERIOD
+        })
+        .collect();
+    b.rows
+        .iter()
+        .map(|&r| {
+            let c = b.wc.centres[r];
+            w2_old.iter().zip(&theta[c - h..]).map(|(a, b)| a * b).sum()
+        })
+        .collect()
 }
 
 /// `diagnose` with the emulator's own LuGre structure on a simulated log: what the base

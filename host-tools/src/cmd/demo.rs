@@ -7,7 +7,7 @@ use crate::effect_spec::EffectSpec;
 use crate::emulator::{simulate_signal, EmulatorConfig, SignalKind};
 use crate::ident::free_params::Constraints;
 use crate::ident::{self, FitRequest};
-use crate::log::Plant;
+use crate::log::{MotorLog, Plant};
 use crate::model::{Model, ModelKind};
 use crate::report::{self, Iteration};
 use crate::workflow;
@@ -172,45 +172,64 @@ pub fn run_loop(
     say: &mut dyn FnMut(&str),
     bar: &ProgressBar,
 ) -> Result<Outcome> {
-    let mut cfg = EmulatorConfig::paper();
-    cfg.seed = seed;
-    cfg.effects = hidden.iter().map(EffectSpec::to_effect).collect();
-    if let Some(u) = unnamed {
-        cfg = u.hide(cfg);
-    }
     bar.set_message("simulating signals a and d (fit), b (selection) and b (test)");
-    let mut fit_log = simulate_signal(&cfg, SignalKind::A, duration)?.log;
-    fit_log.source = PathBuf::from("emulated signal a");
-    // The braking experiment: after each voltage step down the drive brakes the moving
-    // rotor, the only place where load-dependent friction differs from a lower K_t.
-    let mut step_cfg = cfg.clone();
-    step_cfg.seed = seed.wrapping_add(2000);
-    let mut step_log = simulate_signal(&step_cfg, SignalKind::D, STEP_DURATION)?.log;
-    step_log.source = PathBuf::from("emulated signal d");
-    let fit_logs = [fit_log, step_log];
-    let mut val_cfg = cfg.clone();
-    val_cfg.seed = seed.wrapping_add(1000);
-    let mut val_log = simulate_signal(&val_cfg, SignalKind::B, duration)?.log;
-    val_log.source = PathBuf::from("emulated signal b");
-    // The selection log decides which refits are kept; the scores are reported on a fresh
-    // log that no choice was made on.
-    let mut test_cfg = cfg.clone();
-    test_cfg.seed = seed.wrapping_add(3000);
-    let mut test_log = simulate_signal(&test_cfg, SignalKind::B, duration)?.log;
-    test_log.source = PathBuf::from("emulated signal b (test)");
+    let logs = DemoLogs::emulate(hidden, unnamed, seed, duration)?;
     bar.inc(1);
+    let test_log = &logs.test;
     let loop_cfg = workflow::Config {
         kind: ModelKind::Lugre,
         plant: Plant::Voltage,
-        fit_logs: &fit_logs,
-        select_logs: std::slice::from_ref(&val_log),
+        fit_logs: &logs.fit,
+        select_logs: std::slice::from_ref(&logs.select),
         start: Vec::new(),
         constraints: &Constraints::NONE,
         max_rounds: MAX_ROUNDS,
         diagnose: Options::default(),
     };
+    let mut fit = fit_on_bar(bar);
+    let mut iterations = Vec::new();
+    let mut scored: Result<()> = Ok(());
+    let mut on_round = |r: &workflow::Round| {
+        let sc = match ident::score(&r.model, test_log) {
+            Ok(sc) => sc,
+            Err(e) => {
+                scored = Err(e);
+                return;
+            }
+        };
+        say_round(say, iterations.len(), r, &sc);
+        iterations.push(Iteration {
+            label: if r.kept {
+                label(&r.adds)
+            } else {
+                format!("{} (not kept)", label(&r.adds))
+            },
+            validation: sc.fit,
+            added: r.next.as_ref().map(|n| n.spec.to_string()),
+        });
+    };
+    let out = workflow::run(&loop_cfg, &mut fit, &mut on_round)?;
+    scored?;
+    let last = out.final_round();
+    let pred = say_final(say, &out, test_log)?;
+    let mut outcome = Outcome {
+        hidden: hidden.to_vec(),
+        unnamed,
+        iterations,
+        added: last.adds.clone(),
+        report: None,
+    };
+    if let Some(dir) = report_dir {
+        bar.set_message("writing the report");
+        outcome.report = Some(write_report(dir, &outcome, last, test_log, &pred)?);
+    }
+    Ok(outcome)
+}
+
+/// The loop's fit, its stage and progress shown on `bar`, one round after another.
+fn fit_on_bar(bar: &ProgressBar) -> impl FnMut(&FitRequest) -> Result<Model> + '_ {
     let mut round = 0;
-    let mut fit = |req: &FitRequest| -> Result<Model> {
+    move |req: &FitRequest| -> Result<Model> {
         let what = format!("round {round}: fitting {}", label(req.adds));
         round += 1;
         bar.set_message(what.clone());
@@ -222,86 +241,16 @@ pub fn run_loop(
         bar.inc(1);
         bar.set_message("scoring on signal b and diagnosing on a and d");
         Ok(model)
-    };
-    let mut iterations = Vec::new();
-    let mut step = 0;
-    let mut scored: Result<()> = Ok(());
-    let mut on_round = |r: &workflow::Round| {
-        let sc = match ident::score(&r.model, &test_log) {
-            Ok(sc) => sc,
-            Err(e) => {
-                scored = Err(e);
-                return;
-            }
-        };
-        say(&format!(
-            "step {step}{}: {:<32} test fit (fresh signal b): x {:6.2} %, xdot {:6.2} %, i {}",
-            if r.kept { "" } else { " (not kept)" },
-            label(&r.adds),
-            sc.fit.x,
-            sc.fit.xdot,
-            sc.fit
-                .i
-                .map(|v| format!("{v:6.2} %"))
-                .unwrap_or_else(|| "-".into())
-        ));
-        say(&format!(
-            "        selection (signal b): x fit {:.2} %{}",
-            r.selection_fit,
-            r.selection_test
-                .map(|t| format!(
-                    "; {} (F = {:.1}, p {}, level {:.0} %)",
-                    if r.kept {
-                        "kept: explains it better beyond noise"
-                    } else {
-                        "not kept: no better beyond noise, the model before stands"
-                    },
-                    t.f,
-                    if t.p_value >= 1e-300 {
-                        format!("= {:.1e}", t.p_value)
-                    } else {
-                        "< 1e-300".to_string()
-                    },
-                    100.0 * workflow::SELECTION_ALPHA
-                ))
-                .unwrap_or_default()
-        ));
-        match &r.next {
-            Some(n) => say(&format!(
-                "        diagnose (fitting signals a, d): {}",
-                match &n.reason {
-                    workflow::Reason::Effect { score, explanation } =>
-                        format!("{} (score {score:.2}) — {explanation}", n.spec),
-                    workflow::Reason::Unexplained { variable, share } => format!(
-                        "NOT adequate, carried by {variable} ({:.0} % of the residual): add {}",
-                        100.0 * share,
-                        n.spec
-                    ),
-                }
-            )),
-            None if r.kept => {
-                for (d, name) in r.diagnoses.iter().zip(["a", "d"]) {
-                    say(&format!(
-                        "        diagnose (fitting signal {name}): {}",
-                        verdict_line(&d.verdict)
-                    ));
-                }
-            }
-            None => {}
-        }
-        iterations.push(Iteration {
-            label: if r.kept {
-                label(&r.adds)
-            } else {
-                format!("{} (not kept)", label(&r.adds))
-            },
-            validation: sc.fit,
-            added: r.next.as_ref().map(|n| n.spec.to_string()),
-        });
-        step += 1;
-    };
-    let out = workflow::run(&loop_cfg, &mut fit, &mut on_round)?;
-    scored?;
+    }
+}
+
+/// The effects set aside and the final model's test fit; returns its free run on the test
+/// log.
+fn say_final(
+    say: &mut dyn FnMut(&str),
+    out: &workflow::Outcome,
+    test_log: &MotorLog,
+) -> Result<ident::Prediction> {
     for (spec, why) in &out.not_fitted {
         say(&format!(
             "set aside: {} was named but cannot be fitted: {}",
@@ -310,8 +259,8 @@ pub fn run_loop(
         ));
     }
     let last = out.final_round();
-    let pred = ident::freerun::simulate(&last.model, &test_log)?;
-    let sc = ident::score_prediction(&last.model, &test_log, &pred)?;
+    let pred = ident::freerun::simulate(&last.model, test_log)?;
+    let sc = ident::score_prediction(&last.model, test_log, &pred)?;
     say(&format!(
         "final model: {} — test fit on fresh signal b, no choice made on it: x {:.2} %, xdot {:.2} %, i {}",
         label(&last.adds),
@@ -319,38 +268,144 @@ pub fn run_loop(
         sc.fit.xdot,
         sc.fit.i.map(|v| format!("{v:.2} %")).unwrap_or_else(|| "-".into())
     ));
-    let mut outcome = Outcome {
-        hidden: hidden.to_vec(),
-        unnamed,
-        iterations,
-        added: last.adds.clone(),
-        report: None,
-    };
+    Ok(pred)
+}
+
+/// The demo's emulated logs: signals a and d to fit, b to select refits, a fresh b to test.
+struct DemoLogs {
+    fit: [MotorLog; 2],
+    select: MotorLog,
+    test: MotorLog,
+}
+
+impl DemoLogs {
+    /// Emulate the paper's motor with the `hidden` effects (and the `unnamed` one), each
+    /// log with its own noise seed.
+    fn emulate(
+        hidden: &[EffectSpec],
+        unnamed: Option<Unnamed>,
+        seed: u64,
+        duration: f64,
+    ) -> Result<DemoLogs> {
+        let mut cfg = EmulatorConfig::paper();
+        cfg.seed = seed;
+        cfg.effects = hidden.iter().map(EffectSpec::to_effect).collect();
+        if let Some(u) = unnamed {
+            cfg = u.hide(cfg);
+        }
+        let log = |offset: u64, kind: SignalKind, duration: f64, name: &str| -> Result<MotorLog> {
+            let mut c = cfg.clone();
+            c.seed = seed.wrapping_add(offset);
+            let mut log = simulate_signal(&c, kind, duration)?.log;
+            log.source = PathBuf::from(name);
+            Ok(log)
+        };
+        let fit_log = log(0, SignalKind::A, duration, "emulated signal a")?;
+        // The braking experiment: after each voltage step down the drive brakes the moving
+        // rotor, the only place where load-dependent friction differs from a lower K_t.
+        let step_log = log(2000, SignalKind::D, STEP_DURATION, "emulated signal d")?;
+        let select = log(1000, SignalKind::B, duration, "emulated signal b")?;
+        // The selection log decides which refits are kept; the scores are reported on a
+        // fresh log that no choice was made on.
+        let test = log(3000, SignalKind::B, duration, "emulated signal b (test)")?;
+        Ok(DemoLogs {
+            fit: [fit_log, step_log],
+            select,
+            test,
+        })
+    }
+}
+
+/// The lines of one round: its test fit, the keep-or-not test on the selection log, and
+/// what the diagnosis names next (or its verdict on the final model).
+fn say_round(say: &mut dyn FnMut(&str), step: usize, r: &workflow::Round, sc: &ident::Scores) {
+    say(&format!(
+        "step {step}{}: {:<32} test fit (fresh signal b): x {:6.2} %, xdot {:6.2} %, i {}",
+        if r.kept { "" } else { " (not kept)" },
+        label(&r.adds),
+        sc.fit.x,
+        sc.fit.xdot,
+        sc.fit
+            .i
+            .map(|v| format!("{v:6.2} %"))
+            .unwrap_or_else(|| "-".into())
+    ));
+    say(&format!(
+        "        selection (signal b): x fit {:.2} %{}",
+        r.selection_fit,
+        r.selection_test
+            .map(|t| format!(
+                "; {} (F = {:.1}, p {}, level {:.0} %)",
+                if r.kept {
+                    "kept: explains it better beyond noise"
+                } else {
+                    "not kept: no better beyond noise, the model before stands"
+                },
+                t.f,
+                if t.p_value >= 1e-300 {
+                    format!("= {:.1e}", t.p_value)
+                } else {
+                    "< 1e-300".to_string()
+                },
+                100.0 * workflow::SELECTION_ALPHA
+            ))
+            .unwrap_or_default()
+    ));
+    match &r.next {
+        Some(n) => say(&format!(
+            "        diagnose (fitting signals a, d): {}",
+            match &n.reason {
+                workflow::Reason::Effect { score, explanation } =>
+                    format!("{} (score {score:.2}) — {explanation}", n.spec),
+                workflow::Reason::Unexplained { variable, share } => format!(
+                    "NOT adequate, carried by {variable} ({:.0} % of the residual): add {}",
+                    100.0 * share,
+                    n.spec
+                ),
+            }
+        )),
+        None if r.kept => {
+            for (d, name) in r.diagnoses.iter().zip(["a", "d"]) {
+                say(&format!(
+                    "        diagnose (fitting signal {name}): {}",
+                    verdict_line(&d.verdict)
+                ));
+            }
+        }
+        None => {}
+    }
+}
+
+/// The demo's HTML report in `dir`: the hidden effects, the verdict, the rounds and the final
+/// model's free run on the test log. Returns the report's path.
+fn write_report(
+    dir: &std::path::Path,
+    outcome: &Outcome,
+    last: &workflow::Round,
+    test_log: &MotorLog,
+    pred: &ident::Prediction,
+) -> Result<PathBuf> {
     let verdict = if outcome.found_all() {
         "Found: every hidden effect was identified and added."
     } else {
         "Not found: some hidden effect was not identified."
     };
-    if let Some(dir) = report_dir {
-        bar.set_message("writing the report");
-        let mut hidden_s: Vec<String> = hidden.iter().map(|h| h.to_string()).collect();
-        hidden_s.extend(unnamed.map(Unnamed::describe));
-        let d = last
-            .diagnoses
-            .iter()
-            .find(|d| !d.verdict.adequate)
-            .or(last.diagnoses.first())
-            .context("the final model has no diagnosis")?;
-        let w = report::write_demo_report(
-            dir,
-            &hidden_s,
-            verdict,
-            &outcome.iterations,
-            (&last.model, &test_log, d, &pred),
-        )?;
-        outcome.report = Some(w.path);
-    }
-    Ok(outcome)
+    let mut hidden_s: Vec<String> = outcome.hidden.iter().map(|h| h.to_string()).collect();
+    hidden_s.extend(outcome.unnamed.map(Unnamed::describe));
+    let d = last
+        .diagnoses
+        .iter()
+        .find(|d| !d.verdict.adequate)
+        .or(last.diagnoses.first())
+        .context("the final model has no diagnosis")?;
+    let w = report::write_demo_report(
+        dir,
+        &hidden_s,
+        verdict,
+        &outcome.iterations,
+        (&last.model, test_log, d, pred),
+    )?;
+    Ok(w.path)
 }
 
 /// The effects to hide: `--effect`s, else one drawn from the seed (`--random`), else

@@ -157,67 +157,7 @@ const SILENCE: Duration = Duration::from_secs(3);
 const HEARTBEAT_SAMPLES: usize = 10;
 
 pub fn run(args: Args) -> Result<()> {
-    let what = match (&args.signal, args.speed_ref) {
-        (Some(s), _) => s.clone(),
-        (None, Some(w)) => format!("speed {w} rad/s"),
-        (None, None) => bail!("give --signal or --speed-ref"),
-    };
-    let program_kind = matches!(args.signal.as_deref(), Some("steady" | "ramp"));
-    if let Some(w) = args.speed_ref {
-        check_speed_ref(
-            w,
-            control::step::rated_speed(args.pole_pairs),
-            "the Hall capture's",
-        )?;
-    }
-    let rated = f64::from(control::blob::RATED_VBUS_MAX);
-    if !(args.u_max.is_finite() && args.u_max > 0.0 && args.u_max <= rated) {
-        bail!(
-            "--u-max: must be positive and at most the board's rated {rated} V (got {})",
-            crate::validate::show(args.u_max)
-        );
-    }
-    if args.amplitude.is_some() && !program_kind {
-        bail!("--amplitude: only for --signal steady or ramp (the board scales a-d to its u_max)");
-    }
-    let amplitude = args.amplitude.unwrap_or(DEFAULT_AMPLITUDE);
-    if !(amplitude.is_finite() && amplitude > 0.0 && amplitude <= 1.0) {
-        bail!(
-            "--amplitude: must be a fraction of u_max above 0 and at most 1 (got {})",
-            crate::validate::show(amplitude)
-        );
-    }
-    if program_kind && args.duration.is_some() {
-        bail!("--duration: steady and ramp are programs of fixed length; leave it out");
-    }
-    // The board runs: one excitation (a-d), a program (steady, ramp), or speed control.
-    let runs: Vec<(Option<Excitation>, f64)> = match args.signal.as_deref() {
-        Some(k @ ("steady" | "ramp")) => program(k, amplitude * args.u_max)
-            .into_iter()
-            .map(|(e, d)| (Some(e), d))
-            .collect(),
-        Some(k) => {
-            let (sig, kind) = match k {
-                "a" => (Excitation::A, SignalKind::A),
-                "b" => (Excitation::B, SignalKind::B),
-                "c" => (Excitation::C, SignalKind::C),
-                _ => (Excitation::D, SignalKind::D),
-            };
-            vec![(Some(sig), args.duration.unwrap_or(kind.default_duration()))]
-        }
-        None => vec![(None, args.duration.unwrap_or(10.0))],
-    };
-    for (_, duration) in &runs {
-        if !(duration.is_finite() && *duration > 0.0 && *duration <= 3600.0) {
-            bail!(
-                "--duration: must be between 0 and 3600 s (got {})",
-                crate::validate::show(*duration)
-            );
-        }
-    }
-    if args.pole_pairs == 0 {
-        bail!("--pole-pairs: must be at least 1");
-    }
+    let plan = Plan::of(&args)?;
     let port = match &args.port {
         Some(p) => p.clone(),
         None => {
@@ -239,7 +179,140 @@ pub fn run(args: Args) -> Result<()> {
     link.command(&HostMsg::Stop, "stop")?;
     let before = link.read_telemetry()?;
     link.pending_telemetry.clear();
+    let mut rec = record_runs(&mut link, &plan, &args, &port)?;
+    rec.windows.append(&mut link.pending_telemetry);
+    let after = link.read_telemetry()?;
+    if rec.samples.is_empty() {
+        bail!("{port}: the board sent no sample");
+    }
+    let mut meta = log_meta(&args, &plan, &port, &id.firmware, rec.lost);
+    for (k, v) in telemetry_meta(&before, &rec.windows, &after) {
+        meta.insert(k.to_string(), v);
+    }
+    write_log(&args, meta, &rec.samples)?;
+    let ts = f64::from(control::CONTROL_PERIOD_S);
+    eprintln!(
+        "recorded {} samples ({:.1} s, {}{}) from {} into {}",
+        rec.samples.len(),
+        rec.samples.len() as f64 * ts,
+        plan.what,
+        if rec.lost > 0 {
+            format!(", {} samples lost on the link", rec.lost)
+        } else {
+            String::new()
+        },
+        port,
+        crate::log::echo_path(&args.output)
+    );
+    Ok(())
+}
 
+/// What the board is asked to run, from the checked arguments.
+struct Plan {
+    /// The signal's name, or the speed reference, for the closing line.
+    what: String,
+    /// A program of several board runs (steady, ramp).
+    program_kind: bool,
+    /// Largest voltage of a program as a fraction of u_max.
+    amplitude: f64,
+    /// The board runs: one excitation (a-d), a program (steady, ramp), or speed control
+    /// (None); each with its duration [s].
+    runs: Vec<(Option<Excitation>, f64)>,
+}
+
+impl Plan {
+    /// Check the arguments and lay out the board runs.
+    fn of(args: &Args) -> Result<Plan> {
+        let what = match (&args.signal, args.speed_ref) {
+            (Some(s), _) => s.clone(),
+            (None, Some(w)) => format!("speed {w} rad/s"),
+            (None, None) => bail!("give --signal or --speed-ref"),
+        };
+        let program_kind = matches!(args.signal.as_deref(), Some("steady" | "ramp"));
+        if let Some(w) = args.speed_ref {
+            check_speed_ref(
+                w,
+                control::step::rated_speed(args.pole_pairs),
+                "the Hall capture's",
+            )?;
+        }
+        let rated = f64::from(control::blob::RATED_VBUS_MAX);
+        if !(args.u_max.is_finite() && args.u_max > 0.0 && args.u_max <= rated) {
+            bail!(
+                "--u-max: must be positive and at most the board's rated {rated} V (got {})",
+                crate::validate::show(args.u_max)
+            );
+        }
+        if args.amplitude.is_some() && !program_kind {
+            bail!(
+                "--amplitude: only for --signal steady or ramp (the board scales a-d to its u_max)"
+            );
+        }
+        let amplitude = args.amplitude.unwrap_or(DEFAULT_AMPLITUDE);
+        if !(amplitude.is_finite() && amplitude > 0.0 && amplitude <= 1.0) {
+            bail!(
+                "--amplitude: must be a fraction of u_max above 0 and at most 1 (got {})",
+                crate::validate::show(amplitude)
+            );
+        }
+        if program_kind && args.duration.is_some() {
+            bail!("--duration: steady and ramp are programs of fixed length; leave it out");
+        }
+        let runs = board_runs(args, amplitude);
+        for (_, duration) in &runs {
+            if !(duration.is_finite() && *duration > 0.0 && *duration <= 3600.0) {
+                bail!(
+                    "--duration: must be between 0 and 3600 s (got {})",
+                    crate::validate::show(*duration)
+                );
+            }
+        }
+        if args.pole_pairs == 0 {
+            bail!("--pole-pairs: must be at least 1");
+        }
+        Ok(Plan {
+            what,
+            program_kind,
+            amplitude,
+            runs,
+        })
+    }
+}
+
+/// The board runs of the arguments: (excitation or speed control, seconds).
+fn board_runs(args: &Args, amplitude: f64) -> Vec<(Option<Excitation>, f64)> {
+    match args.signal.as_deref() {
+        Some(k @ ("steady" | "ramp")) => program(k, amplitude * args.u_max)
+            .into_iter()
+            .map(|(e, d)| (Some(e), d))
+            .collect(),
+        Some(k) => {
+            let (sig, kind) = match k {
+                "a" => (Excitation::A, SignalKind::A),
+                "b" => (Excitation::B, SignalKind::B),
+                "c" => (Excitation::C, SignalKind::C),
+                _ => (Excitation::D, SignalKind::D),
+            };
+            vec![(Some(sig), args.duration.unwrap_or(kind.default_duration()))]
+        }
+        None => vec![(None, args.duration.unwrap_or(10.0))],
+    }
+}
+
+/// What the board sent over all runs.
+struct Recording {
+    /// Samples on one clock from 0.
+    samples: Vec<Sample>,
+    /// The board's telemetry windows during the runs.
+    windows: Vec<Telemetry>,
+    /// Samples lost on the link (gaps in the sequence numbers).
+    lost: u64,
+}
+
+/// Play every run of `plan` on the board and gather its samples; an error when the board
+/// ends a run early (nothing is written then).
+fn record_runs(link: &mut Link, plan: &Plan, args: &Args, port: &str) -> Result<Recording> {
+    let runs = &plan.runs;
     let ts = f64::from(control::CONTROL_PERIOD_S);
     let total: f64 = runs.iter().map(|(_, d)| d).sum();
     let bar = ProgressBar::new((total / ts).round() as u64);
@@ -247,32 +320,16 @@ pub fn run(args: Args) -> Result<()> {
         ProgressStyle::with_template("recording {bar:30} {pos}/{len} samples ({elapsed})")
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
-    let mut samples: Vec<Sample> = Vec::new();
-    let mut windows: Vec<Telemetry> = Vec::new();
-    let mut lost = 0u64;
+    let mut rec = Recording {
+        samples: Vec::new(),
+        windows: Vec::new(),
+        lost: 0,
+    };
     for (index, (excitation, duration)) in runs.iter().enumerate() {
-        match excitation {
-            Some(sig) => link.start_experiment(*sig, *duration as f32)?,
-            None => {
-                link.command(
-                    &HostMsg::SetSpeed {
-                        omega_ref: args.speed_ref.unwrap_or(0.0),
-                    },
-                    "the speed reference",
-                )?;
-                link.pending_samples.clear();
-                link.command(&HostMsg::SetMode { mode: Mode::Speed }, "speed mode")?;
-            }
-        }
+        start_run(link, *excitation, *duration, args.speed_ref)?;
         let expected = (duration / ts).round() as usize;
-        let (run, end) = collect(
-            &mut link,
-            expected,
-            &port,
-            &bar,
-            samples.len(),
-            &mut windows,
-        )?;
+        let before = rec.samples.len();
+        let (run, end) = collect(link, expected, port, &bar, before, &mut rec.windows)?;
         if let Some(end) = end {
             if excitation.is_none() {
                 // Speed mode runs until told otherwise; a board that lost the link stopped.
@@ -284,7 +341,7 @@ pub fn run(args: Args) -> Result<()> {
             } else {
                 String::new()
             };
-            let got = samples.len() + run.len();
+            let got = rec.samples.len() + run.len();
             let total_n: usize = runs.iter().map(|(_, d)| (d / ts).round() as usize).sum();
             bail!(
                 "{port}: the board ended the run early{which}: {got} of {total_n} samples \
@@ -297,25 +354,55 @@ pub fn run(args: Args) -> Result<()> {
             // Speed mode runs until told otherwise.
             link.command(&HostMsg::Stop, "stop")?;
         }
-        lost += run
+        rec.lost += run
             .windows(2)
             .map(|w| u64::from(w[1].seq.wrapping_sub(w[0].seq).saturating_sub(1)))
             .sum::<u64>();
         // Each run's time starts at 0 on the board: continue the log's clock.
-        let t0 = samples
+        let t0 = rec
+            .samples
             .last()
             .map_or(0.0, |s| s.t + control::CONTROL_PERIOD_S);
-        samples.extend(run.into_iter().map(|mut s| {
+        rec.samples.extend(run.into_iter().map(|mut s| {
             s.t += t0;
             s
         }));
     }
     bar.finish_and_clear();
-    windows.append(&mut link.pending_telemetry);
-    let after = link.read_telemetry()?;
-    if samples.is_empty() {
-        bail!("{port}: the board sent no sample");
+    Ok(rec)
+}
+
+/// Start one board run: an excitation for `duration` seconds, or speed control at
+/// `speed_ref` [rad/s].
+fn start_run(
+    link: &mut Link,
+    excitation: Option<Excitation>,
+    duration: f64,
+    speed_ref: Option<f32>,
+) -> Result<()> {
+    match excitation {
+        Some(sig) => link.start_experiment(sig, duration as f32),
+        None => {
+            link.command(
+                &HostMsg::SetSpeed {
+                    omega_ref: speed_ref.unwrap_or(0.0),
+                },
+                "the speed reference",
+            )?;
+            link.pending_samples.clear();
+            link.command(&HostMsg::SetMode { mode: Mode::Speed }, "speed mode")
+        }
     }
+}
+
+/// The log's metadata lines other than the telemetry's.
+fn log_meta(
+    args: &Args,
+    plan: &Plan,
+    port: &str,
+    firmware: &str,
+    lost: u64,
+) -> BTreeMap<String, String> {
     let mut meta = BTreeMap::new();
     meta.insert(
         "sample_period".to_string(),
@@ -327,20 +414,22 @@ pub fn run(args: Args) -> Result<()> {
         (Some(s), _) => meta.insert("signal".to_string(), s.clone()),
         (None, w) => meta.insert("speed_ref".to_string(), w.unwrap_or(0.0).to_string()),
     };
-    if program_kind {
+    if plan.program_kind {
         meta.insert(
             "amplitude_v".to_string(),
-            format!("{}", amplitude * args.u_max),
+            format!("{}", plan.amplitude * args.u_max),
         );
     }
     meta.insert(
         "source".to_string(),
-        format!("board {port} firmware {}", id.firmware),
+        format!("board {port} firmware {firmware}"),
     );
     meta.insert("lost_samples".to_string(), lost.to_string());
-    for (k, v) in telemetry_meta(&before, &windows, &after) {
-        meta.insert(k.to_string(), v);
-    }
+    meta
+}
+
+/// Write the samples as a motor log to `args.output` (atomically).
+fn write_log(args: &Args, meta: BTreeMap<String, String>, samples: &[Sample]) -> Result<()> {
     // Each f32 as the f64 of its shortest decimal form (0.012, not 0.012000000104).
     let f = |g: fn(&Sample) -> f32| {
         samples
@@ -359,21 +448,7 @@ pub fn run(args: Args) -> Result<()> {
         extra: Vec::new(),
         units: Default::default(),
     };
-    log.write(&args.output)?;
-    eprintln!(
-        "recorded {} samples ({:.1} s, {}{}) from {} into {}",
-        samples.len(),
-        samples.len() as f64 * ts,
-        what,
-        if lost > 0 {
-            format!(", {lost} samples lost on the link")
-        } else {
-            String::new()
-        },
-        port,
-        crate::log::echo_path(&args.output)
-    );
-    Ok(())
+    log.write(&args.output)
 }
 
 /// Why a board run ended before its duration.

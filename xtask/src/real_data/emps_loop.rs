@@ -10,14 +10,20 @@
 //!
 //! The benchmark's test is a free run `vir` → `qm` after a 20-sample initialisation window
 //! ([`benchmark_rmse_mm`]): the generic free-run simulation is started at sample 19 from the
-//! state that a straight line through the first 20 measured positions gives.
+//! state that a straight line through the first 20 measured positions gives
+//! ([`protocol_tail`]).
+//!
+//! The free run of an integrating axis drifts with any force error, so its RMSE depends on
+//! the criterion the final parameters minimise: [`criteria`] refits the loop's structure by
+//! each [`Criterion`] and [`choose`] picks one on the held-out end of the training log alone.
 use super::emps;
 use anyhow::{Context, Result};
 use control::effects::Effect;
 use motorid::diagnose::{self, Diagnosis, Structure};
 use motorid::effect_spec::EffectSpec;
 use motorid::ident::free_params::Constraints;
-use motorid::ident::{self, freerun, FitRequest};
+use motorid::ident::free_params::{Free, Slot};
+use motorid::ident::{self, freerun, linear, nlsq, sensor_chain, sim_error, FitRequest};
 use motorid::log::{MotorLog, Plant};
 use motorid::model::{Model, ModelKind};
 use motorid::numerics::statistics::FTest;
@@ -60,26 +66,37 @@ pub fn prepare(log: &MotorLog, r: usize) -> MotorLog {
 /// position [mm] (the first 19 samples are the measurement).
 pub fn benchmark_rmse_mm(model: &Model, log: &MotorLog) -> Result<(f64, Vec<f64>)> {
     let n0 = emps::INIT_WINDOW;
-    let dt = log.sample_period();
-    let (q0, v0) = emps::initial_state(&log.theta, dt, n0);
-    let mut tail = MotorLog {
-        source: log.source.clone(),
-        meta: log.meta.clone(),
-        t: log.t[n0 - 1..].to_vec(),
-        u: log.u[n0 - 1..].to_vec(),
-        i: None,
-        theta: log.theta[n0 - 1..].to_vec(),
-        // Only its first value is used: the free run's initial velocity.
-        omega: Some(vec![v0; log.len() - n0 + 1]),
-        extra: Vec::new(),
-        units: log.units.clone(),
-    };
-    tail.theta[0] = q0;
-    let pred = freerun::simulate(model, &tail)?;
+    let pred = freerun::simulate(model, &protocol_tail(log, model.sensor.velocity_window))?;
     let mut sim = log.theta[..n0 - 1].to_vec();
     sim.extend(pred.theta);
     let rmse = emps::rms_diff(&log.theta[n0..], &sim[n0..]);
     Ok((1000.0 * rmse / POSITION_SCALE, sim))
+}
+
+/// The part of `log` the benchmark's free run covers, from sample 19 on, starting from the
+/// protocol's state: position and velocity of a straight line through the first 20 measured
+/// positions ([`emps::initial_state`]). Its velocity column is the estimate over `window`
+/// samples (what a fit compares with) with the protocol's velocity as its first value (the
+/// free run's initial velocity).
+pub fn protocol_tail(log: &MotorLog, window: usize) -> MotorLog {
+    let n0 = emps::INIT_WINDOW;
+    let (q0, v0) = emps::initial_state(&log.theta, log.sample_period(), n0);
+    let t = log.t[n0 - 1..].to_vec();
+    let mut theta = log.theta[n0 - 1..].to_vec();
+    theta[0] = q0;
+    let mut omega = sensor_chain::velocity_estimate(&t, &theta, window);
+    omega[0] = v0;
+    MotorLog {
+        source: log.source.clone(),
+        meta: log.meta.clone(),
+        u: log.u[n0 - 1..].to_vec(),
+        t,
+        i: None,
+        theta,
+        omega: Some(omega),
+        extra: Vec::new(),
+        units: log.units.clone(),
+    }
 }
 
 /// The rigid-axis numbers of a generic model, in newtons (×gτ): M, Fv, Fc, OF and the
@@ -227,6 +244,22 @@ pub fn authors_structures(train: &MotorLog, test: &MotorLog) -> Result<Vec<Round
     ])
 }
 
+/// The loop's configuration on a prepared training log: a linear model, torque plant, the
+/// last [`workflow::SELECT_FRACTION`] held out for selection.
+fn loop_config(train: &MotorLog) -> workflow::Config<'_> {
+    static NONE: Constraints = Constraints::NONE;
+    workflow::Config {
+        kind: ModelKind::Linear,
+        plant: Plant::Torque,
+        fit_logs: std::slice::from_ref(train),
+        select_logs: &[],
+        start: Vec::new(),
+        constraints: &NONE,
+        max_rounds: MAX_ROUNDS,
+        diagnose: diagnose::Options::default(),
+    }
+}
+
 /// The identification loop of [`workflow::run`] on the training log (linear model, torque
 /// plant, the last [`workflow::SELECT_FRACTION`] of the log held out for selection), every
 /// round scored by the benchmark's test on `test` (no choice is made on it). `progress` is
@@ -238,16 +271,7 @@ pub fn run(
     progress: &mut dyn FnMut(&str),
 ) -> Result<Vec<Round>> {
     let (train, test) = (&prepare(train, DECIMATION), &prepare(test, 1));
-    let cfg = workflow::Config {
-        kind: ModelKind::Linear,
-        plant: Plant::Torque,
-        fit_logs: std::slice::from_ref(train),
-        select_logs: &[],
-        start: Vec::new(),
-        constraints: &Constraints::NONE,
-        max_rounds: MAX_ROUNDS,
-        diagnose: diagnose::Options::default(),
-    };
+    let cfg = loop_config(train);
     let mut fit = |req: &FitRequest| -> Result<Model> {
         let labels: Vec<String> = req.adds.iter().map(|a| a.to_string()).collect();
         progress(&format!(
@@ -289,4 +313,264 @@ pub fn run(
     last.whole_log = true;
     rounds.push(last);
     Ok(rounds)
+}
+
+/// How the final structure's parameters are refitted before the benchmark's free run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Criterion {
+    /// As `fit` leaves them: its multiple-shooting simulation error (2 s segments).
+    AsFitted,
+    /// `fit`'s simulation error (velocity and position, each scaled by its spread) over one
+    /// free run of the whole log from the protocol's state ([`protocol_tail`]).
+    FreeRun,
+    /// The benchmark's own criterion: the free-run position error from the protocol's state
+    /// (output error).
+    OutputError,
+}
+
+impl Criterion {
+    /// Every criterion, in the order the page lists them.
+    pub const ALL: [Criterion; 3] = [
+        Criterion::AsFitted,
+        Criterion::FreeRun,
+        Criterion::OutputError,
+    ];
+
+    /// How the page names the route.
+    pub fn describe(self) -> &'static str {
+        match self {
+            Criterion::AsFitted => "as `fit` leaves it (simulation error over 2 s segments)",
+            Criterion::FreeRun => {
+                "refitted on `fit`'s simulation error over one free run from the protocol's state"
+            }
+            Criterion::OutputError => {
+                "refitted on the free-run position error from the protocol's state (the \
+                 benchmark's criterion)"
+            }
+        }
+    }
+}
+
+/// The parameters a linear fit of `m`'s structure moves: J, the viscous coefficient and the
+/// effects' continuous keys, with the fit's bounds.
+fn linear_free(m: &Model) -> Vec<Free> {
+    let mut free = linear::motor_free(Plant::Torque);
+    free.push(Free {
+        slot: Slot::Viscous,
+        lo: 0.0,
+        hi: 100.0,
+    });
+    free.extend(linear::effect_free(m));
+    free
+}
+
+/// `model` (a linear model) refitted on `log` (prepared, mm) by `criterion`, from its own
+/// parameters.
+pub fn refit(model: &Model, log: &MotorLog, criterion: Criterion) -> Result<Model> {
+    let free = linear_free(model);
+    let opts = nlsq::Options::default();
+    match criterion {
+        Criterion::AsFitted => Ok(model.clone()),
+        Criterion::FreeRun => {
+            let mut m = model.clone();
+            let tail = protocol_tail(log, m.sensor.velocity_window);
+            let fd = sim_error::Jacobian::FiniteDifferences;
+            sim_error::refine(&mut m, &free, &[tail], fd, opts, &mut |_, _| {})?;
+            Ok(m)
+        }
+        Criterion::OutputError => {
+            let at = |x: &[f64]| {
+                let mut m = model.clone();
+                for (f, v) in free.iter().zip(x) {
+                    f.slot.set(&mut m, *v);
+                }
+                m
+            };
+            let n0 = emps::INIT_WINDOW;
+            let residual = |x: &[f64]| -> Result<Vec<f64>> {
+                let (_, sim) = benchmark_rmse_mm(&at(x), log)?;
+                Ok(sim[n0..]
+                    .iter()
+                    .zip(&log.theta[n0..])
+                    .map(|(a, b)| a - b)
+                    .collect())
+            };
+            let x0: Vec<f64> = free.iter().map(|f| f.slot.get(model)).collect();
+            let lo: Vec<f64> = free.iter().map(|f| f.lo).collect();
+            let hi: Vec<f64> = free.iter().map(|f| f.hi).collect();
+            let scale: Vec<f64> = x0.iter().map(|x| x.abs().max(1e-9)).collect();
+            let sol = nlsq::solve_parallel(&residual, &x0, &lo, &hi, &scale, opts, &mut |_, _| {})?;
+            Ok(at(&sol.x))
+        }
+    }
+}
+
+/// One way to the final model, scored by the benchmark's free run.
+#[derive(Debug, Clone)]
+pub struct Route {
+    pub kind: ModelKind,
+    pub criterion: Criterion,
+    /// RMSE [mm] on the held-out last 30 % of the training log of the model fitted on the
+    /// first 70 %: the only score a choice is made on.
+    pub held_out_mm: f64,
+    /// RMSE [mm] of the whole-log model on the training log and on the test log.
+    pub train_mm: f64,
+    pub test_mm: f64,
+    /// The lowest held-out RMSE of the routes compared.
+    pub chosen: bool,
+}
+
+/// The structure the loop kept, refitted by each [`Criterion`]: on the first 70 % of the
+/// training log from the loop's model there (scored on the held-out 30 %), and on the whole
+/// training log from the loop's final model (scored on both logs). `rounds` are [`run`]'s.
+pub fn criteria(train: &MotorLog, test: &MotorLog, rounds: &[Round]) -> Result<Vec<Route>> {
+    let (train, test) = (&prepare(train, DECIMATION), &prepare(test, 1));
+    let (first, held_out) = workflow::split_in_time(train, workflow::SELECT_FRACTION)?;
+    let split = rounds
+        .iter()
+        .rev()
+        .find(|r| r.kept && !r.whole_log)
+        .context("no kept round")?;
+    let whole = rounds
+        .iter()
+        .find(|r| r.whole_log)
+        .context("no whole-log refit")?;
+    let score = |m: &Model, log: &MotorLog| benchmark_rmse_mm(m, log).map_or(f64::NAN, |r| r.0);
+    let mut out = Vec::new();
+    for criterion in Criterion::ALL {
+        let on_split = refit(&split.model, &first, criterion)?;
+        let on_all = refit(&whole.model, train, criterion)?;
+        out.push(Route {
+            kind: ModelKind::Linear,
+            criterion,
+            held_out_mm: score(&on_split, &held_out),
+            train_mm: score(&on_all, train),
+            test_mm: score(&on_all, test),
+            chosen: false,
+        });
+    }
+    Ok(out)
+}
+
+/// The loop of [`run`] with a LuGre model (`motorid fit --model lugre --plant torque` and its
+/// `diagnose`/`fit --add` steps), as fitted: its kept model on the first 70 % scored on the
+/// held-out 30 %, its final refit on the whole training log on both logs.
+pub fn lugre_route(train: &MotorLog, test: &MotorLog) -> Result<(Route, Vec<String>)> {
+    let (train, test) = (&prepare(train, DECIMATION), &prepare(test, 1));
+    let (_, held_out) = workflow::split_in_time(train, workflow::SELECT_FRACTION)?;
+    let cfg = workflow::Config {
+        kind: ModelKind::Lugre,
+        ..loop_config(train)
+    };
+    let out = workflow::run(&cfg, &mut |req| Ok(ident::fit(req)?.model), &mut |_| {})?;
+    let score = |m: &Model, log: &MotorLog| benchmark_rmse_mm(m, log).map_or(f64::NAN, |r| r.0);
+    let adds = out
+        .final_round()
+        .adds
+        .iter()
+        .map(|a| a.to_string())
+        .collect();
+    let route = Route {
+        kind: ModelKind::Lugre,
+        criterion: Criterion::AsFitted,
+        held_out_mm: score(&out.final_round().model, &held_out),
+        train_mm: score(out.final_model(), train),
+        test_mm: score(out.final_model(), test),
+        chosen: false,
+    };
+    Ok((route, adds))
+}
+
+/// Mark the route with the lowest held-out RMSE as chosen.
+pub fn choose(routes: &mut [Route]) {
+    let best = routes
+        .iter()
+        .enumerate()
+        .filter(|(_, r)| r.held_out_mm.is_finite())
+        .min_by(|a, b| a.1.held_out_mm.total_cmp(&b.1.held_out_mm))
+        .map(|(k, _)| k);
+    for (k, r) in routes.iter_mut().enumerate() {
+        r.chosen = Some(k) == best;
+    }
+}
+
+/// The benchmark's test RMSE [mm] of `model` with a constant force of each of `forces_n`
+/// [N] added (an offset effect, `gain` newtons per volt of the input): how much of the free
+/// run's error a force bias far below the friction's uncertainty decides.
+pub fn force_bias_sensitivity(
+    model: &Model,
+    test: &MotorLog,
+    gain: f64,
+    forces_n: &[f64],
+) -> Result<Vec<(f64, f64)>> {
+    let test = prepare(test, 1);
+    forces_n
+        .iter()
+        .map(|&f| {
+            let mut m = model.clone();
+            m.effects.push(Effect::Offset {
+                t0: f * m.motor.kt / gain,
+            });
+            Ok((f, benchmark_rmse_mm(&m, &test)?.0))
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A 1 kHz log of an axis moving at 20 mm/s from 5 mm.
+    fn ramp_log(n: usize) -> MotorLog {
+        let t: Vec<f64> = (0..n).map(|k| k as f64 * 1e-3).collect();
+        MotorLog {
+            source: "ramp.csv".into(),
+            meta: Default::default(),
+            theta: t.iter().map(|t| 5.0 + 20.0 * t).collect(),
+            u: vec![0.1; n],
+            t,
+            i: None,
+            omega: None,
+            extra: Vec::new(),
+            units: Default::default(),
+        }
+    }
+
+    #[test]
+    fn the_protocol_tail_starts_at_sample_19_from_the_fitted_line() {
+        let log = ramp_log(200);
+        let tail = protocol_tail(&log, 4);
+        let n0 = emps::INIT_WINDOW;
+        assert_eq!(tail.len(), log.len() - n0 + 1);
+        assert_eq!(tail.t[0], log.t[n0 - 1]);
+        // On a straight line the fitted state is the line's own position and slope.
+        assert!((tail.theta[0] - log.theta[n0 - 1]).abs() < 1e-9);
+        let omega = tail.omega.as_ref().unwrap();
+        assert!(
+            (omega[0] - 20.0).abs() < 1e-6,
+            "initial velocity {}",
+            omega[0]
+        );
+        // Later samples carry the velocity estimate a fit compares with.
+        assert!((omega[50] - 20.0).abs() < 1e-6, "velocity {}", omega[50]);
+    }
+
+    fn route(held_out_mm: f64) -> Route {
+        Route {
+            kind: ModelKind::Linear,
+            criterion: Criterion::AsFitted,
+            held_out_mm,
+            train_mm: 1.0,
+            test_mm: 1.0,
+            chosen: false,
+        }
+    }
+
+    #[test]
+    fn the_route_with_the_lowest_held_out_error_is_chosen_and_only_it() {
+        let mut routes = vec![route(4.0), route(f64::NAN), route(3.0), route(5.0)];
+        choose(&mut routes);
+        let chosen: Vec<bool> = routes.iter().map(|r| r.chosen).collect();
+        assert_eq!(chosen, [false, false, true, false]);
+    }
 }
