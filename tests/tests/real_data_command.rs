@@ -15,6 +15,9 @@ fn real_data_writes_figures_and_tables() {
             data.to_str().unwrap(),
             "--out",
             "figs",
+            // The generic loops and the criteria refits are tested in real_data_emps.rs;
+            // here the command's pages and figures (minutes less of CI).
+            "--no-generic",
         ],
     );
     assert!(
