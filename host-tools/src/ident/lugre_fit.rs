@@ -24,13 +24,25 @@ use anyhow::{bail, Result};
 use control::effects::{smooth_sign, VELOCITY_EPS};
 use rayon::prelude::*;
 
-/// Shortest run of constant input used as a steady-state point [samples]: 1 s at 12 ms.
-const MIN_RUN: usize = 80;
-/// Samples skipped at the start of a constant-input run (transient): 0.5 s at 12 ms, many
-/// mechanical time constants (J·R/(K_t·K_b) ≈ 13 ms) and presliding creeps (σ1/σ0 ≈ 70 ms).
-const SETTLE: usize = 40;
-/// Quasi-steady window [samples] for logs without constant-input runs: 0.6 s.
-const QS_WINDOW: usize = 50;
+/// Shortest run of constant input used as a steady-state point [s]: about 1 s (80 samples
+/// at 12 ms).
+const MIN_RUN_S: f64 = 0.96;
+/// Time skipped at the start of a constant-input run (transient) [s]: many mechanical time
+/// constants (J·R/(K_t·K_b) ≈ 13 ms) and presliding creeps (σ1/σ0 ≈ 70 ms).
+const SETTLE_S: f64 = 0.48;
+/// Quasi-steady window for logs without constant-input runs [s].
+const QS_WINDOW_S: f64 = 0.6;
+
+/// A duration [s] as a whole number of sample periods of `log`, at least `min`.
+fn in_samples(log: &MotorLog, seconds: f64, min: usize) -> usize {
+    let period = log.sample_period();
+    if period > 0.0 && period.is_finite() {
+        // `as` saturates: a period far below the duration gives a count no log reaches.
+        ((seconds / period).round() as usize).max(min)
+    } else {
+        min
+    }
+}
 
 /// Starting grid of the bristle stiffness σ0 [N·m/rad], over decades: from a geared axis's
 /// compliance seen at the rotor (0.3: breakaway deflection of about 3 Hall steps at the
@@ -90,6 +102,9 @@ pub fn steady_points(m: &Model, log: &MotorLog, quasi: bool) -> Vec<SteadyPoint>
     };
     let mut pts = Vec::new();
     let n = log.len();
+    let min_run = in_samples(log, MIN_RUN_S, 3);
+    let settle = in_samples(log, SETTLE_S, 0);
+    let qs_window = in_samples(log, QS_WINDOW_S, 4);
     // Runs of constant input.
     let mut a = 0;
     while a < n && !quasi {
@@ -97,10 +112,10 @@ pub fn steady_points(m: &Model, log: &MotorLog, quasi: bool) -> Vec<SteadyPoint>
         while b < n && log.u[b] == log.u[a] {
             b += 1;
         }
-        if b - a >= MIN_RUN {
-            // Skip the transient (the first SETTLE samples or a third of the run), then the
+        if b - a >= min_run {
+            // Skip the transient (the first SETTLE_S seconds or a third of the run), then the
             // velocity is the least-squares slope of the angle: it averages the Hall steps.
-            let s = a + SETTLE.min((b - a) / 3);
+            let s = a + settle.min((b - a) / 3);
             let e = b - 1;
             let moved = (log.theta[e] - log.theta[s]).abs();
             // Moving by less than two Hall steps: stuck (or unresolvable), not sliding.
@@ -122,9 +137,9 @@ pub fn steady_points(m: &Model, log: &MotorLog, quasi: bool) -> Vec<SteadyPoint>
     }
     // Quasi-steady windows: velocity from the angle over each half, inertia corrected.
     let mut s = 0;
-    while s + QS_WINDOW < n {
-        let e = s + QS_WINDOW;
-        let mid = s + QS_WINDOW / 2;
+    while s + qs_window < n {
+        let e = s + qs_window;
+        let mid = s + qs_window / 2;
         let w1 = (log.theta[mid] - log.theta[s]) / (log.t[mid] - log.t[s]);
         let w2 = (log.theta[e] - log.theta[mid]) / (log.t[e] - log.t[mid]);
         let wbar = (log.theta[e] - log.theta[s]) / (log.t[e] - log.t[s]);
@@ -140,7 +155,7 @@ pub fn steady_points(m: &Model, log: &MotorLog, quasi: bool) -> Vec<SteadyPoint>
                 });
             }
         }
-        s += QS_WINDOW / 2;
+        s += qs_window / 2;
     }
     pts
 }
@@ -171,7 +186,7 @@ pub fn fit_static(
     if pts.len() < 5 {
         bail!(
             "only {} steady-state points: the static LuGre curve needs constant-input runs of \
-             at least {MIN_RUN} samples or slowly varying segments (record `motorid simulate \
+             at least {MIN_RUN_S} s or slowly varying segments (record `motorid simulate \
              --signal steady` or the board's steady experiment and fit on it too)",
             pts.len()
         );
@@ -330,8 +345,79 @@ pub fn fit(req: &FitRequest) -> Result<Model> {
     };
     super::progress::report("static friction curve", 0, f64::NAN);
     let pts: Vec<SteadyPoint> = all_steady_points(&m, req.logs);
-    let (lugre, _static_se) = fit_static(&pts, init, false)?;
+    start_dynamics(&mut m, req.logs, &pts, init)?;
+    let free = free_parameters(req.plant);
+    let opts = nlsq::Options::default();
+    let mut dyn_rows = if req.adds.is_empty() {
+        let report = |it: usize, c: f64| {
+            super::progress::report("free-run simulation error", it, c);
+        };
+        let sens = sim_error::Jacobian::Sensitivities;
+        sim_error::refine(&mut m, &free, req.logs, sens, opts, &mut { report })?
+    } else {
+        // From this start, and from the base structure refined without the effects.
+        let starts = [m.clone(), super::base_structure_fit(req)?];
+        sim_error::refine_added_effects(&mut m, &starts, &free, req.logs, opts)?
+    };
+    // The Stribeck excess at its bound 0 leaves v0 without effect on the cost: the pair is
+    // stuck in that corner even where a Stribeck bump would fit far better (the inductance
+    // and inertia then mimic it: L about twice and J 15 % below the emulator's, the current
+    // fit 4 points down). The steady points seldom fix v0 (few of them below a few rad/s).
+    if let Some(rows) = unstick_stribeck(&mut m, &free, req.logs)? {
+        dyn_rows = rows;
+    }
+    let lugre = m.lugre.unwrap_or(init);
+    let static_note = |r: &mut crate::model::Parameter| {
+        r.note = format!(
+            "started from the static curve on {} steady-state points, refined on the \
+             free-run simulation error{}",
+            pts.len(),
+            if r.note.is_empty() {
+                String::new()
+            } else {
+                format!("; {}", r.note)
+            }
+        );
+    };
+    for r in &mut dyn_rows {
+        if matches!(r.name.as_str(), "alpha0" | "alpha1" | "alpha2" | "v0") {
+            static_note(r);
+        }
+    }
+    let res = m.sensor.hall_resolution_rad;
+    for r in &mut dyn_rows {
+        if r.name == "sigma0" && !r.identifiable {
+            r.note = format!(
+                "{}; the bristle deflection s/σ0 = {:.2e} rad is far below one Hall step \
+                 ({res:.3} rad)",
+                r.note,
+                lugre.s(0.0) / r.value.max(1e-300)
+            );
+        }
+    }
+    let mut rows = dyn_rows;
+    rows.extend(fixed_rows(&m));
+    m.parameters = rows;
+    m.data.sample_period = m.sample_period;
+    m.data.method = "weak-form regression (motor constants), Stribeck curve on steady-state \
+                     points (start of alpha0, alpha1, alpha2, v0), then bounded \
+                     Levenberg–Marquardt on the free-run simulation error (the whole LuGre \
+                     law, motor constants, effects)"
+        .into();
+    Ok(m)
+}
+
+/// The start of the base structure's refinement: the static curve fitted to the steady
+/// points `pts` from `init`, then the bristles from a grid (below).
+fn start_dynamics(
+    m: &mut Model,
+    logs: &[MotorLog],
+    pts: &[SteadyPoint],
+    init: LugreParams,
+) -> Result<()> {
+    let (lugre, _static_se) = fit_static(pts, init, false)?;
     m.lugre = Some(lugre);
+    let sigma0 = init.sigma0;
     // Dynamic step. The simulation error has local minima in (σ0, σ1) (σ1 → 0 with a
     // too-slow winding, for one): start from the best of a coarse grid over decades. The
     // soft end (0.3 and 3 N·m/rad; 0.3 is a breakaway deflection of 0.3 rad, 3 Hall steps,
@@ -341,7 +427,7 @@ pub fn fit(req: &FitRequest) -> Result<Model> {
     // 1. A stiff grid alone can leave a soft bristle in the local minimum near σ0 ≈ 10.
     {
         super::progress::report("bristle start grid", 0, f64::NAN);
-        let res = sim_error::Residuals::new(req.logs, m.sensor.velocity_window);
+        let res = sim_error::Residuals::new(logs, m.sensor.velocity_window);
         // Best start among the stiff (≥ 30) and among the soft grid points, separately.
         let mut best = (f64::INFINITY, sigma0, init.sigma1);
         let mut best_soft = (f64::INFINITY, sigma0, init.sigma1);
@@ -384,6 +470,12 @@ pub fn fit(req: &FitRequest) -> Result<Model> {
             l.sigma1 = best.2;
         }
     }
+    Ok(())
+}
+
+/// The parameters the LuGre refinement moves, with bounds: the whole LuGre law and the
+/// motor constants.
+fn free_parameters(plant: Plant) -> Vec<Free> {
     // The static curve is only the starting point: the whole LuGre law is refined jointly
     // with the motor constants on the simulation error. Refining only (α2, σ0, σ1, motor)
     // left the static curve biased by the steady points' K_t and J, and the validation
@@ -408,53 +500,6 @@ pub fn fit(req: &FitRequest) -> Result<Model> {
         hi,
     })
     .collect();
-    free.extend(motor_free(req.plant));
-    let mut dyn_rows =
-        sim_error::refine_with_effects(&mut m, &free, req.logs, nlsq::Options::default())?;
-    // The Stribeck excess at its bound 0 leaves v0 without effect on the cost: the pair is
-    // stuck in that corner even where a Stribeck bump would fit far better (the inductance
-    // and inertia then mimic it: L about twice and J 15 % below the emulator's, the current
-    // fit 4 points down). The steady points seldom fix v0 (few of them below a few rad/s).
-    if let Some(rows) = unstick_stribeck(&mut m, &free, req.logs)? {
-        dyn_rows = rows;
-    }
-    let lugre = m.lugre.unwrap_or(lugre);
-    let static_note = |r: &mut crate::model::Parameter| {
-        r.note = format!(
-            "started from the static curve on {} steady-state points, refined on the \
-             free-run simulation error{}",
-            pts.len(),
-            if r.note.is_empty() {
-                String::new()
-            } else {
-                format!("; {}", r.note)
-            }
-        );
-    };
-    for r in &mut dyn_rows {
-        if matches!(r.name.as_str(), "alpha0" | "alpha1" | "alpha2" | "v0") {
-            static_note(r);
-        }
-    }
-    let res = m.sensor.hall_resolution_rad;
-    for r in &mut dyn_rows {
-        if r.name == "sigma0" && !r.identifiable {
-            r.note = format!(
-                "{}; the bristle deflection s/σ0 = {:.2e} rad is far below one Hall step \
-                 ({res:.3} rad)",
-                r.note,
-                lugre.s(0.0) / r.value.max(1e-300)
-            );
-        }
-    }
-    let mut rows = dyn_rows;
-    rows.extend(fixed_rows(&m));
-    m.parameters = rows;
-    m.data.sample_period = m.sample_period;
-    m.data.method = "weak-form regression (motor constants), Stribeck curve on steady-state \
-                     points (start of alpha0, alpha1, alpha2, v0), then bounded \
-                     Levenberg–Marquardt on the free-run simulation error (the whole LuGre \
-                     law, motor constants, effects)"
-        .into();
-    Ok(m)
+    free.extend(motor_free(plant));
+    free
 }
