@@ -452,7 +452,7 @@ fn start_dynamics(
         let costs: Vec<f64> = starts
             .par_iter()
             .map(|&(s0, s1)| {
-                let mut trial = sim_error::scale_effect_magnitudes(&m, 0.0);
+                let mut trial = sim_error::scale_effect_magnitudes(m, 0.0);
                 if let Some(l) = trial.lugre.as_mut() {
                     l.sigma0 = s0;
                     l.sigma1 = s1;
