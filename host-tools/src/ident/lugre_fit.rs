@@ -33,15 +33,17 @@ const SETTLE_S: f64 = 0.48;
 /// Quasi-steady window for logs without constant-input runs [s].
 const QS_WINDOW_S: f64 = 0.6;
 
-/// A duration [s] as a whole number of sample periods of `log`, at least `min`.
+/// A duration [s] as a whole number of sample periods of `log`, at least `min` and at most
+/// one more than the log's length (longer than any run or window of the log).
 fn in_samples(log: &MotorLog, seconds: f64, min: usize) -> usize {
     let period = log.sample_period();
-    if period > 0.0 && period.is_finite() {
-        // `as` saturates: a period far below the duration gives a count no log reaches.
-        ((seconds / period).round() as usize).max(min)
+    let n = if period > 0.0 && period.is_finite() {
+        // `as` saturates (and maps NaN to 0).
+        (seconds / period).round() as usize
     } else {
-        min
-    }
+        0
+    };
+    n.min(log.len() + 1).max(min)
 }
 
 /// Starting grid of the bristle stiffness σ0 [N·m/rad], over decades: from a geared axis's
@@ -510,4 +512,33 @@ fn free_parameters(plant: Plant) -> Vec<Free> {
     .collect();
     free.extend(motor_free(plant));
     free
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn log_at(period: f64, n: usize) -> MotorLog {
+        MotorLog {
+            t: (0..n).map(|k| k as f64 * period).collect(),
+            u: vec![0.0; n],
+            theta: vec![0.0; n],
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn steady_windows_are_durations() {
+        // At 12 ms the windows are the sample counts the fit was tuned with.
+        let l = log_at(0.012, 10_000);
+        assert_eq!(in_samples(&l, MIN_RUN_S, 3), 80);
+        assert_eq!(in_samples(&l, SETTLE_S, 0), 40);
+        assert_eq!(in_samples(&l, QS_WINDOW_S, 4), 50);
+        // Ten times the rate, ten times the samples.
+        let l = log_at(0.0012, 10_000);
+        assert_eq!(in_samples(&l, QS_WINDOW_S, 4), 500);
+        // Longer than the log: one more than its length; no period: the minimum.
+        assert_eq!(in_samples(&log_at(1e-9, 100), QS_WINDOW_S, 4), 101);
+        assert_eq!(in_samples(&log_at(0.0, 100), QS_WINDOW_S, 4), 4);
+    }
 }
