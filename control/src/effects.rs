@@ -297,13 +297,14 @@ impl<F: Float> Effect<F> {
     /// [`VELOCITY_EPS`]: a model identified on a log in other velocity units (m/s of a linear
     /// axis) carries the width that means the same there.
     pub fn torque_with_width(&self, x: &EffectInputs<F>, veps: F) -> F {
-        let sgn = smooth_sign(x.omega, veps);
+        // The smoothed sign only where an effect needs it (a tanh per call otherwise).
+        let sgn = || smooth_sign(x.omega, veps);
         match *self {
-            Effect::Coulomb { fc } => fc * sgn,
+            Effect::Coulomb { fc } => fc * sgn(),
             Effect::Viscous { b } => b * x.omega,
             Effect::Stribeck { fs, vs } => {
                 let r = x.omega / vs;
-                fs * (-(r * r)).exp() * sgn
+                fs * (-(r * r)).exp() * sgn()
             }
             Effect::Cogging {
                 harmonic,
@@ -312,8 +313,8 @@ impl<F: Float> Effect<F> {
             } => amp * crate::trig::sin_of(F::from(harmonic).unwrap() * x.theta + phase),
             Effect::PositionLoad { amp, phase } => amp * crate::trig::sin_of(x.theta + phase),
             Effect::Offset { t0 } => t0,
-            Effect::Asymmetry { dv, dc } => dv * x.omega.abs() + dc * sgn.abs(),
-            Effect::LoadFriction { mu } => mu * (x.kt * x.current).abs() * sgn,
+            Effect::Asymmetry { dv, dc } => dv * x.omega.abs() + dc * sgn().abs(),
+            Effect::LoadFriction { mu } => mu * (x.kt * x.current).abs() * sgn(),
             Effect::Saturation { k } => {
                 let q = k * x.current * x.current;
                 x.kt * x.current * q / (F::one() + q)

@@ -8,8 +8,8 @@
 //! bristle state updated *exactly* for the new velocity (`control::lugre::z_step`) — the
 //! scheme of the emulator (`emulator::plant`), L-stable at any step and exact at equilibria
 //! (stiction). The unknown of a sub-step is the new velocity: the residual
-//! `J·(ω' − ω)/h − K_t·I'(ω') + F_f(ω') + loads(ω')` increases with ω', so the emulator's
-//! bracketing scalar solver finds it. (An exponential Rosenbrock scheme was tried first: it
+//! `J·(ω' − ω)/h − K_t·I'(ω') + F_f(ω') + loads(ω')` increases with ω', so Newton's method on
+//! its exact slope, kept in a bracket, finds it in two or three evaluations. (An exponential Rosenbrock scheme was tried first: it
 //! diverges at LuGre breakaway, where the bilinear |ω|·z term changes within a step.)
 //!
 //! The run is generic in its number type ([`RunScalar`]): in `f64` it is the simulation; in
@@ -177,14 +177,20 @@ fn substep_residual<D: RunScalar>(
     (resid, [theta, w, current, z])
 }
 
+/// The model's numbers in the one-lane dual number of the sub-step's Newton iteration (the
+/// lane is the new velocity's: the residual's value and its exact slope in one evaluation).
+type Slope = DualVec<f64, 1>;
+
 /// One backward-Euler sub-step of length `h` (z exact), from state x with input u and heat
 /// state h_th. The new velocity is the root of [`substep_residual`] (increasing in it),
-/// found in `f64` by the emulator's bracketing scalar solver from `w_guess`; in dual
-/// numbers the new state then carries the implicit function's derivatives
-/// ([`RunScalar::on_root`]).
+/// found in `f64` by [`substep_velocity`] from `w_guess`; in dual numbers the new state then
+/// carries the implicit function's derivatives ([`RunScalar::on_root`]). `slope` holds the
+/// values `re` of `p` as one-lane dual numbers.
+#[allow(clippy::too_many_arguments)]
 fn implicit_step<D: RunScalar>(
     p: &RunParams<D>,
     re: &RunParams<f64>,
+    slope: &RunParams<Slope>,
     x: &[D; NX],
     u: f64,
     h_th: D,
@@ -192,13 +198,74 @@ fn implicit_step<D: RunScalar>(
     w_guess: f64,
 ) -> [D; NX] {
     let xr = x.map(|v| v.re());
-    let hr = h_th.re();
-    let g = |w: f64| substep_residual(re, re, &xr, u, hr, h, w).0;
-    let g0 = g(w_guess);
-    let step0 = g0.abs() * h / re.motor.j + 1e-9;
-    let w = find_root(g, w_guess, step0, 1e-11 * (1.0 + xr[1].abs()));
+    let w = substep_velocity(re, slope, &xr, u, h_th.re(), h, w_guess);
     let (g, s) = substep_residual(p, re, x, u, h_th, h, D::unknown(w));
     s.map(|v| D::on_root(v, g))
+}
+
+/// The new velocity of a sub-step: the root of [`substep_residual`] to within
+/// 1e-11·(1 + |ω|). Newton's method on the residual and its exact slope (one evaluation in
+/// [`Slope`] numbers each), kept inside the bracket of the residual's signs seen so far
+/// (bisection when a step leaves it): two or three evaluations from the previous
+/// sub-steps' extrapolation. Where the slope is not positive (a residual that is not
+/// increasing there) and no bracket is known, the bracketing search of the emulator
+/// ([`find_root`]) takes over.
+fn substep_velocity(
+    re: &RunParams<f64>,
+    slope: &RunParams<Slope>,
+    x: &[f64; NX],
+    u: f64,
+    h_th: f64,
+    h: f64,
+    w_guess: f64,
+) -> f64 {
+    let xtol = 1e-11 * (1.0 + x[1].abs());
+    let xs = x.map(Slope::constant);
+    let hs = Slope::constant(h_th);
+    let eval = |w: f64| {
+        let g = substep_residual(slope, re, &xs, u, hs, h, Slope::unknown(w)).0;
+        (g.re, g.eps[0])
+    };
+    let (mut lo, mut hi) = (f64::NEG_INFINITY, f64::INFINITY);
+    let mut w = w_guess;
+    let mut last_step = f64::INFINITY;
+    for _ in 0..60 {
+        let (g, dg) = eval(w);
+        if g == 0.0 {
+            return w;
+        }
+        if !g.is_finite() {
+            break;
+        }
+        if g < 0.0 {
+            lo = w;
+        } else {
+            hi = w;
+        }
+        let newton = w - g / dg;
+        if dg > 0.0 && (newton - w).abs() <= xtol {
+            return newton;
+        }
+        let bracketed = lo.is_finite() && hi.is_finite();
+        // Newton while it stays in the bracket and, once there is one, converges (each
+        // step under half the last one); else bisection.
+        let shrinks = !bracketed || (newton - w).abs() <= 0.5 * last_step;
+        let next = if dg > 0.0 && newton > lo && newton < hi && shrinks {
+            newton
+        } else if bracketed {
+            0.5 * (lo + hi)
+        } else {
+            break;
+        };
+        last_step = (next - w).abs();
+        if (next - w).abs() <= xtol || (hi - lo) <= xtol {
+            return next;
+        }
+        w = next;
+    }
+    let g = |w: f64| substep_residual(re, re, x, u, h_th, h, w).0;
+    let step0 = g(w_guess).abs() * h / re.motor.j + 1e-9;
+    find_root(g, w_guess, step0, xtol)
 }
 
 /// Matrix exponential of a small dense matrix: scaling and squaring with a degree-12 Taylor
@@ -408,6 +475,7 @@ pub fn run_range<D: RunScalar>(
     let mut x = [D::constant(log.theta[start]), D::constant(omega0), i0, z0];
     let mut h = heat_at(p, log, start);
     let mut w_prev = omega0;
+    let slope = re.lift::<Slope>();
     let mut out = Run {
         theta: Vec::with_capacity(n),
         omega: Vec::with_capacity(n),
@@ -437,7 +505,7 @@ pub fn run_range<D: RunScalar>(
             let w = x[1].re();
             let guess = w + (w - w_prev);
             w_prev = w;
-            x = implicit_step(p, re, &x, u, h, dt, guess);
+            x = implicit_step(p, re, &slope, &x, u, h, dt, guess);
             for e in &p.effects {
                 h = e.heat_step(h, x[2], D::constant(dt));
             }

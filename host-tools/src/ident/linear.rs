@@ -395,8 +395,18 @@ pub fn fit(req: &FitRequest) -> Result<Model> {
         lo: 0.0,
         hi: 100.0,
     });
-    let mut rows =
-        sim_error::refine_with_effects(&mut m, &free, req.logs, nlsq::Options::default())?;
+    let opts = nlsq::Options::default();
+    let mut rows = if req.adds.is_empty() {
+        let report = |it: usize, c: f64| {
+            super::progress::report("free-run simulation error", it, c);
+        };
+        let sens = sim_error::Jacobian::Sensitivities;
+        sim_error::refine(&mut m, &free, req.logs, sens, opts, &mut { report })?
+    } else {
+        // From this start, and from the base structure refined without the effects.
+        let starts = [m.clone(), super::base_structure_fit(req)?];
+        sim_error::refine_added_effects(&mut m, &starts, &free, req.logs, opts)?
+    };
     rows.extend(fixed_rows(&m));
     m.parameters = rows;
     m.data.sample_period = m.sample_period;

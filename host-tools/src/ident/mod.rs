@@ -209,6 +209,13 @@ pub fn fit(req: &FitRequest) -> Result<FitReport> {
     })
 }
 
+/// The base structure of `req` (its model kind without the added effects) fitted on the
+/// same logs: the start of a fit with added effects, and a candidate of their guard. Taken
+/// from [`BASE_FITS`] when this process fitted it before.
+pub fn base_structure_fit(req: &FitRequest) -> Result<Model> {
+    fit_kind(&FitRequest { adds: &[], ..*req })
+}
+
 fn fit_kind(req: &FitRequest) -> Result<Model> {
     match req.kind {
         ModelKind::Linear => base_fit_memo(req, linear::fit),
@@ -409,9 +416,8 @@ fn guard_added_effects(req: &FitRequest, with: Model) -> Result<Model> {
             residual_best = Some((s, cand));
         }
     }
-    let base_req = FitRequest { adds: &[], ..*req };
     progress::report("the base structure fitted afresh", 0, f64::NAN);
-    if let Ok(mut base) = fit_kind(&base_req) {
+    if let Ok(mut base) = base_structure_fit(req) {
         let cand = residual_candidate(&base);
         let s = validation_score(&cand, req.validate);
         tracing::debug!("guard: with {score_with:.2}, residual estimate on the base fit {s:.2}");
