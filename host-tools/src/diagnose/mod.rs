@@ -185,6 +185,10 @@ pub struct Diagnosis {
 pub struct Verdict {
     /// True only when every check passes, no effect is missing and nothing is unexplained.
     pub adequate: bool,
+    /// False when an equation had too few usable windows ([`MIN_VERDICT_ROWS`]) to test its
+    /// residual: the log cannot show whether the model is adequate, and `adequate` is false
+    /// for that reason alone when no finding, carrier or other check says otherwise.
+    pub judged: bool,
     /// Family-wise level of the checks and the per-test level after Bonferroni.
     pub level: f64,
     pub level_per_test: f64,
@@ -669,6 +673,7 @@ fn judge(
     let mut checks = Vec::new();
     let mut unexplained: Vec<carriers::Carrier> = Vec::new();
     let mut refit = Vec::new();
+    let all_clusters = verdict::hold_clusters(&s.raw_u, &wf.centres);
     for j in judged {
         // Too few windows to test anything: the verdict cannot be "adequate".
         if j.base.len() < MIN_VERDICT_ROWS {
@@ -701,7 +706,13 @@ fn judge(
         let mut w = verdict::whiteness_check(&j.after, level_per_test);
         w.detail = format!("{}: {}", j.eq.label(), w.detail);
         checks.push(w);
-        let mut x = verdict::input_check(&j.after, &j.input, level_per_test);
+        let cluster: Vec<usize> = all_clusters
+            .iter()
+            .zip(&j.keep)
+            .filter(|(_, k)| **k)
+            .map(|(c, _)| *c)
+            .collect();
+        let mut x = verdict::input_check(&j.after, &j.input, &cluster, level_per_test);
         x.detail = format!("{}: {}", j.eq.label(), x.detail);
         checks.push(x);
         let rows = carriers::Rows {
@@ -710,6 +721,7 @@ fn judge(
             resid: &j.after,
             scale: j.scale.as_deref(),
             label: j.eq.label(),
+            cluster: &cluster,
         };
         for c in carriers::carriers(s, &rows, level_per_test, opts.min_explained) {
             match unexplained.iter_mut().find(|u| u.variable == c.variable) {
@@ -720,12 +732,14 @@ fn judge(
         }
     }
     unexplained.sort_by(|a, b| b.share.total_cmp(&a.share));
+    let testable = !judged.is_empty() && checks.iter().all(|c| c.name != "data");
     let adequate = !judged.is_empty()
         && findings.is_empty()
         && unexplained.is_empty()
         && checks.iter().all(|c| c.passed);
     Verdict {
         adequate,
+        judged: testable,
         level,
         level_per_test,
         checks,
