@@ -369,8 +369,7 @@ fn write_verdict_table() {
          breakaway. A torque constant that falls 3 % by 10 A goes unseen, and \
          the model is called adequate: on the fitting signal a the current rarely leaves that \
          range, and on voltage steps what the fall leaves is within what the robust tests \
-         grant the Hall sensor's shared error (the acceleration and current carriers it used to \
-         get there were no larger than the correct model's own on the same signal). A compliant coupling is \
+         grant the Hall sensor's shared error. A compliant coupling is \
          named `compliance` with its load inertia and natural frequency. A gap has no \
          candidate of its own yet: its nearest named physics is a soft coupling (`compliance` \
          at about 1 Hz), which is what `diagnose` reports.\n",
