@@ -25,7 +25,9 @@
 //! - current sense: the measured current flowing against the voltage that drives it
 //!   ([`crate::step::current_sign_implausible`]) for [`CURRENT_SENSE_PERIODS`] in a row (an
 //!   inverted current sense before commissioning; the command follows the model's window
-//!   meanwhile);
+//!   meanwhile), or in a single period where the model's and the measured windows are also
+//!   disjoint (a model's K_b below half the motor's: a braking current; neither window
+//!   bounds the current);
 //! - over-speed: |ω̂| above [`OVERSPEED_FACTOR`] times the speed limit for
 //!   [`OVERSPEED_PERIODS`] in a row;
 //! - link loss (a stop, not a fault): no frame for [`LINK_TIMEOUT_PERIODS`] in speed or
@@ -845,7 +847,11 @@ impl Board {
             out.omega.abs() > OVERSPEED_FACTOR * self.w_max,
         );
         self.sense = in_row(self.sense, out.faults.contains(Faults::CURRENT_SENSE));
-        let f = if self.sense >= CURRENT_SENSE_PERIODS {
+        // A current against its driving voltage while the model's and the measured windows
+        // are disjoint: neither bounds the current, stop at once.
+        let untrusted = out.faults.contains(Faults::CURRENT_SENSE)
+            && out.faults.contains(Faults::MODEL_MISMATCH);
+        let f = if self.sense >= CURRENT_SENSE_PERIODS || untrusted {
             Some(Fault::CurrentSense)
         } else if self.stall >= STALL_PERIODS {
             Some(Fault::Stall)
@@ -1246,5 +1252,31 @@ mod tests {
         );
         assert!((b.commission_current() - 0.5 * i_full).abs() < 1e-5);
         assert!(b.commission_volts() < v);
+    }
+
+    #[test]
+    fn a_hot_board_does_not_take_sense_noise_for_an_inverted_current() {
+        // Near the trip the derated limit is a tenth of the full one; a current of 0.7 A
+        // against the drive (noise and offset of a working sense) is not significant
+        // against the full limit's quarter, while 7 A against it at 25 °C is.
+        for (t, i, want) in [(98.0, -0.7, None), (25.0, -7.0, Some(Fault::CurrentSense))] {
+            let mut b = Board::new(Some((identified(), 1)), "test", 22.2);
+            b.set_hardware_stop(true, false);
+            b.handle(
+                &HostMsg::StartExperiment {
+                    signal: Excitation::Steady { volts: 5.0 },
+                    duration_s: 1.0,
+                },
+                &mut |_| {},
+            );
+            for _ in 0..10 {
+                let m = Measurements {
+                    i_vector: i,
+                    ..at(t)
+                };
+                b.tick(&m, &mut |_| {});
+            }
+            assert_eq!(b.fault(), want, "{t} °C, {i} A");
+        }
     }
 }

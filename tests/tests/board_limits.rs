@@ -504,6 +504,44 @@ fn wrong_motor_constants_never_run_the_rotor_away() {
 }
 
 #[test]
+fn a_model_back_emf_far_below_the_motors_stops_at_the_first_braking_period() {
+    // K_b at 0.4 times the motor's, and a load that drives the rotor (0.4 N·m, within what
+    // the current limit brakes): the true current brakes while the model's driving voltage
+    // says it drives. The current looks implausible, and the model's window, which would
+    // take over, lies beside the measured one: neither bounds the current, and the board
+    // stops in that same period, before any period ends with the current beyond i_max.
+    let mut co = paper_coefficients(24.0, 10.0);
+    co.motor.kb *= 0.4;
+    let i_max = f64::from(co.limits.i_max);
+    let plant = EmulatorConfig::paper().with_extra_load(|x| if x.t > 0.5 { -0.8 } else { 0.0 });
+    let mut slots = control::slots::Slots::new(RamFlash::new(None), 0, PAGE as u32).unwrap();
+    slots
+        .store(&motorid::board::coeffs::encode(&co).unwrap())
+        .unwrap();
+    let mut sim = BoardSim::new(plant, Wiring::default(), slots.into_inner()).unwrap();
+    let (p, fault) = speed_run(&mut sim, 20.0, 400);
+    let over = beyond_trip(&p, i_max);
+    let peak = peak_current(&p);
+    let both = p.iter().position(|x| {
+        x.faults.contains(Faults::CURRENT_SENSE) && x.faults.contains(Faults::MODEL_MISMATCH)
+    });
+    let sense = p
+        .iter()
+        .position(|x| x.faults.contains(Faults::CURRENT_SENSE));
+    eprintln!("K_b x0.4, driving load: fault {fault:?}, peak {peak:.2} A, {over} periods beyond i_max, flagged first in period {sense:?}, with disjoint windows {both:?}");
+    assert_eq!(fault, Some(Fault::CurrentSense), "peak {peak} A");
+    assert_eq!(both, sense, "stopped in the first flagged period");
+    assert_eq!(over, 0, "{over} periods beyond i_max, peak {peak} A");
+    // From the fault on the bridge is off: the current decays within the next period.
+    let k = both.unwrap();
+    assert!(
+        p[k + 2..].iter().all(|x| x.peak_i < 0.1),
+        "{:?}",
+        &p[k + 1..k + 3]
+    );
+}
+
+#[test]
 fn a_load_step_at_speed_holds_the_current_limit() {
     // At 150 rad/s a load rises to 0.6 N·m over 0.1 s (8.4 A of torque, beyond what the
     // limit's 8 A give with friction): the rotor slows while the moving average still
