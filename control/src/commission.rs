@@ -633,7 +633,8 @@ mod tests {
         // offset, and a sense reading nothing at all.
         let noise =
             |k: usize| ((k as u32).wrapping_mul(2_654_435_761) >> 16) as f32 / 65_536.0 - 0.5;
-        let cases: [(&str, &dyn Fn(f32, usize) -> f32); 4] = [
+        type Sense<'a> = &'a dyn Fn(f32, usize) -> f32;
+        let cases: [(&str, Sense); 4] = [
             ("zero", &|_, _| 0.0),
             ("noise", &|_, k| 0.1 * noise(k)),
             ("offset and noise", &|_, k| 0.3 + 0.1 * noise(k)),
