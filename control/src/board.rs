@@ -25,7 +25,9 @@
 //! - current sense: the measured current flowing against the voltage that drives it
 //!   ([`crate::step::current_sign_implausible`]) for [`CURRENT_SENSE_PERIODS`] in a row (an
 //!   inverted current sense before commissioning; the command follows the model's window
-//!   meanwhile);
+//!   meanwhile), or in a single period where the model's and the measured windows are also
+//!   disjoint (a model's K_b below half the motor's: a braking current; neither window
+//!   bounds the current);
 //! - over-speed: |ω̂| above [`OVERSPEED_FACTOR`] times the speed limit for
 //!   [`OVERSPEED_PERIODS`] in a row;
 //! - link loss (a stop, not a fault): no frame for [`LINK_TIMEOUT_PERIODS`] in speed or
@@ -110,9 +112,10 @@ pub const OVERSPEED_PERIODS: u32 = 8;
 pub const STALL_FRACTION: f32 = 0.5;
 /// Commissioning voltage: at most this fraction of the voltage limit...
 pub const COMMISSION_U_FRACTION: f32 = 0.25;
-/// ...and at most the voltage that drives this fraction of `i_max` through R at standstill;
-/// the measured current then holds the run to this fraction of `i_max` whatever the blob's R
-/// ([`crate::commission`]).
+/// ...and at most the voltage that drives this fraction of `i_max` (lowered with the board
+/// temperature, [`temperature_derating`]) through R at standstill, above the dead time's
+/// drop; the measured current then holds the run to this fraction of `i_max` whatever the
+/// blob's R ([`crate::commission`]).
 pub const COMMISSION_I_FRACTION: f32 = 0.3;
 
 /// PWM carrier frequency of the bridge [Hz] (centre-aligned TIM1).
@@ -120,12 +123,13 @@ pub const PWM_HZ: u32 = 20_000;
 /// Dead time of the bridge's complementary outputs [ns].
 pub const DEAD_TIME_NS: u32 = 500;
 
-/// Voltage [V] the bridge's dead time takes from a vector (two half-bridges in series) with
-/// a current of one sign, at bus voltage `v_bus` [V]: during each dead time the off
-/// half-bridge's diode conducts and clamps its phase to the rail against the command,
-/// `t_d·f_PWM·V_bus` per half-bridge (0.47 V at 500 ns, 20 kHz and 23.5 V).
+/// Voltage [V] the bridge's dead time takes from a vector with a current of one sign, at
+/// bus voltage `v_bus` [V]: in six-step only the high phase's half-bridge switches (the low
+/// phase's low side conducts throughout), and during each of its dead times its diode
+/// clamps the phase to the rail against the command: `t_d·f_PWM·V_bus` (0.24 V at 500 ns,
+/// 20 kHz and 23.5 V).
 pub fn dead_time_drop(v_bus: f32) -> f32 {
-    2.0 * (DEAD_TIME_NS as f32 * 1e-9) * PWM_HZ as f32 * v_bus
+    (DEAD_TIME_NS as f32 * 1e-9) * PWM_HZ as f32 * v_bus
 }
 
 /// Bridge step (0..5) that drives a rotor in Hall sector `sector`: one vector ahead
@@ -245,6 +249,9 @@ pub struct Board {
     w_max: f32,
     /// Bus voltage of the last period [V] (measured, else the nominal one).
     v_bus: f32,
+    /// Current-limit fraction of the last period's board temperature
+    /// ([`temperature_derating`]).
+    derating: f32,
     /// The hardware over-current stop is armed ([`Board::set_hardware_stop`]; false until
     /// the transport says so).
     hw_stop_armed: bool,
@@ -316,6 +323,7 @@ impl Board {
             applied: None,
             w_max: 0.0,
             v_bus: v_bus_nominal,
+            derating: 1.0,
             hw_stop_armed: false,
             run_without_hw_stop: false,
             commission: CommissionOutcome::NotRun,
@@ -469,10 +477,17 @@ impl Board {
         }
     }
 
-    /// Commissioning voltage [V] (see [`COMMISSION_U_FRACTION`]).
+    /// Commissioning current limit [A]: [`COMMISSION_I_FRACTION`] of `i_max`, lowered with
+    /// the board temperature of the last period.
+    pub fn commission_current(&self) -> f32 {
+        COMMISSION_I_FRACTION * self.coeffs.limits.i_max * self.derating
+    }
+
+    /// Commissioning voltage [V] at the bus voltage of the last period (see
+    /// [`COMMISSION_U_FRACTION`], [`COMMISSION_I_FRACTION`]).
     pub fn commission_volts(&self) -> f32 {
-        let u = COMMISSION_U_FRACTION * self.u_limit(self.v_bus_nominal);
-        let i = COMMISSION_I_FRACTION * self.coeffs.limits.i_max * self.coeffs.motor.r;
+        let u = COMMISSION_U_FRACTION * self.u_limit(self.v_bus);
+        let i = dead_time_drop(self.v_bus) + self.commission_current() * self.coeffs.motor.r;
         if i < u {
             i
         } else {
@@ -528,9 +543,12 @@ impl Board {
             }
             | HostMsg::Commission => {
                 let volts = self.commission_volts();
-                let i_limit = COMMISSION_I_FRACTION * self.coeffs.limits.i_max;
+                let i_limit = self.commission_current();
                 let v_dead = dead_time_drop(self.v_bus);
-                self.start(Run::Commission(Commissioner::new(volts, i_limit, v_dead)));
+                let r = self.coeffs.motor.r;
+                self.start(Run::Commission(Commissioner::new(
+                    volts, i_limit, v_dead, r,
+                )));
                 self.commission = CommissionOutcome::Running;
                 BoardMsg::Ack
             }
@@ -600,7 +618,9 @@ impl Board {
     }
 
     /// A commissioning run ended with `r`; `resistance` [Ω] is the winding resistance its
-    /// holds measured, stored unless the motor constants were identified.
+    /// holds measured, stored unless the motor constants were identified, and at most
+    /// `u_limit/i_limit` (the step's voltage window `R·i_limit` within what the board can
+    /// drive at this bus voltage; a smaller R only narrows the window).
     fn commissioned(
         &mut self,
         r: Result<Commissioning, CommissionError>,
@@ -614,7 +634,9 @@ impl Board {
                 let mut co = self.coeffs.clone();
                 co.apply_commissioning(c);
                 if let (Some(r), false) = (resistance, co.motor_identified) {
-                    co.motor.r = r;
+                    let r_max =
+                        self.u_limit(self.v_bus) / (blob::DERATE_FRACTION * co.limits.i_max);
+                    co.motor.r = if r < r_max { r } else { r_max };
                 }
                 self.step = ControlStep::new(&co.step_config(self.v_bus_nominal));
                 self.table = table_of(&co);
@@ -647,11 +669,9 @@ impl Board {
         let u_lim = self.u_limit(v_bus);
         let i = self.signed_current(m.i_vector);
         self.hard_faults(m, i, send);
-        self.step.set_current_limit(
-            blob::DERATE_FRACTION
-                * self.coeffs.limits.i_max
-                * temperature_derating(m.temperature_c),
-        );
+        self.derating = temperature_derating(m.temperature_c);
+        self.step
+            .set_current_limit(blob::DERATE_FRACTION * self.coeffs.limits.i_max * self.derating);
         self.watch_link(send);
         if let Some(drive) = self.commissioning(m, send) {
             return drive;
@@ -827,7 +847,11 @@ impl Board {
             out.omega.abs() > OVERSPEED_FACTOR * self.w_max,
         );
         self.sense = in_row(self.sense, out.faults.contains(Faults::CURRENT_SENSE));
-        let f = if self.sense >= CURRENT_SENSE_PERIODS {
+        // A current against its driving voltage while the model's and the measured windows
+        // are disjoint: neither bounds the current, stop at once.
+        let untrusted = out.faults.contains(Faults::CURRENT_SENSE)
+            && out.faults.contains(Faults::MODEL_MISMATCH);
+        let f = if self.sense >= CURRENT_SENSE_PERIODS || untrusted {
             Some(Fault::CurrentSense)
         } else if self.stall >= STALL_PERIODS {
             Some(Fault::Stall)
@@ -1198,5 +1222,61 @@ mod tests {
             out.push(m)
         });
         assert_eq!(out.last(), Some(&BoardMsg::Nack(Nack::Faulted)));
+    }
+
+    #[test]
+    fn commissioning_is_sized_at_the_measured_bus_and_the_board_temperature() {
+        let mut b = Board::new(Some((identified(), 1)), "test", 22.2);
+        let co = identified();
+        let cool = Measurements {
+            v_bus: 12.0,
+            ..at(25.0)
+        };
+        b.tick(&cool, &mut |_| {});
+        let i_full = COMMISSION_I_FRACTION * co.limits.i_max;
+        assert_eq!(b.commission_current(), i_full);
+        let v = (dead_time_drop(12.0) + i_full * co.motor.r)
+            .min(COMMISSION_U_FRACTION * co.pi.u_max.min(MAX_DUTY * 12.0));
+        assert!(
+            (b.commission_volts() - v).abs() < 1e-6,
+            "{}",
+            b.commission_volts()
+        );
+        let mid = 0.5 * (TEMP_DERATE_C + TEMP_MAX_C);
+        b.tick(
+            &Measurements {
+                v_bus: 12.0,
+                ..at(mid)
+            },
+            &mut |_| {},
+        );
+        assert!((b.commission_current() - 0.5 * i_full).abs() < 1e-5);
+        assert!(b.commission_volts() < v);
+    }
+
+    #[test]
+    fn a_hot_board_does_not_take_sense_noise_for_an_inverted_current() {
+        // Near the trip the derated limit is a tenth of the full one; a current of 0.7 A
+        // against the drive (noise and offset of a working sense) is not significant
+        // against the full limit's quarter, while 7 A against it at 25 °C is.
+        for (t, i, want) in [(98.0, -0.7, None), (25.0, -7.0, Some(Fault::CurrentSense))] {
+            let mut b = Board::new(Some((identified(), 1)), "test", 22.2);
+            b.set_hardware_stop(true, false);
+            b.handle(
+                &HostMsg::StartExperiment {
+                    signal: Excitation::Steady { volts: 5.0 },
+                    duration_s: 1.0,
+                },
+                &mut |_| {},
+            );
+            for _ in 0..10 {
+                let m = Measurements {
+                    i_vector: i,
+                    ..at(t)
+                };
+                b.tick(&m, &mut |_| {});
+            }
+            assert_eq!(b.fault(), want, "{t} °C, {i} A");
+        }
     }
 }

@@ -16,27 +16,40 @@
 //!   magnet's pole count differs from the motor's;
 //! - the current-sense sign: with a positive voltage along the held vector the current
 //!   along it is positive; a negative mean says the sense is inverted (`current_sign` −1);
+//! - that the current sense sees the current at all ([`CommissionError::NoCurrent`]): the
+//!   mean current at the higher level `Ī_hi` must reach a quarter of what the blob's R
+//!   lets flow, `|Ī_hi| ≥ ¼·min(i_limit, (V_hi − V_d)/R_blob)`, and the two levels' currents
+//!   must differ by a quarter of it, `|Ī_hi − Ī_lo| ≥ ¼·|Ī_hi|` (they differ by a half
+//!   when the sense works). The quarter admits a winding of up to four times the blob's R
+//!   (a first spin runs on the default R) and a dead-time estimate off by half the drop,
+//!   while a dead sense (its offset and noise, tens of mA against amperes) or a hold
+//!   voltage at or below the drop fails: neither a sign nor an R is taken from noise;
 //! - the winding resistance R [Ω] along a vector (two phases in series, the DC-equivalent
 //!   motor's R) from two voltage levels held while the rotor rests (no back-EMF) and the
 //!   current has settled (L/R is a few ms): `R = (V_hi − V_lo)/(Ī_hi − Ī_lo)`. The bridge's
-//!   dead time takes a constant voltage from a current of one sign (`2·t_d·f_PWM·V_bus`, about
-//!   0.5 V at 500 ns, 20 kHz and 24 V: a third of a 1.5 V hold), and the difference cancels it,
-//!   as it does the current sense's offset ([`Commissioner::resistance`]).
+//!   dead time takes a constant voltage from a current of one sign (`t_d·f_PWM·V_bus`: in
+//!   six-step only the high leg switches; about 0.24 V at 500 ns, 20 kHz and 24 V), and the
+//!   difference cancels it, as it does the current sense's offset
+//!   ([`Commissioner::resistance`]).
 //!
 //! Each hold lasts [`HOLD_PERIODS`] control periods: the first half at the run's voltage
 //! `V_hi` (the rotor turns and settles), then a quarter at the lower level
 //! `V_lo = V_d + `[`LOW_LEVEL`]`·(V_hi − V_d)` and the last quarter at `V_hi` again (the Hall
 //! state is read at the end, under full torque); the current is averaged over each of the
-//! two quarters. `V_d` is the dead time's drop the caller expects: placing the lower level
+//! two quarters but their first two periods (it settles with the winding's L/R, up to 15 ms). `V_d` is the dead time's drop the caller expects: placing the lower level
 //! above it keeps its current at about half the higher level's, of the same sign, where the
 //! drop is constant; an error of `V_d` moves that current, not R.
 //!
 //! The voltage is chosen by the caller (the board logic limits it to a fraction of `u_max`
 //! and to the voltage that drives a fraction of `i_max` through the blob's R, which may not
 //! be the motor's); the measured current then bounds it:
-//! - the first hold starts at [`RAMP_START`] of the way from `V_d` to `V_hi` and grows by
-//!   [`RAMP_GROWTH`] a period, so the current approaches the limit from below (by at most
-//!   that factor past it) whatever the winding's R;
+//! - the first hold starts at [`RAMP_START`] of the way from `V_d/2` to `V_hi` and grows by
+//!   [`RAMP_GROWTH`] a period, so the current approaches the limit from below whatever the
+//!   winding's R and even when the drop `V_d` is overestimated twofold (starting at `V_d`
+//!   itself would drive `(V_d − V_d,true)/R` at once: 12 A through 20 mΩ); once the current
+//!   passes [`RAMP_NEAR`] of the limit the growth slows to [`RAMP_GROWTH_NEAR`] and the voltage goes
+//!   no further than the one extrapolated to drive [`RAMP_TARGET`] of the limit,
+//!   `V_d + (V − V_d)·RAMP_TARGET·i_limit/|I|`, where the ramp ends;
 //! - whenever `|I|` exceeds the run's current limit `i_limit`, `V_hi` falls to the voltage
 //!   that drives the limit, `V_d + (V − V_d)·i_limit/|I|` for the voltage `V` that drove
 //!   `I` (the current at rest is `(V − V_d)/R`), and stays there for the rest of the run.
@@ -46,18 +59,31 @@ use crate::hall::HallTable;
 
 /// Control periods each vector is held (0.3 s at 12 ms).
 pub const HOLD_PERIODS: u16 = 25;
+/// Smallest share of the expected current the higher level's mean must reach, and of that
+/// mean the two levels' difference must reach ([`CommissionError::NoCurrent`], module docs).
+pub const CURRENT_SHARE: f32 = 0.25;
 /// Holds in a run: two forward passes and one backward pass.
 pub const HOLDS: u8 = 18;
 /// The lower of a hold's two voltage levels, as a fraction of the higher above the dead
 /// time's drop: the current's difference between them is half the higher level's, enough
 /// against the sense's noise, and the lower level's current keeps its sign.
 pub const LOW_LEVEL: f32 = 0.5;
-/// Where the first hold's voltage starts, as a fraction of the way from the dead time's drop
-/// to the run's voltage.
+/// Where the first hold's voltage starts, as a fraction of the way from half the dead time's
+/// drop to the run's voltage.
 pub const RAMP_START: f32 = 1.0 / 16.0;
-/// Growth of the first hold's voltage above the dead time's drop per period: 16 times in
-/// 13 periods, within the first hold's settling half.
+/// Growth of the first hold's voltage above half the dead time's drop per period, while the
+/// current is below [`RAMP_NEAR`] of the limit.
 pub const RAMP_GROWTH: f32 = 1.25;
+/// Share of the limit the current passes where the ramp slows to [`RAMP_GROWTH_NEAR`].
+pub const RAMP_NEAR: f32 = 0.25;
+/// Growth per period once the current has passed [`RAMP_NEAR`] of the limit: the last
+/// steps towards the limit are small against the winding's L/R lag (15 ms at 0.3 mH and
+/// 20 mΩ).
+pub const RAMP_GROWTH_NEAR: f32 = 1.05;
+/// Where the ramp ends: at the voltage extrapolated to drive this fraction of the limit (the
+/// current measured at a period's end still lags the voltage by `e^(−T·R/L)` of its last
+/// step when L/R is long).
+pub const RAMP_TARGET: f32 = 0.9;
 
 /// The default Hall state sequence of [`HallTable::DEFAULT_120`] (sectors 0..5).
 pub const DEFAULT_SEQUENCE: [u8; 6] = [1, 3, 2, 6, 4, 5];
@@ -117,6 +143,11 @@ pub enum CommissionError {
     PolePairs,
     /// Stopped before the end (a stop command or a fault).
     Aborted,
+    /// The measured current was far below what the voltage drives through the blob's R, or
+    /// did not follow the voltage level: the current sense does not work (or the winding's
+    /// R is over four times the blob's, or the hold voltage does not exceed the dead
+    /// time's drop). Neither a current sign nor an R is stored.
+    NoCurrent,
 }
 
 /// How the last commissioning run ended.
@@ -153,11 +184,11 @@ impl LevelMean {
         self.n = self.n.saturating_add(1);
     }
 
-    /// (mean voltage, mean |current|) [V, A].
+    /// (mean voltage, mean current) [V, A] (the current's sign as measured).
     fn mean(&self) -> Option<(f32, f32)> {
         (self.n > 0).then(|| {
             let n = f32::from(self.n);
-            (self.v_sum / n, (self.i_sum / n).abs())
+            (self.v_sum / n, self.i_sum / n)
         })
     }
 }
@@ -182,8 +213,12 @@ pub struct Commissioner {
     i_limit: f32,
     /// Voltage the bridge's dead time is expected to take [V].
     v_dead: f32,
-    /// Fraction of the way from `v_dead` to `volts` the ramp has reached (1: done).
+    /// The blob's winding resistance [Ω] (what the current is expected from).
+    r_model: f32,
+    /// Fraction of the way from `v_dead/2` to `volts` the ramp has reached (1: done).
     ramp: f32,
+    /// The current has passed [`RAMP_NEAR`] of the limit (the ramp slows).
+    near: bool,
     /// The drive returned last period: its voltage, and the level its current samples
     /// (`None`: not sampled).
     last: (f32, Option<bool>),
@@ -201,11 +236,12 @@ pub enum CommissionStep {
 impl Commissioner {
     /// A run at `volts` [V] along each vector, at most `i_limit` [A] (non-finite or not
     /// positive: no current limit), on a bridge whose dead time takes `v_dead` [V] (below 0
-    /// or not finite: 0).
-    pub fn new(volts: f32, i_limit: f32, v_dead: f32) -> Self {
+    /// or not finite: 0), on a winding the blob gives `r_model` [Ω] (the expected current).
+    pub fn new(volts: f32, i_limit: f32, v_dead: f32, r_model: f32) -> Self {
         Commissioner {
             hold: 0,
-            period: 0,
+            // The first tick makes it 0.
+            period: u16::MAX,
             fwd: [0; 6],
             bwd: [0; 6],
             path: heapless::Vec::new(),
@@ -223,18 +259,26 @@ impl Commissioner {
             } else {
                 0.0
             },
+            r_model,
             ramp: RAMP_START,
+            near: false,
             last: (0.0, None),
+        }
+    }
+
+    /// The voltage a fraction `x` of the way from `base` [V] to `v_hi` [V] (from 0 when
+    /// `v_hi` is not above `base`).
+    fn above(base: f32, v_hi: f32, x: f32) -> f32 {
+        if v_hi > base {
+            base + x * (v_hi - base)
+        } else {
+            x * v_hi
         }
     }
 
     /// The voltage a fraction `x` of the way from the dead time's drop to `v_hi` [V].
     fn above_drop(&self, v_hi: f32, x: f32) -> f32 {
-        if v_hi > self.v_dead {
-            self.v_dead + x * (v_hi - self.v_dead)
-        } else {
-            x * v_hi
-        }
+        Self::above(self.v_dead, v_hi, x)
     }
 
     /// The higher voltage level now [V] (the run's voltage, lowered by the current limit).
@@ -287,8 +331,8 @@ impl Commissioner {
             }
         }
         self.measured(i_vector);
-        self.period += 1;
-        if self.period > HOLD_PERIODS {
+        self.period = self.period.wrapping_add(1);
+        if self.period >= HOLD_PERIODS {
             // The hold is over: the state now is that vector's sector.
             let k = Self::step_of(self.hold) as usize;
             match self.hold {
@@ -313,14 +357,35 @@ impl Commissioner {
             p if p < 3 * HOLD_PERIODS / 4 => Some(false),
             _ => Some(true),
         };
-        let v_hi = self.above_drop(self.volts, self.ramp);
-        self.ramp = (self.ramp * RAMP_GROWTH).min(1.0);
+        self.near |= i_vector.is_finite() && i_vector.abs() > RAMP_NEAR * self.i_limit;
+        let near = self.near;
+        let v_hi = if self.ramp < 1.0 {
+            let v = Self::above(0.5 * self.v_dead, self.volts, self.ramp);
+            // Near the limit, no further than the voltage extrapolated to drive it.
+            let cap = self.above_drop(self.last.0, RAMP_TARGET * self.i_limit / i_vector.abs());
+            if near && i_vector.abs() > 0.0 && cap < v {
+                // The ramp ends there.
+                self.volts = cap;
+                self.ramp = 1.0;
+                cap
+            } else {
+                v
+            }
+        } else {
+            self.volts
+        };
+        let growth = if near { RAMP_GROWTH_NEAR } else { RAMP_GROWTH };
+        self.ramp = (self.ramp * growth).min(1.0);
         let volts = if level == Some(false) {
             self.above_drop(v_hi, LOW_LEVEL)
         } else {
             v_hi
         };
-        self.last = (volts, level);
+        // The first two periods at each level are not sampled: the current settles with L/R.
+        let p = self.period;
+        let settled = !(HOLD_PERIODS / 2..HOLD_PERIODS / 2 + 2).contains(&p)
+            && !(3 * HOLD_PERIODS / 4..3 * HOLD_PERIODS / 4 + 2).contains(&p);
+        self.last = (volts, level.filter(|_| settled));
         CommissionStep::Hold {
             step: Self::step_of(self.hold),
             volts,
@@ -347,14 +412,34 @@ impl Commissioner {
         }
     }
 
+    /// Whether the current sense saw the current the holds drove (module docs,
+    /// [`CommissionError::NoCurrent`]): `(Ī_hi, Ī_lo)` [A], signed as measured.
+    fn current_seen(&self) -> Option<(f32, f32)> {
+        let (v_hi, i_hi) = self.hi.mean()?;
+        let (_, i_lo) = self.lo.mean()?;
+        let expected = (v_hi - self.v_dead) / self.r_model;
+        let expected = if expected < self.i_limit {
+            expected
+        } else {
+            self.i_limit
+        };
+        let seen = expected > 0.0
+            && i_hi.abs() >= CURRENT_SHARE * expected
+            && (i_hi - i_lo).abs() >= CURRENT_SHARE * i_hi.abs()
+            && (i_hi - i_lo) * i_hi > 0.0;
+        seen.then_some((i_hi, i_lo))
+    }
+
     /// The winding resistance [Ω] from the holds so far: the difference of the two levels'
     /// mean voltages over that of their mean currents (module docs); `None` without samples
-    /// at both levels, without a current difference, or outside the physical range
+    /// at both levels, when the current sense did not see the current
+    /// ([`CommissionError::NoCurrent`]), or outside the physical range
     /// [`crate::blob::MOTOR_R`].
     pub fn resistance(&self) -> Option<f32> {
-        let (v_hi, i_hi) = self.hi.mean()?;
-        let (v_lo, i_lo) = self.lo.mean()?;
-        let r = (v_hi - v_lo) / (i_hi - i_lo);
+        let (i_hi, i_lo) = self.current_seen()?;
+        let (v_hi, _) = self.hi.mean()?;
+        let (v_lo, _) = self.lo.mean()?;
+        let r = (v_hi - v_lo) / (i_hi - i_lo).abs();
         let (lo, hi) = crate::blob::MOTOR_R;
         (r >= lo && r <= hi).then_some(r)
     }
@@ -379,6 +464,9 @@ impl Commissioner {
         if self.net_edges() != 6 {
             return Err(CommissionError::PolePairs);
         }
+        let Some((i_hi, _)) = self.current_seen() else {
+            return Err(CommissionError::NoCurrent);
+        };
         let rot = |s: &[u8; 6]| (0..6).any(|o| (0..6).all(|k| seq[k] == s[(k + o) % 6]));
         let mut rev = DEFAULT_SEQUENCE;
         rev.reverse();
@@ -388,11 +476,7 @@ impl Commissioner {
             sequence: seq,
             reversed,
             permuted: !forward && !reversed,
-            current_sign: if self.hi.i_sum + self.lo.i_sum < 0.0 {
-                -1
-            } else {
-                1
-            },
+            current_sign: if i_hi < 0.0 { -1 } else { 1 },
             edges_per_elec_rev: self.net_edges().min(255) as u8,
             volts: self.volts,
         })
@@ -405,17 +489,19 @@ mod tests {
     use super::*;
 
     /// An ideal rotor that jumps into the held vector's sector; Hall states of a given
-    /// sequence; current of a given sign.
+    /// sequence; the current `(V − 0.4 V)/0.2 Ω` a hold drives, of a given sign.
     fn run(seq: [u8; 6], sign: f32, start: u8) -> Result<Commissioning, CommissionError> {
-        let mut c = Commissioner::new(2.0, 10.0, 0.4);
+        let mut c = Commissioner::new(2.0, 10.0, 0.4, 0.2);
         let mut sector = start;
         let mut hall = seq[sector as usize];
         // Edges arrive with the next period's measurement.
         let mut edges: std::vec::Vec<u8> = std::vec::Vec::new();
+        let mut i = 0.0f32;
         for _ in 0..10_000 {
-            match c.tick(hall, edges.drain(..), false, sign * 5.0) {
+            match c.tick(hall, edges.drain(..), false, i) {
                 CommissionStep::Done(r) => return r,
-                CommissionStep::Hold { step, .. } => {
+                CommissionStep::Hold { step, volts } => {
+                    i = sign * (volts - 0.4).max(0.0) / 0.2;
                     // The rotor turns the short way into the vector's sector, overshooting
                     // by one sector and back.
                     let start = sector;
@@ -482,7 +568,7 @@ mod tests {
     fn two_levels_measure_r_without_the_dead_time_drop() {
         // 2 V across 0.2 Ω behind a 0.5 V drop: V/I would read 0.267 Ω (a third high).
         for (vd_expected, r, vd) in [(0.5, 0.2, 0.5), (0.4, 0.2, 0.5), (0.0, 0.5, 0.3)] {
-            let mut c = Commissioner::new(2.0, f32::INFINITY, vd_expected);
+            let mut c = Commissioner::new(2.0, f32::INFINITY, vd_expected, r);
             resting_winding(&mut c, r, vd);
             let got = c.resistance().unwrap();
             assert!(
@@ -495,22 +581,104 @@ mod tests {
     #[test]
     fn the_measured_current_lowers_the_hold_voltage_to_the_limit() {
         // The caller sized 2 V for a 0.2 Ω winding (7.5 A); the winding has 0.05 Ω (30 A).
-        let mut c = Commissioner::new(2.0, 7.5, 0.5);
+        let mut c = Commissioner::new(2.0, 7.5, 0.5, 0.2);
         let peak = resting_winding(&mut c, 0.05, 0.5);
-        assert!(peak <= RAMP_GROWTH * 7.5 + 1e-3, "peak {peak} A");
-        // The voltage that drives the limit: 0.5 V + 7.5 A · 0.05 Ω.
-        assert!((c.volts() - 0.875).abs() < 1e-3, "{} V", c.volts());
+        assert!(peak <= 7.5 + 1e-3, "peak {peak} A");
+        // The ramp ends at the voltage that drives its target share of the limit:
+        // 0.5 V + 0.9 · 7.5 A · 0.05 Ω.
+        let want = 0.5 + RAMP_TARGET * 7.5 * 0.05;
+        assert!((c.volts() - want).abs() < 1e-3, "{} V", c.volts());
         assert!((c.resistance().unwrap() - 0.05).abs() < 1e-4);
     }
 
     #[test]
     fn a_blocked_rotor_is_no_motion() {
-        let mut c = Commissioner::new(2.0, 10.0, 0.4);
+        let mut c = Commissioner::new(2.0, 10.0, 0.4, 0.2);
         let r = loop {
             if let CommissionStep::Done(r) = c.tick(1, [], false, 1.0) {
                 break r;
             }
         };
         assert_eq!(r, Err(CommissionError::NoMotion));
+    }
+
+    /// Runs a whole commissioning with an ideal rotor (default sequence) whose current sense
+    /// reads `sense(true current, period)`; the winding has `r` [Ω] behind a 0.4 V drop.
+    fn with_sense(
+        r: f32,
+        sense: impl Fn(f32, usize) -> f32,
+    ) -> (Result<Commissioning, CommissionError>, Option<f32>) {
+        let mut c = Commissioner::new(2.0, 10.0, 0.4, 0.2);
+        let (mut hall, mut i) = (DEFAULT_SEQUENCE[0], 0.0f32);
+        let mut edge = None;
+        for k in 0..10_000 {
+            match c.tick(hall, edge.take(), false, sense(i, k)) {
+                CommissionStep::Done(res) => return (res, c.resistance()),
+                CommissionStep::Hold { step, volts } => {
+                    let next = DEFAULT_SEQUENCE[step as usize];
+                    if next != hall {
+                        edge = Some(next);
+                    }
+                    hall = next;
+                    i = (volts - 0.4).max(0.0) / r;
+                }
+            }
+        }
+        panic!("never finished");
+    }
+
+    #[test]
+    fn a_current_sense_that_does_not_see_the_current_fails_the_run() {
+        // Pseudo-random noise of ±50 mA (a dead sense's noise), with and without a 0.3 A
+        // offset, and a sense reading nothing at all.
+        let noise =
+            |k: usize| ((k as u32).wrapping_mul(2_654_435_761) >> 16) as f32 / 65_536.0 - 0.5;
+        type Sense<'a> = &'a dyn Fn(f32, usize) -> f32;
+        let cases: [(&str, Sense); 4] = [
+            ("zero", &|_, _| 0.0),
+            ("noise", &|_, k| 0.1 * noise(k)),
+            ("offset and noise", &|_, k| 0.3 + 0.1 * noise(k)),
+            ("a hundredth of the current", &|i, _| 0.01 * i),
+        ];
+        for (what, sense) in cases {
+            let (res, r) = with_sense(0.2, sense);
+            assert_eq!(res, Err(CommissionError::NoCurrent), "{what}");
+            assert_eq!(r, None, "{what}");
+        }
+        // A working sense, inverted, on windings of a third and three times the blob's R.
+        for r_true in [0.2 / 3.0, 0.6] {
+            let (res, r) = with_sense(r_true, |i, _| -i);
+            let res = res.unwrap();
+            assert_eq!(res.current_sign, -1);
+            let r = r.unwrap();
+            assert!((r - r_true).abs() < 0.02 * r_true, "{r} vs {r_true}");
+        }
+        // Five times the blob's R: the current is under a quarter of the expected one.
+        let (res, _) = with_sense(1.0, |i, _| i);
+        assert_eq!(res, Err(CommissionError::NoCurrent));
+        // A hold voltage below the dead time's drop drives nothing to measure.
+        let mut c = Commissioner::new(0.3, 10.0, 0.4, 0.2);
+        let res = loop {
+            if let CommissionStep::Done(r) = c.tick(1, [], false, 0.0) {
+                break r;
+            }
+        };
+        assert!(res.is_err());
+    }
+
+    #[test]
+    fn each_hold_lasts_hold_periods() {
+        let mut c = Commissioner::new(2.0, 10.0, 0.4, 0.2);
+        let mut steps = std::vec::Vec::new();
+        while let CommissionStep::Hold { step, .. } = c.tick(1, [], false, 1.0) {
+            steps.push(step);
+        }
+        assert_eq!(steps.len(), usize::from(HOLDS) * usize::from(HOLD_PERIODS));
+        for (h, hold) in steps.chunks(usize::from(HOLD_PERIODS)).enumerate() {
+            assert!(
+                hold.iter().all(|&k| k == Commissioner::step_of(h as u8)),
+                "{h}"
+            );
+        }
     }
 }

@@ -36,13 +36,12 @@
 //! | `ReadTelemetry` | `Telemetry(..)`: the last complete window of [`crate::telemetry`] |
 //! | (nothing) | `Sample { .. }` every 12 ms while running, `Telemetry(..)` every second while running, `Fault`, `Warning` |
 //!
-//! Version 5 adds `hw_stop_armed` and `motor_identified` to `Identity`, and refuses speed
-//! mode and experiments while the hardware over-current stop is not armed
-//! (`Nack(NoHardwareStop)`, unless the firmware was built to run without it) and speed mode
-//! while the coefficients' motor constants are not identified (`Nack(MotorNotIdentified)`).
-//! Version 7 adds the fault `CurrentSense`. Version 6 adds the faults `ModelMismatch` and
-//! `OverSpeed`. Version 4 adds `speed_max` to `Identity` and refuses a `SetSpeed` beyond it; version 3 adds `ReadTelemetry` and `Telemetry`. Refusals (since version 2): `SetMode { Speed }` and `StartExperiment` without valid
-//! coefficients (`Nack(NoCoefficients)`); an experiment whose duration is not finite, not
+//! Refusals: `SetMode { Speed }` and experiments while the hardware over-current stop is
+//! not armed (`Nack(NoHardwareStop)`, unless the firmware was built to run without it);
+//! `SetMode { Speed }` while the coefficients' motor constants are not identified
+//! (`Nack(MotorNotIdentified)`); a `SetSpeed` beyond `speed_max` (`Nack(OutOfRange)`);
+//! `SetMode { Speed }` and `StartExperiment` without valid coefficients
+//! (`Nack(NoCoefficients)`); an experiment whose duration is not finite, not
 //! positive or above [`crate::board::MAX_EXPERIMENT_S`], or a steady voltage beyond `u_max`
 //! (`Nack(OutOfRange)`); any start while a fault is latched (`Nack(Faulted)`). A speed or
 //! experiment run stops (`Warning(LinkLost)`) when no frame came for
@@ -67,7 +66,7 @@ use serde::{Deserialize, Serialize};
 use crate::blob::{self, Coefficients, ModelKind, CRC32, MAX_BLOB_LEN};
 
 /// Protocol version reported by `Identity`.
-pub const PROTOCOL_VERSION: u16 = 7;
+pub const PROTOCOL_VERSION: u16 = 8;
 /// Largest upload chunk.
 pub const CHUNK_LEN: usize = 64;
 /// Largest body (postcard message + CRC).

@@ -192,6 +192,8 @@ impl Faults {
     pub const MODEL_MISMATCH: u16 = 1 << 8;
     /// The measured current flows against the voltage that drives it
     /// ([`current_sign_implausible`]): the command was bounded by the model's window alone.
+    /// Set with [`Faults::MODEL_MISMATCH`] when the two windows are also disjoint: then
+    /// either the sense or the model's constants are wrong, and the board stops at once.
     pub const CURRENT_SENSE: u16 = 1 << 9;
 
     pub fn contains(self, flag: u16) -> bool {
@@ -238,7 +240,10 @@ pub struct ControlStep<F> {
     dt: F,
     v_bus_nominal: F,
     u_max: F,
+    /// Current limit now [A] (lowered by [`ControlStep::set_current_limit`]).
     i_limit: F,
+    /// The configured current limit [A] ([`StepConfig::i_limit`]), before any lowering.
+    i_rated: F,
     /// Weight of the compensation voltage (see [`StepConfig::comp_gain`]).
     comp_gain: F,
     decoder: HallDecoder,
@@ -399,7 +404,8 @@ pub const EMF_TOLERANCE: f32 = 1.0;
 /// voltage (eq. 2 held over the period). `e` is trusted where it exceeds its error,
 /// [`EMF_TOLERANCE`]`·|emf| + emf_res` (`emf_res` = K_b times one estimator resolution),
 /// by the resistive drop of a significant current `R·i_sig`, `i_sig` =
-/// [`SENSE_SIGNIFICANCE`]`·i_limit`; the measurement contradicts it when `i` flows the
+/// [`SENSE_SIGNIFICANCE`]`·i_limit` (the step passes its configured limit, not one lowered
+/// with the board temperature, which near the trip would bring `i_sig` down to the noise); the measurement contradicts it when `i` flows the
 /// other way by more than `i_sig`. With the sense inverted, the measured-current window
 /// would feed the current back positively (it grows by `1 + g` a period); with the model's
 /// window alone it stays at `i_limit`. The check speaks where the drive, not the back-EMF,
@@ -443,6 +449,11 @@ impl<F: Float> ControlStep<F> {
                 F::infinity()
             },
             i_limit: if cfg.i_limit > F::zero() {
+                cfg.i_limit
+            } else {
+                F::infinity()
+            },
+            i_rated: if cfg.i_limit > F::zero() {
                 cfg.i_limit
             } else {
                 F::infinity()
@@ -755,6 +766,13 @@ impl<F: Float> ControlStep<F> {
         // model, whole: the model's constants (K_b, pole pairs) disagree with the motor.
         // A measured current against its driving voltage is not trusted: the model's
         // window alone bounds the command.
+        // The significance is that of the configured limit: a limit lowered with the board
+        // temperature would bring it down to the sense's noise.
+        let i_sig_limit = if self.i_rated.is_finite() && self.i_rated > self.i_limit {
+            self.i_rated
+        } else {
+            self.i_limit
+        };
         let sense_implausible = emf_meas.is_some()
             && current_sign_implausible(
                 u_prev,
@@ -762,12 +780,17 @@ impl<F: Float> ControlStep<F> {
                 self.motor.kb * self.v_res,
                 current,
                 r,
-                self.i_limit,
+                i_sig_limit,
             );
+        let disjoint = hi < lo_m || lo > hi_m;
         if sense_implausible {
             faults.set(Faults::CURRENT_SENSE);
+            if disjoint {
+                // Neither window can be trusted: the board stops at once.
+                faults.set(Faults::MODEL_MISMATCH);
+            }
             (lo, hi)
-        } else if hi < lo_m || lo > hi_m {
+        } else if disjoint {
             faults.set(Faults::MODEL_MISMATCH);
             (lo_m, hi_m)
         } else {

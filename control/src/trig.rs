@@ -18,8 +18,10 @@
 //! absolute error at most [`MAX_ERROR`] for `|x| ≤` [`EXACT_RANGE`]. Beyond it `k·P1` is
 //! rounded, and the error grows as the argument's own spacing: at most
 //! `MAX_ERROR + ulp(x)` (an f32 argument near `x` is itself uncertain by `ulp(x)/2`).
-//! For `|x| ≥` [`PHASELESS`] (consecutive f32 values more than π apart: the argument
-//! holds no phase) both return 0; NaN and ±∞ give NaN.
+//! For `|x| > 2^24` (consecutive f32 values 2 or more apart) that bound is 2 or more, met
+//! by any result in [−1, 1]; there `y = x·2/π` is rounded and `k` may be one too high, which
+//! is harmless for the same reason. For `|x| ≥` [`PHASELESS`] (consecutive f32 values more
+//! than π apart: the argument holds no phase) both return 0; NaN and ±∞ give NaN.
 //!
 //! The firmware and the emulated board run this same code, so their results agree bit for
 //! bit (QEMU parity).
@@ -85,14 +87,40 @@ pub fn sin_cos(x: f32) -> (f32, f32) {
     }
 }
 
-/// sin x [x in rad] in f32 arithmetic.
+/// sin x [x in rad] in f32 arithmetic (the one kernel its quadrant needs; the same bits as
+/// [`sin_cos`]'s sine).
 pub fn sin(x: f32) -> f32 {
-    sin_cos(x).0
+    if x.is_nan() || x.is_infinite() {
+        return f32::NAN;
+    }
+    if x.abs() >= PHASELESS {
+        return 0.0;
+    }
+    let (q, r) = reduce(x);
+    match q {
+        0 => sin_kernel(r),
+        1 => cos_kernel(r),
+        2 => -sin_kernel(r),
+        _ => -cos_kernel(r),
+    }
 }
 
-/// cos x [x in rad] in f32 arithmetic.
+/// cos x [x in rad] in f32 arithmetic (the one kernel its quadrant needs; the same bits as
+/// [`sin_cos`]'s cosine).
 pub fn cos(x: f32) -> f32 {
-    sin_cos(x).1
+    if x.is_nan() || x.is_infinite() {
+        return f32::NAN;
+    }
+    if x.abs() >= PHASELESS {
+        return 0.0;
+    }
+    let (q, r) = reduce(x);
+    match q {
+        0 => cos_kernel(r),
+        1 => -sin_kernel(r),
+        2 => -cos_kernel(r),
+        _ => sin_kernel(r),
+    }
 }
 
 /// sin x for the generic equations: this module's [`sin`] in f32 (the board's type), the
@@ -184,6 +212,21 @@ mod tests {
                 );
             }
         }
+    }
+
+    #[test]
+    fn sin_and_cos_give_the_bits_of_sin_cos() {
+        for i in 0..200_000u32 {
+            let x = (i as f32 - 100_000.0) * 0.0731;
+            let (s, c) = sin_cos(x);
+            assert_eq!(sin(x).to_bits(), s.to_bits(), "{x}");
+            assert_eq!(cos(x).to_bits(), c.to_bits(), "{x}");
+        }
+        // Beyond 2^24 the stated bound (the argument's spacing) is 2 or more: any result in
+        // [−1, 1] meets it, even with k one quarter turn too high.
+        let x = 16_777_216.0f32 * 1.5;
+        let ulp = f32::from_bits(x.to_bits() + 1) - x;
+        assert!(MAX_ERROR + ulp >= 2.0 && sin(x).abs() <= 1.0 && cos(x).abs() <= 1.0);
     }
 
     #[test]

@@ -21,8 +21,9 @@
 //!
 //! Safety (in `control::board`): an invalid Hall state or impossible transition,
 //! over-current, over-temperature (the board's NTC, which also lowers the current limit from
-//! 80 °C), bus under- or over-voltage, overrun and stall turn the bridge off and latch
-//! a fault (cleared by `ClearFault`, the bridge stays off until a mode is set again). The
+//! 80 °C), bus under- or over-voltage, overrun, stall, a current sense that reads the current
+//! against its driving voltage (`CurrentSense`), over-speed and a model that disagrees with
+//! the measured current (`ModelMismatch`) turn the bridge off and latch a fault (cleared by `ClearFault`, the bridge stays off until a mode is set again). The
 //! independent watchdog runs before the flash is read and resets the MCU when the loop
 //! stops (TIM1's reset state has the outputs off); a panic, HardFault or unexpected
 //! interrupt clears TIM1's MOE first and waits for the watchdog. A flash ECC error in a

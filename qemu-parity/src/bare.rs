@@ -89,6 +89,11 @@ pub extern "C" fn qp_begin_sindyc() {
 }
 #[no_mangle]
 #[inline(never)]
+pub extern "C" fn qp_begin_sindyc_a() {
+    unsafe { core::arch::asm!("mov {0}, #5", out(reg) _, options(nomem, nostack)) }
+}
+#[no_mangle]
+#[inline(never)]
 pub extern "C" fn qp_end() {
     unsafe { core::arch::asm!("mov {0}, #4", out(reg) _, options(nomem, nostack)) }
 }
@@ -134,10 +139,11 @@ fn main() -> ! {
     let addr = |f: extern "C" fn()| (f as usize) & !1;
     let _ = writeln!(
         line,
-        "markers {:#x} {:#x} {:#x} {:#x}",
+        "markers {:#x} {:#x} {:#x} {:#x} {:#x}",
         addr(qp_begin_none),
         addr(qp_begin_lugre),
         addr(qp_begin_sindyc),
+        addr(qp_begin_sindyc_a),
         addr(qp_end)
     );
     flush(&mut line);
@@ -161,6 +167,7 @@ fn main() -> ! {
             (Observer::None, true) => qp_begin_none(),
             (Observer::Lugre, true) => qp_begin_lugre(),
             (Observer::Sindyc, true) => qp_begin_sindyc(),
+            (Observer::SindycSignalA, true) => qp_begin_sindyc_a(),
             (_, false) => qp_end(),
         },
     );

@@ -114,6 +114,8 @@ pub struct Hardware {
     v_bus: f32,
     /// The hardware over-current stop is armed (false: it failed its self-test).
     stop_armed: bool,
+    /// Gain of the current sense (1: working; 0: dead, only its offset and noise).
+    sense_gain: f64,
 }
 
 impl Hardware {
@@ -132,6 +134,7 @@ impl Hardware {
             peak_current: 0.0,
             v_bus: f32::NAN,
             stop_armed: true,
+            sense_gain: 1.0,
         })
     }
 
@@ -143,7 +146,14 @@ impl Hardware {
     /// What the board's inputs read now.
     pub fn measure(&mut self) -> Measurements {
         let truth = self.plant.truth();
-        let mut i = self.plant.measured_current() * self.last_sign;
+        let read = self.plant.measured_current();
+        let read = if self.sense_gain == 1.0 {
+            read
+        } else {
+            // Offset and noise stay, the current's own part scales.
+            read - (1.0 - self.sense_gain) * truth.i
+        };
+        let mut i = read * self.last_sign;
         if self.wiring.current_inverted {
             i = -i;
         }
@@ -183,6 +193,12 @@ impl Hardware {
     /// its self-test (`false`: it never trips).
     pub fn set_stop_armed(&mut self, armed: bool) {
         self.stop_armed = armed;
+    }
+
+    /// Sets the current sense's gain: 1 (the default) reads the winding current, 0 a dead
+    /// sense (only the emulator's sensor offset and noise).
+    pub fn set_current_sense_gain(&mut self, gain: f64) {
+        self.sense_gain = gain;
     }
 
     /// Re-arms the hardware over-current stop (the firmware does it after `ClearFault`).

@@ -42,6 +42,9 @@ fn error_text(e: CommissionError) -> &'static str {
             "not 6 Hall edges per electrical revolution: the Hall magnet's pole pairs differ from the motor's"
         }
         CommissionError::Aborted => "stopped before the end (a stop command or a fault)",
+        CommissionError::NoCurrent => {
+            "the board measured little or no current while it held the voltage (current sense not working, motor phases not connected, or a winding resistance over four times the coefficients' R); nothing was stored"
+        }
     }
 }
 
