@@ -8,7 +8,7 @@
 //! `K_t·∫φ·I = J·∫φ''·θ + b·(−∫φ'·θ) + Σ c_e·∫φ·g_e(θ, ω, I)`.
 //! Then every parameter is refined on the free-run simulation error.
 use super::free_params::{effect_keys, effect_keys_of, Free, Slot};
-use super::{nlsq, sim_error, FitRequest};
+use super::FitRequest;
 use crate::log::{MotorLog, Plant};
 use crate::model::{Model, ModelKind, Parameter};
 use crate::numerics::differentiation::smooth_velocity_of;
@@ -395,18 +395,7 @@ pub fn fit(req: &FitRequest) -> Result<Model> {
         lo: 0.0,
         hi: 100.0,
     });
-    let opts = nlsq::Options::default();
-    let mut rows = if req.adds.is_empty() {
-        let report = |it: usize, c: f64| {
-            super::progress::report("free-run simulation error", it, c);
-        };
-        let sens = sim_error::Jacobian::Sensitivities;
-        sim_error::refine(&mut m, &free, req.logs, sens, opts, &mut { report })?
-    } else {
-        // From this start, and from the base structure refined without the effects.
-        let starts = [m.clone(), super::base_structure_fit(req)?];
-        sim_error::refine_added_effects(&mut m, &starts, &free, req.logs, opts)?
-    };
+    let mut rows = super::refine_free_run(&mut m, &free, req)?;
     rows.extend(fixed_rows(&m));
     m.parameters = rows;
     m.data.sample_period = m.sample_period;

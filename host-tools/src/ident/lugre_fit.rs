@@ -358,18 +358,7 @@ pub fn fit(req: &FitRequest) -> Result<Model> {
     let pts: Vec<SteadyPoint> = all_steady_points(&m, req.logs);
     start_dynamics(&mut m, req.logs, &pts, init)?;
     let free = free_parameters(req.plant);
-    let opts = nlsq::Options::default();
-    let mut dyn_rows = if req.adds.is_empty() {
-        let report = |it: usize, c: f64| {
-            super::progress::report("free-run simulation error", it, c);
-        };
-        let sens = sim_error::Jacobian::Sensitivities;
-        sim_error::refine(&mut m, &free, req.logs, sens, opts, &mut { report })?
-    } else {
-        // From this start, and from the base structure refined without the effects.
-        let starts = [m.clone(), super::base_structure_fit(req)?];
-        sim_error::refine_added_effects(&mut m, &starts, &free, req.logs, opts)?
-    };
+    let mut dyn_rows = super::refine_free_run(&mut m, &free, req)?;
     // The refinement can end where the inductance and inertia mimic a Stribeck bump (L
     // about twice and J 15 % below the emulator's, the current fit 4 points down): the
     // steady points seldom fix v0 (few of them below a few rad/s), so other (α1, v0) starts.

@@ -216,6 +216,27 @@ pub fn base_structure_fit(req: &FitRequest) -> Result<Model> {
     fit_kind(&FitRequest { adds: &[], ..*req })
 }
 
+/// The free-run refinement of `model`'s `free` parameters on `req`'s logs, on the exact
+/// Jacobian: the base structure from `model` alone; with added effects, from the cheaper of
+/// `model` and the base structure refined without them ([`sim_error::refine_added_effects`]).
+pub fn refine_free_run(
+    model: &mut Model,
+    free: &[free_params::Free],
+    req: &FitRequest,
+) -> Result<Vec<crate::model::Parameter>> {
+    let opts = nlsq::Options::default();
+    if req.adds.is_empty() {
+        let mut report = |it: usize, c: f64| {
+            progress::report("free-run simulation error", it, c);
+        };
+        let sens = sim_error::Jacobian::Sensitivities;
+        sim_error::refine(model, free, req.logs, sens, opts, &mut report)
+    } else {
+        let starts = [model.clone(), base_structure_fit(req)?];
+        sim_error::refine_added_effects(model, &starts, free, req.logs, opts)
+    }
+}
+
 fn fit_kind(req: &FitRequest) -> Result<Model> {
     match req.kind {
         ModelKind::Linear => base_fit_memo(req, linear::fit),
