@@ -111,9 +111,9 @@ impl<'a> SimResiduals<'a> {
     /// problem with independent Gaussian errors of unknown variance per output (the
     /// estimate minimises `Σ_k N_k·ln σ_k²`, whose normal equations are least squares
     /// weighted by `1/σ_k²` at the optimum's own residual variances), so neither output
-    /// dominates by its units or by the size of its model error. The angle, a function of
-    /// the velocity rather than a separate measurement, keeps its fixed weight relative to
-    /// the velocity. 1 when either scale is zero or not finite (an exact output: nothing to
+    /// dominates by its units or by the size of its model error. The angle, the measurement
+    /// the velocity is estimated from rather than an independent output, keeps its fixed
+    /// weight relative to the velocity. 1 when either scale is zero or not finite (an exact output: nothing to
     /// weigh against). Errors when `m` diverges on the fitting logs.
     pub fn current_weight(&self, m: &SindyModel<f64>) -> Result<f64> {
         let runs = self.outputs(m)?;
