@@ -36,7 +36,7 @@ impl Key {
             "kg·m²" => (0.0, 1e3),
             TABLE_VAR_UNIT => (0.0, 2.0),
             "bins" => (2.0, TABLE_MAX_BINS as f64),
-            "rad/s or A" => (-1e5, 1e5),
+            "rad, rad/s or A" => (-1e5, 1e5),
             "s" => (1e-3, 1e7),
             "1" => (-1.0, 1.0),
             _ => (-1e9, 1e9),
@@ -752,6 +752,7 @@ mod tests {
         assert!((e.torque(&at(200.0)) - 0.25).abs() < 1e-12);
         for (bad, why) in [
             ("table:var=theta,lo=5,hi=1", "below hi"),
+            ("table:var=theta,lo=0,hi=1e6", "outside"),
             ("table:var=speed", "not one of theta"),
             ("table:bins=33", "bins"),
             ("coulomb:fc=1,fc=2", "given twice"),
