@@ -127,7 +127,8 @@ pub const TABLE_MAX_BINS: usize = 16;
 /// The variable a [`Effect::Table`] looks its torque up by.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub enum TableVar {
-    /// Rotor angle θ [rad]: the table spans one revolution and wraps around.
+    /// Rotor angle θ [rad]: the table spans one revolution and wraps around, or, with a
+    /// range `lo < hi`, that stretch of θ (the stroke of a linear axis), clamped at its ends.
     Theta,
     /// Rotor velocity ω [rad/s], clamped to the table's range.
     Omega,
@@ -157,10 +158,11 @@ impl TableVar {
 /// The two table nodes around `x` and the weight of the second: the value at `x` is
 /// `(1 − w)·v[k0] + w·v[k1]` (linear "hat" interpolation, continuous in `x`).
 ///
-/// For [`TableVar::Theta`] the `bins` nodes sit at `θ_k = 2π·k/bins` and the table wraps
-/// around one revolution (`lo`, `hi` unused). Otherwise the nodes sit evenly from `lo`
-/// (node 0) to `hi` (node `bins − 1`) and `x` is clamped to that range. `bins` is taken as
-/// at least 2 and at most [`TABLE_MAX_BINS`].
+/// For [`TableVar::Theta`] without a range (`lo < hi` does not hold) the `bins` nodes sit at
+/// `θ_k = 2π·k/bins` and the table wraps around one revolution. Otherwise the nodes sit
+/// evenly from `lo` (node 0) to `hi` (node `bins − 1`) and `x` is clamped to that range (for
+/// θ: a position-dependent force along the stroke of a linear axis, which does not repeat).
+/// `bins` is taken as at least 2 and at most [`TABLE_MAX_BINS`].
 pub fn table_nodes<F: Float>(var: TableVar, bins: u8, lo: F, hi: F, x: F) -> (usize, usize, F) {
     let n = (bins as usize).clamp(2, TABLE_MAX_BINS);
     let nf = F::from(n).unwrap();
@@ -168,7 +170,7 @@ pub fn table_nodes<F: Float>(var: TableVar, bins: u8, lo: F, hi: F, x: F) -> (us
         return (0, 0, F::zero());
     }
     match var {
-        TableVar::Theta => {
+        TableVar::Theta if hi.partial_cmp(&lo) != Some(core::cmp::Ordering::Greater) => {
             let two_pi = F::from(core::f64::consts::TAU).unwrap();
             let mut t = (x / two_pi).fract() * nf;
             if t < F::zero() {
@@ -178,7 +180,7 @@ pub fn table_nodes<F: Float>(var: TableVar, bins: u8, lo: F, hi: F, x: F) -> (us
             let w = (t - F::from(k0).unwrap()).max(F::zero()).min(F::one());
             (k0, (k0 + 1) % n, w)
         }
-        TableVar::Omega | TableVar::Current => {
+        TableVar::Theta | TableVar::Omega | TableVar::Current => {
             let span = hi - lo;
             if span.is_nan() || span <= F::zero() {
                 return (0, 0, F::zero());
@@ -252,8 +254,8 @@ pub enum Effect<F> {
     Backlash { j2: F, gap: F },
     /// A lookup table of load torque [N·m] over one variable, for physics without a name:
     /// `Σ_k values[k]·h_k(x)` with the hat functions `h_k` of [`table_nodes`] (`bins` nodes;
-    /// over one revolution and periodic for θ, over `lo..hi` and clamped for ω [rad/s] or
-    /// I [A]). Entries from `bins` on are unused.
+    /// over one revolution and periodic for θ without a range, over `lo..hi` and clamped for
+    /// θ [rad] with one, ω [rad/s] or I [A]). Entries from `bins` on are unused.
     Table {
         var: TableVar,
         bins: u8,
@@ -464,6 +466,20 @@ mod tests {
             e.torque(&at(0.0, 0.0, 0.0)),
         );
         assert!((a - b).abs() < 1e-6);
+    }
+
+    #[test]
+    fn theta_table_with_a_range_spans_the_stroke_and_does_not_wrap() {
+        // Five nodes over 0..240 (mm of a linear axis): 60 apart.
+        let e = table(TableVar::Theta, 5, 0.0, 240.0);
+        assert!((e.torque(&at(0.0, 0.0, 0.0)) - 0.01).abs() < 1e-12);
+        assert!((e.torque(&at(240.0, 0.0, 0.0)) - 0.05).abs() < 1e-12);
+        assert!((e.torque(&at(90.0, 0.0, 0.0)) - 0.025).abs() < 1e-12);
+        // Beyond the stroke the end nodes hold; one revolution later is not node 0 again.
+        assert!((e.torque(&at(300.0, 0.0, 0.0)) - 0.05).abs() < 1e-12);
+        assert!((e.torque(&at(-5.0, 0.0, 0.0)) - 0.01).abs() < 1e-12);
+        let tau = core::f64::consts::TAU;
+        assert!((e.torque(&at(tau, 0.0, 0.0)) - e.torque(&at(0.0, 0.0, 0.0))).abs() > 1e-4);
     }
 
     #[test]

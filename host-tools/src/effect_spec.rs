@@ -36,7 +36,7 @@ impl Key {
             "kg·m²" => (0.0, 1e3),
             TABLE_VAR_UNIT => (0.0, 2.0),
             "bins" => (2.0, TABLE_MAX_BINS as f64),
-            "rad/s or A" => (-1e5, 1e5),
+            "rad, rad/s or A" => (-1e5, 1e5),
             "s" => (1e-3, 1e7),
             "1" => (-1.0, 1.0),
             _ => (-1e9, 1e9),
@@ -67,8 +67,18 @@ const TABLE_KEYS: &[Key] = &[
         "variable the torque is looked up by",
     ),
     k("bins", "bins", 8.0, "number of table nodes (2 to 16)"),
-    k("lo", "rad/s or A", 0.0, "first node (omega, current)"),
-    k("hi", "rad/s or A", 0.0, "last node (omega, current)"),
+    k(
+        "lo",
+        "rad, rad/s or A",
+        0.0,
+        "first node (omega, current; theta: start of a stroke)",
+    ),
+    k(
+        "hi",
+        "rad, rad/s or A",
+        0.0,
+        "last node (omega, current; theta: end of a stroke)",
+    ),
     k("b0", "N·m", 0.0, "table torque at node 0"),
     k("b1", "N·m", 0.0, "table torque at node 1"),
     k("b2", "N·m", 0.0, "table torque at node 2"),
@@ -406,15 +416,13 @@ impl EffectSpec {
                     bins - 1
                 );
             }
-            if self.table_var() != TableVar::Theta {
-                if let (Some(lo), Some(hi)) = (self.values.get("lo"), self.values.get("hi")) {
-                    if lo >= hi {
-                        bail!(
-                            "effect 'table': lo ({}) must be below hi ({})",
-                            crate::validate::show(*lo),
-                            crate::validate::show(*hi)
-                        );
-                    }
+            if let (Some(lo), Some(hi)) = (self.values.get("lo"), self.values.get("hi")) {
+                if lo >= hi {
+                    bail!(
+                        "effect 'table': lo ({}) must be below hi ({})",
+                        crate::validate::show(*lo),
+                        crate::validate::show(*hi)
+                    );
                 }
             }
         }
@@ -563,7 +571,7 @@ impl EffectSpec {
                     TableVar::ALL.iter().position(|x| *x == var).unwrap_or(0) as f64,
                 );
                 put("bins", bins as f64);
-                if var != TableVar::Theta {
+                if var != TableVar::Theta || hi > lo {
                     put("lo", lo);
                     put("hi", hi);
                 }
@@ -585,8 +593,9 @@ impl EffectSpec {
             if kind == EffectKind::Table {
                 s.push_str(&format!(
                     "  {:<15} var=theta|omega|current; bins=8 [2 to {TABLE_MAX_BINS}] nodes; \
-                     lo, hi [rad/s or A] range the nodes span (omega, current; fit takes it \
-                     from the data); b0..b<bins-1> [N·m] torque at each node (theta: one \
+                     lo, hi [rad, rad/s or A] range the nodes span (omega, current: fit takes it \
+                     from the data; theta: the stroke of a linear axis, clamped at its ends); \
+                     b0..b<bins-1> [N·m] torque at each node (theta without lo, hi: one \
                      revolution, periodic)\n",
                     kind.name()
                 ));
@@ -728,7 +737,22 @@ mod tests {
         let t = EffectSpec::parse("table:var=theta,bins=12").unwrap();
         assert_eq!(t.to_string(), "table:var=theta,bins=12");
         assert_eq!(t.table_var(), TableVar::Theta);
+        // Over a stroke (a linear axis): the range is kept, printed and round-trips.
+        let st = EffectSpec::parse("table:var=theta,bins=4,lo=0,hi=240,b3=0.5").unwrap();
+        assert_eq!(st.to_string(), "table:var=theta,bins=4,lo=0,hi=240,b3=0.5");
+        let e = st.to_effect();
+        assert_eq!(EffectSpec::from_effect(&e).to_effect(), e);
+        let at = |theta| control::effects::EffectInputs {
+            theta,
+            omega: 0.0,
+            current: 0.0,
+            kt: 0.07,
+        };
+        assert!((e.torque(&at(240.0)) - 0.5).abs() < 1e-12);
+        assert!((e.torque(&at(200.0)) - 0.25).abs() < 1e-12);
         for (bad, why) in [
+            ("table:var=theta,lo=5,hi=1", "below hi"),
+            ("table:var=theta,lo=0,hi=1e6", "outside"),
             ("table:var=speed", "not one of theta"),
             ("table:bins=33", "bins"),
             ("coulomb:fc=1,fc=2", "given twice"),

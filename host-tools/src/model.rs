@@ -659,6 +659,11 @@ mod tests {
             .unwrap()
             .to_effect();
         m.effects.push(table);
+        // A table over the stroke of a linear axis keeps its range.
+        let stroke = EffectSpec::parse("table:var=theta,bins=4,lo=0,hi=0.25,b1=0.5")
+            .unwrap()
+            .to_effect();
+        m.effects.push(stroke);
         m.parameters.push(Parameter::new("R", 0.2, "Ω"));
         m.data.units.insert("t".into(), "ms".into());
         let text = m.to_toml().unwrap();

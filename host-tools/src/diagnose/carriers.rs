@@ -54,20 +54,24 @@ pub struct Carrier {
 
 /// The `table` spec a carrier of the torque equation offers: over θ when its basis is the
 /// Fourier series of one revolution (`2·ANGLE_HARMONICS` nodes resolve its harmonics), over
-/// ω or I (the current of a voltage plant) with one node per knot of its hats.
-fn table_spec(variable: &str, knots: usize, label: &str, s: &Signals) -> Option<String> {
+/// θ's travel when its basis is hats (a linear axis' stroke, `lo`..`hi` from the first to the
+/// last knot), over ω or I (the current of a voltage plant) with one node per knot of its
+/// hats.
+fn table_spec(variable: &str, knots: &[f64], label: &str, s: &Signals) -> Option<String> {
     if label != super::candidates::Equation::Mechanical.label() {
         return None;
     }
-    let bins = match variable {
-        "theta" if knots == 0 => 2 * ANGLE_HARMONICS,
-        "omega" => knots,
-        "current" if s.plant == crate::log::Plant::Voltage && s.i.is_some() => knots,
+    let n = knots.len();
+    let (bins, range) = match variable {
+        "theta" if n == 0 => (2 * ANGLE_HARMONICS, String::new()),
+        "theta" => (n, format!(",lo={:.6e},hi={:.6e}", knots[0], knots[n - 1])),
+        "omega" => (n, String::new()),
+        "current" if s.plant == crate::log::Plant::Voltage && s.i.is_some() => (n, String::new()),
         _ => return None,
     };
     (2..=control::effects::TABLE_MAX_BINS)
         .contains(&bins)
-        .then(|| format!("table:var={variable},bins={bins}"))
+        .then(|| format!("table:var={variable},bins={bins}{range}"))
 }
 
 /// One equation's residual on its weak-form windows.
@@ -282,7 +286,7 @@ pub fn carriers(s: &Signals, rows: &Rows, level: f64, min_share: f64) -> Vec<Car
     let mut out: Vec<Carrier> = Vec::new();
     let mut push = |variable: &'static str, t: Tested, knots: Vec<f64>, hz: Option<f64>| {
         if t.p_value < level && t.share >= min_share {
-            let spec = table_spec(variable, knots.len(), rows.label, s);
+            let spec = table_spec(variable, &knots, rows.label, s);
             let shape = if knots.len() == t.beta.len() {
                 knots.into_iter().zip(t.beta).collect()
             } else {
@@ -443,6 +447,38 @@ mod tests {
         assert_eq!(h[0][2], 0.5);
         assert_eq!(h[1][3], 0.5);
         assert_eq!(h[2][3], 0.5);
+    }
+
+    #[test]
+    fn a_carrier_over_the_travel_offers_a_table_over_that_stroke() {
+        let s = Signals {
+            dt: 1e-3,
+            t: vec![],
+            u: vec![],
+            raw_u: vec![],
+            i: None,
+            theta: vec![],
+            theta_s: vec![],
+            theta_torque: vec![],
+            theta_torque_var: vec![],
+            omega: vec![],
+            drive: vec![],
+            drive_model: vec![],
+            plant: crate::log::Plant::Torque,
+            kt: 1.0,
+            hall_resolution: None,
+            vscale: 1.0,
+            velocity_half: 4,
+        };
+        let torque = super::super::candidates::Equation::Mechanical.label();
+        let knots = [2.0, 50.0, 120.0, 245.5];
+        let spec = table_spec("theta", &knots, torque, &s).unwrap();
+        let e = crate::effect_spec::EffectSpec::parse(&spec).unwrap();
+        assert_eq!(e.get("bins"), 4.0, "{spec}");
+        assert!((e.get("lo") - 2.0).abs() < 1e-9 && (e.get("hi") - 245.5).abs() < 1e-9);
+        // One revolution's Fourier series (no knots): the periodic table, no range.
+        let rev = table_spec("theta", &[], torque, &s).unwrap();
+        assert_eq!(rev, "table:var=theta,bins=12");
     }
 
     #[test]

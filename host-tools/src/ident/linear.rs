@@ -76,7 +76,7 @@ pub fn sign_width(logs: &[MotorLog]) -> f64 {
 
 /// A table over ω or I spans the range the logs cover (from their 0.5th to their 99.5th
 /// percentile, so that a few outliers do not waste nodes) unless the spec gives `lo` and
-/// `hi`; a table over θ spans one revolution and needs no range.
+/// `hi`; a table over θ spans one revolution unless the spec gives the stroke `lo`..`hi`.
 fn set_table_range(spec: &mut crate::effect_spec::EffectSpec, logs: &[MotorLog], plant: Plant) {
     use control::effects::TableVar;
     let var = spec.table_var();

@@ -240,6 +240,49 @@ pub fn idim_relative_error(axis: &RigidAxis, log: &MotorLog, gain: f64) -> f64 {
     100.0 * (e2 / y2).sqrt()
 }
 
+/// The force an axis model leaves unexplained, by position along the stroke: the inverse
+/// model's residual `gain·u − (M·q̈ + friction)` on the filtered states of [`filtered_states`]
+/// (samples at rest left out), averaged in `bins` equal bins of position from `lo` to `hi`
+/// [m], in each direction of motion, then the two directions averaged. The part of the
+/// residual that depends on the position and not on the direction [N]; NaN for a bin the
+/// axis does not cross both ways.
+pub fn residual_by_position(
+    axis: &RigidAxis,
+    gain: f64,
+    log: &MotorLog,
+    bins: usize,
+    (lo, hi): (f64, f64),
+) -> Vec<f64> {
+    if bins == 0 || hi.partial_cmp(&lo) != Some(std::cmp::Ordering::Greater) {
+        return vec![f64::NAN; bins];
+    }
+    let (qf, dq, ddq) = filtered_states(&log.theta, log.sample_period());
+    let (fvm, fcm) = axis.negative();
+    let mut sums = vec![[0.0f64; 4]; bins];
+    // At rest: below a thousandth of the stroke per second.
+    let v_rest = 1e-3 * (hi - lo);
+    // The first and last 50 samples carry the filter's edges.
+    for k in 50..log.len().saturating_sub(50) {
+        let v = dq[k];
+        if v.abs() < v_rest {
+            continue;
+        }
+        let friction = if v > 0.0 {
+            axis.fv * v + axis.fc
+        } else {
+            fvm * v - fcm
+        };
+        let e = gain * log.u[k] - (axis.m * ddq[k] + friction + axis.offset);
+        let b = (((qf[k] - lo) / (hi - lo) * bins as f64).floor().max(0.0) as usize).min(bins - 1);
+        let d = if v > 0.0 { 0 } else { 2 };
+        sums[b][d] += e;
+        sums[b][d + 1] += 1.0;
+    }
+    sums.iter()
+        .map(|s| 0.5 * (s[0] / s[1] + s[2] / s[3]))
+        .collect()
+}
+
 /// Open-loop free run: position driven by the force `gain·u`, starting from (q0, v0) at the
 /// first sample. Sample k+1 is the state after holding `u[k]` for `dt`.
 pub fn simulate_open_loop(

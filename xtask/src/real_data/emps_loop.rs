@@ -15,7 +15,9 @@
 //!
 //! The free run of an integrating axis drifts with any force error, so its RMSE depends on
 //! the criterion the final parameters minimise: [`criteria`] refits the loop's structure by
-//! each [`Criterion`] and [`choose`] picks one on the held-out end of the training log alone.
+//! each [`Criterion`], [`stroke_table_routes`] adds a force that depends on the position
+//! along the stroke, and [`choose`] picks one route on the held-out end of the training log
+//! alone.
 use super::emps;
 use anyhow::{Context, Result};
 use control::effects::Effect;
@@ -410,14 +412,34 @@ pub fn refit(model: &Model, log: &MotorLog, criterion: Criterion) -> Result<Mode
 pub struct Route {
     pub kind: ModelKind,
     pub criterion: Criterion,
+    /// Nodes of the position table over the stroke added to the loop's structure
+    /// ([`stroke_table`]); None for the loop's structure as it is.
+    pub table_bins: Option<usize>,
+    /// The loop's keep-or-not test of the table ([`workflow::selection_test`] on the
+    /// held-out part, against the loop's model there); None without a table.
+    pub table_test: Option<FTest>,
     /// RMSE [mm] on the held-out last 30 % of the training log of the model fitted on the
     /// first 70 %: the only score a choice is made on.
     pub held_out_mm: f64,
     /// RMSE [mm] of the whole-log model on the training log and on the test log.
     pub train_mm: f64,
     pub test_mm: f64,
+    /// The position table's node forces [N] in the whole-log model (empty without a table).
+    pub table_forces_n: Vec<f64>,
     /// The lowest held-out RMSE of the routes compared.
     pub chosen: bool,
+}
+
+/// The node values of the first table in `m` (in volts of `vir` for a model fitted with
+/// `u = vir`); empty without one.
+fn table_values(m: &Model) -> Vec<f64> {
+    m.effects
+        .iter()
+        .find_map(|e| match *e {
+            Effect::Table { bins, values, .. } => Some(values[..bins as usize].to_vec()),
+            _ => None,
+        })
+        .unwrap_or_default()
 }
 
 /// The structure the loop kept, refitted by each [`Criterion`]: on the first 70 % of the
@@ -443,11 +465,105 @@ pub fn criteria(train: &MotorLog, test: &MotorLog, rounds: &[Round]) -> Result<V
         out.push(Route {
             kind: ModelKind::Linear,
             criterion,
+            table_bins: None,
+            table_test: None,
             held_out_mm: score(&on_split, &held_out),
             train_mm: score(&on_all, train),
             test_mm: score(&on_all, test),
+            table_forces_n: Vec::new(),
             chosen: false,
         });
+    }
+    Ok(out)
+}
+
+/// Node counts of the position tables [`stroke_table_routes`] tries: from a coarse trend
+/// to the finest a table holds ([`control::effects::TABLE_MAX_BINS`], about 16 mm between
+/// nodes over the EMPS stroke).
+pub const STROKE_TABLE_BINS: [usize; 4] = [4, 8, 12, control::effects::TABLE_MAX_BINS];
+
+/// Criteria the page refits the routes with a position table by: as fitted and the
+/// benchmark's own criterion (the two ends of [`Criterion::ALL`]).
+pub const STROKE_TABLE_CRITERIA: [Criterion; 2] = [Criterion::AsFitted, Criterion::OutputError];
+
+/// A force over the position along the stroke of `log` (prepared, mm): `fit --add
+/// table:var=theta,bins=N,lo=..,hi=..` with its nodes from the lowest to the highest
+/// position the log reaches (a linear axis: the table does not wrap around).
+pub fn stroke_table(log: &MotorLog, bins: usize) -> Result<EffectSpec> {
+    let (lo, hi) = log
+        .theta
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
+            (a.min(x), b.max(x))
+        });
+    EffectSpec::parse(&format!("table:var=theta,bins={bins},lo={lo},hi={hi}"))
+}
+
+/// The loop's structure plus a position table over the stroke ([`stroke_table`], each of
+/// `bins`), refitted by each of `criteria`: fitted on the first 70 % of the
+/// training log (the held-out 30 % as the fit's validation data, as in the loop) and scored
+/// on the held-out part, then fitted on the whole training log and scored on both logs. Each
+/// route also carries the loop's own keep-or-not test of the table on the held-out part.
+/// `rounds` are [`run`]'s.
+pub fn stroke_table_routes(
+    train: &MotorLog,
+    test: &MotorLog,
+    rounds: &[Round],
+    bins: &[usize],
+    criteria: &[Criterion],
+) -> Result<Vec<Route>> {
+    let (train, test) = (&prepare(train, DECIMATION), &prepare(test, 1));
+    let (first, held_out) = workflow::split_in_time(train, workflow::SELECT_FRACTION)?;
+    let split = rounds
+        .iter()
+        .rev()
+        .find(|r| r.kept && !r.whole_log)
+        .context("no kept round")?;
+    let base = split
+        .adds
+        .iter()
+        .map(|a| EffectSpec::parse(a))
+        .collect::<Result<Vec<_>>>()?;
+    let score = |m: &Model, log: &MotorLog| benchmark_rmse_mm(m, log).map_or(f64::NAN, |r| r.0);
+    let mut out = Vec::new();
+    for &n in bins {
+        let table = stroke_table(train, n)?;
+        let adds: Vec<EffectSpec> = base.iter().cloned().chain([table.clone()]).collect();
+        let fit = |logs: &[MotorLog], validate: &[MotorLog]| -> Result<Model> {
+            Ok(ident::fit(&FitRequest {
+                kind: ModelKind::Linear,
+                logs,
+                validate,
+                adds: &adds,
+                plant: Plant::Torque,
+                constraints: &Constraints::NONE,
+            })?
+            .model)
+        };
+        let held = std::slice::from_ref(&held_out);
+        let on_split = fit(std::slice::from_ref(&first), held)?;
+        let on_all = fit(std::slice::from_ref(train), &[])?;
+        let table_test = workflow::selection_test(&split.model, &on_split, &table, held);
+        for &criterion in criteria {
+            let (s, a) = (
+                refit(&on_split, &first, criterion)?,
+                refit(&on_all, train, criterion)?,
+            );
+            out.push(Route {
+                kind: ModelKind::Linear,
+                criterion,
+                table_bins: Some(n),
+                table_test: Some(table_test),
+                held_out_mm: score(&s, &held_out),
+                train_mm: score(&a, train),
+                test_mm: score(&a, test),
+                table_forces_n: table_values(&a)
+                    .iter()
+                    .map(|v| v * emps::GTAU / a.motor.kt)
+                    .collect(),
+                chosen: false,
+            });
+        }
     }
     Ok(out)
 }
@@ -473,9 +589,12 @@ pub fn lugre_route(train: &MotorLog, test: &MotorLog) -> Result<(Route, Vec<Stri
     let route = Route {
         kind: ModelKind::Lugre,
         criterion: Criterion::AsFitted,
+        table_bins: None,
+        table_test: None,
         held_out_mm: score(&out.final_round().model, &held_out),
         train_mm: score(out.final_model(), train),
         test_mm: score(out.final_model(), test),
+        table_forces_n: Vec::new(),
         chosen: false,
     };
     Ok((route, adds))
@@ -559,9 +678,12 @@ mod tests {
         Route {
             kind: ModelKind::Linear,
             criterion: Criterion::AsFitted,
+            table_bins: None,
+            table_test: None,
             held_out_mm,
             train_mm: 1.0,
             test_mm: 1.0,
+            table_forces_n: Vec::new(),
             chosen: false,
         }
     }
