@@ -15,7 +15,10 @@ use std::path::PathBuf;
     that residual (F-test), the parameters are off and the refitted constants are printed: \
     refit first. WHITENESS: the residual must not be predictable from its own past \
     (Breusch-Godfrey on disjoint windows). INPUT: it must not be explained by the input of the \
-    last windows. Then what is MISSING: every effect of the list that the model lacks adds its \
+    last windows. Both, and the carriers below, use score tests that hold their level where the \
+    residual is noisier in some windows than others (slips, steps) and where the windows of one \
+    held input share an error of the angle's reading. A log with too few usable windows for an \
+    equation gets \"Cannot judge\" (JSON \"judged\": false). Then what is MISSING: every effect of the list that the model lacks adds its \
     regressors (searched over cogging harmonics, Stribeck velocities, thermal time constants...) \
     and forward selection keeps an effect when it is significant (nested F-test p < 0.001 / \
     number of candidate variants, Bonferroni, with an effective sample size for autocorrelated \
@@ -30,7 +33,7 @@ use std::path::PathBuf;
     before breakaway. Load-dependent friction shows only where the drive brakes the moving \
     rotor. SINDYc models get no parameter check (their equations are not motor constants).\n\n\
     Each finding's `spec` carries the estimated parameters and is accepted by \
-    `motorid fit --add SPEC`. --json prints {\"adequate\": BOOL, \"effects\": [{\"name\", \
+    `motorid fit --add SPEC`. --json prints {\"adequate\": BOOL, \"judged\": BOOL, \"effects\": [{\"name\", \
     \"spec\", \"score\", \"explanation\"}, ...], \"unexplained\": [{\"variable\", \"share\", \
     \"explanation\"}, ...], \"checks\": [...], \"refit\": [...]}, most important first; \
     score and share = fraction of the residual explained."
@@ -138,6 +141,7 @@ pub fn run(args: Args) -> Result<()> {
             "{}",
             serde_json::json!({
                 "adequate": d.verdict.adequate,
+                "judged": d.verdict.judged,
                 "effects": effects,
                 "unexplained": unexplained,
                 "checks": d.verdict.checks,

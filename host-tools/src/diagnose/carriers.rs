@@ -4,8 +4,9 @@
 //! still somewhere. Each variable gets a smooth nonparametric function (a basis of hat
 //! functions on its quantiles, a Fourier series for the angle over one revolution, a band of
 //! sinusoids for a spectral peak), integrated against the same weak-form windows as the
-//! equation, and an F-test against a constant with the residual's effective sample size
-//! ([`statistics::effective_n`]). A variable *carries* structure when the test is significant at
+//! equation, and tested against a constant on disjoint windows with a score test that holds
+//! its level whatever each window's variance and however the windows of one held input share
+//! an error ([`statistics::robust_score_test`]). A variable *carries* structure when the test is significant at
 //! the family level split over every test of the run (Bonferroni) and the function explains at
 //! least the same share of the residual an effect must ([`super::MIN_EXPLAINED`]).
 //!
@@ -81,6 +82,9 @@ pub struct Rows<'a> {
     pub scale: Option<&'a [f64]>,
     /// Equation label for explanations.
     pub label: &'a str,
+    /// Cluster of each kept row ([`super::verdict::hold_clusters`]): rows that may share an
+    /// error of the angle's reading.
+    pub cluster: &'a [usize],
 }
 
 /// Hat functions on `knots` (ascending): a partition of unity, linear between knots.
@@ -146,29 +150,23 @@ struct Tested {
     beta: Vec<f64>,
 }
 
-/// F-test of the residual on the weak-form integrals of sample-level columns, against a
-/// constant (∫φ). `spans_constant`: the columns sum to one (hats), so one is not free.
-fn test_columns(rows: &Rows, cols: &[Vec<f64>], spans_constant: bool, n_eff: f64) -> Tested {
-    test_rows(rows, cols, spans_constant, n_eff, 1)
-}
-
-/// As [`test_columns`] on every `step`-th kept row (`step` 2: disjoint windows, whose
-/// residuals are independent under a correct model, so the F-test needs no effective count).
-fn test_rows(
-    rows: &Rows,
-    cols: &[Vec<f64>],
-    spans_constant: bool,
-    n_eff: f64,
-    step: usize,
-) -> Tested {
+/// Test of the residual on the weak-form integrals of sample-level columns, against a
+/// constant (∫φ), on disjoint windows (every other row), whose residuals share no sample:
+/// the share is the columns' least-squares share of the residual's sum of squares, the p-value
+/// that of the cluster-robust score test ([`statistics::robust_score_test`]), which holds its
+/// level where the residual's variance changes from window to window (stick-slip, steps)
+/// and where the windows of one held input share an error of the angle's reading.
+/// `spans_constant`: the columns sum to one (hats), so one is not free.
+fn test_columns(rows: &Rows, cols: &[Vec<f64>], spans_constant: bool) -> Tested {
     let thin = |v: Vec<f64>| -> Vec<f64> {
         let v = match rows.scale {
             Some(w) => v.iter().zip(w).map(|(a, b)| a * b).collect(),
             None => v,
         };
-        v.into_iter().step_by(step).collect()
+        v.into_iter().step_by(2).collect()
     };
-    let resid: Vec<f64> = rows.resid.iter().step_by(step).copied().collect();
+    let resid: Vec<f64> = rows.resid.iter().step_by(2).copied().collect();
+    let cluster: Vec<usize> = rows.cluster.iter().step_by(2).copied().collect();
     let ones_w: Vec<f64> = thin(super::select_rows(
         &rows.wf.integral(&vec![1.0; cols[0].len()]),
         rows.keep,
@@ -189,15 +187,24 @@ fn test_rows(
     } else {
         cols.len()
     };
-    let t = statistics::f_test(base.rss, full.rss, q.max(1), 1, n_eff);
+    let share = if base.rss > 0.0 {
+        ((base.rss - full.rss) / base.rss).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let z: Vec<Vec<f64>> = w
+        .iter()
+        .map(|c| least_squares::lstsq(&[&ones_w], c).resid)
+        .collect();
+    let (_, p_value) = statistics::robust_score_test(&base.resid, &z, &cluster, q.max(1));
     let beta = if spans_constant {
         full.beta
     } else {
         full.beta[1..].to_vec()
     };
     Tested {
-        share: t.explained,
-        p_value: t.p_value,
+        share,
+        p_value,
         beta,
     }
 }
@@ -278,7 +285,6 @@ pub fn carriers(s: &Signals, rows: &Rows, level: f64, min_share: f64) -> Vec<Car
         return vec![];
     }
     let mask = sample_mask(rows, n);
-    let n_eff = statistics::effective_n(rows.resid);
     let mut out: Vec<Carrier> = Vec::new();
     let mut push = |variable: &'static str, t: Tested, knots: Vec<f64>, hz: Option<f64>| {
         if t.p_value < level && t.share >= min_share {
@@ -321,17 +327,12 @@ pub fn carriers(s: &Signals, rows: &Rows, level: f64, min_share: f64) -> Vec<Car
             cols.push(s.theta.iter().map(|x| (kf * x).sin()).collect());
             cols.push(s.theta.iter().map(|x| (kf * x).cos()).collect());
         }
-        push(
-            "theta",
-            test_columns(rows, &cols, false, n_eff),
-            vec![],
-            None,
-        );
+        push("theta", test_columns(rows, &cols, false), vec![], None);
     } else {
         let knots = quantile_knots(&s.theta, &mask, KNOTS);
         if knots.len() >= 3 {
             let cols = hats(&s.theta, &knots);
-            push("theta", test_columns(rows, &cols, true, n_eff), knots, None);
+            push("theta", test_columns(rows, &cols, true), knots, None);
         }
     }
     let acc =
@@ -358,7 +359,7 @@ pub fn carriers(s: &Signals, rows: &Rows, level: f64, min_share: f64) -> Vec<Car
                     .collect();
                 cols.extend(more);
             }
-            let t = test_columns(rows, &cols, true, n_eff);
+            let t = test_columns(rows, &cols, true);
             push(variable, t, if signed { vec![] } else { knots }, None);
         }
     }
@@ -372,16 +373,10 @@ pub fn carriers(s: &Signals, rows: &Rows, level: f64, min_share: f64) -> Vec<Car
                 .into_iter()
                 .map(|c| c.iter().zip(&sgn).map(|(a, b)| a * b).collect())
                 .collect();
-            push(
-                "reversal",
-                test_columns(rows, &cols, false, n_eff),
-                knots,
-                None,
-            );
+            push("reversal", test_columns(rows, &cols, false), knots, None);
         }
     }
     // Frequency: the best band of sinusoids.
-    let resid_disjoint_n = rows.resid.len().div_ceil(2) as f64;
     let mut best: Option<(f64, Tested)> = None;
     for f0 in band_centres(s, rows.wf) {
         let mut cols = Vec::new();
@@ -391,10 +386,7 @@ pub fn carriers(s: &Signals, rows: &Rows, level: f64, min_share: f64) -> Vec<Car
             cols.push(s.t.iter().map(|t| (w * t).sin()).collect());
             cols.push(s.t.iter().map(|t| (w * t).cos()).collect());
         }
-        // A band of 10 columns searched over many centres: tested on disjoint windows, where
-        // a correct model's residuals are independent (the effective count of overlapping
-        // windows overstated the evidence near the windows' own Nyquist frequency).
-        let t = test_rows(rows, &cols, false, resid_disjoint_n, 2);
+        let t = test_columns(rows, &cols, false);
         if best.as_ref().is_none_or(|(_, b)| t.share > b.share) {
             best = Some((f0, t));
         }

@@ -200,6 +200,45 @@ pub fn rms(x: &[f64]) -> f64 {
     (x.iter().map(|v| v * v).sum::<f64>() / x.len() as f64).sqrt()
 }
 
+/// Cluster-robust score test that the columns `z` explain nothing of the residual `u` of the
+/// null model (each column of `z` already residualised on the null model's columns; `q` the
+/// number of free columns among them). With `s_g = Σ_{i∈g} u_i·z_i` the score of cluster `g`
+/// (rows with one id in `cluster`, consecutive), `LM = 1ᵀS(SᵀS)⁻¹Sᵀ1`, the count of clusters
+/// minus the residual sum of squares of 1 regressed on the scores, is χ²(q) under the null
+/// whatever each row's variance and however the rows of one cluster are correlated (the
+/// heteroscedasticity-robust LM test of Wooldridge, *Econometric Analysis of Cross Section
+/// and Panel Data*, §4.2.3, summed over clusters). Returns `(LM, p)`; `p = 1` when there are
+/// not more clusters than columns.
+pub fn robust_score_test(u: &[f64], z: &[Vec<f64>], cluster: &[usize], q: usize) -> (f64, f64) {
+    let n = u.len().min(cluster.len());
+    if z.is_empty() || q == 0 || z.iter().any(|c| c.len() < n) {
+        return (0.0, 1.0);
+    }
+    let mut scores: Vec<Vec<f64>> = vec![Vec::new(); z.len()];
+    for i in 0..n {
+        let new = i == 0 || cluster[i] != cluster[i - 1];
+        for (s, c) in scores.iter_mut().zip(z) {
+            let v = u[i] * c[i];
+            match s.last_mut() {
+                Some(last) if !new => *last += v,
+                _ => s.push(v),
+            }
+        }
+    }
+    let g = scores[0].len();
+    if g <= q + 1 {
+        return (0.0, 1.0);
+    }
+    let ones = vec![1.0; g];
+    let refs: Vec<&[f64]> = scores.iter().map(|c| c.as_slice()).collect();
+    let fit = super::least_squares::lstsq(&refs, &ones);
+    let lm = (g as f64 - fit.rss).max(0.0);
+    let p = statrs::distribution::ChiSquared::new(q as f64)
+        .map(|d| d.sf(lm))
+        .unwrap_or(1.0);
+    (lm, if p.is_finite() { p } else { 1.0 })
+}
+
 /// `n` standard normal numbers from `seed` (for the statistics' tests).
 #[cfg(test)]
 pub(crate) fn white_noise(n: usize, seed: u64) -> Vec<f64> {
@@ -236,6 +275,58 @@ mod tests {
             t.p_value < 1e-10 && t.explained > 0.05 && t.delta_bic < 0.0,
             "{t:?}"
         );
+    }
+
+    /// Rows of very unequal variance: the robust score test rejects a column that is
+    /// nonzero only on the noisy rows at about its level, and still finds a real effect.
+    #[test]
+    fn robust_score_test_holds_its_level_under_unequal_variance() {
+        let n = 400;
+        let cluster: Vec<usize> = (0..n).collect();
+        let z: Vec<f64> = (0..n)
+            .map(|k| if k % 10 == 0 { 1.0 } else { 0.0 })
+            .collect();
+        let centred = |c: &[f64]| -> Vec<f64> {
+            let m = c.iter().sum::<f64>() / c.len() as f64;
+            c.iter().map(|v| v - m).collect()
+        };
+        let zc = vec![centred(&z)];
+        let rejected = (0..200)
+            .filter(|&seed| {
+                let e = noise(n, seed);
+                let u: Vec<f64> = (0..n)
+                    .map(|k| e[k] * if k % 10 == 0 { 20.0 } else { 1.0 })
+                    .collect();
+                robust_score_test(&centred(&u), &zc, &cluster, 1).1 < 0.05
+            })
+            .count();
+        assert!((2..=22).contains(&rejected), "{rejected} of 200 rejected");
+        let e = noise(n, 1);
+        let u: Vec<f64> = (0..n).map(|k| e[k] + 2.0 * z[k]).collect();
+        assert!(robust_score_test(&centred(&u), &zc, &cluster, 1).1 < 1e-6);
+    }
+
+    /// Rows that share an error within a cluster: a column constant over each cluster is not
+    /// taken for an effect when the clusters are given.
+    #[test]
+    fn robust_score_test_allows_an_error_shared_within_a_cluster() {
+        let (n, size) = (600, 20);
+        let cluster: Vec<usize> = (0..n).map(|k| k / size).collect();
+        let rejected = (0..100)
+            .filter(|&seed| {
+                let shared = noise(n / size, seed + 1000);
+                let e = noise(n, seed);
+                let u: Vec<f64> = (0..n).map(|k| 3.0 * shared[k / size] + e[k]).collect();
+                let z = noise(n / size, seed + 5000);
+                let zc: Vec<f64> = (0..n).map(|k| z[k / size]).collect();
+                let m = u.iter().sum::<f64>() / n as f64;
+                let mz = zc.iter().sum::<f64>() / n as f64;
+                let u: Vec<f64> = u.iter().map(|v| v - m).collect();
+                let zc: Vec<f64> = zc.iter().map(|v| v - mz).collect();
+                robust_score_test(&u, &[zc], &cluster, 1).1 < 0.05
+            })
+            .count();
+        assert!(rejected <= 14, "{rejected} of 100 rejected");
     }
 
     #[test]
