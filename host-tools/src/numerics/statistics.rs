@@ -207,8 +207,9 @@ pub fn rms(x: &[f64]) -> f64 {
 /// minus the residual sum of squares of 1 regressed on the scores, is χ²(q) under the null
 /// whatever each row's variance and however the rows of one cluster are correlated (the
 /// heteroscedasticity-robust LM test of Wooldridge, *Econometric Analysis of Cross Section
-/// and Panel Data*, §4.2.3, summed over clusters). Returns `(LM, p)`; `p = 1` when there are
-/// not more clusters than columns.
+/// and Panel Data*, §4.2.3, summed over clusters). `p` is read from the Hotelling form
+/// `F(q, G−q)` with `q` the numerical rank of the scores. Returns `(LM, p)`; `p = 1` when there
+/// are not more clusters than columns.
 pub fn robust_score_test(u: &[f64], z: &[Vec<f64>], cluster: &[usize], q: usize) -> (f64, f64) {
     let n = u.len().min(cluster.len());
     if z.is_empty() || q == 0 || z.iter().any(|c| c.len() < n) {
@@ -226,17 +227,43 @@ pub fn robust_score_test(u: &[f64], z: &[Vec<f64>], cluster: &[usize], q: usize)
         }
     }
     let g = scores[0].len();
-    if g <= q + 1 {
+    let q = q.min(score_rank(&scores));
+    if q == 0 || g <= q + 1 {
         return (0.0, 1.0);
     }
     let ones = vec![1.0; g];
     let refs: Vec<&[f64]> = scores.iter().map(|c| c.as_slice()).collect();
     let fit = super::least_squares::lstsq(&refs, &ones);
     let lm = (g as f64 - fit.rss).max(0.0);
-    let p = statrs::distribution::ChiSquared::new(q as f64)
-        .map(|d| d.sf(lm))
+    // LM ≤ G, so χ²(q) cannot reject with few clusters; the Hotelling form
+    // F = (G−q)/q · LM/(G−LM) ~ F(q, G−q) is exact for Gaussian scores.
+    let (gf, qf) = (g as f64, q as f64);
+    if lm >= gf {
+        return (lm, 0.0);
+    }
+    let f = (gf - qf) / qf * lm / (gf - lm);
+    let p = statrs::distribution::FisherSnedecor::new(qf, gf - qf)
+        .map(|d| d.sf(f))
         .unwrap_or(1.0);
     (lm, if p.is_finite() { p } else { 1.0 })
+}
+
+/// Numerical rank of the score columns: singular values above `1e-10 ×` the largest.
+fn score_rank(scores: &[Vec<f64>]) -> usize {
+    let (g, k) = (scores[0].len(), scores.len());
+    let m = faer::Mat::<f64>::from_fn(g, k, |i, j| scores[j][i]);
+    if m.col_iter()
+        .flat_map(|c| c.iter().copied())
+        .any(|v| !v.is_finite())
+    {
+        return 0;
+    }
+    let Ok(svd) = m.thin_svd() else {
+        return 0;
+    };
+    let sv: Vec<f64> = (0..g.min(k)).map(|i| svd.S().column_vector()[i]).collect();
+    let smax = sv.iter().cloned().fold(0.0, f64::max);
+    sv.iter().filter(|&&v| v > smax * 1e-10 && v > 0.0).count()
 }
 
 /// `n` standard normal numbers from `seed` (for the statistics' tests).
@@ -327,6 +354,31 @@ mod tests {
             })
             .count();
         assert!(rejected <= 14, "{rejected} of 100 rejected");
+    }
+
+    /// Eight clusters: a strong effect is rejected at the 1 % level (the χ² reference could
+    /// not reject at all, `LM ≤ G`), and the null is kept at about its 5 % level: with 100
+    /// trials at 5 %, ≥ 14 rejections has binomial probability below 0.2 %.
+    #[test]
+    fn robust_score_test_with_eight_clusters_has_power_and_level() {
+        let (n, size) = (400, 50);
+        let cluster: Vec<usize> = (0..n).map(|k| k / size).collect();
+        let centred = |c: &[f64]| -> Vec<f64> {
+            let m = c.iter().sum::<f64>() / c.len() as f64;
+            c.iter().map(|v| v - m).collect()
+        };
+        let z = centred(&noise(n, 77));
+        let e = noise(n, 78);
+        let u: Vec<f64> = (0..n).map(|k| e[k] + 1.0 * z[k]).collect();
+        let (_, p) = robust_score_test(&centred(&u), &[z.clone()], &cluster, 1);
+        assert!(p < 0.01, "strong effect, p = {p}");
+        let rejected = (0..100)
+            .filter(|&seed| {
+                let u = centred(&noise(n, seed + 300));
+                robust_score_test(&u, &[z.clone()], &cluster, 1).1 < 0.05
+            })
+            .count();
+        assert!(rejected <= 13, "{rejected} of 100 rejected");
     }
 
     #[test]
