@@ -456,6 +456,23 @@ fn judge(
             .filter(|(_, k)| **k)
             .map(|(c, _)| *c)
             .collect();
+        // The robust tests need more held inputs (clusters) than free columns, or they
+        // can never reject: too few, and the verdict cannot be "adequate".
+        let held = 1 + cluster.windows(2).filter(|w| w[0] != w[1]).count();
+        if held <= verdict::LAGS + 2 {
+            checks.push(verdict::Check {
+                name: "clusters",
+                statistic: held as f64,
+                p_value: f64::NAN,
+                share: 0.0,
+                passed: false,
+                detail: format!(
+                    "{} equation: cannot judge: {held} held inputs, need more than {}",
+                    j.eq.label(),
+                    verdict::LAGS + 2
+                ),
+            });
+        }
         let mut x = verdict::input_check(&j.after, &j.input, &cluster, level_per_test);
         x.detail = format!("{}: {}", j.eq.label(), x.detail);
         checks.push(x);
@@ -476,7 +493,10 @@ fn judge(
         }
     }
     unexplained.sort_by(|a, b| b.share.total_cmp(&a.share));
-    let testable = !judged.is_empty() && checks.iter().all(|c| c.name != "data");
+    let testable = !judged.is_empty()
+        && checks
+            .iter()
+            .all(|c| c.name != "data" && c.name != "clusters");
     let adequate = !judged.is_empty()
         && findings.is_empty()
         && unexplained.is_empty()
