@@ -183,13 +183,15 @@ fn print_verdict(model: &Model, args: &Args, d: &diagnose::Diagnosis) {
         );
         return;
     }
-    let only_data = !failed.is_empty()
-        && failed.iter().all(|c| c.name == "data")
+    let only_data = (!v.judged || failed.is_empty())
+        && failed
+            .iter()
+            .all(|c| c.name == "data" || c.name == "clusters")
         && d.effects.is_empty()
         && v.unexplained.is_empty();
     if only_data {
         println!(
-            "Cannot judge: {} has too little motion to test the {} model (not adequate until a log can show it).",
+            "Cannot judge: {} has too little motion or too few held inputs to test the {} model (not adequate until a log can show it).",
             crate::log::echo_path(&args.data),
             model.kind.name()
         );
