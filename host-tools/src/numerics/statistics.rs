@@ -367,15 +367,15 @@ mod tests {
             let m = c.iter().sum::<f64>() / c.len() as f64;
             c.iter().map(|v| v - m).collect()
         };
-        let z = centred(&noise(n, 77));
+        let z = vec![centred(&noise(n, 77))];
         let e = noise(n, 78);
-        let u: Vec<f64> = (0..n).map(|k| e[k] + 1.0 * z[k]).collect();
-        let (_, p) = robust_score_test(&centred(&u), &[z.clone()], &cluster, 1);
+        let u: Vec<f64> = (0..n).map(|k| e[k] + z[0][k]).collect();
+        let (_, p) = robust_score_test(&centred(&u), &z, &cluster, 1);
         assert!(p < 0.01, "strong effect, p = {p}");
         let rejected = (0..100)
             .filter(|&seed| {
                 let u = centred(&noise(n, seed + 300));
-                robust_score_test(&u, &[z.clone()], &cluster, 1).1 < 0.05
+                robust_score_test(&u, &z, &cluster, 1).1 < 0.05
             })
             .count();
         assert!(rejected <= 13, "{rejected} of 100 rejected");
