@@ -358,21 +358,23 @@ fn write_verdict_table() {
         "\nLimits seen here: a correct model's residual is far noisier in the windows of a slip \
          or an input step than at rest, and over one held voltage step the rotor turns at a \
          steady speed whose Hall rounding error beats slowly with the 12 ms sampling, one error \
-         shared by every window of the hold. The checks and carriers therefore use score tests \
-         robust to both (clustered by held input); the findings' forward selection still uses \
-         the F-test with an effective sample size, and its rare false findings (a compliance on \
-         a multisine, a cogging or presliding on steps) are most of what remains. The voltage \
-         equation on steps still fails its whiteness check now and then. On the low-speed \
-         signal c the torque equation keeps fewer windows than the verdict needs (most windows \
-         touch a standstill or a reversal): \"Cannot judge\", with `judged: false` in JSON; its \
-         voltage equation is sometimes carried by current, where a slip's current follows the \
-         breakaway. A torque constant that falls 3 % by 10 A goes unseen, and \
-         the model is called adequate: on the fitting signal a the current rarely leaves that \
-         range, and on voltage steps what the fall leaves is within what the robust tests \
-         grant the Hall sensor's shared error. A compliant coupling is \
-         named `compliance` with its load inertia and natural frequency. A gap has no \
-         candidate of its own yet: its nearest named physics is a soft coupling (`compliance` \
-         at about 1 Hz), which is what `diagnose` reports.\n",
+         shared by every window of the hold. The checks and carriers therefore use the \
+         jackknifed cluster-robust Wald test (clustered by held input; decision 0011). On the \
+         multisines a and b a correct model is called not adequate on 1 to 4 logs in 20, above \
+         the stated 1 % (part of it the findings' forward selection, whose F-test with an \
+         effective sample size names a compliance now and then, part a carrier on a few \
+         windows at the log's ends). On voltage steps (d) the rounding drift within a hold is \
+         real serial correlation, which no clustering removes: the torque equation fails its \
+         whiteness check or is carried by the acceleration on most logs, so a step log cannot \
+         judge a model; judge on a multisine. On the low-speed signal c the torque equation \
+         keeps too few windows or held inputs for its tests (most windows touch a standstill \
+         or a reversal): \"Cannot judge\", with `judged: false` in JSON. A torque constant \
+         that falls 3 % by 10 A goes unseen on the fitting signal a, whose current rarely \
+         leaves that range; on steps it is carried by the acceleration and the current, but so \
+         is the correct model's rounding floor there. A compliant coupling is named \
+         `compliance` with its load inertia and natural frequency. A gap has no candidate of \
+         its own yet: its nearest named physics is a soft coupling (`compliance` at about \
+         1 Hz), which is what `diagnose` reports.\n",
     );
     let path = tests::root().join("docs").join("diagnose-verdict.md");
     std::fs::write(&path, md).unwrap();

@@ -15,10 +15,10 @@ use std::path::PathBuf;
     that residual (F-test), the parameters are off and the refitted constants are printed: \
     refit first. WHITENESS: the residual must not be predictable from its own past \
     (Breusch-Godfrey on disjoint windows). INPUT: it must not be explained by the input of the \
-    last windows. Both, and the carriers below, use score tests that hold their level where the \
+    last windows. Both, and the carriers below, use robust tests that hold their level where the \
     residual is noisier in some windows than others (slips, steps) and where the windows of one \
-    held input share an error of the angle's reading. A log with too few usable windows for an \
-    equation gets \"Cannot judge\" (JSON \"judged\": false). Then what is MISSING: every effect of the list that the model lacks adds its \
+    held input share an error of the angle's reading. A log on which a test cannot decide (too \
+    few usable windows or held inputs for an equation) gets \"Cannot judge\" (JSON \"judged\": false). Then what is MISSING: every effect of the list that the model lacks adds its \
     regressors (searched over cogging harmonics, Stribeck velocities, thermal time constants...) \
     and forward selection keeps an effect when it is significant (nested F-test p < 0.001 / \
     number of candidate variants, Bonferroni, with an effective sample size for autocorrelated \

@@ -411,7 +411,7 @@ fn judge(
     findings: &[Finding],
     opts: &Options,
 ) -> Verdict {
-    let per_eq = 3 + carriers::test_count(s, wf);
+    let per_eq = 3 + carriers::test_count();
     let level = verdict::ADEQUACY_ALPHA;
     let level_per_test = level / (per_eq * judged.len()).max(1) as f64;
     let mut checks = Vec::new();
@@ -484,7 +484,22 @@ fn judge(
             label: j.eq.label(),
             cluster: &cluster,
         };
-        for c in carriers::carriers(s, &rows, level_per_test, opts.min_explained) {
+        let carried = carriers::carriers(s, &rows, level_per_test, opts.min_explained);
+        if !carried.untested.is_empty() {
+            checks.push(verdict::Check {
+                name: "carriers",
+                statistic: f64::NAN,
+                p_value: f64::NAN,
+                share: 0.0,
+                passed: false,
+                detail: format!(
+                    "{} equation: cannot judge what {} carry: too few windows or held inputs for the test to reject anything",
+                    j.eq.label(),
+                    carried.untested.join(", ")
+                ),
+            });
+        }
+        for c in carried.carriers {
             match unexplained.iter_mut().find(|u| u.variable == c.variable) {
                 Some(u) if u.share >= c.share => {}
                 Some(u) => *u = c,
@@ -493,10 +508,11 @@ fn judge(
         }
     }
     unexplained.sort_by(|a, b| b.share.total_cmp(&a.share));
+    // A check whose test cannot reject on this log (p-value NaN) leaves the verdict unjudged.
     let testable = !judged.is_empty()
         && checks
             .iter()
-            .all(|c| c.name != "data" && c.name != "clusters");
+            .all(|c| c.name != "data" && !c.p_value.is_nan());
     let adequate = !judged.is_empty()
         && findings.is_empty()
         && unexplained.is_empty()
