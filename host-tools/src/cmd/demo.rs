@@ -121,7 +121,7 @@ pub struct Args {
 
 /// Share of the start model's gap to the true model's test fit that the final model must
 /// close on every channel for a named effect to count as found: one half
-/// (docs/decisions/0009-found-means-near-the-truth.md).
+/// (docs/decisions/0010-found-means-near-the-truth.md).
 pub const GAP_CLOSED: f64 = 0.5;
 /// Distance to the true model's test fit [fit-% points] within which a channel counts as
 /// closed whatever its start: 1 point, about the spread of one model's test fit over fresh
@@ -593,7 +593,7 @@ pub fn run(args: Args) -> Result<()> {
         println!(
             "  (FOUND: the effect is named and the final model closes at least {:.0} % of the start \
              model's gap to the true model's test fit on every channel, or ends within {NEAR_TRUTH} \
-             point of it; docs/decisions/0009-found-means-near-the-truth.md)",
+             point of it; docs/decisions/0010-found-means-near-the-truth.md)",
             100.0 * GAP_CLOSED
         );
     }

@@ -24,7 +24,8 @@
 //! 4. **Refinement** ([`refine`]): the nonzero coefficients of the mechanical equations and
 //!    the shape parameters (tanh gain `a`, Stribeck velocity `vs`) refined by bounded
 //!    Levenberg–Marquardt on the free-run error of the fitting logs (velocity, current,
-//!    angle), from two starts: the thresholded model, and the same with a Stribeck term
+//!    angle; the current weighted against the velocity by maximum likelihood, each output
+//!    divided by its own residual scale), from two starts: the thresholded model, and the same with a Stribeck term
 //!    `exp(−(ẋ/vs)²)·sgn(ẋ)` added to the acceleration equation (refitted on the weak form;
 //!    the paper's library has no term that falls with speed, and the friction of a real
 //!    motor does). A refined model replaces the result only if its validation fit is

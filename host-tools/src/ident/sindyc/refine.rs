@@ -6,7 +6,9 @@
 //! current equation keeps the coefficients of its held-voltage regression
 //! ([`super::rows::held_current_normal`]): it is the sampled current's own law, and moving
 //! it to help the velocity fit trades a right equation for a wrong one (and one free run per
-//! coefficient per iteration).
+//! coefficient per iteration). The current residual still steers the mechanical equations,
+//! weighted against the velocity's by maximum likelihood: each output divided by its own
+//! residual scale on the fitting logs ([`SimResiduals::current_weight`]).
 use super::simulate::{simulate, Limits};
 use super::ParetoRow;
 use crate::ident::library::IDOT;
@@ -19,18 +21,6 @@ use control::sindy::{SindyModel, Term};
 /// grey-box refinement's, `sim_error.rs`: the free-run angle integrates every velocity error,
 /// so it only steers the low frequencies).
 const REFINE_ANGLE_WEIGHT: f64 = 0.3;
-/// Weight of the current residual of the refinement relative to velocity. The current
-/// equation itself is not refined (its coefficients come from the held-voltage regression),
-/// so the current residual only steers the mechanical equations. At 12 ms the current is
-/// `(u − K_b·ẋ)/R` within a sample, and most of its free-run error sits in the few samples
-/// after each velocity reversal, where presliding (the bristles of a LuGre law turning
-/// round under a damping far above the viscous one) holds the rotor for several
-/// milliseconds: no sign-like or Stribeck term reproduces that, and at the velocity's weight
-/// those samples bias the inertia and the friction level to imitate it. A tenth keeps the
-/// current as a check on the velocity's level without that bias; on the emulated paper
-/// motor it is what brings the validation fit of the current closest to the true model's on
-/// both fitting seeds tried (docs/performance-sindyc.md).
-const REFINE_CURRENT_WEIGHT: f64 = 0.1;
 /// Iteration limit of the refinement (one Jacobian = one free run per coefficient each).
 const REFINE_ITER: usize = 25;
 /// Largest model (terms over all equations) the refinement takes on: each iteration costs
@@ -46,8 +36,10 @@ const REFINE_VS_FACTOR: f64 = 10.0;
 
 /// Free-run residuals of a SINDYc model on the fitting logs, defined as the grey-box
 /// refinement's (`sim_error.rs`): velocity (the model's angle through the firmware's moving
-/// average, not quantised so the cost stays smooth in the coefficients), current and angle
-/// (weights [`REFINE_CURRENT_WEIGHT`], [`REFINE_ANGLE_WEIGHT`]), each normalised by the spread of the measured signal.
+/// average, not quantised so the cost stays smooth in the coefficients), current and angle,
+/// each normalised by the spread of the measured signal. The angle has the weight
+/// [`REFINE_ANGLE_WEIGHT`] relative to the velocity; the current's weight is an argument,
+/// the maximum-likelihood one of [`SimResiduals::current_weight`].
 pub struct SimResiduals<'a> {
     logs: &'a [MotorLog],
     omega: Vec<Vec<f64>>,
@@ -84,34 +76,74 @@ impl<'a> SimResiduals<'a> {
         }
     }
 
-    fn eval(&self, m: &SindyModel<f64>) -> Result<Vec<f64>> {
+    /// Free-run residuals of `m` on each fitting log, normalised by the spread of the
+    /// measured signal and not yet weighted: (velocity, current, angle); the current is
+    /// empty without a measured or simulated current.
+    fn outputs(&self, m: &SindyModel<f64>) -> Result<Vec<[Vec<f64>; 3]>> {
         use rayon::prelude::*;
-        let runs: Vec<Vec<f64>> = self
-            .logs
+        self.logs
             .par_iter()
             .zip(&self.omega)
             .zip(&self.spreads)
-            .map(|((log, w), &(sw, si, sx))| -> Result<Vec<f64>> {
+            .map(|((log, w), &(sw, si, sx))| -> Result<[Vec<f64>; 3]> {
                 let p = simulate(m, self.plant, log, self.limits)?;
                 let wp = sensor_chain::velocity_estimate(&p.t, &p.theta, self.window);
-                let mut r: Vec<f64> = wp.iter().zip(w).map(|(a, b)| (a - b) / sw).collect();
-                if let (Some(im), Some(ip)) = (&log.i, &p.i) {
-                    r.extend(
-                        ip.iter()
-                            .zip(im)
-                            .map(|(a, b)| REFINE_CURRENT_WEIGHT * (a - b) / si),
-                    );
-                }
-                r.extend(
-                    p.theta
-                        .iter()
-                        .zip(&log.theta)
-                        .map(|(a, b)| REFINE_ANGLE_WEIGHT * (a - b) / sx),
-                );
-                Ok(r)
+                let rw = wp.iter().zip(w).map(|(a, b)| (a - b) / sw).collect();
+                let ri = match (&log.i, &p.i) {
+                    (Some(im), Some(ip)) => ip.iter().zip(im).map(|(a, b)| (a - b) / si).collect(),
+                    _ => Vec::new(),
+                };
+                let rx = p
+                    .theta
+                    .iter()
+                    .zip(&log.theta)
+                    .map(|(a, b)| (a - b) / sx)
+                    .collect();
+                Ok([rw, ri, rx])
             })
-            .collect::<Result<_>>()?;
-        Ok(runs.concat())
+            .collect()
+    }
+
+    /// Weight of the current residual relative to the velocity's for a refinement that
+    /// starts at `m`: the ratio of the two outputs' residual scales, `σ_ẋ/σ_i`, each the RMS
+    /// of its normalised free-run residual over all fitting logs. Dividing each output's
+    /// residual by its own scale is the maximum-likelihood weighting of an output-error
+    /// problem with independent Gaussian errors of unknown variance per output (the
+    /// estimate minimises `Σ_k N_k·ln σ_k²`, whose normal equations are least squares
+    /// weighted by `1/σ_k²` at the optimum's own residual variances), so neither output
+    /// dominates by its units or by the size of its model error. The angle, the measurement
+    /// the velocity is estimated from rather than an independent output, keeps its fixed
+    /// weight relative to the velocity. 1 when either scale is zero or not finite (an exact output: nothing to
+    /// weigh against). Errors when `m` diverges on the fitting logs.
+    pub fn current_weight(&self, m: &SindyModel<f64>) -> Result<f64> {
+        let runs = self.outputs(m)?;
+        let scale = |k: usize| {
+            let all: Vec<f64> = runs.iter().flat_map(|r| r[k].iter().copied()).collect();
+            crate::numerics::statistics::rms(&all)
+        };
+        let ratio = scale(0) / scale(1);
+        Ok(if ratio.is_finite() && ratio > 0.0 {
+            ratio
+        } else {
+            1.0
+        })
+    }
+
+    /// The residual vector the refinement minimises: velocity, current times
+    /// `current_weight`, angle times [`REFINE_ANGLE_WEIGHT`], log after log.
+    fn eval(&self, m: &SindyModel<f64>, current_weight: f64) -> Result<Vec<f64>> {
+        let runs = self.outputs(m)?;
+        let mut r = Vec::with_capacity(
+            runs.iter()
+                .map(|o| o.iter().map(Vec::len).sum::<usize>())
+                .sum(),
+        );
+        for [rw, ri, rx] in runs {
+            r.extend(rw);
+            r.extend(ri.iter().map(|v| current_weight * v));
+            r.extend(rx.iter().map(|v| REFINE_ANGLE_WEIGHT * v));
+        }
+        Ok(r)
     }
 }
 
@@ -169,7 +201,10 @@ fn with_values(base: &SindyModel<f64>, slots: &Slots, x: &[f64]) -> SindyModel<f
 /// quasi-static current, the bias of the sign-like terms on Hall-quantised data). Each
 /// coefficient may move within ±10 times its magnitude around the start (so it can change
 /// sign but cannot run off); a trial that diverges is rejected like one that raises the
-/// cost. Errors when the start itself diverges on the fitting logs.
+/// cost. The current residual has the maximum-likelihood weight of the start
+/// ([`SimResiduals::current_weight`]), estimated once from the free run of the regression
+/// stage's model and held through the iterations. Errors when the start itself diverges on
+/// the fitting logs.
 fn refine_model(
     m: &SindyModel<f64>,
     res: &SimResiduals,
@@ -196,7 +231,9 @@ fn refine_model(
     if x0.is_empty() {
         return Ok(m.clone());
     }
-    let mut f = |x: &[f64]| res.eval(&with_values(m, &slots, x));
+    let weight = res.current_weight(&with_values(m, &slots, &x0))?;
+    tracing::debug!("SINDYc refinement: current weight {weight:.4} (maximum likelihood)");
+    let mut f = |x: &[f64]| res.eval(&with_values(m, &slots, x), weight);
     let opts = nlsq::Options {
         max_iter,
         ..nlsq::Options::default()
@@ -290,7 +327,8 @@ mod tests {
         let mut start = truth.clone();
         start.accel.terms[1].1 *= 1.1;
         start.accel.terms[2].1 *= 0.8;
-        let cost = |m: &SindyModel<f64>| res.eval(m).unwrap().iter().map(|r| r * r).sum::<f64>();
+        let cost =
+            |m: &SindyModel<f64>| res.eval(m, 1.0).unwrap().iter().map(|r| r * r).sum::<f64>();
         let refined = refine_model(&start, &res, 15).unwrap();
         assert!(
             cost(&refined) < 0.01 * cost(&start),
@@ -312,6 +350,46 @@ mod tests {
         // The structure stays: the refinement moves values, never adds or drops terms.
         assert_eq!(refined.accel.terms.len(), 3);
         assert_eq!(refined.idot.terms.len(), 3);
+    }
+
+    #[test]
+    fn the_current_weight_equalises_the_outputs_and_falls_with_current_noise() {
+        let mut truth = SindyModel::empty(5.0, 1.0, 1.0);
+        truth.accel = SparseEq::from_slice(&[
+            (Term::Xdot, -4.0),
+            (Term::I, 190.0),
+            (Term::TanhXdot, -240.0),
+        ])
+        .unwrap();
+        truth.idot =
+            SparseEq::from_slice(&[(Term::Xdot, -240.0), (Term::I, -700.0), (Term::U, 3300.0)])
+                .unwrap();
+        let mut start = truth.clone();
+        start.accel.terms[1].1 *= 1.1;
+        start.idot.terms[2].1 *= 0.95;
+        let log = log_of(&truth);
+        let logs = std::slice::from_ref(&log);
+        let res = SimResiduals::new(logs, Plant::Voltage, 10, Limits::default());
+        let w = res.current_weight(&start).unwrap();
+        assert!(w.is_finite() && w > 0.0, "{w}");
+        // Weighted, the velocity and current residuals have the same RMS: neither output
+        // dominates the cost.
+        let r = res.eval(&start, w).unwrap();
+        let n = log.len();
+        let rms = crate::numerics::statistics::rms;
+        let (rw, ri) = (rms(&r[..n]), rms(&r[n..2 * n]));
+        assert!((rw / ri - 1.0).abs() < 1e-9, "{rw} vs {ri}");
+        // A noisier current measurement weighs less.
+        let mut noisy = log.clone();
+        let spread = sim_error::spread(noisy.i.as_ref().unwrap());
+        let noise = crate::numerics::statistics::white_noise(n, 7);
+        for (i, e) in noisy.i.as_mut().unwrap().iter_mut().zip(noise) {
+            *i += 0.2 * spread * e;
+        }
+        let noisy_logs = std::slice::from_ref(&noisy);
+        let res = SimResiduals::new(noisy_logs, Plant::Voltage, 10, Limits::default());
+        let w_noisy = res.current_weight(&start).unwrap();
+        assert!(w_noisy < 0.7 * w, "{w_noisy} vs {w}");
     }
 
     #[test]
