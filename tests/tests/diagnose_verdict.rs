@@ -301,7 +301,13 @@ fn write_verdict_table() {
                 .checks
                 .iter()
                 .filter(|c| !c.passed)
-                .map(|c| format!("{} (p {:.0e}, {:.0} %)", c.name, c.p_value, 100.0 * c.share))
+                .map(|c| {
+                    if c.p_value.is_nan() {
+                        format!("{} (cannot judge)", c.name)
+                    } else {
+                        format!("{} (p {:.0e}, {:.0} %)", c.name, c.p_value, 100.0 * c.share)
+                    }
+                })
                 .collect();
             let effects: Vec<String> = d
                 .effects
@@ -361,20 +367,19 @@ fn write_verdict_table() {
          shared by every window of the hold. The checks and carriers therefore use the \
          jackknifed cluster-robust Wald test (clustered by held input; decision 0011). On the \
          multisines a and b a correct model is called not adequate on 1 to 4 logs in 20, above \
-         the stated 1 % (part of it the findings' forward selection, whose F-test with an \
-         effective sample size names a compliance now and then, part a carrier on a few \
-         windows at the log's ends). On voltage steps (d) the rounding drift within a hold is \
-         real serial correlation, which no clustering removes: the torque equation fails its \
-         whiteness check or is carried by the acceleration on most logs, so a step log cannot \
-         judge a model; judge on a multisine. On the low-speed signal c the torque equation \
-         keeps too few windows or held inputs for its tests (most windows touch a standstill \
-         or a reversal): \"Cannot judge\", with `judged: false` in JSON. A torque constant \
-         that falls 3 % by 10 A goes unseen on the fitting signal a, whose current rarely \
-         leaves that range; on steps it is carried by the acceleration and the current, but so \
-         is the correct model's rounding floor there. A compliant coupling is named \
-         `compliance` with its load inertia and natural frequency. A gap has no candidate of \
-         its own yet: its nearest named physics is a soft coupling (`compliance` at about \
-         1 Hz), which is what `diagnose` reports.\n",
+         the stated 1 % (a compliance named now and then by the findings' forward selection, \
+         whose F-test is not robust to the shared error; a carrier on a few windows). On \
+         voltage steps (d) the rounding drift within a hold is serial correlation whatever the \
+         model, so whiteness cannot decide there, and the carriers leave out what one hold \
+         decides alone: \"Cannot judge\" on most logs, and not adequate on the rest, where the \
+         acceleration carries the drift. Judge a model on a multisine. On the low-speed signal \
+         c the torque equation keeps too few windows or held inputs for its tests (most \
+         windows touch a standstill or a reversal): mostly \"Cannot judge\". A torque \
+         constant that falls 3 % by 10 A goes unseen on the fitting signal a, whose current \
+         rarely leaves that range; on steps the log cannot judge it. A compliant coupling is \
+         named `compliance` with its load inertia and natural frequency. A gap has no \
+         candidate of its own yet: its nearest named physics is a soft coupling (`compliance` \
+         at about 1 Hz), which is what `diagnose` reports.\n",
     );
     let path = tests::root().join("docs").join("diagnose-verdict.md");
     std::fs::write(&path, md).unwrap();

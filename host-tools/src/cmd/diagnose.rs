@@ -18,7 +18,10 @@ use std::path::PathBuf;
     last windows. Both, and the carriers below, use robust tests that hold their level where the \
     residual is noisier in some windows than others (slips, steps) and where the windows of one \
     held input share an error of the angle's reading. A log on which a test cannot decide (too \
-    few usable windows or held inputs for an equation) gets \"Cannot judge\" (JSON \"judged\": false). Then what is MISSING: every effect of the list that the model lacks adds its \
+    few usable windows or held inputs for an equation; whiteness on voltage steps, whose angle \
+    rounding drifts within each hold) gets \"Cannot judge\" (JSON \"judged\": false, the \
+    check's statistic and p_value null). Judge a model on a multisine: on voltage steps even \
+    a correct model is often not adequate (docs/limits.md). Then what is MISSING: every effect of the list that the model lacks adds its \
     regressors (searched over cogging harmonics, Stribeck velocities, thermal time constants...) \
     and forward selection keeps an effect when it is significant (nested F-test p < 0.001 / \
     number of candidate variants, Bonferroni, with an effective sample size for autocorrelated \
@@ -183,15 +186,15 @@ fn print_verdict(model: &Model, args: &Args, d: &diagnose::Diagnosis) {
         );
         return;
     }
-    let only_data = (!v.judged || failed.is_empty())
-        && failed
-            .iter()
-            .all(|c| c.name == "data" || c.name == "clusters")
+    // Every failed check is one that could not decide (its p-value NaN), and nothing else
+    // was found: the log cannot judge the model.
+    let only_undecided = !v.judged
+        && failed.iter().all(|c| c.p_value.is_nan())
         && d.effects.is_empty()
         && v.unexplained.is_empty();
-    if only_data {
+    if only_undecided {
         println!(
-            "Cannot judge: {} has too little motion or too few held inputs to test the {} model (not adequate until a log can show it).",
+            "Cannot judge: {} has too little motion or too few held inputs to test the {} model (not adequate until a log can show it; a multisine judges best).",
             crate::log::echo_path(&args.data),
             model.kind.name()
         );
@@ -204,7 +207,12 @@ fn print_verdict(model: &Model, args: &Args, d: &diagnose::Diagnosis) {
         );
     }
     for c in &failed {
-        println!("  FAILED {:<10} {}", c.name, c.detail);
+        let tag = if c.p_value.is_nan() {
+            "UNDECIDED"
+        } else {
+            "FAILED"
+        };
+        println!("  {tag} {:<10} {}", c.name, c.detail);
     }
     if !v.refit.is_empty() {
         let vals: Vec<String> = v

@@ -149,6 +149,8 @@ struct Tested {
     share: f64,
     /// `NaN` when the test cannot reject on this log (too few windows or held inputs).
     p_value: f64,
+    /// Share of the residual in directions one held input decides alone (left untested).
+    dropped_share: f64,
     beta: Vec<f64>,
 }
 
@@ -197,8 +199,8 @@ fn test_columns(rows: &Rows, cols: &[Vec<f64>], spans_constant: bool) -> Tested 
     } else {
         0.0
     };
-    let p_value =
-        statistics::robust_wald_test(&base.resid, &z, &cluster).map_or(f64::NAN, |t| t.p_value);
+    let test = statistics::robust_wald_test(&base.resid, &z, &cluster);
+    let (p_value, dropped_share) = test.map_or((f64::NAN, 0.0), |t| (t.p_value, t.dropped_share));
     // The shape for the report: the residual against the columns alone (and a constant
     // where they do not span one).
     let mut refs: Vec<&[f64]> = Vec::with_capacity(w.len() + 1);
@@ -215,6 +217,7 @@ fn test_columns(rows: &Rows, cols: &[Vec<f64>], spans_constant: bool) -> Tested 
     Tested {
         share,
         p_value,
+        dropped_share,
         beta,
     }
 }
@@ -314,7 +317,9 @@ pub fn carriers(s: &Signals, rows: &Rows, level: f64, min_share: f64) -> Carried
     let mut out: Vec<Carrier> = Vec::new();
     let mut untested: Vec<&'static str> = Vec::new();
     let mut push = |variable: &'static str, t: Tested, knots: Vec<f64>, hz: Option<f64>| {
-        if t.p_value.is_nan() {
+        // Untested: the test cannot decide, or what it had to leave out (directions one held
+        // input decides alone) could hold as much of the residual as an effect must explain.
+        if t.p_value.is_nan() || t.dropped_share >= min_share {
             untested.push(variable);
         } else if t.p_value < level && t.share >= min_share {
             let spec = table_spec(variable, knots.len(), rows.label, s);
@@ -405,8 +410,10 @@ pub fn carriers(s: &Signals, rows: &Rows, level: f64, min_share: f64) -> Carried
             push("reversal", test_columns(rows, &cols, false), knots, None);
         }
     }
-    // Frequency: the best band of sinusoids, its p-value adjusted for the bands searched.
+    // Frequency: the band of sinusoids with the smallest p-value, adjusted for the bands
+    // searched (Bonferroni); a band the test cannot decide leaves the frequency untested.
     let mut best: Option<(f64, Tested)> = None;
+    let mut undecided: Option<Tested> = None;
     let centres = band_centres(s, rows.wf);
     for &f0 in &centres {
         let mut cols = Vec::new();
@@ -417,13 +424,19 @@ pub fn carriers(s: &Signals, rows: &Rows, level: f64, min_share: f64) -> Carried
             cols.push(s.t.iter().map(|t| (w * t).cos()).collect());
         }
         let t = test_columns(rows, &cols, false);
-        if best.as_ref().is_none_or(|(_, b)| t.share > b.share) {
+        if t.p_value.is_nan() {
+            undecided.get_or_insert(t);
+        } else if best.as_ref().is_none_or(|(_, b)| t.p_value < b.p_value) {
             best = Some((f0, t));
         }
     }
-    if let Some((f0, mut t)) = best {
-        t.p_value = (t.p_value * centres.len() as f64).min(1.0);
-        push("frequency", t, vec![], Some(f0));
+    match (undecided, best) {
+        (Some(t), _) => push("frequency", t, vec![], None),
+        (None, Some((f0, mut t))) => {
+            t.p_value = (t.p_value * centres.len() as f64).min(1.0);
+            push("frequency", t, vec![], Some(f0));
+        }
+        (None, None) => {}
     }
     out.sort_by(|a, b| b.share.total_cmp(&a.share));
     Carried {

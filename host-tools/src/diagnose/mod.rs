@@ -185,9 +185,11 @@ pub struct Diagnosis {
 pub struct Verdict {
     /// True only when every check passes, no effect is missing and nothing is unexplained.
     pub adequate: bool,
-    /// False when an equation had too few usable windows ([`MIN_VERDICT_ROWS`]) to test its
-    /// residual: the log cannot show whether the model is adequate, and `adequate` is false
-    /// for that reason alone when no finding, carrier or other check says otherwise.
+    /// False when a check could not decide on this log: an equation with too few usable
+    /// windows ([`MIN_VERDICT_ROWS`]), too few held inputs for a test, a whiteness check on
+    /// held inputs, or a carrier whose test had to leave out too much (its p-value NaN). The
+    /// log cannot show whether the model is adequate, and `adequate` is false for that reason
+    /// alone when no finding, carrier or other check says otherwise.
     pub judged: bool,
     /// Family-wise level of the checks and the per-test level after Bonferroni.
     pub level: f64,
@@ -424,7 +426,7 @@ fn judge(
             checks.push(verdict::Check {
                 name: "data",
                 statistic: j.base.len() as f64,
-                p_value: 0.0,
+                p_value: f64::NAN,
                 share: 0.0,
                 passed: false,
                 detail: format!(
@@ -447,32 +449,15 @@ fn judge(
             }
             checks.push(c);
         }
-        let mut w = verdict::whiteness_check(&j.after, level_per_test);
-        w.detail = format!("{}: {}", j.eq.label(), w.detail);
-        checks.push(w);
         let cluster: Vec<usize> = all_clusters
             .iter()
             .zip(&j.keep)
             .filter(|(_, k)| **k)
             .map(|(c, _)| *c)
             .collect();
-        // The robust tests need more held inputs (clusters) than free columns, or they
-        // can never reject: too few, and the verdict cannot be "adequate".
-        let held = 1 + cluster.windows(2).filter(|w| w[0] != w[1]).count();
-        if held <= verdict::LAGS + 2 {
-            checks.push(verdict::Check {
-                name: "clusters",
-                statistic: held as f64,
-                p_value: f64::NAN,
-                share: 0.0,
-                passed: false,
-                detail: format!(
-                    "{} equation: cannot judge: {held} held inputs, need more than {}",
-                    j.eq.label(),
-                    verdict::LAGS + 2
-                ),
-            });
-        }
+        let mut w = verdict::whiteness_check(&j.after, &cluster, level_per_test);
+        w.detail = format!("{}: {}", j.eq.label(), w.detail);
+        checks.push(w);
         let mut x = verdict::input_check(&j.after, &j.input, &cluster, level_per_test);
         x.detail = format!("{}: {}", j.eq.label(), x.detail);
         checks.push(x);

@@ -9,7 +9,9 @@
 //! 2. **Whiteness** of the structure's residual: the Breusch–Godfrey regression of the
 //!    residual on its own past values, on every other weak-form window, so that no two
 //!    windows share a sample and a correct model's residual is independent; tested with the
-//!    heteroscedasticity-robust Wald test, whatever each window's variance.
+//!    heteroscedasticity-robust Wald test, whatever each window's variance. Not on a log of
+//!    held inputs, whose rounding drift within each hold is serial correlation whatever the
+//!    model: there the check cannot decide ([`whiteness_check`]).
 //! 3. **Independence from the input**: the residual regressed on the input averaged over the
 //!    current and the [`LAGS`] previous disjoint windows (MATLAB's `resid` draws this as a
 //!    cross-correlation band), tested with the Wald test clustered by held input
@@ -21,7 +23,7 @@
 //! whose rounding error drifts slowly, one shared error for all the windows of the hold.
 //! Tests that assume one variance and independent windows read both as structure; the
 //! jackknifed cluster-robust Wald tests of [`crate::numerics::statistics::robust_wald_test`]
-//! do not (why this form: `docs/decisions/0011-robust-wald-verdict.md`). A test that cannot
+//! do not for the input and the carriers (why this form: `docs/decisions/0011-robust-wald-verdict.md`). A test that cannot
 //! reject on the log leaves the verdict "cannot judge".
 //! 4. **What carries the rest** ([`super::carriers`]).
 //!
@@ -163,9 +165,25 @@ pub fn hold_clusters(raw_u: &[f64], centres: &[usize]) -> Vec<usize> {
         .collect()
 }
 
-/// The whiteness check of a structure residual (rows in time order, stride half a window).
-pub fn whiteness_check(resid: &[f64], level: f64) -> Check {
+/// The whiteness check of a structure residual (rows in time order, stride half a window;
+/// `cluster` the held input of each row, [`hold_clusters`]). On a log whose windows lie
+/// mostly within held inputs (more than half of the disjoint windows share their hold with
+/// another) it cannot decide: over a hold the angle's rounding error drifts slowly, serial
+/// correlation whatever the model, and a whiteness test would read it as structure.
+pub fn whiteness_check(resid: &[f64], cluster: &[usize], level: f64) -> Check {
     let x = disjoint(resid);
+    let ids = disjoint_ids(cluster);
+    let in_holds = (0..ids.len())
+        .filter(|&i| (i > 0 && ids[i - 1] == ids[i]) || ids.get(i + 1) == Some(&ids[i]))
+        .count();
+    if 2 * in_holds > ids.len() {
+        let mut c = cannot_judge("whiteness", x.len());
+        c.detail = format!(
+            "cannot judge the whiteness of the residual: {in_holds} of {} disjoint windows lie within held inputs, where the angle's rounding drifts whatever the model; judge it on a multisine",
+            ids.len()
+        );
+        return c;
+    }
     let (test, r2) = breusch_godfrey(&x, LAGS);
     let Some(t) = test else {
         return cannot_judge("whiteness", x.len());
@@ -206,7 +224,7 @@ pub fn input_check(resid: &[f64], input: &[f64], cluster: &[usize], level: f64) 
     let x = disjoint(resid);
     let u = disjoint(input);
     let (test, share) = input_test(&x, &u, &disjoint_ids(cluster), LAGS);
-    let Some(t) = test else {
+    let Some(t) = test.filter(|t| t.dropped_share < super::MIN_EXPLAINED) else {
         return cannot_judge("input", x.len());
     };
     let passed = t.p_value >= level;

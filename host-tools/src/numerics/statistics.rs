@@ -211,6 +211,9 @@ pub struct RobustTest {
     pub rank: usize,
     /// Number of clusters `G`.
     pub clusters: usize,
+    /// Share of `u`'s sum of squares in the directions left out because one cluster decides
+    /// them alone ([`CLUSTER_LEVERAGE_CAP`]): what the test could not look at.
+    pub dropped_share: f64,
 }
 
 /// Cluster-robust Wald test that the columns `z` explain nothing of `u`, the residual of the
@@ -230,94 +233,163 @@ pub struct RobustTest {
 /// columns, and runs on an orthonormal basis of their span: `r` is the span's numerical rank
 /// (singular values above [`RANK_TOLERANCE`] of the largest), so that a column the null
 /// model already spans is not tested as rounding noise, less the directions one cluster
-/// decides alone ([`CLUSTER_LEVERAGE_CAP`]). `None` when the test cannot reject whatever the
-/// data: no direction left, or not more clusters than `r + 1`.
+/// decides alone ([`CLUSTER_LEVERAGE_CAP`]; their share of `u` is reported, for the caller
+/// to weigh what the test could not see). The rank is judged against the largest singular
+/// value, so the columns should be of like scale. `None` when the test cannot reject
+/// whatever the data: no direction left, or not more clusters than `r + 1`.
 pub fn robust_wald_test(u: &[f64], z: &[Vec<f64>], cluster: &[usize]) -> Option<RobustTest> {
     let n = u.len().min(cluster.len());
     if z.is_empty() || n == 0 || z.iter().any(|c| c.len() < n) {
         return None;
     }
-    let k = z.len();
-    let zm = faer::Mat::<f64>::from_fn(n, k, |i, j| z[j][i]);
-    let finite = u[..n].iter().all(|v| v.is_finite())
-        && zm
-            .col_iter()
-            .flat_map(|c| c.iter().copied())
-            .all(|v| v.is_finite());
-    if !finite {
+    let u = &u[..n];
+    if !u.iter().all(|v| v.is_finite()) {
         return None;
     }
-    let svd = zm.thin_svd().ok()?;
-    let sv: Vec<f64> = (0..k.min(n)).map(|i| svd.S().column_vector()[i]).collect();
-    let smax = sv.iter().cloned().fold(0.0, f64::max);
-    // Orthonormal basis `Q` of the columns' span, one column per numerically free direction.
-    let mut qcols: Vec<Vec<f64>> = (0..sv.len())
-        .filter(|&j| sv[j] > smax * RANK_TOLERANCE && sv[j] > 0.0)
-        .map(|j| (0..n).map(|i| svd.U()[(i, j)]).collect())
+    let bounds = cluster_bounds(&cluster[..n]);
+    let (q, dropped) = without_decided_directions(orthonormal_span(z, n)?, &bounds)?;
+    let uu: f64 = u.iter().map(|v| v * v).sum();
+    let dropped_share = if uu > 0.0 {
+        dropped
+            .iter()
+            .map(|d| d.iter().zip(u).map(|(x, y)| x * y).sum::<f64>().powi(2))
+            .sum::<f64>()
+            / uu
+    } else {
+        0.0
+    };
+    let a: Vec<f64> = q
+        .iter()
+        .map(|c| c.iter().zip(u).map(|(x, y)| x * y).sum())
         .collect();
+    let scores = jackknife_scores(u, &q, &a, &bounds)?;
+    let mut t = hotelling(&a, &scores)?;
+    t.dropped_share = dropped_share;
+    Some(t)
+}
+
+/// `[lo, hi)` row ranges of the consecutive runs of one id in `cluster`.
+fn cluster_bounds(cluster: &[usize]) -> Vec<(usize, usize)> {
     let mut bounds: Vec<(usize, usize)> = Vec::new();
-    for i in 0..n {
+    for i in 0..cluster.len() {
         if i == 0 || cluster[i] != cluster[i - 1] {
             bounds.push((i, i + 1));
         } else if let Some(last) = bounds.last_mut() {
             last.1 = i + 1;
         }
     }
-    // Leverage of cluster `g` on the basis: `A_g = Q_gᵀQ_g`. A direction on which one cluster
-    // has a leverage above [`CLUSTER_LEVERAGE_CAP`] rests on that cluster alone; it is dropped
-    // from the test, whose variance could not be estimated there.
-    let leverage = |qc: &[Vec<f64>], (lo, hi): (usize, usize)| -> faer::Mat<f64> {
-        let r = qc.len();
-        faer::Mat::<f64>::from_fn(r, r, |c1, c2| {
-            (lo..hi).map(|i| qc[c1][i] * qc[c2][i]).sum::<f64>()
-        })
-    };
+    bounds
+}
+
+/// Orthonormal basis of the span of the first `n` rows of the columns `z` (thin SVD), one
+/// column per singular value above [`RANK_TOLERANCE`] of the largest; `None` for non-finite
+/// entries or no free direction.
+fn orthonormal_span(z: &[Vec<f64>], n: usize) -> Option<Vec<Vec<f64>>> {
+    let k = z.len();
+    let zm = faer::Mat::<f64>::from_fn(n, k, |i, j| z[j][i]);
+    if !zm
+        .col_iter()
+        .flat_map(|c| c.iter().copied())
+        .all(|v| v.is_finite())
+    {
+        return None;
+    }
+    let svd = zm.thin_svd().ok()?;
+    let sv: Vec<f64> = (0..k.min(n)).map(|i| svd.S().column_vector()[i]).collect();
+    let smax = sv.iter().cloned().fold(0.0, f64::max);
+    let q: Vec<Vec<f64>> = (0..sv.len())
+        .filter(|&j| sv[j] > smax * RANK_TOLERANCE && sv[j] > 0.0)
+        .map(|j| (0..n).map(|i| svd.U()[(i, j)]).collect())
+        .collect();
+    (!q.is_empty()).then_some(q)
+}
+
+/// Leverage of the rows `[lo, hi)` on the orthonormal basis `q`: `A = Q_gᵀQ_g`.
+fn cluster_leverage(q: &[Vec<f64>], (lo, hi): (usize, usize)) -> faer::Mat<f64> {
+    let r = q.len();
+    faer::Mat::<f64>::from_fn(r, r, |c1, c2| {
+        (lo..hi).map(|i| q[c1][i] * q[c2][i]).sum::<f64>()
+    })
+}
+
+/// Orthonormal columns (one `Vec` per column).
+type Basis = Vec<Vec<f64>>;
+
+/// The basis `q` less every direction on which one cluster has a leverage above
+/// [`CLUSTER_LEVERAGE_CAP`] (the variance there would rest on that cluster alone), and the
+/// directions left out. Each round rotates the basis onto the worst cluster's eigenvectors
+/// (still orthonormal) and drops the top one, so the loop ends after at most `r` rounds.
+/// `None` when no direction is left.
+fn without_decided_directions(mut q: Basis, bounds: &[(usize, usize)]) -> Option<(Basis, Basis)> {
+    let mut dropped: Basis = Vec::new();
     loop {
-        let r = qcols.len();
+        let r = q.len();
         if r == 0 {
             return None;
         }
-        let mut worst: Option<(f64, faer::Mat<f64>, usize)> = None;
-        for &bd in &bounds {
-            let evd = leverage(&qcols, bd)
+        let mut worst: Option<(f64, faer::Mat<f64>)> = None;
+        for &bd in bounds {
+            // The largest eigenvalue is at most the trace, the cluster's summed leverage.
+            let trace: f64 = (bd.0..bd.1)
+                .map(|i| q.iter().map(|c| c[i] * c[i]).sum::<f64>())
+                .sum();
+            if trace <= CLUSTER_LEVERAGE_CAP {
+                continue;
+            }
+            let evd = cluster_leverage(&q, bd)
                 .self_adjoint_eigen(faer::Side::Lower)
                 .ok()?;
             // faer sorts the eigenvalues ascending: the last is the largest.
             let top = evd.S().column_vector()[r - 1];
             if top > CLUSTER_LEVERAGE_CAP && worst.as_ref().is_none_or(|w| top > w.0) {
-                worst = Some((top, evd.U().to_owned(), r - 1));
+                worst = Some((top, evd.U().to_owned()));
             }
         }
-        let Some((_, vecs, drop)) = worst else {
-            break;
+        let Some((_, vecs)) = worst else {
+            return Some((q, dropped));
         };
-        qcols = (0..r)
-            .filter(|&m| m != drop)
+        let n = q[0].len();
+        let mut rotated: Basis = (0..r)
             .map(|m| {
                 (0..n)
-                    .map(|i| (0..r).map(|c| qcols[c][i] * vecs[(c, m)]).sum())
+                    .map(|i| (0..r).map(|c| q[c][i] * vecs[(c, m)]).sum())
                     .collect()
             })
             .collect();
+        dropped.extend(rotated.pop());
+        q = rotated;
     }
-    let r = qcols.len();
-    let a: Vec<f64> = qcols
-        .iter()
-        .map(|c| c.iter().zip(&u[..n]).map(|(x, y)| x * y).sum())
+}
+
+/// Each cluster's score `(I − A_g)⁻¹ Q_gᵀ e_g`, with `e = u − Q·a` the residual after the
+/// columns: the score the cluster would have with the coefficients fitted without it (the
+/// jackknife; for a one-row cluster, HC3's `q_i·e_i/(1 − h_i)`). One column per basis
+/// direction, one row per cluster.
+fn jackknife_scores(
+    u: &[f64],
+    q: &[Vec<f64>],
+    a: &[f64],
+    bounds: &[(usize, usize)],
+) -> Option<Vec<Vec<f64>>> {
+    let r = q.len();
+    let e: Vec<f64> = (0..u.len())
+        .map(|i| u[i] - q.iter().zip(a).map(|(c, ac)| c[i] * ac).sum::<f64>())
         .collect();
-    // Residuals after the columns, then each cluster's score `(I − A_g)⁻¹ Q_gᵀ e_g`: the score
-    // the cluster would have with the coefficients fitted without it (the jackknife; for a
-    // one-row cluster, HC3's `q_i·e_i/(1 − h_i)`).
-    let e: Vec<f64> = (0..n)
-        .map(|i| u[i] - qcols.iter().zip(&a).map(|(c, ac)| c[i] * ac).sum::<f64>())
-        .collect();
-    let mut scores: Vec<Vec<f64>> = vec![Vec::new(); r];
-    for &(lo, hi) in &bounds {
-        let b: Vec<f64> = qcols
+    let mut scores: Vec<Vec<f64>> = vec![Vec::with_capacity(bounds.len()); r];
+    for &(lo, hi) in bounds {
+        if hi - lo == 1 {
+            // One row: `A = q_i q_iᵀ`, whose inverse of `I − A` on `q_i` is `1/(1 − h_i)`.
+            let h: f64 = q.iter().map(|c| c[lo] * c[lo]).sum();
+            for (col, c) in scores.iter_mut().zip(q) {
+                col.push(c[lo] * e[lo] / (1.0 - h));
+            }
+            continue;
+        }
+        let b: Vec<f64> = q
             .iter()
             .map(|c| (lo..hi).map(|i| c[i] * e[i]).sum())
             .collect();
-        let evd = leverage(&qcols, (lo, hi))
+        let evd = cluster_leverage(q, (lo, hi))
             .self_adjoint_eigen(faer::Side::Lower)
             .ok()?;
         let (lam, vecs) = (evd.S().column_vector(), evd.U());
@@ -332,7 +404,16 @@ pub fn robust_wald_test(u: &[f64], z: &[Vec<f64>], cluster: &[usize]) -> Option<
             col.push(v);
         }
     }
-    let g = scores[0].len();
+    Some(scores)
+}
+
+/// Hotelling's `T² = (G−1)/G · aᵀ(SᵀS)⁻¹a` of the projections `a` against the cluster scores
+/// `S` (one column per direction), and its p-value from `F = (G−r)/(r(G−1))·T² ~ F(r, G−r)`.
+/// `None` when it cannot decide: not more clusters than `r + 1`, scores of lower rank than
+/// the basis (every cluster's score on one line), or a non-finite result.
+fn hotelling(a: &[f64], scores: &[Vec<f64>]) -> Option<RobustTest> {
+    let r = scores.len();
+    let g = scores.first()?.len();
     if g <= r + 1 {
         return None;
     }
@@ -340,31 +421,31 @@ pub fn robust_wald_test(u: &[f64], z: &[Vec<f64>], cluster: &[usize]) -> Option<
     let ssvd = sm.thin_svd().ok()?;
     let ss: Vec<f64> = (0..r).map(|i| ssvd.S().column_vector()[i]).collect();
     let smax = ss.iter().cloned().fold(0.0, f64::max);
-    if !(smax > 0.0) {
+    if !(smax > 0.0 && smax.is_finite()) || ss.iter().any(|&sj| sj <= smax * RANK_TOLERANCE) {
         return None;
     }
-    // aᵀ(SᵀS)⁻¹a = Σ_j (v_jᵀa)² / σ_j²; a score matrix of lower rank than the basis (every
-    // cluster's score on one line) leaves the test undecidable.
+    // aᵀ(SᵀS)⁻¹a = Σ_j (v_jᵀa)² / σ_j².
     let v = ssvd.V();
-    let mut w = 0.0;
-    for (j, &sj) in ss.iter().enumerate() {
-        if sj <= smax * RANK_TOLERANCE {
-            return None;
-        }
-        let va: f64 = (0..r).map(|m| v[(m, j)] * a[m]).sum();
-        w += va * va / (sj * sj);
-    }
+    let w: f64 = ss
+        .iter()
+        .enumerate()
+        .map(|(j, &sj)| {
+            let va: f64 = (0..r).map(|m| v[(m, j)] * a[m]).sum();
+            va * va / (sj * sj)
+        })
+        .sum();
     let (gf, rf) = (g as f64, r as f64);
     let t2 = w * (gf - 1.0) / gf;
     let f = (gf - rf) / (rf * (gf - 1.0)) * t2;
     let p = statrs::distribution::FisherSnedecor::new(rf, gf - rf)
-        .map(|d| d.sf(f))
-        .unwrap_or(1.0);
-    Some(RobustTest {
+        .ok()?
+        .sf(f);
+    p.is_finite().then_some(RobustTest {
         t2,
-        p_value: if p.is_finite() { p } else { 1.0 },
+        p_value: p,
         rank: r,
         clusters: g,
+        dropped_share: 0.0,
     })
 }
 
@@ -537,7 +618,7 @@ mod tests {
             .collect();
         let ones = vec![1.0; n];
         let z: Vec<Vec<f64>> = z.iter().map(|c| residualise(c, &[&ones])).collect();
-        let sd = |k: usize| if k % 7 == 0 { 6.0 } else { 1.0 };
+        let sd = |k: usize| if k.is_multiple_of(7) { 6.0 } else { 1.0 };
         let rejected = (0..200)
             .filter(|&seed| {
                 let e = noise(n, seed + 2000);
