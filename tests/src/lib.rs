@@ -104,4 +104,5 @@ v0 = 3.676
 sigma0 = 317.225
 sigma1 = 22.2464
 "#;
+pub mod false_alarms;
 pub mod other_plant;

@@ -15,7 +15,13 @@ use std::path::PathBuf;
     that residual (F-test), the parameters are off and the refitted constants are printed: \
     refit first. WHITENESS: the residual must not be predictable from its own past \
     (Breusch-Godfrey on disjoint windows). INPUT: it must not be explained by the input of the \
-    last windows. Then what is MISSING: every effect of the list that the model lacks adds its \
+    last windows. Both, and the carriers below, use robust tests that hold their level where the \
+    residual is noisier in some windows than others (slips, steps) and where the windows of one \
+    held input share an error of the angle's reading. A log on which a test cannot decide (too \
+    few usable windows or held inputs for an equation; whiteness on voltage steps, whose angle \
+    rounding drifts within each hold) gets \"Cannot judge\" (JSON \"judged\": false, the \
+    check's statistic and p_value null). Judge a model on a multisine: on voltage steps even \
+    a correct model is often not adequate (docs/limits.md). Then what is MISSING: every effect of the list that the model lacks adds its \
     regressors (searched over cogging harmonics, Stribeck velocities, thermal time constants...) \
     and forward selection keeps an effect when it is significant (nested F-test p < 0.001 / \
     number of candidate variants, Bonferroni, with an effective sample size for autocorrelated \
@@ -30,7 +36,7 @@ use std::path::PathBuf;
     before breakaway. Load-dependent friction shows only where the drive brakes the moving \
     rotor. SINDYc models get no parameter check (their equations are not motor constants).\n\n\
     Each finding's `spec` carries the estimated parameters and is accepted by \
-    `motorid fit --add SPEC`. --json prints {\"adequate\": BOOL, \"effects\": [{\"name\", \
+    `motorid fit --add SPEC`. --json prints {\"adequate\": BOOL, \"judged\": BOOL, \"effects\": [{\"name\", \
     \"spec\", \"score\", \"explanation\"}, ...], \"unexplained\": [{\"variable\", \"share\", \
     \"explanation\"}, ...], \"checks\": [...], \"refit\": [...]}, most important first; \
     score and share = fraction of the residual explained."
@@ -138,6 +144,7 @@ pub fn run(args: Args) -> Result<()> {
             "{}",
             serde_json::json!({
                 "adequate": d.verdict.adequate,
+                "judged": d.verdict.judged,
                 "effects": effects,
                 "unexplained": unexplained,
                 "checks": d.verdict.checks,
@@ -179,13 +186,15 @@ fn print_verdict(model: &Model, args: &Args, d: &diagnose::Diagnosis) {
         );
         return;
     }
-    let only_data = !failed.is_empty()
-        && failed.iter().all(|c| c.name == "data")
+    // Every failed check is one that could not decide (its p-value NaN), and nothing else
+    // was found: the log cannot judge the model.
+    let only_undecided = !v.judged
+        && failed.iter().all(|c| c.p_value.is_nan())
         && d.effects.is_empty()
         && v.unexplained.is_empty();
-    if only_data {
+    if only_undecided {
         println!(
-            "Cannot judge: {} has too little motion to test the {} model (not adequate until a log can show it).",
+            "Cannot judge: {} has too little motion or too few held inputs to test the {} model (not adequate until a log can show it; a multisine judges best).",
             crate::log::echo_path(&args.data),
             model.kind.name()
         );
@@ -198,7 +207,12 @@ fn print_verdict(model: &Model, args: &Args, d: &diagnose::Diagnosis) {
         );
     }
     for c in &failed {
-        println!("  FAILED {:<10} {}", c.name, c.detail);
+        let tag = if c.p_value.is_nan() {
+            "UNDECIDED"
+        } else {
+            "FAILED"
+        };
+        println!("  {tag} {:<10} {}", c.name, c.detail);
     }
     if !v.refit.is_empty() {
         let vals: Vec<String> = v

@@ -4,10 +4,12 @@
 //! still somewhere. Each variable gets a smooth nonparametric function (a basis of hat
 //! functions on its quantiles, a Fourier series for the angle over one revolution, a band of
 //! sinusoids for a spectral peak), integrated against the same weak-form windows as the
-//! equation, and an F-test against a constant with the residual's effective sample size
-//! ([`statistics::effective_n`]). A variable *carries* structure when the test is significant at
-//! the family level split over every test of the run (Bonferroni) and the function explains at
-//! least the same share of the residual an effect must ([`super::MIN_EXPLAINED`]).
+//! equation, and tested against a constant on disjoint windows with a Wald test that holds
+//! its level whatever each window's variance and however the windows of one held input share
+//! an error ([`statistics::robust_wald_test`]). A variable *carries* structure when the test
+//! is significant at the family level split over the checks and variables of the run
+//! (Bonferroni; [`test_count`]) and the function explains at least the same share of the
+//! residual an effect must ([`super::MIN_EXPLAINED`]).
 //!
 //! | variable | its function | physics that leaves this signature |
 //! |---|---|---|
@@ -85,6 +87,9 @@ pub struct Rows<'a> {
     pub scale: Option<&'a [f64]>,
     /// Equation label for explanations.
     pub label: &'a str,
+    /// Cluster of each kept row ([`super::verdict::hold_clusters`]): rows that may share an
+    /// error of the angle's reading.
+    pub cluster: &'a [usize],
 }
 
 /// Hat functions on `knots` (ascending): a partition of unity, linear between knots.
@@ -146,33 +151,37 @@ fn sample_mask(rows: &Rows, n: usize) -> Vec<bool> {
 
 struct Tested {
     share: f64,
+    /// `NaN` when the test cannot reject on this log (too few windows or held inputs).
     p_value: f64,
+    /// Share of the residual in directions one held input decides alone (left untested).
+    dropped_share: f64,
     beta: Vec<f64>,
 }
 
-/// F-test of the residual on the weak-form integrals of sample-level columns, against a
-/// constant (∫φ). `spans_constant`: the columns sum to one (hats), so one is not free.
-fn test_columns(rows: &Rows, cols: &[Vec<f64>], spans_constant: bool, n_eff: f64) -> Tested {
-    test_rows(rows, cols, spans_constant, n_eff, 1)
-}
-
-/// As [`test_columns`] on every `step`-th kept row (`step` 2: disjoint windows, whose
-/// residuals are independent under a correct model, so the F-test needs no effective count).
-fn test_rows(
-    rows: &Rows,
-    cols: &[Vec<f64>],
-    spans_constant: bool,
-    n_eff: f64,
-    step: usize,
-) -> Tested {
+/// Test of the residual on the weak-form integrals of sample-level columns, beyond a
+/// constant (∫φ), on disjoint windows (every other row), whose
+/// residuals share no sample: the share is the columns' least-squares share of the
+/// residual's sum of squares, the p-value that of the cluster-robust Wald test
+/// ([`statistics::robust_wald_test`]), which holds its level where the residual's variance
+/// changes from window to window (stick-slip, steps) and where the windows of one held input
+/// share an error of the angle's reading. `spans_constant`: the columns sum to one (hats).
+///
+/// The columns are tested beyond a constant, not beyond the model's own columns: those are
+/// read from the same angle as the residual (errors in variables), and removing them from a
+/// carrier passes the angle's rounding noise into it, which the residual shares; a correct
+/// model's speed carrier then fires on most logs. The current would also rebuild, with the
+/// model's columns, the equation's own left side.
+fn test_columns(rows: &Rows, cols: &[Vec<f64>], spans_constant: bool) -> Tested {
+    let every_other = |v: &[f64]| -> Vec<f64> { v.iter().step_by(2).copied().collect() };
     let thin = |v: Vec<f64>| -> Vec<f64> {
         let v = match rows.scale {
             Some(w) => v.iter().zip(w).map(|(a, b)| a * b).collect(),
             None => v,
         };
-        v.into_iter().step_by(step).collect()
+        every_other(&v)
     };
-    let resid: Vec<f64> = rows.resid.iter().step_by(step).copied().collect();
+    let resid = every_other(rows.resid);
+    let cluster: Vec<usize> = rows.cluster.iter().step_by(2).copied().collect();
     let ones_w: Vec<f64> = thin(super::select_rows(
         &rows.wf.integral(&vec![1.0; cols[0].len()]),
         rows.keep,
@@ -181,27 +190,38 @@ fn test_rows(
         .iter()
         .map(|c| thin(super::select_rows(&rows.wf.integral(c), rows.keep)))
         .collect();
+    let null: [&[f64]; 1] = [&ones_w];
+    let base = least_squares::lstsq(&null, &resid);
+    let z: Vec<Vec<f64>> = w
+        .iter()
+        .map(|c| statistics::residualise(c, &null))
+        .collect();
+    let zr: Vec<&[f64]> = z.iter().map(|c| c.as_slice()).collect();
+    let beyond = least_squares::lstsq(&zr, &base.resid);
+    let share = if base.rss > 0.0 {
+        ((base.rss - beyond.rss) / base.rss).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let test = statistics::robust_wald_test(&base.resid, &z, &cluster);
+    let (p_value, dropped_share) = test.map_or((f64::NAN, 0.0), |t| (t.p_value, t.dropped_share));
+    // The shape for the report: the residual against the columns alone (and a constant
+    // where they do not span one).
     let mut refs: Vec<&[f64]> = Vec::with_capacity(w.len() + 1);
     if !spans_constant {
         refs.push(&ones_w);
     }
     refs.extend(w.iter().map(|c| c.as_slice()));
     let full = least_squares::lstsq(&refs, &resid);
-    let base = least_squares::lstsq(&[&ones_w], &resid);
-    let q = if spans_constant {
-        cols.len().saturating_sub(1)
-    } else {
-        cols.len()
-    };
-    let t = statistics::f_test(base.rss, full.rss, q.max(1), 1, n_eff);
     let beta = if spans_constant {
         full.beta
     } else {
         full.beta[1..].to_vec()
     };
     Tested {
-        share: t.explained,
-        p_value: t.p_value,
+        share,
+        p_value,
+        dropped_share,
         beta,
     }
 }
@@ -270,22 +290,42 @@ pub fn rms_frequency(u: &[f64], dt: f64) -> f64 {
     }
 }
 
-/// Number of tests [`carriers`] runs on one equation (for the Bonferroni count).
-pub fn test_count(s: &Signals, wf: &WeakForm) -> usize {
-    6 + band_centres(s, wf).len()
+/// Number of tests [`carriers`] runs on one equation, for the Bonferroni split of the level:
+/// one per variable. The frequency is one variable searched over many bands; its best band's
+/// p-value is multiplied by the number of bands searched (Bonferroni within the variable), so
+/// that a search over a wide band does not take the level from the other variables.
+pub fn test_count() -> usize {
+    7
+}
+
+/// The variables that carry the residual's structure, and those whose test cannot decide on
+/// this log.
+#[derive(Debug, Default)]
+pub struct Carried {
+    /// Carriers, largest share first.
+    pub carriers: Vec<Carrier>,
+    /// Variables whose test cannot reject anything here (too few windows or held inputs).
+    pub untested: Vec<&'static str>,
 }
 
 /// Rank the variables that carry the residual's structure; `level` is the per-test level.
-pub fn carriers(s: &Signals, rows: &Rows, level: f64, min_share: f64) -> Vec<Carrier> {
+pub fn carriers(s: &Signals, rows: &Rows, level: f64, min_share: f64) -> Carried {
     let n = s.len();
     if rows.resid.len() < 4 * KNOTS || n == 0 {
-        return vec![];
+        return Carried {
+            carriers: vec![],
+            untested: vec!["every variable"],
+        };
     }
     let mask = sample_mask(rows, n);
-    let n_eff = statistics::effective_n(rows.resid);
     let mut out: Vec<Carrier> = Vec::new();
+    let mut untested: Vec<&'static str> = Vec::new();
     let mut push = |variable: &'static str, t: Tested, knots: Vec<f64>, hz: Option<f64>| {
-        if t.p_value < level && t.share >= min_share {
+        // Untested: the test cannot decide, or what it had to leave out (directions one held
+        // input decides alone) could hold as much of the residual as an effect must explain.
+        if t.p_value.is_nan() || t.dropped_share >= min_share {
+            untested.push(variable);
+        } else if t.p_value < level && t.share >= min_share {
             let spec = table_spec(variable, &knots, rows.label, s);
             let shape = if knots.len() == t.beta.len() {
                 knots.into_iter().zip(t.beta).collect()
@@ -325,17 +365,12 @@ pub fn carriers(s: &Signals, rows: &Rows, level: f64, min_share: f64) -> Vec<Car
             cols.push(s.theta.iter().map(|x| (kf * x).sin()).collect());
             cols.push(s.theta.iter().map(|x| (kf * x).cos()).collect());
         }
-        push(
-            "theta",
-            test_columns(rows, &cols, false, n_eff),
-            vec![],
-            None,
-        );
+        push("theta", test_columns(rows, &cols, false), vec![], None);
     } else {
         let knots = quantile_knots(&s.theta, &mask, KNOTS);
         if knots.len() >= 3 {
             let cols = hats(&s.theta, &knots);
-            push("theta", test_columns(rows, &cols, true, n_eff), knots, None);
+            push("theta", test_columns(rows, &cols, true), knots, None);
         }
     }
     let acc =
@@ -362,7 +397,7 @@ pub fn carriers(s: &Signals, rows: &Rows, level: f64, min_share: f64) -> Vec<Car
                     .collect();
                 cols.extend(more);
             }
-            let t = test_columns(rows, &cols, true, n_eff);
+            let t = test_columns(rows, &cols, true);
             push(variable, t, if signed { vec![] } else { knots }, None);
         }
     }
@@ -376,18 +411,15 @@ pub fn carriers(s: &Signals, rows: &Rows, level: f64, min_share: f64) -> Vec<Car
                 .into_iter()
                 .map(|c| c.iter().zip(&sgn).map(|(a, b)| a * b).collect())
                 .collect();
-            push(
-                "reversal",
-                test_columns(rows, &cols, false, n_eff),
-                knots,
-                None,
-            );
+            push("reversal", test_columns(rows, &cols, false), knots, None);
         }
     }
-    // Frequency: the best band of sinusoids.
-    let resid_disjoint_n = rows.resid.len().div_ceil(2) as f64;
+    // Frequency: the band of sinusoids with the smallest p-value, adjusted for the bands
+    // searched (Bonferroni); a band the test cannot decide leaves the frequency untested.
     let mut best: Option<(f64, Tested)> = None;
-    for f0 in band_centres(s, rows.wf) {
+    let mut undecided: Option<Tested> = None;
+    let centres = band_centres(s, rows.wf);
+    for &f0 in &centres {
         let mut cols = Vec::new();
         for j in -2..=2 {
             let f = f0 * (1.0 + BAND * j as f64 / 2.0);
@@ -395,19 +427,26 @@ pub fn carriers(s: &Signals, rows: &Rows, level: f64, min_share: f64) -> Vec<Car
             cols.push(s.t.iter().map(|t| (w * t).sin()).collect());
             cols.push(s.t.iter().map(|t| (w * t).cos()).collect());
         }
-        // A band of 10 columns searched over many centres: tested on disjoint windows, where
-        // a correct model's residuals are independent (the effective count of overlapping
-        // windows overstated the evidence near the windows' own Nyquist frequency).
-        let t = test_rows(rows, &cols, false, resid_disjoint_n, 2);
-        if best.as_ref().is_none_or(|(_, b)| t.share > b.share) {
+        let t = test_columns(rows, &cols, false);
+        if t.p_value.is_nan() {
+            undecided.get_or_insert(t);
+        } else if best.as_ref().is_none_or(|(_, b)| t.p_value < b.p_value) {
             best = Some((f0, t));
         }
     }
-    if let Some((f0, t)) = best {
-        push("frequency", t, vec![], Some(f0));
+    match (undecided, best) {
+        (Some(t), _) => push("frequency", t, vec![], None),
+        (None, Some((f0, mut t))) => {
+            t.p_value = (t.p_value * centres.len() as f64).min(1.0);
+            push("frequency", t, vec![], Some(f0));
+        }
+        (None, None) => {}
     }
     out.sort_by(|a, b| b.share.total_cmp(&a.share));
-    out
+    Carried {
+        carriers: out,
+        untested,
+    }
 }
 
 /// Which physics leaves the signature of `variable`, in one sentence.

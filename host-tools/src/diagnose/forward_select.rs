@@ -9,6 +9,7 @@ use super::{
     explain, plausible, EqData, Finding, Options, Tested, MAX_FINDINGS, MIN_TORQUE_FRACTION,
     PRESLIDING_GAIN,
 };
+use crate::effect_spec::EffectSpec;
 use crate::numerics::least_squares::Gram;
 use crate::numerics::statistics;
 use control::effects::EffectKind;
@@ -29,6 +30,236 @@ pub(super) struct Selection {
     pub base_beta: Vec<f64>,
 }
 
+/// The candidate that won its kind in one round: its index in `data.cand`, the residual sum
+/// of squares with it, and its test against the current base.
+type Best = (usize, f64, statistics::FTest);
+
+/// One equation's columns (base, then every candidate's) and their Gram matrix.
+struct Problem<'a> {
+    data: &'a EqData,
+    all_cols: Vec<Vec<f64>>,
+    /// Indices into `all_cols` of each candidate's columns.
+    cand_idx: Vec<Vec<usize>>,
+    gram: Gram,
+    units: Units,
+}
+
+impl<'a> Problem<'a> {
+    fn new(data: &'a EqData, units: Units) -> Problem<'a> {
+        let mut all_cols: Vec<Vec<f64>> = data.base_cols.clone();
+        let mut cand_idx: Vec<Vec<usize>> = Vec::new();
+        for (_, cols) in &data.cand {
+            let start = all_cols.len();
+            all_cols.extend(cols.iter().cloned());
+            cand_idx.push((start..start + cols.len()).collect());
+        }
+        let gram = Gram::new(&all_cols, &data.y);
+        Problem {
+            data,
+            all_cols,
+            cand_idx,
+            gram,
+            units,
+        }
+    }
+
+    /// The base with candidate `ci` added.
+    fn with(&self, base: &[usize], ci: usize) -> Vec<usize> {
+        let mut subset = base.to_vec();
+        subset.extend(&self.cand_idx[ci]);
+        subset
+    }
+
+    /// `y` minus the fit of `subset` with coefficients `beta`.
+    fn resid_of(&self, subset: &[usize], beta: &[f64]) -> Vec<f64> {
+        let mut r = self.data.y.clone();
+        for (j, b) in subset.iter().zip(beta) {
+            for (v, c) in r.iter_mut().zip(&self.all_cols[*j]) {
+                *v -= b * c;
+            }
+        }
+        r
+    }
+
+    /// The spec candidate `ci` gets when added to `base`.
+    fn spec_for(&self, base: &[usize], ci: usize) -> EffectSpec {
+        let (beta, _) = self.gram.fit(&self.with(base, ci));
+        candidates::spec_of(&self.data.cand[ci].0, &beta[base.len()..], self.units)
+    }
+
+    /// Size of candidate `ci`'s torque [N·m] when added to `base`: RMS over the samples of
+    /// its fitted term (load friction's column is only its braking part: its size is its
+    /// whole torque).
+    fn size_of(&self, base: &[usize], ci: usize) -> f64 {
+        let (beta, _) = self.gram.fit(&self.with(base, ci));
+        let v = &self.data.cand[ci].0;
+        let cols = v
+            .torque
+            .as_ref()
+            .map_or(&v.columns[..], std::slice::from_ref);
+        let n = cols.first().map_or(0, |c| c.len());
+        let mut ss = 0.0;
+        for k in 0..n {
+            let v: f64 = cols
+                .iter()
+                .zip(&beta[base.len()..])
+                .map(|(c, b)| b * c[k])
+                .sum();
+            ss += v * v;
+        }
+        self.units.mech_scale * (ss / n.max(1) as f64).sqrt()
+    }
+
+    /// The best variant of every kind not chosen yet, tested against `base` (residual sum of
+    /// squares `rss_cur`, effective sample size `n_eff`).
+    fn best_by_kind(
+        &self,
+        base: &[usize],
+        chosen: &[EffectKind],
+        rss_cur: f64,
+        n_eff: f64,
+    ) -> Vec<Best> {
+        let mut best: Vec<Best> = Vec::new();
+        let mut kind_score: Vec<f64> = Vec::new();
+        for (ci, (v, _)) in self.data.cand.iter().enumerate() {
+            if chosen.contains(&v.kind) {
+                continue;
+            }
+            let subset = self.with(base, ci);
+            let (b1, rss1) = self.gram.fit(&subset);
+            // A presliding column is the bristles' own torque: a gain far from 1 means it
+            // stands for something else (see `PRESLIDING_GAIN`).
+            if v.kind == EffectKind::Presliding
+                && !b1.last().is_some_and(|g| {
+                    (1.0 / PRESLIDING_GAIN..=PRESLIDING_GAIN).contains(&(g * self.units.mech_scale))
+                })
+            {
+                continue;
+            }
+            let t = statistics::f_test(rss_cur, rss1, self.cand_idx[ci].len(), base.len(), n_eff);
+            // Cogging harmonics compete by leave-one-out: a high harmonic's column lives in
+            // the few slow windows, where it can fit one window's error (see
+            // `harmonics::leave_one_out_rss`).
+            let score = if v.kind == EffectKind::Cogging {
+                let cols: Vec<&[f64]> = subset
+                    .iter()
+                    .map(|&j| self.all_cols[j].as_slice())
+                    .collect();
+                harmonics::leave_one_out_rss(&cols, &self.data.y)
+            } else {
+                rss1
+            };
+            match best
+                .iter()
+                .position(|(j, _, _)| self.data.cand[*j].0.kind == v.kind)
+            {
+                Some(k) if kind_score[k] <= score => {}
+                Some(k) => (best[k], kind_score[k]) = ((ci, rss1, t), score),
+                None => {
+                    best.push((ci, rss1, t));
+                    kind_score.push(score);
+                }
+            }
+        }
+        best
+    }
+
+    /// The first round's tests, for tables: every kind's best variant against the base.
+    fn first_round(&self, base: &[usize], best: &[Best]) -> Vec<Tested> {
+        best.iter()
+            .map(|(ci, _, t)| Tested {
+                name: self.data.cand[*ci].0.kind.name().to_string(),
+                equation: self.data.eq,
+                spec: self.spec_for(base, *ci).to_string(),
+                explained: t.explained,
+                p_value: t.p_value,
+                kept: false,
+            })
+            .collect()
+    }
+
+    /// The candidate to add: the one removing the most residual among those significant,
+    /// relevant (against the model's own residual `rss0`: an effect that removes 2 % of what
+    /// is left after larger findings may still change the model's fit by a fraction of a
+    /// percent, and in the torque equation at least `min_torque`), favoured by BIC and
+    /// physically plausible.
+    fn pick(&self, st: &State, best: &[Best], alpha: f64, min_explained: f64) -> Option<Best> {
+        best.iter()
+            .filter(|(ci, rss1, t)| {
+                t.p_value < alpha
+                    && (st.rss_cur - rss1) >= min_explained * st.rss0
+                    && t.delta_bic < 0.0
+                    && plausible(&self.spec_for(&st.base, *ci))
+                    && (self.data.eq != Equation::Mechanical
+                        || self.size_of(&st.base, *ci) >= st.min_torque)
+            })
+            .max_by(|a, b| b.1.total_cmp(&a.1))
+            .copied()
+    }
+
+    /// The finding candidate `ci` makes when added to `st.base`.
+    fn finding(&self, st: &State, (ci, rss1, t): Best) -> Added {
+        let v = &self.data.cand[ci].0;
+        let subset = self.with(&st.base, ci);
+        let (beta, _) = self.gram.fit(&subset);
+        let spec = candidates::spec_of(v, &beta[st.base.len()..], self.units);
+        let score = if st.rss0 > 0.0 {
+            (st.rss_cur - rss1) / st.rss0
+        } else {
+            0.0
+        };
+        let finding = Finding {
+            name: v.kind.name().to_string(),
+            explanation: explain(&spec, score, self.data.eq),
+            spec: spec.to_string(),
+            score,
+            equation: self.data.eq,
+            p_value: t.p_value,
+            f: t.f,
+            delta_bic: t.delta_bic,
+            kind: Some(v.kind),
+        };
+        Added {
+            finding,
+            kind: v.kind,
+            spec,
+            subset,
+            beta,
+        }
+    }
+}
+
+/// A candidate added to the base: its finding, spec, the new base columns and coefficients.
+struct Added {
+    finding: Finding,
+    kind: EffectKind,
+    spec: EffectSpec,
+    subset: Vec<usize>,
+    beta: Vec<f64>,
+}
+
+/// Where forward selection stands: the columns in the base, their residual, and the floor of
+/// a relevant torque.
+struct State {
+    base: Vec<usize>,
+    /// Residual sum of squares of the model's own structure.
+    rss0: f64,
+    rss_cur: f64,
+    resid_cur: Vec<f64>,
+    min_torque: f64,
+    chosen: Vec<EffectKind>,
+}
+
+/// Relevance threshold [N·m]: from the model's Coulomb friction when it states one, else from
+/// the Coulomb friction refitted in the base (a model whose fit left fc at 0 still has one);
+/// see `MIN_TORQUE_FRACTION`.
+fn relevance_floor(data: &EqData, beta0: &[f64], units: Units) -> f64 {
+    match data.coulomb_col.and_then(|j| beta0.get(j)) {
+        Some(fc) if *fc > 0.0 => MIN_TORQUE_FRACTION * fc * units.mech_scale,
+        _ => data.min_torque,
+    }
+}
+
 /// Select the missing effects of `data` (units: `units.r` is updated from the electrical
 /// base's resistance).
 pub(super) fn select(
@@ -37,184 +268,53 @@ pub(super) fn select(
     alpha_per_test: f64,
     units: &mut Units,
 ) -> Selection {
-    let mut all_cols: Vec<Vec<f64>> = data.base_cols.clone();
-    let mut cand_idx: Vec<Vec<usize>> = Vec::new();
-    for (_, cols) in &data.cand {
-        let start = all_cols.len();
-        all_cols.extend(cols.iter().cloned());
-        cand_idx.push((start..start + cols.len()).collect());
-    }
-    let gram = Gram::new(&all_cols, &data.y);
-    let mut base: Vec<usize> = (0..data.base_cols.len()).collect();
-    let (beta0, rss0) = gram.fit(&base);
+    let mut pb = Problem::new(data, *units);
+    let base: Vec<usize> = (0..data.base_cols.len()).collect();
+    let (beta0, rss0) = pb.gram.fit(&base);
     if data.eq == Equation::Electrical && beta0.first().is_some_and(|r| *r > 0.0) {
         units.r = beta0[0];
     }
-    let units = *units;
-    let resid_of = |subset: &[usize], beta: &[f64]| -> Vec<f64> {
-        let mut r = data.y.clone();
-        for (j, b) in subset.iter().zip(beta) {
-            for (v, c) in r.iter_mut().zip(&all_cols[*j]) {
-                *v -= b * c;
-            }
-        }
-        r
-    };
-    let base_resid = resid_of(&base, &beta0);
+    pb.units = *units;
+    let base_resid = pb.resid_of(&base, &beta0);
     let n_eff_base = statistics::effective_n(&base_resid);
-    // Relevance threshold: from the model's Coulomb friction when it states one, else from the
-    // Coulomb friction refitted here (a model whose fit left fc at 0 still has one) or, once
-    // Coulomb friction is found, from the one found (see `MIN_TORQUE_FRACTION`).
-    let mut min_torque = data.min_torque;
-    if let Some(fc) = data.coulomb_col.and_then(|j| beta0.get(j)) {
-        if *fc > 0.0 {
-            min_torque = MIN_TORQUE_FRACTION * fc * units.mech_scale;
-        }
-    }
-
-    // Best variant per effect kind, tested against the current base.
-    let mut chosen_kinds: Vec<EffectKind> = Vec::new();
-    let mut findings = Vec::new();
+    let mut st = State {
+        min_torque: relevance_floor(data, &beta0, pb.units),
+        base,
+        rss0,
+        rss_cur: rss0,
+        resid_cur: base_resid.clone(),
+        chosen: Vec::new(),
+    };
+    let mut findings: Vec<Finding> = Vec::new();
     let mut first_round: Vec<Tested> = Vec::new();
-    let mut rss_cur = rss0;
-    let mut resid_cur = base_resid.clone();
     loop {
-        let n_eff = statistics::effective_n(&resid_cur);
-        let mut best_by_kind: Vec<(usize, f64, statistics::FTest)> = Vec::new();
-        let mut kind_score: Vec<f64> = Vec::new();
-        for (ci, (v, _)) in data.cand.iter().enumerate() {
-            if chosen_kinds.contains(&v.kind) {
-                continue;
-            }
-            let mut subset = base.clone();
-            subset.extend(&cand_idx[ci]);
-            let (b1, rss1) = gram.fit(&subset);
-            // A presliding column is the bristles' own torque: a gain far from 1 means it
-            // stands for something else (see `PRESLIDING_GAIN`).
-            if v.kind == EffectKind::Presliding
-                && !b1.last().is_some_and(|g| {
-                    (1.0 / PRESLIDING_GAIN..=PRESLIDING_GAIN).contains(&(g * units.mech_scale))
-                })
-            {
-                continue;
-            }
-            let t = statistics::f_test(rss_cur, rss1, cand_idx[ci].len(), base.len(), n_eff);
-            // Cogging harmonics compete by leave-one-out: a high harmonic's column lives in
-            // the few slow windows, where it can fit one window's error (see
-            // `harmonics::leave_one_out_rss`).
-            let score = if v.kind == EffectKind::Cogging {
-                let cols: Vec<&[f64]> = subset.iter().map(|&j| all_cols[j].as_slice()).collect();
-                harmonics::leave_one_out_rss(&cols, &data.y)
-            } else {
-                rss1
-            };
-            match best_by_kind
-                .iter()
-                .position(|(j, _, _)| data.cand[*j].0.kind == v.kind)
-            {
-                Some(k) if kind_score[k] <= score => {}
-                Some(k) => (best_by_kind[k], kind_score[k]) = ((ci, rss1, t), score),
-                None => {
-                    best_by_kind.push((ci, rss1, t));
-                    kind_score.push(score);
-                }
-            }
-        }
+        let n_eff = statistics::effective_n(&st.resid_cur);
+        let best = pb.best_by_kind(&st.base, &st.chosen, st.rss_cur, n_eff);
         if first_round.is_empty() {
-            for (ci, _, t) in &best_by_kind {
-                let v = &data.cand[*ci].0;
-                let mut subset = base.clone();
-                subset.extend(&cand_idx[*ci]);
-                let (beta, _) = gram.fit(&subset);
-                first_round.push(Tested {
-                    name: v.kind.name().to_string(),
-                    equation: data.eq,
-                    spec: candidates::spec_of(v, &beta[base.len()..], units).to_string(),
-                    explained: t.explained,
-                    p_value: t.p_value,
-                    kept: false,
-                });
-            }
+            first_round = pb.first_round(&st.base, &best);
         }
-        let spec_for = |ci: usize| {
-            let mut subset = base.clone();
-            subset.extend(&cand_idx[ci]);
-            let (beta, _) = gram.fit(&subset);
-            candidates::spec_of(&data.cand[ci].0, &beta[base.len()..], units)
-        };
-        // Size of the effect's torque [N·m]: RMS over the samples of its fitted term.
-        let size_of = |ci: usize| {
-            let mut subset = base.clone();
-            subset.extend(&cand_idx[ci]);
-            let (beta, _) = gram.fit(&subset);
-            let v = &data.cand[ci].0;
-            // Load friction's column is only its braking part: its size is its whole torque.
-            let cols = v
-                .torque
-                .as_ref()
-                .map_or(&v.columns[..], std::slice::from_ref);
-            let n = cols.first().map_or(0, |c| c.len());
-            let mut ss = 0.0;
-            for k in 0..n {
-                let v: f64 = cols
-                    .iter()
-                    .zip(&beta[base.len()..])
-                    .map(|(c, b)| b * c[k])
-                    .sum();
-                ss += v * v;
-            }
-            units.mech_scale * (ss / n.max(1) as f64).sqrt()
-        };
-        let Some(&(ci, rss1, t)) = best_by_kind
-            .iter()
-            .filter(|(ci, rss1, t)| {
-                // Relevance is measured against the model's own residual (rss0): an effect
-                // that removes 2 % of what is left after larger findings may still change the
-                // model's fit by a fraction of a percent.
-                t.p_value < alpha_per_test
-                    && (rss_cur - rss1) >= opts.min_explained * rss0
-                    && t.delta_bic < 0.0
-                    && plausible(&spec_for(*ci))
-                    && (data.eq != Equation::Mechanical || size_of(*ci) >= min_torque)
-            })
-            .max_by(|a, b| b.1.total_cmp(&a.1))
-        else {
+        let Some(pick) = pb.pick(&st, &best, alpha_per_test, opts.min_explained) else {
             break;
         };
-        let v = &data.cand[ci].0;
-        let mut subset = base.clone();
-        subset.extend(&cand_idx[ci]);
-        let (beta, _) = gram.fit(&subset);
-        let spec = candidates::spec_of(v, &beta[base.len()..], units);
-        let score = if rss0 > 0.0 {
-            (rss_cur - rss1) / rss0
-        } else {
-            0.0
-        };
-        findings.push(Finding {
-            name: v.kind.name().to_string(),
-            explanation: explain(&spec, score, data.eq),
-            spec: spec.to_string(),
-            score,
-            equation: data.eq,
-            p_value: t.p_value,
-            f: t.f,
-            delta_bic: t.delta_bic,
-            kind: Some(v.kind),
-        });
-        if let Some(x) = first_round.iter_mut().find(|x| x.name == v.kind.name()) {
+        let added = pb.finding(&st, pick);
+        if let Some(x) = first_round
+            .iter_mut()
+            .find(|x| x.name == added.finding.name)
+        {
             x.kept = true;
         }
-        if v.kind == EffectKind::Coulomb && data.eq == Equation::Mechanical {
-            let fc = spec.get("fc");
+        // Once Coulomb friction is found, the effects tested after it are measured against it.
+        if added.kind == EffectKind::Coulomb && data.eq == Equation::Mechanical {
+            let fc = added.spec.get("fc");
             if fc > 0.0 {
-                min_torque = MIN_TORQUE_FRACTION * fc;
+                st.min_torque = MIN_TORQUE_FRACTION * fc;
             }
         }
-        chosen_kinds.push(v.kind);
-        base = subset;
-        rss_cur = rss1;
-        resid_cur = resid_of(&base, &beta);
+        st.chosen.push(added.kind);
+        st.rss_cur = pick.1;
+        st.resid_cur = pb.resid_of(&added.subset, &added.beta);
+        st.base = added.subset;
+        findings.push(added.finding);
         if findings.len() >= MAX_FINDINGS {
             break;
         }
@@ -223,7 +323,7 @@ pub(super) fn select(
         findings,
         first_round,
         base_resid,
-        final_resid: resid_cur,
+        final_resid: st.resid_cur,
         n_eff_base,
         base_beta: beta0,
     }

@@ -23,6 +23,7 @@
 //!    `fit --add` accepts; its score is the fraction of the base residual it explains.
 pub mod candidates;
 pub mod carriers;
+mod equations;
 mod forward_select;
 pub mod harmonics;
 pub mod lookalikes;
@@ -37,7 +38,6 @@ use crate::numerics::weak_form;
 use candidates::{Equation, Signals, Units, Variant};
 use control::effects::{Effect, EffectKind};
 use control::motor::MotorParams;
-use forward_select::select;
 use serde::Serialize;
 
 /// Family-wise false-alarm probability of one `diagnose` run: the chance that a correct model
@@ -185,6 +185,12 @@ pub struct Diagnosis {
 pub struct Verdict {
     /// True only when every check passes, no effect is missing and nothing is unexplained.
     pub adequate: bool,
+    /// False when a check could not decide on this log: an equation with too few usable
+    /// windows ([`MIN_VERDICT_ROWS`]), too few held inputs for a test, a whiteness check on
+    /// held inputs, or a carrier whose test had to leave out too much (its p-value NaN). The
+    /// log cannot show whether the model is adequate, and `adequate` is false for that reason
+    /// alone when no finding, carrier or other check says otherwise.
+    pub judged: bool,
     /// Family-wise level of the checks and the per-test level after Bonferroni.
     pub level: f64,
     pub level_per_test: f64,
@@ -212,321 +218,65 @@ pub(super) struct EqData {
     pub(super) cand: Vec<(Variant, Vec<Vec<f64>>)>,
 }
 
-/// Diagnose a log against a model structure.
+/// Diagnose a log against a model structure: the log in weak form, the base and candidate
+/// columns of both equations, forward selection in the voltage equation and then in the
+/// torque equation ([`equations`]), and the verdict on the model as given ([`judge`]).
 pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
-    let h = if opts.half_width == 0 {
-        candidates::samples_for(weak_form::HALF_WIDTH_S, log.sample_period(), log.len() / 2)
-    } else {
-        opts.half_width
-    }
-    .max(2);
-    let mut s = signals_of(log, st, h, opts.steady_angle);
-    s.drive_model = modelled_drive(&s, st);
-    let wf = weak_form::WeakForm::new(s.len(), s.dt, h, h);
-    let voltage = s.plant == Plant::Voltage && s.i.is_some();
-    // The torque equation of a voltage plant integrates its held terms with the lag of the
-    // model's own step response (`numerics::weak_form`, module doc); a torque plant, or a model without
-    // motor constants (SINDYc), gets the plain interval weights.
-    let wf_m = match (voltage, st.motor) {
-        (true, Some(m)) => wf.held(weak_form::held_step_lag(
-            m.r,
-            m.l,
-            m.kt,
-            m.kb,
-            m.j,
-            viscous_of(&st.effects),
-            s.dt,
-        )),
-        _ => wf.held(0.0),
-    };
+    let f = equations::weak_forms(log, st, opts);
     // The model's own equations with its own numbers, for the verdict.
-    let given = st
+    let (given_mech, given_elec) = match st
         .motor
-        .map(|m| verdict::given_residuals(&s, &wf, &wf_m, &st.effects, &m));
-    let mut judged: Vec<Judged> = Vec::new();
-
-    // Electrical equation (voltage plant): V = R·I + L·İ + K_b·ω + losses, on the sample grid
-    // (the current sampled at t_k answers the input held just before).
-    let mut elec = EqData {
-        eq: Equation::Electrical,
-        y: wf.integral(&s.u),
-        base_cols: vec![],
-        base_sample: vec![],
-        min_torque: 0.0,
-        coulomb_col: None,
-        cand: vec![],
-    };
-    if voltage {
-        let i = s.i.as_ref().unwrap();
-        elec.base_cols.push(wf.integral(i));
-        // L·dI/dt just before a sample, where the current tracks the back-EMF
-        // quasi-statically: −(L·K_b/R)·ω̇ (the sampled current's own derivative would carry
-        // the input's steps, which the winding has settled from by then).
-        elec.base_cols.push(wf.second_derivative(&s.theta));
-        elec.base_cols.push(wf.derivative(&s.theta));
-    }
-    // Mechanical equation. Voltage plant: the current is eliminated with the electrical
-    // equation (L·İ ≈ 0 at this sample rate), `K_t·I = (K_t/R)·(V − K_b·ω − losses)`, so the
-    // torque balance reads in volts: `V − K_b·ω = (R/K_t)·(J·θ̈ + Σ torques) + losses`. The
-    // held input integrates exactly; no sampled current has to stand for its interval.
-    let mut mech = EqData {
-        eq: Equation::Mechanical,
-        y: vec![],
-        base_cols: vec![wf_m.second_derivative(&s.theta_torque)],
-        base_sample: vec![],
-        min_torque: min_torque(st, &s),
-        coulomb_col: None,
-        cand: vec![],
-    };
-    for e in &st.effects {
-        if matches!(e, Effect::Coulomb { fc } if *fc <= 0.0) {
-            mech.coulomb_col = Some(mech.base_cols.len());
-        }
-        for (eq, col) in candidates::present_columns(e, &s) {
-            if eq == Equation::Mechanical {
-                mech.base_cols.push(weak_torque(&wf_m, &s, &col));
-            } else {
-                elec.base_cols.push(wf.integral(&col));
-                mech.base_sample.push(col);
-            }
-        }
-    }
-    // Any Coulomb-like friction sticks at standstill (the smooth sign creeps below 0.05
-    // rad/s, which no Hall sensor resolves): the stick column belongs to the base then.
-    if !st.has(EffectKind::Coulomb)
-        && (st.has(EffectKind::Presliding) || st.has(EffectKind::Stribeck))
+        .map(|m| verdict::given_residuals(&f.s, &f.wf, &f.wf_m, &st.effects, &m))
     {
-        mech.base_cols.push(wf_m.integral(&s.stick_column()));
-    }
-
-    // Candidates.
-    let mut n_variants = 0usize;
-    // Presliding is tested on every window, reversals and standstills included (see
-    // `presliding_pass`).
-    let mut pre_cand: Vec<(Variant, Vec<Vec<f64>>)> = Vec::new();
-    let mut pre_nuisance: Vec<Vec<f64>> = Vec::new();
-    for kind in EffectKind::ALL {
-        if st.has(kind) {
-            continue;
-        }
-        let vs = if kind == EffectKind::Presliding {
-            let (nuisance, vs) = presliding_candidates(&s, st);
-            pre_nuisance = nuisance.iter().map(|c| wf_m.integral(c)).collect();
-            vs
-        } else {
-            candidates::variants(kind, &s)
-        };
-        for v in vs {
-            let w = if v.equation == Equation::Mechanical {
-                &wf_m
-            } else {
-                &wf
-            };
-            let cols: Vec<Vec<f64>> = v.columns.iter().map(|c| weak_torque(w, &s, c)).collect();
-            n_variants += 1;
-            if v.kind == EffectKind::Presliding {
-                pre_cand.push((v, cols));
-            } else if v.equation == Equation::Mechanical {
-                mech.cand.push((v, cols));
-            } else if voltage {
-                elec.cand.push((v, cols));
-            }
-        }
-    }
+        Some((m, e)) => (Some(m), e),
+        None => (None, None),
+    };
+    let (mut elec, mut mech) = equations::base_equations(&f, st);
+    let mut pre = equations::PreslidingTest::default();
+    let n_variants = equations::add_candidates(&f, st, &mut elec, &mut mech, &mut pre);
     let alpha_per_test = opts.alpha / n_variants.max(1) as f64;
-
-    let mut findings = Vec::new();
-    let mut tested = Vec::new();
-    let mut equations = Vec::new();
-    let paper = MotorParams::<f64>::paper();
     let mut units = Units {
-        r: paper.r,
+        r: MotorParams::<f64>::paper().r,
         kt: st.kt,
         mech_scale: 1.0,
     };
-    let centres = wf.centres.clone();
-    let input: Vec<f64> = centres.iter().map(|&c| s.u[c]).collect();
-    let push_eq = |eq: Equation,
-                   out: &forward_select::Selection,
-                   unit: &'static str,
-                   keep: Option<&[bool]>| {
-        let idx: Vec<usize> = (0..centres.len())
-            .filter(|&r| keep.is_none_or(|k| k[r]))
-            .collect();
-        let inp: Vec<f64> = idx.iter().map(|&r| input[r]).collect();
-        EquationResidual {
-            equation: eq,
-            t: idx.iter().map(|&r| s.t[centres[r]]).collect(),
-            centres: idx.iter().map(|&r| centres[r]).collect(),
-            base: out.base_resid.clone(),
-            after: out.final_resid.clone(),
-            n_eff: out.n_eff_base,
-            whiteness: statistics::whiteness(&out.base_resid, &inp, 30),
-            unit,
-        }
-    };
+    let mut acc = equations::Outcome::default();
     let mut kb = 0.0;
-    let mech_keep: Option<Vec<bool>>;
-    if voltage && !elec.y.is_empty() {
-        let out = select(&elec, opts, alpha_per_test, &mut units);
-        kb = out.base_beta.get(2).copied().unwrap_or(paper.kb);
-        // Voltage losses found here act in the torque equation (written in volts) too.
-        for f in &out.findings {
-            if let Some(v) = elec.cand.iter().find(|(v, _)| {
-                Some(v.kind) == f.kind
-                    && EffectSpec::parse(&f.spec)
-                        .is_ok_and(|sp| v.fixed.iter().all(|(k, x)| (sp.get(k) - x).abs() < 1e-9))
-            }) {
-                if v.0.kind != EffectKind::CurrentOffset {
-                    mech.base_sample.extend(v.0.columns.iter().cloned());
-                }
-            }
-        }
-        equations.push(push_eq(Equation::Electrical, &out, "V·s", None));
-        judged.push(Judged {
-            eq: Equation::Electrical,
-            scale: None,
-            keep: vec![true; wf.rows()],
-            given: given.as_ref().and_then(|g| g.1.clone()),
-            base: out.base_resid.clone(),
-            after: out.final_resid.clone(),
-            beta: out.base_beta.clone(),
-            p: elec.base_cols.len(),
-            input: wf.integral(&s.u),
-        });
-        findings.extend(out.findings);
-        tested.extend(out.first_round);
+    if f.voltage && !elec.y.is_empty() {
+        kb = equations::electrical_pass(
+            &f,
+            &elec,
+            &mut mech,
+            given_elec,
+            opts,
+            alpha_per_test,
+            &mut units,
+            &mut acc,
+        );
     }
-    if !wf.centres.is_empty() {
-        if voltage {
-            let zoh = wf_m.integral_zoh(&s.raw_u);
-            let w = wf_m.derivative(&s.theta_torque);
-            mech.y = zoh.iter().zip(&w).map(|(a, b)| a - kb * b).collect();
-            units.mech_scale = st.kt / units.r;
-            // The winding's L·dI/dt over each interval: its increments, exactly.
-            mech.base_cols.push(wf_m.derivative(s.i.as_ref().unwrap()));
-            for col in std::mem::take(&mut mech.base_sample) {
-                // Current offsets do not reach the torque equation written in volts.
-                mech.base_cols.push(wf_m.integral(&col));
-            }
-        } else {
-            mech.y = wf_m.integral_zoh(&s.raw_u);
-            units.mech_scale = 1.0;
-        }
-        // Load friction per sample interval, with the held input and the angle increments
-        // (the braking transients last about one sample; see `load_friction_intervals`): the
-        // candidate's column, or the base's when the model has it.
-        let (lf_col, lf_torque) = s.load_friction_intervals(kb, units.r);
-        if st.has(EffectKind::LoadFriction) {
-            mech.base_cols.push(wf_m.integral_zoh(&lf_col));
-        }
-        // A model's saturation likewise per interval (its I³ weighs the step transients).
-        if st.has(EffectKind::Saturation) && voltage {
-            mech.base_cols
-                .push(wf_m.integral_zoh(&s.saturation_intervals(units.r)));
-        }
-        for (v, cols) in mech.cand.iter_mut() {
-            if v.kind == EffectKind::LoadFriction {
-                *cols = vec![wf_m.integral_zoh(&lf_col)];
-                v.torque = Some(lf_torque.clone());
-            }
-        }
-        // Every window, for presliding (with its nuisance term, see `presliding_pass`).
-        let mut all_rows = (mech.y.clone(), mech.base_cols.clone());
-        all_rows.1.extend(pre_nuisance);
-        // Windows that touch a standstill are left out: there static friction is whatever
-        // balances the drive (an unknown per window), and the Hall angle cannot tell creep
-        // from rest. So are windows that hold a reversal (a sign change of the velocity
-        // estimate): a fast reversal skips the stick band between two samples, and when the
-        // friction switched inside those 12 ms is unknown (±0.15 N·m of residual per window
-        // on the step signal d with the true constants). Kept, those windows biased the
-        // refitted inertia by +20 % on signal d (its reversals brake hard), and with it any
-        // transient term; presliding is tested on every window (`presliding_pass`).
-        {
-            let keep: Vec<bool> = wf
-                .centres
-                .iter()
-                .map(|&c| {
-                    let win = &s.omega[c.saturating_sub(h)..(c + h + 1).min(s.len())];
-                    win.iter().all(|w| w.abs() >= s.stick_speed())
-                        && win.iter().all(|w| w.signum() == win[0].signum())
-                })
-                .collect();
-            mech.y = select_rows(&mech.y, &keep);
-            mech.base_cols = mech
-                .base_cols
-                .iter()
-                .map(|c| select_rows(c, &keep))
-                .collect();
-            for (_, cols) in mech.cand.iter_mut() {
-                *cols = cols.iter().map(|c| select_rows(c, &keep)).collect();
-            }
-            mech_keep = Some(keep);
-        }
-        // Rows weighted by their noise: a first fit gives the residual whose squares set
-        // the variance model ([`row_scale`]).
-        let scale = st.motor.filter(|_| opts.steady_angle).map(|m| {
-            let b = viscous_of(&st.effects);
-            let (a1, a2) = if voltage {
-                let ratio = if m.kt != 0.0 { m.r / m.kt } else { 0.0 };
-                (-(m.kb + ratio * b), -ratio * m.j)
-            } else {
-                (-b, -m.j)
-            };
-            let keep = mech_keep.as_deref().unwrap_or(&[]);
-            let v = select_rows(
-                &wf_m.angle_error_variance(a1, a2, &s.theta_torque_var),
-                keep,
-            );
-            let first = select(&mech, opts, alpha_per_test, &mut units.clone());
-            row_scale(&first.base_resid, &v)
-        });
-        if let Some(w) = &scale {
-            let mul = |x: &mut Vec<f64>| x.iter_mut().zip(w).for_each(|(a, b)| *a *= b);
-            mul(&mut mech.y);
-            mech.base_cols.iter_mut().for_each(mul);
-            for (_, cols) in mech.cand.iter_mut() {
-                cols.iter_mut().for_each(mul);
-            }
-        }
-        let out = select(&mech, opts, alpha_per_test, &mut units);
-        equations.push(push_eq(
-            Equation::Mechanical,
-            &out,
-            if voltage { "V·s" } else { "u·s" },
-            mech_keep.as_deref(),
-        ));
-        let keep = mech_keep.clone().unwrap_or_else(|| vec![true; wf.rows()]);
-        let scaled = |x: Vec<f64>| -> Vec<f64> {
-            match &scale {
-                Some(w) => x.iter().zip(w).map(|(a, b)| a * b).collect(),
-                None => x,
-            }
-        };
-        judged.push(Judged {
-            eq: Equation::Mechanical,
-            scale: scale.clone(),
-            given: given.as_ref().map(|g| scaled(select_rows(&g.0, &keep))),
-            input: scaled(select_rows(&wf_m.integral(&s.u), &keep)),
-            keep,
-            base: out.base_resid.clone(),
-            after: out.final_resid.clone(),
-            beta: out.base_beta.clone(),
-            p: mech.base_cols.len(),
-        });
-        if !pre_cand.is_empty() {
-            let pre = presliding_pass(&mech, &out.findings, all_rows, pre_cand, &wf_m, &s);
-            let pout = select(&pre, opts, alpha_per_test, &mut units);
-            findings.extend(pout.findings);
-            tested.extend(pout.first_round);
-        }
-        findings.extend(out.findings);
-        tested.extend(out.first_round);
+    if !f.wf.centres.is_empty() {
+        equations::mechanical_pass(
+            &f,
+            st,
+            mech,
+            pre,
+            (kb, given_mech),
+            opts,
+            alpha_per_test,
+            &mut units,
+            &mut acc,
+        );
     }
+    let equations::Outcome {
+        mut findings,
+        tested,
+        equations,
+        judged,
+    } = acc;
     resolve_offsets(&mut findings, st.kt);
     findings.sort_by(|a, b| b.score.total_cmp(&a.score));
     findings.truncate(MAX_FINDINGS);
-    let mut verdict = judge(&s, &wf, st, &judged, &findings, opts);
+    let mut verdict = judge(&f.s, &f.wf, st, &judged, &findings, opts);
     verdict.look_alikes =
         lookalikes::find(&findings, &tested, &verdict.unexplained, alpha_per_test);
     Diagnosis {
@@ -663,19 +413,20 @@ fn judge(
     findings: &[Finding],
     opts: &Options,
 ) -> Verdict {
-    let per_eq = 3 + carriers::test_count(s, wf);
+    let per_eq = 3 + carriers::test_count();
     let level = verdict::ADEQUACY_ALPHA;
     let level_per_test = level / (per_eq * judged.len()).max(1) as f64;
     let mut checks = Vec::new();
     let mut unexplained: Vec<carriers::Carrier> = Vec::new();
     let mut refit = Vec::new();
+    let all_clusters = verdict::hold_clusters(&s.raw_u, &wf.centres);
     for j in judged {
         // Too few windows to test anything: the verdict cannot be "adequate".
         if j.base.len() < MIN_VERDICT_ROWS {
             checks.push(verdict::Check {
                 name: "data",
                 statistic: j.base.len() as f64,
-                p_value: 0.0,
+                p_value: f64::NAN,
                 share: 0.0,
                 passed: false,
                 detail: format!(
@@ -698,10 +449,16 @@ fn judge(
             }
             checks.push(c);
         }
-        let mut w = verdict::whiteness_check(&j.after, level_per_test);
+        let cluster: Vec<usize> = all_clusters
+            .iter()
+            .zip(&j.keep)
+            .filter(|(_, k)| **k)
+            .map(|(c, _)| *c)
+            .collect();
+        let mut w = verdict::whiteness_check(&j.after, &cluster, level_per_test);
         w.detail = format!("{}: {}", j.eq.label(), w.detail);
         checks.push(w);
-        let mut x = verdict::input_check(&j.after, &j.input, level_per_test);
+        let mut x = verdict::input_check(&j.after, &j.input, &cluster, level_per_test);
         x.detail = format!("{}: {}", j.eq.label(), x.detail);
         checks.push(x);
         let rows = carriers::Rows {
@@ -710,8 +467,24 @@ fn judge(
             resid: &j.after,
             scale: j.scale.as_deref(),
             label: j.eq.label(),
+            cluster: &cluster,
         };
-        for c in carriers::carriers(s, &rows, level_per_test, opts.min_explained) {
+        let carried = carriers::carriers(s, &rows, level_per_test, opts.min_explained);
+        if !carried.untested.is_empty() {
+            checks.push(verdict::Check {
+                name: "carriers",
+                statistic: f64::NAN,
+                p_value: f64::NAN,
+                share: 0.0,
+                passed: false,
+                detail: format!(
+                    "{} equation: cannot judge what {} carry: too few windows or held inputs for the test to reject anything",
+                    j.eq.label(),
+                    carried.untested.join(", ")
+                ),
+            });
+        }
+        for c in carried.carriers {
             match unexplained.iter_mut().find(|u| u.variable == c.variable) {
                 Some(u) if u.share >= c.share => {}
                 Some(u) => *u = c,
@@ -720,12 +493,18 @@ fn judge(
         }
     }
     unexplained.sort_by(|a, b| b.share.total_cmp(&a.share));
+    // A check whose test cannot reject on this log (p-value NaN) leaves the verdict unjudged.
+    let testable = !judged.is_empty()
+        && checks
+            .iter()
+            .all(|c| c.name != "data" && !c.p_value.is_nan());
     let adequate = !judged.is_empty()
         && findings.is_empty()
         && unexplained.is_empty()
         && checks.iter().all(|c| c.passed);
     Verdict {
         adequate,
+        judged: testable,
         level,
         level_per_test,
         checks,

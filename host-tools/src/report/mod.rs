@@ -218,9 +218,14 @@ fn equation_section(page: &mut Page, e: &EquationResidual) {
 
 fn findings_section(page: &mut Page, d: &Diagnosis) {
     if d.effects.is_empty() {
-        page.paragraph(
-            "No missing effect is significant: the model explains the data down to its noise.",
-        );
+        let v = &d.verdict;
+        page.paragraph(if v.adequate {
+            "No missing effect is significant: the model explains the data down to its noise."
+        } else if !v.judged {
+            "No missing effect is significant, but the log cannot judge the model: too little motion or too few held inputs for the tests to reject."
+        } else {
+            "No named missing effect is significant, but the model leaves structure in the residual (see the verdict's failed checks)."
+        });
     } else {
         let rows: Vec<Vec<String>> = d
             .effects

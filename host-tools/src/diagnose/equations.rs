@@ -1,0 +1,419 @@
+//! The stages of [`super::diagnose`]: the log's weak forms, the two equations' base and
+//! candidate columns, forward selection in the voltage equation and then in the torque
+//! equation (which takes the voltage equation's K_b and losses), and the residuals the
+//! verdict judges.
+use super::candidates::{self, Equation, Signals, Units, Variant};
+use super::forward_select::{select, Selection};
+use super::{
+    min_torque, modelled_drive, presliding_candidates, presliding_pass, row_scale, select_rows,
+    signals_of, viscous_of, weak_torque, EqData, EquationResidual, Finding, Judged, Options,
+    Structure, Tested,
+};
+use crate::effect_spec::EffectSpec;
+use crate::log::{MotorLog, Plant};
+use crate::numerics::statistics;
+use crate::numerics::weak_form::{self, WeakForm};
+use control::effects::{Effect, EffectKind};
+
+/// One log in weak form: its signals, the voltage equation's point weights `wf` and the
+/// torque equation's interval weights `wf_m`.
+pub(super) struct Forms {
+    pub(super) s: Signals,
+    pub(super) wf: WeakForm,
+    pub(super) wf_m: WeakForm,
+    /// Window half-width [samples].
+    pub(super) h: usize,
+    /// A voltage plant with a measured current: the voltage equation exists.
+    pub(super) voltage: bool,
+}
+
+/// What the passes found so far.
+#[derive(Default)]
+pub(super) struct Outcome {
+    pub(super) findings: Vec<Finding>,
+    pub(super) tested: Vec<Tested>,
+    pub(super) equations: Vec<EquationResidual>,
+    pub(super) judged: Vec<Judged>,
+}
+
+/// The presliding candidates, tested apart on every window, and their nuisance columns.
+#[derive(Default)]
+pub(super) struct PreslidingTest {
+    pub(super) cand: Vec<(Variant, Vec<Vec<f64>>)>,
+    pub(super) nuisance: Vec<Vec<f64>>,
+}
+
+/// The log's weak forms.
+pub(super) fn weak_forms(log: &MotorLog, st: &Structure, opts: &Options) -> Forms {
+    let h = if opts.half_width == 0 {
+        candidates::samples_for(weak_form::HALF_WIDTH_S, log.sample_period(), log.len() / 2)
+    } else {
+        opts.half_width
+    }
+    .max(2);
+    let mut s = signals_of(log, st, h, opts.steady_angle);
+    s.drive_model = modelled_drive(&s, st);
+    let wf = WeakForm::new(s.len(), s.dt, h, h);
+    let voltage = s.plant == Plant::Voltage && s.i.is_some();
+    // The torque equation of a voltage plant integrates its held terms with the lag of the
+    // model's own step response (`numerics::weak_form`, module doc); a torque plant, or a model without
+    // motor constants (SINDYc), gets the plain interval weights.
+    let wf_m = match (voltage, st.motor) {
+        (true, Some(m)) => wf.held(weak_form::held_step_lag(
+            m.r,
+            m.l,
+            m.kt,
+            m.kb,
+            m.j,
+            viscous_of(&st.effects),
+            s.dt,
+        )),
+        _ => wf.held(0.0),
+    };
+    Forms {
+        s,
+        wf,
+        wf_m,
+        h,
+        voltage,
+    }
+}
+
+/// The base of both equations: the model's own structure (R, L, K_b; the inertia; every
+/// effect it has, each in the equation it acts in).
+pub(super) fn base_equations(f: &Forms, st: &Structure) -> (EqData, EqData) {
+    let (s, wf, wf_m) = (&f.s, &f.wf, &f.wf_m);
+    // Electrical equation (voltage plant): V = R·I + L·İ + K_b·ω + losses, on the sample grid
+    // (the current sampled at t_k answers the input held just before).
+    let mut elec = EqData {
+        eq: Equation::Electrical,
+        y: wf.integral(&s.u),
+        base_cols: vec![],
+        base_sample: vec![],
+        min_torque: 0.0,
+        coulomb_col: None,
+        cand: vec![],
+    };
+    if f.voltage {
+        let i = s.i.as_ref().unwrap();
+        elec.base_cols.push(wf.integral(i));
+        // L·dI/dt just before a sample, where the current tracks the back-EMF
+        // quasi-statically: −(L·K_b/R)·ω̇ (the sampled current's own derivative would carry
+        // the input's steps, which the winding has settled from by then).
+        elec.base_cols.push(wf.second_derivative(&s.theta));
+        elec.base_cols.push(wf.derivative(&s.theta));
+    }
+    // Mechanical equation. Voltage plant: the current is eliminated with the electrical
+    // equation (L·İ ≈ 0 at this sample rate), `K_t·I = (K_t/R)·(V − K_b·ω − losses)`, so the
+    // torque balance reads in volts: `V − K_b·ω = (R/K_t)·(J·θ̈ + Σ torques) + losses`. The
+    // held input integrates exactly; no sampled current has to stand for its interval.
+    let mut mech = EqData {
+        eq: Equation::Mechanical,
+        y: vec![],
+        base_cols: vec![wf_m.second_derivative(&s.theta_torque)],
+        base_sample: vec![],
+        min_torque: min_torque(st, s),
+        coulomb_col: None,
+        cand: vec![],
+    };
+    for e in &st.effects {
+        if matches!(e, Effect::Coulomb { fc } if *fc <= 0.0) {
+            mech.coulomb_col = Some(mech.base_cols.len());
+        }
+        for (eq, col) in candidates::present_columns(e, s) {
+            if eq == Equation::Mechanical {
+                mech.base_cols.push(weak_torque(wf_m, s, &col));
+            } else {
+                elec.base_cols.push(wf.integral(&col));
+                mech.base_sample.push(col);
+            }
+        }
+    }
+    // Any Coulomb-like friction sticks at standstill (the smooth sign creeps below 0.05
+    // rad/s, which no Hall sensor resolves): the stick column belongs to the base then.
+    if !st.has(EffectKind::Coulomb)
+        && (st.has(EffectKind::Presliding) || st.has(EffectKind::Stribeck))
+    {
+        mech.base_cols.push(wf_m.integral(&s.stick_column()));
+    }
+    (elec, mech)
+}
+
+/// Every effect of the list the model lacks, as candidate columns of the equation it acts in
+/// (presliding apart: it is tested on every window). Returns the number of variants tested.
+pub(super) fn add_candidates(
+    f: &Forms,
+    st: &Structure,
+    elec: &mut EqData,
+    mech: &mut EqData,
+    pre: &mut PreslidingTest,
+) -> usize {
+    let s = &f.s;
+    let mut n_variants = 0usize;
+    for kind in EffectKind::ALL {
+        if st.has(kind) {
+            continue;
+        }
+        let vs = if kind == EffectKind::Presliding {
+            let (nuisance, vs) = presliding_candidates(s, st);
+            pre.nuisance = nuisance.iter().map(|c| f.wf_m.integral(c)).collect();
+            vs
+        } else {
+            candidates::variants(kind, s)
+        };
+        for v in vs {
+            let w = if v.equation == Equation::Mechanical {
+                &f.wf_m
+            } else {
+                &f.wf
+            };
+            let cols: Vec<Vec<f64>> = v.columns.iter().map(|c| weak_torque(w, s, c)).collect();
+            n_variants += 1;
+            if v.kind == EffectKind::Presliding {
+                pre.cand.push((v, cols));
+            } else if v.equation == Equation::Mechanical {
+                mech.cand.push((v, cols));
+            } else if f.voltage {
+                elec.cand.push((v, cols));
+            }
+        }
+    }
+    n_variants
+}
+
+/// One equation's residuals for the report: the windows `keep` marks (all without it).
+fn residual_of(
+    f: &Forms,
+    eq: Equation,
+    out: &Selection,
+    unit: &'static str,
+    keep: Option<&[bool]>,
+) -> EquationResidual {
+    let centres = &f.wf.centres;
+    let idx: Vec<usize> = (0..centres.len())
+        .filter(|&r| keep.is_none_or(|k| k[r]))
+        .collect();
+    let inp: Vec<f64> = idx.iter().map(|&r| f.s.u[centres[r]]).collect();
+    EquationResidual {
+        equation: eq,
+        t: idx.iter().map(|&r| f.s.t[centres[r]]).collect(),
+        centres: idx.iter().map(|&r| centres[r]).collect(),
+        base: out.base_resid.clone(),
+        after: out.final_resid.clone(),
+        n_eff: out.n_eff_base,
+        whiteness: statistics::whiteness(&out.base_resid, &inp, 30),
+        unit,
+    }
+}
+
+/// Forward selection in the voltage equation. Returns the refitted K_b; voltage losses found
+/// there join the torque equation's base (written in volts, it carries them too).
+#[allow(clippy::too_many_arguments)]
+pub(super) fn electrical_pass(
+    f: &Forms,
+    elec: &EqData,
+    mech: &mut EqData,
+    given: Option<Vec<f64>>,
+    opts: &Options,
+    alpha_per_test: f64,
+    units: &mut Units,
+    acc: &mut Outcome,
+) -> f64 {
+    let out = select(elec, opts, alpha_per_test, units);
+    let kb = out
+        .base_beta
+        .get(2)
+        .copied()
+        .unwrap_or(control::motor::MotorParams::<f64>::paper().kb);
+    for found in &out.findings {
+        if let Some(v) = elec.cand.iter().find(|(v, _)| {
+            Some(v.kind) == found.kind
+                && EffectSpec::parse(&found.spec)
+                    .is_ok_and(|sp| v.fixed.iter().all(|(k, x)| (sp.get(k) - x).abs() < 1e-9))
+        }) {
+            if v.0.kind != EffectKind::CurrentOffset {
+                mech.base_sample.extend(v.0.columns.iter().cloned());
+            }
+        }
+    }
+    acc.equations
+        .push(residual_of(f, Equation::Electrical, &out, "V·s", None));
+    acc.judged.push(Judged {
+        eq: Equation::Electrical,
+        scale: None,
+        keep: vec![true; f.wf.rows()],
+        given,
+        base: out.base_resid.clone(),
+        after: out.final_resid.clone(),
+        beta: out.base_beta.clone(),
+        p: elec.base_cols.len(),
+        input: f.wf.integral(&f.s.u),
+    });
+    acc.findings.extend(out.findings);
+    acc.tested.extend(out.first_round);
+    kb
+}
+
+/// The torque equation's left side and the base columns that need K_b or act per sample
+/// interval: `V − K_b·ω` (volts) or the held torque, the winding's L·dI/dt, the voltage
+/// losses, the model's load friction and saturation; and the load-friction candidate's
+/// interval column.
+fn complete_torque_equation(
+    f: &Forms,
+    st: &Structure,
+    mech: &mut EqData,
+    kb: f64,
+    units: &mut Units,
+) {
+    let (s, wf_m) = (&f.s, &f.wf_m);
+    if f.voltage {
+        let zoh = wf_m.integral_zoh(&s.raw_u);
+        let w = wf_m.derivative(&s.theta_torque);
+        mech.y = zoh.iter().zip(&w).map(|(a, b)| a - kb * b).collect();
+        units.mech_scale = st.kt / units.r;
+        // The winding's L·dI/dt over each interval: its increments, exactly.
+        mech.base_cols.push(wf_m.derivative(s.i.as_ref().unwrap()));
+        for col in std::mem::take(&mut mech.base_sample) {
+            // Current offsets do not reach the torque equation written in volts.
+            mech.base_cols.push(wf_m.integral(&col));
+        }
+    } else {
+        mech.y = wf_m.integral_zoh(&s.raw_u);
+        units.mech_scale = 1.0;
+    }
+    // Load friction per sample interval, with the held input and the angle increments
+    // (the braking transients last about one sample; see `load_friction_intervals`): the
+    // candidate's column, or the base's when the model has it.
+    let (lf_col, lf_torque) = s.load_friction_intervals(kb, units.r);
+    if st.has(EffectKind::LoadFriction) {
+        mech.base_cols.push(wf_m.integral_zoh(&lf_col));
+    }
+    // A model's saturation likewise per interval (its I³ weighs the step transients).
+    if st.has(EffectKind::Saturation) && f.voltage {
+        mech.base_cols
+            .push(wf_m.integral_zoh(&s.saturation_intervals(units.r)));
+    }
+    for (v, cols) in mech.cand.iter_mut() {
+        if v.kind == EffectKind::LoadFriction {
+            *cols = vec![wf_m.integral_zoh(&lf_col)];
+            v.torque = Some(lf_torque.clone());
+        }
+    }
+}
+
+/// The torque equation's windows: those that touch neither a standstill nor a reversal.
+///
+/// At a standstill static friction is whatever balances the drive (an unknown per window),
+/// and the Hall angle cannot tell creep from rest. A window that holds a reversal (a sign
+/// change of the velocity estimate) is left out too: a fast reversal skips the stick band
+/// between two samples, and when the friction switched inside those 12 ms is unknown
+/// (±0.15 N·m of residual per window on voltage steps with the true constants). Kept, those
+/// windows biased the refitted inertia, and with it any transient term; presliding is tested
+/// on every window (`presliding_pass`).
+fn moving_windows(f: &Forms) -> Vec<bool> {
+    let s = &f.s;
+    f.wf.centres
+        .iter()
+        .map(|&c| {
+            let win = &s.omega[c.saturating_sub(f.h)..(c + f.h + 1).min(s.len())];
+            win.iter().all(|w| w.abs() >= s.stick_speed())
+                && win.iter().all(|w| w.signum() == win[0].signum())
+        })
+        .collect()
+}
+
+/// Every row of the equation (its left side, base and candidate columns) times `w`, or only
+/// the rows `keep` marks.
+fn map_rows(mech: &mut EqData, op: impl Fn(&[f64]) -> Vec<f64>) {
+    mech.y = op(&mech.y);
+    mech.base_cols = mech.base_cols.iter().map(|c| op(c)).collect();
+    for (_, cols) in mech.cand.iter_mut() {
+        *cols = cols.iter().map(|c| op(c)).collect();
+    }
+}
+
+/// Rows weighted by their noise (with `steady_angle`): a first fit gives the residual whose
+/// squares set the variance model ([`row_scale`]).
+fn noise_weights(
+    f: &Forms,
+    st: &Structure,
+    mech: &EqData,
+    keep: &[bool],
+    opts: &Options,
+    alpha_per_test: f64,
+    units: &Units,
+) -> Option<Vec<f64>> {
+    let m = st.motor.filter(|_| opts.steady_angle)?;
+    let b = viscous_of(&st.effects);
+    let (a1, a2) = if f.voltage {
+        let ratio = if m.kt != 0.0 { m.r / m.kt } else { 0.0 };
+        (-(m.kb + ratio * b), -ratio * m.j)
+    } else {
+        (-b, -m.j)
+    };
+    let v = select_rows(
+        &f.wf_m.angle_error_variance(a1, a2, &f.s.theta_torque_var),
+        keep,
+    );
+    let first = select(mech, opts, alpha_per_test, &mut units.clone());
+    Some(row_scale(&first.base_resid, &v))
+}
+
+/// Forward selection in the torque equation on its moving windows, then presliding on every
+/// window.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn mechanical_pass(
+    f: &Forms,
+    st: &Structure,
+    mut mech: EqData,
+    pre: PreslidingTest,
+    (kb, given): (f64, Option<Vec<f64>>),
+    opts: &Options,
+    alpha_per_test: f64,
+    units: &mut Units,
+    acc: &mut Outcome,
+) {
+    complete_torque_equation(f, st, &mut mech, kb, units);
+    let mut all_rows = (mech.y.clone(), mech.base_cols.clone());
+    all_rows.1.extend(pre.nuisance);
+    let keep = moving_windows(f);
+    map_rows(&mut mech, |c| select_rows(c, &keep));
+    let scale = noise_weights(f, st, &mech, &keep, opts, alpha_per_test, units);
+    if let Some(w) = &scale {
+        map_rows(&mut mech, |c| c.iter().zip(w).map(|(a, b)| a * b).collect());
+    }
+    let out = select(&mech, opts, alpha_per_test, units);
+    let unit = if f.voltage { "V·s" } else { "u·s" };
+    acc.equations.push(residual_of(
+        f,
+        Equation::Mechanical,
+        &out,
+        unit,
+        Some(&keep),
+    ));
+    let scaled = |x: Vec<f64>| -> Vec<f64> {
+        match &scale {
+            Some(w) => x.iter().zip(w).map(|(a, b)| a * b).collect(),
+            None => x,
+        }
+    };
+    acc.judged.push(Judged {
+        eq: Equation::Mechanical,
+        scale: scale.clone(),
+        given: given.map(|g| scaled(select_rows(&g, &keep))),
+        input: scaled(select_rows(&f.wf_m.integral(&f.s.u), &keep)),
+        keep,
+        base: out.base_resid.clone(),
+        after: out.final_resid.clone(),
+        beta: out.base_beta.clone(),
+        p: mech.base_cols.len(),
+    });
+    if !pre.cand.is_empty() {
+        let data = presliding_pass(&mech, &out.findings, all_rows, pre.cand, &f.wf_m, &f.s);
+        let pout = select(&data, opts, alpha_per_test, units);
+        acc.findings.extend(pout.findings);
+        acc.tested.extend(pout.first_round);
+    }
+    acc.findings.extend(out.findings);
+    acc.tested.extend(out.first_round);
+}
