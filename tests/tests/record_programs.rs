@@ -14,8 +14,10 @@ struct Board {
 }
 
 impl Board {
+    /// The emulated board at 10× real time: its 2 s link timeout is then 0.2 s of real time,
+    /// longer than a busy two-core machine pauses the recording process.
     fn start(dir: &Path) -> Board {
-        Board::start_at(dir, "50")
+        Board::start_at(dir, "10")
     }
 
     /// The emulated board at time factor `speed`.
