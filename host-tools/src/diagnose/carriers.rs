@@ -308,6 +308,16 @@ pub struct Carried {
     pub untested: Vec<&'static str>,
 }
 
+/// One variable's test, before it is judged a carrier, untested or neither.
+struct Finding {
+    variable: &'static str,
+    tested: Tested,
+    /// The hats' knots when the test's coefficients are a shape over them, else empty.
+    knots: Vec<f64>,
+    /// Centre of the frequency band [Hz], for the frequency's test.
+    hz: Option<f64>,
+}
+
 /// Rank the variables that carry the residual's structure; `level` is the per-test level.
 pub fn carriers(s: &Signals, rows: &Rows, level: f64, min_share: f64) -> Carried {
     let n = s.len();
@@ -318,40 +328,57 @@ pub fn carriers(s: &Signals, rows: &Rows, level: f64, min_share: f64) -> Carried
         };
     }
     let mask = sample_mask(rows, n);
-    let mut out: Vec<Carrier> = Vec::new();
-    let mut untested: Vec<&'static str> = Vec::new();
-    let mut push = |variable: &'static str, t: Tested, knots: Vec<f64>, hz: Option<f64>| {
-        // Untested: the test cannot decide, or what it had to leave out (directions one held
-        // input decides alone) could hold as much of the residual as an effect must explain.
+    let sgn: Vec<f64> = s.omega.iter().map(|w| w.signum()).collect();
+    let findings = angle_finding(s, rows, &mask)
+        .into_iter()
+        .chain(hat_findings(s, rows, &mask, &sgn))
+        .chain(reversal_finding(s, rows, &mask, &sgn))
+        .chain(frequency_finding(s, rows));
+    let mut carried = Carried::default();
+    for finding in findings {
+        carried.record(finding, s, rows, level, min_share);
+    }
+    carried.carriers.sort_by(|a, b| b.share.total_cmp(&a.share));
+    carried
+}
+
+impl Carried {
+    /// Judge one finding: untested where the test cannot decide, or where what it had to leave
+    /// out (directions one held input decides alone) could hold as much of the residual as an
+    /// effect must explain; a carrier where it rejects at `level` with at least `min_share`.
+    fn record(&mut self, f: Finding, s: &Signals, rows: &Rows, level: f64, min_share: f64) {
+        let t = f.tested;
         if t.p_value.is_nan() || t.dropped_share >= min_share {
-            untested.push(variable);
+            self.untested.push(f.variable);
         } else if t.p_value < level && t.share >= min_share {
-            let spec = table_spec(variable, &knots, rows.label, s);
-            let shape = if knots.len() == t.beta.len() {
-                knots.into_iter().zip(t.beta).collect()
+            let spec = table_spec(f.variable, &f.knots, rows.label, s);
+            let shape = if f.knots.len() == t.beta.len() {
+                f.knots.into_iter().zip(t.beta).collect()
             } else {
                 vec![]
             };
-            let mut explanation = explanation(variable, t.share, hz, rows.label);
+            let mut explanation = explanation(f.variable, t.share, f.hz, rows.label);
             if let Some(spec) = &spec {
                 explanation.push_str(&format!(
                     " Where no named effect fits, `motorid fit --add {spec}` adds a lookup table of torque over it."
                 ));
             }
-            out.push(Carrier {
-                variable,
+            self.carriers.push(Carrier {
+                variable: f.variable,
                 share: t.share,
                 p_value: t.p_value,
                 explanation,
                 shape,
-                hz,
+                hz: f.hz,
                 spec,
             });
         }
-    };
+    }
+}
 
-    // Angle: one revolution's Fourier series for a rotor that turns, else hats over the
-    // travel of a linear axis or a rotor that never completes two turns.
+/// Angle: one revolution's Fourier series for a rotor that turns, else hats over the travel of
+/// a linear axis or a rotor that never completes two turns.
+fn angle_finding(s: &Signals, rows: &Rows, mask: &[bool]) -> Option<Finding> {
     let (lo, hi) = s
         .theta
         .iter()
@@ -365,57 +392,82 @@ pub fn carriers(s: &Signals, rows: &Rows, level: f64, min_share: f64) -> Carried
             cols.push(s.theta.iter().map(|x| (kf * x).sin()).collect());
             cols.push(s.theta.iter().map(|x| (kf * x).cos()).collect());
         }
-        push("theta", test_columns(rows, &cols, false), vec![], None);
-    } else {
-        let knots = quantile_knots(&s.theta, &mask, KNOTS);
-        if knots.len() >= 3 {
-            let cols = hats(&s.theta, &knots);
-            push("theta", test_columns(rows, &cols, true), knots, None);
-        }
+        return Some(Finding {
+            variable: "theta",
+            tested: test_columns(rows, &cols, false),
+            knots: vec![],
+            hz: None,
+        });
     }
+    let knots = quantile_knots(&s.theta, mask, KNOTS);
+    (knots.len() >= 3).then(|| Finding {
+        variable: "theta",
+        tested: test_columns(rows, &hats(&s.theta, &knots), true),
+        knots,
+        hz: None,
+    })
+}
+
+/// Hats over speed, acceleration, current and time. Speed, acceleration and current are
+/// signed: their hats carry odd functions. Time is not: a friction that changes over the run
+/// acts with the direction of motion `sgn`, so time's hats come twice, plain and signed.
+fn hat_findings(s: &Signals, rows: &Rows, mask: &[bool], sgn: &[f64]) -> Vec<Finding> {
     let acc =
         crate::numerics::differentiation::smoothed_derivative(&s.omega, s.dt, s.velocity_half);
     let current: &[f64] = s.i.as_deref().unwrap_or(&s.raw_u);
-    let reversal: Vec<f64> = since_reversal(s);
-    let sgn: Vec<f64> = s.omega.iter().map(|w| w.signum()).collect();
-    // Speed, acceleration and current are signed: their hats carry odd functions. Time is
-    // not: a friction that changes over the run acts with the direction of motion, so time's
-    // hats come twice, plain and signed by the direction.
+    let mut found = Vec::new();
     for (variable, x, signed) in [
         ("omega", &s.omega[..], false),
         ("acceleration", &acc[..], false),
         ("current", current, false),
         ("time", &s.t[..], true),
     ] {
-        let knots = quantile_knots(x, &mask, KNOTS);
+        let knots = quantile_knots(x, mask, KNOTS);
         if knots.len() >= 3 {
             let mut cols = hats(x, &knots);
             if signed {
-                let more: Vec<Vec<f64>> = cols
-                    .iter()
-                    .map(|c| c.iter().zip(&sgn).map(|(a, b)| a * b).collect())
-                    .collect();
+                let more: Vec<Vec<f64>> = cols.iter().map(|c| signed_by(c, sgn)).collect();
                 cols.extend(more);
             }
-            let t = test_columns(rows, &cols, true);
-            push(variable, t, if signed { vec![] } else { knots }, None);
+            found.push(Finding {
+                variable,
+                tested: test_columns(rows, &cols, true),
+                knots: if signed { vec![] } else { knots },
+                hz: None,
+            });
         }
     }
-    {
-        // Hats over the time since the last reversal, signed by the direction of motion; the
-        // last knot also takes every sample long after a reversal.
-        let finite: Vec<f64> = reversal.iter().map(|r| r.min(1e300)).collect();
-        let knots = quantile_knots(&finite, &mask, KNOTS);
-        if knots.len() >= 3 {
-            let cols: Vec<Vec<f64>> = hats(&finite, &knots)
-                .into_iter()
-                .map(|c| c.iter().zip(&sgn).map(|(a, b)| a * b).collect())
-                .collect();
-            push("reversal", test_columns(rows, &cols, false), knots, None);
-        }
+    found
+}
+
+/// Hats over the time since the last reversal, signed by the direction of motion `sgn`; the
+/// last knot also takes every sample long after a reversal.
+fn reversal_finding(s: &Signals, rows: &Rows, mask: &[bool], sgn: &[f64]) -> Option<Finding> {
+    let finite: Vec<f64> = since_reversal(s).iter().map(|r| r.min(1e300)).collect();
+    let knots = quantile_knots(&finite, mask, KNOTS);
+    if knots.len() < 3 {
+        return None;
     }
-    // Frequency: the band of sinusoids with the smallest p-value, adjusted for the bands
-    // searched (Bonferroni); a band the test cannot decide leaves the frequency untested.
+    let cols: Vec<Vec<f64>> = hats(&finite, &knots)
+        .iter()
+        .map(|c| signed_by(c, sgn))
+        .collect();
+    Some(Finding {
+        variable: "reversal",
+        tested: test_columns(rows, &cols, false),
+        knots,
+        hz: None,
+    })
+}
+
+/// The column `c` times the direction of motion `sgn`, sample by sample.
+fn signed_by(c: &[f64], sgn: &[f64]) -> Vec<f64> {
+    c.iter().zip(sgn).map(|(a, b)| a * b).collect()
+}
+
+/// Frequency: the band of sinusoids with the smallest p-value, adjusted for the bands searched
+/// (Bonferroni); a band the test cannot decide leaves the frequency untested.
+fn frequency_finding(s: &Signals, rows: &Rows) -> Option<Finding> {
     let mut best: Option<(f64, Tested)> = None;
     let mut undecided: Option<Tested> = None;
     let centres = band_centres(s, rows.wf);
@@ -434,19 +486,20 @@ pub fn carriers(s: &Signals, rows: &Rows, level: f64, min_share: f64) -> Carried
             best = Some((f0, t));
         }
     }
-    match (undecided, best) {
-        (Some(t), _) => push("frequency", t, vec![], None),
+    let (tested, hz) = match (undecided, best) {
+        (Some(t), _) => (t, None),
         (None, Some((f0, mut t))) => {
             t.p_value = (t.p_value * centres.len() as f64).min(1.0);
-            push("frequency", t, vec![], Some(f0));
+            (t, Some(f0))
         }
-        (None, None) => {}
-    }
-    out.sort_by(|a, b| b.share.total_cmp(&a.share));
-    Carried {
-        carriers: out,
-        untested,
-    }
+        (None, None) => return None,
+    };
+    Some(Finding {
+        variable: "frequency",
+        tested,
+        knots: vec![],
+        hz,
+    })
 }
 
 /// Which physics leaves the signature of `variable`, in one sentence.

@@ -423,29 +423,13 @@ fn judge(
     for j in judged {
         // Too few windows to test anything: the verdict cannot be "adequate".
         if j.base.len() < MIN_VERDICT_ROWS {
-            checks.push(verdict::Check {
-                name: "data",
-                statistic: j.base.len() as f64,
-                p_value: f64::NAN,
-                share: 0.0,
-                passed: false,
-                detail: format!(
-                    "{} equation: only {} usable windows (at least {MIN_VERDICT_ROWS} are needed to test the residual); record a longer log with more motion",
-                    j.eq.label(),
-                    j.base.len()
-                ),
-            });
+            checks.push(too_few_windows(j));
             continue;
         }
-        if let Some(g) = &j.given {
-            let mut c = verdict::parameter_check(g, &j.base, j.p, level_per_test);
-            c.detail = format!("{}: {}", j.eq.label(), c.detail);
+        if let Some(given) = &j.given {
+            let c = parameter_check(j, given, level_per_test);
             if !c.passed {
-                let r_refit = judged
-                    .iter()
-                    .find(|e| e.eq == Equation::Electrical)
-                    .and_then(|e| e.beta.first().copied());
-                refit.extend(refitted_constants(j, st, r_refit));
+                refit.extend(refitted_constants(j, st, electrical_resistance(judged)));
             }
             checks.push(c);
         }
@@ -455,12 +439,7 @@ fn judge(
             .filter(|(_, k)| **k)
             .map(|(c, _)| *c)
             .collect();
-        let mut w = verdict::whiteness_check(&j.after, &cluster, level_per_test);
-        w.detail = format!("{}: {}", j.eq.label(), w.detail);
-        checks.push(w);
-        let mut x = verdict::input_check(&j.after, &j.input, &cluster, level_per_test);
-        x.detail = format!("{}: {}", j.eq.label(), x.detail);
-        checks.push(x);
+        checks.extend(residual_checks(j, &cluster, level_per_test));
         let rows = carriers::Rows {
             wf,
             keep: &j.keep,
@@ -470,27 +449,8 @@ fn judge(
             cluster: &cluster,
         };
         let carried = carriers::carriers(s, &rows, level_per_test, opts.min_explained);
-        if !carried.untested.is_empty() {
-            checks.push(verdict::Check {
-                name: "carriers",
-                statistic: f64::NAN,
-                p_value: f64::NAN,
-                share: 0.0,
-                passed: false,
-                detail: format!(
-                    "{} equation: cannot judge what {} carry: too few windows or held inputs for the test to reject anything",
-                    j.eq.label(),
-                    carried.untested.join(", ")
-                ),
-            });
-        }
-        for c in carried.carriers {
-            match unexplained.iter_mut().find(|u| u.variable == c.variable) {
-                Some(u) if u.share >= c.share => {}
-                Some(u) => *u = c,
-                None => unexplained.push(c),
-            }
-        }
+        checks.extend(untested_carriers(j, &carried.untested));
+        merge_carriers(&mut unexplained, carried.carriers);
     }
     unexplained.sort_by(|a, b| b.share.total_cmp(&a.share));
     // A check whose test cannot reject on this log (p-value NaN) leaves the verdict unjudged.
@@ -511,6 +471,79 @@ fn judge(
         unexplained,
         refit,
         look_alikes: Vec::new(),
+    }
+}
+
+/// The failed "data" check of an equation with too few windows to test its residual.
+fn too_few_windows(j: &Judged) -> verdict::Check {
+    verdict::Check {
+        name: "data",
+        statistic: j.base.len() as f64,
+        p_value: f64::NAN,
+        share: 0.0,
+        passed: false,
+        detail: format!(
+            "{} equation: only {} usable windows (at least {MIN_VERDICT_ROWS} are needed to test the residual); record a longer log with more motion",
+            j.eq.label(),
+            j.base.len()
+        ),
+    }
+}
+
+/// Are the model's own parameters as good as a refit of its structure? `given` is the
+/// residual with the model's numbers.
+fn parameter_check(j: &Judged, given: &[f64], level_per_test: f64) -> verdict::Check {
+    let mut c = verdict::parameter_check(given, &j.base, j.p, level_per_test);
+    c.detail = format!("{}: {}", j.eq.label(), c.detail);
+    c
+}
+
+/// The resistance [Ω] the refit of the electrical equation gives, when it was judged.
+fn electrical_resistance(judged: &[Judged]) -> Option<f64> {
+    judged
+        .iter()
+        .find(|e| e.eq == Equation::Electrical)
+        .and_then(|e| e.beta.first().copied())
+}
+
+/// The whiteness and input checks of one equation's residual after the findings; `cluster`
+/// is the hold cluster of each kept window.
+fn residual_checks(j: &Judged, cluster: &[usize], level_per_test: f64) -> [verdict::Check; 2] {
+    let mut w = verdict::whiteness_check(&j.after, cluster, level_per_test);
+    w.detail = format!("{}: {}", j.eq.label(), w.detail);
+    let mut x = verdict::input_check(&j.after, &j.input, cluster, level_per_test);
+    x.detail = format!("{}: {}", j.eq.label(), x.detail);
+    [w, x]
+}
+
+/// The failed "carriers" check naming the variables whose test cannot decide, if any.
+fn untested_carriers(j: &Judged, untested: &[&str]) -> Option<verdict::Check> {
+    if untested.is_empty() {
+        return None;
+    }
+    Some(verdict::Check {
+        name: "carriers",
+        statistic: f64::NAN,
+        p_value: f64::NAN,
+        share: 0.0,
+        passed: false,
+        detail: format!(
+            "{} equation: cannot judge what {} carry: too few windows or held inputs for the test to reject anything",
+            j.eq.label(),
+            untested.join(", ")
+        ),
+    })
+}
+
+/// Add one equation's carriers to those of the equations before: one per variable, the one
+/// with the larger share.
+fn merge_carriers(unexplained: &mut Vec<carriers::Carrier>, found: Vec<carriers::Carrier>) {
+    for c in found {
+        match unexplained.iter_mut().find(|u| u.variable == c.variable) {
+            Some(u) if u.share >= c.share => {}
+            Some(u) => *u = c,
+            None => unexplained.push(c),
+        }
     }
 }
 

@@ -50,8 +50,8 @@ pub struct Breakdown {
     pub sentences: Vec<String>,
 }
 
-/// A velocity band: its name and which samples belong to it.
-type Band<'a> = (&'static str, Box<dyn Fn(usize) -> bool + 'a>);
+/// A velocity band: its label and which samples belong to it.
+type Band<'a> = (String, Box<dyn Fn(usize) -> bool + 'a>);
 
 /// Inputs of the breakdown: one value per sample.
 pub struct RegionInputs<'a> {
@@ -83,121 +83,12 @@ pub fn breakdown(x: &RegionInputs) -> Breakdown {
     let n = x.error.len().min(x.omega.len()).min(x.theta.len());
     let e = &x.error[..n];
     let overall = rms(e);
-    let mut regions = Vec::new();
-    let pick = |f: &dyn Fn(usize) -> bool| -> Vec<f64> {
-        (0..n).filter(|&k| f(k)).map(|k| e[k]).collect()
-    };
-
-    // Velocity bands and reversals, in the log's velocity units and sample period.
-    let vscale = crate::scales::velocity_scale(&x.omega[..n]);
-    let (standstill, low_speed) = (sig3(STANDSTILL * vscale), sig3(LOW_SPEED * vscale));
-    let dt = if x.t.len() > 1 {
-        (x.t[x.t.len() - 1] - x.t[0]) / (x.t.len() - 1) as f64
-    } else {
-        0.0
-    };
-    let reversal_half = crate::scales::samples_for(REVERSAL_HALF_S, dt, n);
-    let mut near_rev = vec![false; n];
-    for k in 1..n {
-        if x.omega[k].signum() != x.omega[k - 1].signum() && x.omega[k] != 0.0 {
-            for v in
-                near_rev[k.saturating_sub(reversal_half)..(k + reversal_half).min(n)].iter_mut()
-            {
-                *v = true;
-            }
-        }
-    }
-    let high = {
-        let mut v: Vec<f64> = x.omega[..n].iter().map(|w| w.abs()).collect();
-        v.sort_by(f64::total_cmp);
-        v.get(n * 3 / 4)
-            .copied()
-            .unwrap_or(0.0)
-            .max(low_speed * 2.0)
-    };
-    let bands: [Band; 5] = [
-        (
-            "standstill",
-            Box::new(|k| x.omega[k].abs() < standstill && !near_rev[k]),
-        ),
-        ("reversals", Box::new(|k| near_rev[k])),
-        (
-            "low speed",
-            Box::new(|k| (standstill..low_speed).contains(&x.omega[k].abs()) && !near_rev[k]),
-        ),
-        (
-            "medium speed",
-            Box::new(|k| (low_speed..high).contains(&x.omega[k].abs())),
-        ),
-        ("high speed", Box::new(|k| x.omega[k].abs() >= high)),
-    ];
-    for (label, f) in bands.iter() {
-        let label = match *label {
-            "standstill" => format!("standstill (|ω| < {standstill} rad/s)"),
-            "low speed" => format!("low speed ({standstill}–{low_speed} rad/s)"),
-            "medium speed" => format!("medium speed ({low_speed}–{} rad/s)", sig3(high)),
-            "high speed" => format!("high speed (> {} rad/s)", sig3(high)),
-            other => other.to_string(),
-        };
-        regions.extend(region("velocity", label, &pick(f.as_ref()), overall));
-    }
-    // Direction.
-    regions.extend(region(
-        "direction",
-        "forward (ω > 0)".into(),
-        &pick(&|k| x.omega[k] > standstill),
-        overall,
-    ));
-    regions.extend(region(
-        "direction",
-        "backward (ω < 0)".into(),
-        &pick(&|k| x.omega[k] < -standstill),
-        overall,
-    ));
-    // Angle bins over one revolution.
-    const ANGLE_BINS: usize = 12;
-    for b in 0..ANGLE_BINS {
-        let lo = b as f64 * 360.0 / ANGLE_BINS as f64;
-        let hi = lo + 360.0 / ANGLE_BINS as f64;
-        let f = |k: usize| {
-            let d = x.theta[k].rem_euclid(std::f64::consts::TAU).to_degrees();
-            d >= lo && d < hi
-        };
-        regions.extend(region(
-            "angle",
-            format!("{lo:.0}–{hi:.0}°"),
-            &pick(&f),
-            overall,
-        ));
-    }
-    // Current quartiles.
+    let mut regions = velocity_regions(x.t, &x.omega[..n], e, overall);
+    regions.extend(angle_regions(&x.theta[..n], e, overall));
     if let Some(i) = x.current {
-        let mut a: Vec<f64> = i[..n].iter().map(|v| v.abs()).collect();
-        a.sort_by(f64::total_cmp);
-        let q = |p: usize| a.get(n * p / 4).copied().unwrap_or(0.0);
-        let edges = [0.0, q(1), q(2), q(3), f64::INFINITY];
-        for w in 0..4 {
-            let (lo, hi) = (edges[w], edges[w + 1]);
-            let f = |k: usize| (lo..hi).contains(&i[k].abs());
-            let label = if hi.is_finite() {
-                format!("|I| {lo:.2}–{hi:.2} A")
-            } else {
-                format!("|I| > {lo:.2} A")
-            };
-            regions.extend(region("current", label, &pick(&f), overall));
-        }
+        regions.extend(current_regions(&i[..n], e, overall));
     }
-    // Time quarters (drift).
-    for w in 0..4 {
-        let f = |k: usize| k * 4 / n.max(1) == w;
-        let (a, b) = (w * n / 4, ((w + 1) * n / 4).min(n.max(1)) - 1);
-        regions.extend(region(
-            "time",
-            format!("{:.0}–{:.0} s", x.t[a.min(n - 1)], x.t[b.min(n - 1)]),
-            &pick(&f),
-            overall,
-        ));
-    }
+    regions.extend(time_regions(x.t, e, overall));
     let spectrum = harmonics::angle_spectrum(&x.theta[..n], e, harmonics::MAX_HARMONIC);
     let sentences = sentences(&regions, &spectrum, x.what);
     Breakdown {
@@ -206,6 +97,142 @@ pub fn breakdown(x: &RegionInputs) -> Breakdown {
         spectrum,
         sentences,
     }
+}
+
+/// The errors `e[k]` of the samples `k` that `f` selects.
+fn pick(e: &[f64], f: &dyn Fn(usize) -> bool) -> Vec<f64> {
+    (0..e.len()).filter(|&k| f(k)).map(|k| e[k]).collect()
+}
+
+/// Mean sample period of the time column `t` [s]; 0 for fewer than two samples.
+fn sample_period(t: &[f64]) -> f64 {
+    if t.len() > 1 {
+        (t[t.len() - 1] - t[0]) / (t.len() - 1) as f64
+    } else {
+        0.0
+    }
+}
+
+/// The samples within `half` samples of a change of sign of the velocity `omega`.
+fn near_reversals(omega: &[f64], half: usize) -> Vec<bool> {
+    let n = omega.len();
+    let mut near = vec![false; n];
+    for k in 1..n {
+        if omega[k].signum() != omega[k - 1].signum() && omega[k] != 0.0 {
+            for v in near[k.saturating_sub(half)..(k + half).min(n)].iter_mut() {
+                *v = true;
+            }
+        }
+    }
+    near
+}
+
+/// Velocity bands, reversals and directions, in the log's velocity units and sample period;
+/// `omega` and `e` have one value per sample, `t` at least as many.
+fn velocity_regions(t: &[f64], omega: &[f64], e: &[f64], overall: f64) -> Vec<Region> {
+    let n = e.len();
+    let vscale = crate::scales::velocity_scale(omega);
+    let (standstill, low_speed) = (sig3(STANDSTILL * vscale), sig3(LOW_SPEED * vscale));
+    let reversal_half = crate::scales::samples_for(REVERSAL_HALF_S, sample_period(t), n);
+    let near_rev = near_reversals(omega, reversal_half);
+    let high = {
+        let mut v: Vec<f64> = omega.iter().map(|w| w.abs()).collect();
+        v.sort_by(f64::total_cmp);
+        v.get(n * 3 / 4)
+            .copied()
+            .unwrap_or(0.0)
+            .max(low_speed * 2.0)
+    };
+    let bands: [Band; 5] = [
+        (
+            format!("standstill (|ω| < {standstill} rad/s)"),
+            Box::new(|k| omega[k].abs() < standstill && !near_rev[k]),
+        ),
+        ("reversals".to_string(), Box::new(|k| near_rev[k])),
+        (
+            format!("low speed ({standstill}–{low_speed} rad/s)"),
+            Box::new(|k| (standstill..low_speed).contains(&omega[k].abs()) && !near_rev[k]),
+        ),
+        (
+            format!("medium speed ({low_speed}–{} rad/s)", sig3(high)),
+            Box::new(|k| (low_speed..high).contains(&omega[k].abs())),
+        ),
+        (
+            format!("high speed (> {} rad/s)", sig3(high)),
+            Box::new(|k| omega[k].abs() >= high),
+        ),
+    ];
+    let mut regions = Vec::new();
+    for (label, f) in bands {
+        regions.extend(region("velocity", label, &pick(e, f.as_ref()), overall));
+    }
+    let forward = pick(e, &|k| omega[k] > standstill);
+    regions.extend(region(
+        "direction",
+        "forward (ω > 0)".into(),
+        &forward,
+        overall,
+    ));
+    let backward = pick(e, &|k| omega[k] < -standstill);
+    regions.extend(region(
+        "direction",
+        "backward (ω < 0)".into(),
+        &backward,
+        overall,
+    ));
+    regions
+}
+
+/// Twelve bins of the rotor angle `theta` [rad] over one revolution.
+fn angle_regions(theta: &[f64], e: &[f64], overall: f64) -> Vec<Region> {
+    const ANGLE_BINS: usize = 12;
+    let mut regions = Vec::new();
+    for b in 0..ANGLE_BINS {
+        let lo = b as f64 * 360.0 / ANGLE_BINS as f64;
+        let hi = lo + 360.0 / ANGLE_BINS as f64;
+        let f = |k: usize| {
+            let d = theta[k].rem_euclid(std::f64::consts::TAU).to_degrees();
+            d >= lo && d < hi
+        };
+        let label = format!("{lo:.0}–{hi:.0}°");
+        regions.extend(region("angle", label, &pick(e, &f), overall));
+    }
+    regions
+}
+
+/// Quartiles of the current's magnitude `|i|` [A].
+fn current_regions(i: &[f64], e: &[f64], overall: f64) -> Vec<Region> {
+    let n = e.len();
+    let mut a: Vec<f64> = i.iter().map(|v| v.abs()).collect();
+    a.sort_by(f64::total_cmp);
+    let q = |p: usize| a.get(n * p / 4).copied().unwrap_or(0.0);
+    let edges = [0.0, q(1), q(2), q(3), f64::INFINITY];
+    let mut regions = Vec::new();
+    for w in 0..4 {
+        let (lo, hi) = (edges[w], edges[w + 1]);
+        let f = |k: usize| (lo..hi).contains(&i[k].abs());
+        let label = if hi.is_finite() {
+            format!("|I| {lo:.2}–{hi:.2} A")
+        } else {
+            format!("|I| > {lo:.2} A")
+        };
+        regions.extend(region("current", label, &pick(e, &f), overall));
+    }
+    regions
+}
+
+/// Quarters of the run in time, where a drift shows; `t` [s] has at least one value per
+/// sample of `e`.
+fn time_regions(t: &[f64], e: &[f64], overall: f64) -> Vec<Region> {
+    let n = e.len();
+    let mut regions = Vec::new();
+    for w in 0..4 {
+        let f = |k: usize| k * 4 / n.max(1) == w;
+        let (a, b) = (w * n / 4, ((w + 1) * n / 4).min(n.max(1)) - 1);
+        let label = format!("{:.0}–{:.0} s", t[a.min(n - 1)], t[b.min(n - 1)]);
+        regions.extend(region("time", label, &pick(e, &f), overall));
+    }
+    regions
 }
 
 /// Fraction of the error's variance one angle harmonic must explain to be named: 10 %.
