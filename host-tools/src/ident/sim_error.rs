@@ -493,13 +493,14 @@ pub fn data_scales<'a>(model: &Model, logs: impl Iterator<Item = &'a MotorLog>) 
 /// restart from the measured angle.
 ///
 /// The cost has nearby local minima (the inductance and inertia compensating a misplaced
-/// effect: a hidden offset or cogging torque), and which one a refinement reaches depends
-/// on its start. The candidates: each of `starts` (structures without the effects: the
-/// weak-form start and the base structure refined alone) with the effects of `model`
-/// (their weak-form estimate) moved to their [`better_effect_start`]; the cheapest is
-/// refined. (On the emulated motor the cheaper start also ends cheaper: with a hidden
-/// offset the weak-form start, with a hidden cogging torque the refined base; phase shifts
-/// of the cogging torque refined from one structure end in the same minimum.)
+/// effect: a hidden offset or cogging torque; a Stribeck bump below the speeds the axis
+/// holds, with α0 at 0, standing in for Coulomb friction), and which one a refinement
+/// reaches depends on its start. Each of `starts` (structures without the effects: the
+/// weak-form start and the base structure refined alone), with the effects of `model`
+/// (their weak-form estimate) moved to their [`better_effect_start`], is refined, and the
+/// refinement that ends cheapest is kept. The cheaper start does not always end cheaper: a
+/// base structure refined into such a corner is close to the data at the start and stays in
+/// the corner, while the weak-form start leaves it.
 pub fn refine_added_effects(
     model: &mut Model,
     starts: &[Model],
@@ -512,30 +513,41 @@ pub fn refine_added_effects(
     let seg = Residuals::segmented(logs, model.sensor.velocity_window);
     let mut free = base_free.to_vec();
     free.extend(super::linear::effect_free(model));
-    let mut best: Option<(f64, Model)> = None;
+    let mut best: Option<(f64, Model, Vec<Parameter>)> = None;
+    let mut first_err = None;
     for structure in starts {
         let mut m = structure.clone();
         m.effects = model.effects.clone();
         better_effect_start(&mut m, &seg);
-        let c = cost(&seg, &m);
-        tracing::debug!("added effects' start: cost {c:.4e}");
-        if best.as_ref().is_none_or(|b| c < b.0) {
-            best = Some((c, m));
+        let refined = refine_on(
+            &mut m,
+            &free,
+            &seg,
+            Jacobian::Sensitivities,
+            opts,
+            &mut |it, c| progress::report(stage, it, c),
+        );
+        match refined {
+            Ok(rows) => {
+                let c = cost(&seg, &m);
+                tracing::debug!("added effects refined: cost {c:.4e}");
+                if best.as_ref().is_none_or(|b| c < b.0) {
+                    best = Some((c, m, rows));
+                }
+            }
+            Err(e) => {
+                first_err.get_or_insert(e);
+            }
         }
     }
-    let Some((_, mut m)) = best else {
-        bail!("no start for the added effects");
-    };
-    let rows = refine_on(
-        &mut m,
-        &free,
-        &seg,
-        Jacobian::Sensitivities,
-        opts,
-        &mut |it, c| progress::report(stage, it, c),
-    )?;
-    *model = m;
-    Ok(rows)
+    match (best, first_err) {
+        (Some((_, m, rows)), _) => {
+            *model = m;
+            Ok(rows)
+        }
+        (None, Some(e)) => Err(e),
+        (None, None) => bail!("no start for the added effects"),
+    }
 }
 
 #[cfg(test)]
