@@ -41,8 +41,7 @@ pub struct Residuals<'a> {
     targets: Vec<Target<'a>>,
     window: usize,
     /// Multiple shooting: segment length [samples], each segment simulated from the measured
-    /// angle at its start and the other states where the run before it left them (the first
-    /// segment of a log from the measured state); `None`: one free run per log.
+    /// state at its start; `None`: one free run per log.
     segment: Option<usize>,
 }
 
@@ -52,15 +51,6 @@ pub struct Residuals<'a> {
 /// per period of the effect. Restarting from the measured angle every 2 s keeps the drift
 /// well below a cogging period (2π/7 ≈ 0.9 rad) while a segment still spans many mechanical
 /// time constants (J·R/(K_t·K_b) ≈ 13 ms) and Hall steps.
-///
-/// Only the angle is taken from the measurement at a segment's start: it is the one state
-/// that integrates the model's errors instead of forgetting them. The velocity, current and
-/// bristle deflection continue from the run before. Restarting them from the measurement
-/// would start every segment from the logged velocity, which the firmware's moving average
-/// delays by half its window (≈ 60 ms), and from bristles put on the Stribeck curve: a model
-/// that forgets its initial state faster then costs less. (On the emulated motor with a hidden
-/// cogging torque, refined from the true parameters, the minimum had the inertia 8 % and the
-/// bristle stiffness σ0 a factor 60 too low; with the angle alone re-anchored, 2 % and 16 %.)
 pub const SEGMENT_S: f64 = 2.0;
 
 impl<'a> Residuals<'a> {
@@ -158,18 +148,13 @@ impl<'a> Residuals<'a> {
             // on its own samples only. The free run is one segment from the first sample.
             let seg = self.segment.unwrap_or(n);
             let mut s = 0;
-            let mut prev: Option<(usize, freerun::Run<D>)> = None;
             while s < n {
                 let e = (s + seg).min(n);
                 let a = match self.segment {
                     Some(_) => s.saturating_sub(self.window),
                     None => s,
                 };
-                let carried = match &prev {
-                    Some((pa, run)) if a >= *pa => Some(run.carried(p, a - pa)),
-                    _ => None,
-                };
-                let run = freerun::run_range_from(p, re, tg.log, a, e, freerun::SUBSTEPS, carried)?;
+                let run = freerun::run_range(p, re, tg.log, a, e, freerun::SUBSTEPS)?;
                 let w = sensor_chain::velocity_estimate(&tg.log.t[a..e], &run.theta, self.window);
                 let off = s - a;
                 r.extend(
@@ -192,7 +177,6 @@ impl<'a> Residuals<'a> {
                         .zip(&tg.log.theta[s..e])
                         .map(|(a, b)| c(ANGLE_WEIGHT) * (*a - c(*b)) / c(tg.s_theta)),
                 );
-                prev = Some((a, run));
                 s = e;
             }
         }
@@ -593,27 +577,6 @@ mod tests {
         free.extend(super::super::linear::motor_free(Plant::Voltage));
         free.extend(super::super::linear::effect_free(&m));
         (m, free)
-    }
-
-    /// Segments take only the angle from the log: on a log whose angle is the model's own
-    /// free run, the multiple-shooting cost is the free run's. (Restarting the velocity from
-    /// the logged estimate, which lags by half its window, would make them differ.)
-    #[test]
-    fn segments_restart_only_the_angle() {
-        let cfg = EmulatorConfig::paper();
-        let mut log = simulate_signal(&cfg, SignalKind::A, 6.0).unwrap().log;
-        let model = cfg.truth_model();
-        log.theta = freerun::simulate(&model, &log).unwrap().theta;
-        let logs = [log];
-        let mut seg = Residuals::segmented(&logs, 10);
-        seg.segment = Some(120);
-        let free = Residuals::new(&logs, 10);
-        let (c_seg, c_free) = (cost(&seg, &model), cost(&free, &model));
-        assert!(c_free > 0.0);
-        assert!(
-            (c_seg - c_free).abs() <= 1e-6 * c_free,
-            "segments {c_seg:.9e}, free run {c_free:.9e}"
-        );
     }
 
     #[test]
