@@ -38,18 +38,7 @@ pub fn correct_model(maker: Maker, kind: SignalKind, seed: u64, opts: &Options) 
     if let Some(n) = noise {
         p.current_noise = n;
     }
-    let st = Structure {
-        plant: Plant::Voltage,
-        effects: vec![Effect::Coulomb { fc: p.fc }, Effect::Viscous { b: p.b }],
-        kt: p.kt,
-        motor: Some(MotorParams {
-            r: p.r,
-            l: p.l,
-            kt: p.kt,
-            kb: p.kt,
-            j: p.j,
-        }),
-    };
+    let st = correct_structure(&p);
     let log = p.run(&signal(kind, 60.0, seed), 0.012, seed);
     diagnose(&log, &st, opts)
 }
@@ -80,4 +69,25 @@ pub fn count(maker: Maker, kind: SignalKind, seeds: u64, opts: &Options) -> (usi
         }
     }
     (alarms, unjudged)
+}
+
+/// The correct model of `p` without its extra physics: its constants, Coulomb and viscous
+/// friction, and the rigid inertia of rotor and load where a load hangs on a coupling or gap.
+pub fn correct_structure(p: &OtherPlant) -> Structure {
+    let load = match p.extra {
+        Extra::Coupling { j2, .. } | Extra::Gap { j2, .. } => j2,
+        _ => 0.0,
+    };
+    Structure {
+        plant: Plant::Voltage,
+        effects: vec![Effect::Coulomb { fc: p.fc }, Effect::Viscous { b: p.b }],
+        kt: p.kt,
+        motor: Some(MotorParams {
+            r: p.r,
+            l: p.l,
+            kt: p.kt,
+            kb: p.kt,
+            j: p.j + load,
+        }),
+    }
 }

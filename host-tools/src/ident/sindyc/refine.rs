@@ -309,8 +309,9 @@ mod tests {
         log
     }
 
-    #[test]
-    fn refinement_moves_perturbed_coefficients_back_to_the_data() {
+    /// A model of both equations near the paper motor's: viscous and tanh friction, the
+    /// winding's resistance, back-EMF and input gain.
+    fn two_equation_truth() -> SindyModel<f64> {
         let mut truth = SindyModel::empty(5.0, 1.0, 1.0);
         truth.accel = SparseEq::from_slice(&[
             (Term::Xdot, -4.0),
@@ -321,6 +322,12 @@ mod tests {
         truth.idot =
             SparseEq::from_slice(&[(Term::Xdot, -240.0), (Term::I, -700.0), (Term::U, 3300.0)])
                 .unwrap();
+        truth
+    }
+
+    #[test]
+    fn refinement_moves_perturbed_coefficients_back_to_the_data() {
+        let truth = two_equation_truth();
         let log = log_of(&truth);
         let logs = std::slice::from_ref(&log);
         let res = SimResiduals::new(logs, Plant::Voltage, 10, Limits::default());
@@ -354,16 +361,7 @@ mod tests {
 
     #[test]
     fn the_current_weight_equalises_the_outputs_and_falls_with_current_noise() {
-        let mut truth = SindyModel::empty(5.0, 1.0, 1.0);
-        truth.accel = SparseEq::from_slice(&[
-            (Term::Xdot, -4.0),
-            (Term::I, 190.0),
-            (Term::TanhXdot, -240.0),
-        ])
-        .unwrap();
-        truth.idot =
-            SparseEq::from_slice(&[(Term::Xdot, -240.0), (Term::I, -700.0), (Term::U, 3300.0)])
-                .unwrap();
+        let truth = two_equation_truth();
         let mut start = truth.clone();
         start.accel.terms[1].1 *= 1.1;
         start.idot.terms[2].1 *= 0.95;
