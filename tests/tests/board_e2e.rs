@@ -336,7 +336,7 @@ fn commissioning_learns_every_hall_order_and_the_motor_then_runs() {
 fn an_uploaded_model_keeps_the_commissioned_hall_table() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let board = Board::start_wired(d, "50", &["--hall-order", "231", "--phase-order", "321"]);
+    let board = Board::start_wired(d, "10", &["--hall-order", "231", "--phase-order", "321"]);
     let first = ok(&motorid(
         d,
         &["commission", "--port", &board.port, "--json"],
