@@ -442,17 +442,27 @@ fn table_values(m: &Model) -> Vec<f64> {
         .unwrap_or_default()
 }
 
-/// The structure the loop kept, refitted by each [`Criterion`]: on the first 70 % of the
-/// training log from the loop's model there (scored on the held-out 30 %), and on the whole
-/// training log from the loop's final model (scored on both logs). `rounds` are [`run`]'s.
-pub fn criteria(train: &MotorLog, test: &MotorLog, rounds: &[Round]) -> Result<Vec<Route>> {
-    let (train, test) = (&prepare(train, DECIMATION), &prepare(test, 1));
+/// The training log split as the loop split it (first part, held-out part) and the last
+/// round the loop kept on that split.
+fn held_out_split<'r>(
+    train: &MotorLog,
+    rounds: &'r [Round],
+) -> Result<(MotorLog, MotorLog, &'r Round)> {
     let (first, held_out) = workflow::split_in_time(train, workflow::SELECT_FRACTION)?;
     let split = rounds
         .iter()
         .rev()
         .find(|r| r.kept && !r.whole_log)
         .context("no kept round")?;
+    Ok((first, held_out, split))
+}
+
+/// The structure the loop kept, refitted by each [`Criterion`]: on the first 70 % of the
+/// training log from the loop's model there (scored on the held-out 30 %), and on the whole
+/// training log from the loop's final model (scored on both logs). `rounds` are [`run`]'s.
+pub fn criteria(train: &MotorLog, test: &MotorLog, rounds: &[Round]) -> Result<Vec<Route>> {
+    let (train, test) = (&prepare(train, DECIMATION), &prepare(test, 1));
+    let (first, held_out, split) = held_out_split(train, rounds)?;
     let whole = rounds
         .iter()
         .find(|r| r.whole_log)
@@ -513,12 +523,7 @@ pub fn stroke_table_routes(
     criteria: &[Criterion],
 ) -> Result<Vec<Route>> {
     let (train, test) = (&prepare(train, DECIMATION), &prepare(test, 1));
-    let (first, held_out) = workflow::split_in_time(train, workflow::SELECT_FRACTION)?;
-    let split = rounds
-        .iter()
-        .rev()
-        .find(|r| r.kept && !r.whole_log)
-        .context("no kept round")?;
+    let (first, held_out, split) = held_out_split(train, rounds)?;
     let base = split
         .adds
         .iter()
