@@ -190,20 +190,7 @@ fn test_columns(rows: &Rows, cols: &[Vec<f64>], spans_constant: bool) -> Tested 
         .iter()
         .map(|c| thin(super::select_rows(&rows.wf.integral(c), rows.keep)))
         .collect();
-    let null: [&[f64]; 1] = [&ones_w];
-    let base = least_squares::lstsq(&null, &resid);
-    let z: Vec<Vec<f64>> = w
-        .iter()
-        .map(|c| statistics::residualise(c, &null))
-        .collect();
-    let zr: Vec<&[f64]> = z.iter().map(|c| c.as_slice()).collect();
-    let beyond = least_squares::lstsq(&zr, &base.resid);
-    let share = if base.rss > 0.0 {
-        ((base.rss - beyond.rss) / base.rss).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    let test = statistics::robust_wald_test(&base.resid, &z, &cluster);
+    let (test, share) = statistics::robust_test_beyond(&resid, &ones_w, &w, &cluster);
     let (p_value, dropped_share) = test.map_or((f64::NAN, 0.0), |t| (t.p_value, t.dropped_share));
     // The shape for the report: the residual against the columns alone (and a constant
     // where they do not span one).

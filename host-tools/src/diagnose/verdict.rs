@@ -32,8 +32,8 @@
 //! list is missing and no variable carries structure.
 use super::candidates::Signals;
 use crate::log::Plant;
+use crate::numerics::statistics;
 use crate::numerics::weak_form::WeakForm;
-use crate::numerics::{least_squares, statistics};
 use control::effects::{total_sensor_offset, total_voltage_loss, Effect, EffectInputs, EffectKind};
 use control::lugre::{LugreObserver, LugreParams};
 use control::motor::MotorParams;
@@ -104,22 +104,7 @@ fn lag_test(
     lagged: &[Vec<f64>],
     cluster: &[usize],
 ) -> (Option<statistics::RobustTest>, f64) {
-    let ones = vec![1.0; y.len()];
-    let null: [&[f64]; 1] = [&ones];
-    let base = least_squares::lstsq(&null, y);
-    let z: Vec<Vec<f64>> = lagged
-        .iter()
-        .map(|c| statistics::residualise(c, &null))
-        .collect();
-    let zr: Vec<&[f64]> = z.iter().map(|c| c.as_slice()).collect();
-    let full = least_squares::lstsq(&zr, &base.resid);
-    let share = if base.rss > 0.0 {
-        (1.0 - full.rss / base.rss).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    let test = statistics::robust_wald_test(&base.resid, &z, cluster);
-    (test, share)
+    statistics::robust_test_beyond(y, &vec![1.0; y.len()], lagged, cluster)
 }
 
 /// Robust test of `x` on the input `u` at lags `0..=m` (same indexing as `x`), against a

@@ -461,6 +461,28 @@ pub const CLUSTER_LEVERAGE_CAP: f64 = 0.5;
 /// that carries data.
 pub const RANK_TOLERANCE: f64 = 1e-7;
 
+/// [`robust_wald_test`] of the columns `cols` on `y`, both taken beyond the one null column
+/// `constant` (a constant, or its weak-form integral). Returns the test and the share of
+/// `y`'s sum of squares, beyond the constant, that the columns explain.
+pub fn robust_test_beyond(
+    y: &[f64],
+    constant: &[f64],
+    cols: &[Vec<f64>],
+    cluster: &[usize],
+) -> (Option<RobustTest>, f64) {
+    let null: [&[f64]; 1] = [constant];
+    let base = super::least_squares::lstsq(&null, y);
+    let z: Vec<Vec<f64>> = cols.iter().map(|c| residualise(c, &null)).collect();
+    let zr: Vec<&[f64]> = z.iter().map(|c| c.as_slice()).collect();
+    let beyond = super::least_squares::lstsq(&zr, &base.resid);
+    let share = if base.rss > 0.0 {
+        ((base.rss - beyond.rss) / base.rss).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (robust_wald_test(&base.resid, &z, cluster), share)
+}
+
 /// `c` minus its least-squares projection on `null` (the null model's columns).
 pub fn residualise(c: &[f64], null: &[&[f64]]) -> Vec<f64> {
     if null.is_empty() {
