@@ -59,26 +59,12 @@ const fn k(name: &'static str, unit: &'static str, default: f64, meaning: &'stat
 
 /// The keys of a `table`: the variable, the number of nodes, the range of ω or I the nodes
 /// span (set from the data by `fit`), then the torque at each node.
+#[rustfmt::skip]
 const TABLE_KEYS: &[Key] = &[
-    k(
-        "var",
-        TABLE_VAR_UNIT,
-        0.0,
-        "variable the torque is looked up by",
-    ),
+    k("var", TABLE_VAR_UNIT, 0.0, "variable the torque is looked up by"),
     k("bins", "bins", 8.0, "number of table nodes (2 to 16)"),
-    k(
-        "lo",
-        "rad, rad/s or A",
-        0.0,
-        "first node (omega, current; theta: start of a stroke)",
-    ),
-    k(
-        "hi",
-        "rad, rad/s or A",
-        0.0,
-        "last node (omega, current; theta: end of a stroke)",
-    ),
+    k("lo", "rad, rad/s or A", 0.0, "first node (omega, current; theta: start of a stroke)"),
+    k("hi", "rad, rad/s or A", 0.0, "last node (omega, current; theta: end of a stroke)"),
     k("b0", "N·m", 0.0, "table torque at node 0"),
     k("b1", "N·m", 0.0, "table torque at node 1"),
     k("b2", "N·m", 0.0, "table torque at node 2"),
@@ -118,168 +104,139 @@ pub fn table_value_key(k: usize) -> &'static str {
     TABLE_KEYS[4 + k.min(TABLE_MAX_BINS - 1)].name
 }
 
-/// The keys of an effect, in the order the spec prints them. Defaults are sized for the
-/// reference paper's motor (Coulomb friction 0.08 N·m, K_t = 0.071 N·m/A): clearly visible
-/// in the data, but smaller than the friction the base model already has.
+// The keys of each effect, in the order the spec prints them: name, unit, default, meaning.
+// Defaults are sized for the reference paper's motor (Coulomb friction 0.08 N·m,
+// K_t = 0.071 N·m/A): clearly visible in the data, but smaller than the friction the base
+// model already has.
+
+/// Backlash. Default: a load twice the paper rotor's inertia behind a gap of two Hall steps
+/// of the paper's board (0.19 rad), a worn gear stage seen at the rotor.
+#[rustfmt::skip]
+const BACKLASH_KEYS: &[Key] = &[
+    k("j2", "kg·m²", 6e-4, "inertia of the load behind the gap"),
+    k("gap", "rad", 0.19, "angle the rotor turns alone after a reversal"),
+];
+
+/// Coulomb friction.
+const COULOMB_KEYS: &[Key] = &[k("fc", "N·m", 0.05, "Coulomb friction torque")];
+
+/// Viscous friction.
+const VISCOUS_KEYS: &[Key] = &[k("b", "N·m·s/rad", 0.001, "viscous friction coefficient")];
+
+/// Stribeck friction.
+#[rustfmt::skip]
+const STRIBECK_KEYS: &[Key] = &[
+    k("fs", "N·m", 0.04, "breakaway torque above Coulomb"),
+    k("vs", "rad/s", 5.0, "Stribeck velocity"),
+];
+
+/// Presliding (the LuGre bristles). Defaults: the compliance of a geared axis as seen at the
+/// rotor, where presliding becomes visible. A size-14 harmonic drive winds up about 1 mrad at
+/// its output under its rated torque (torsional stiffness of a few 10³ N·m/rad); with ratio
+/// 100 the rotor sees that stiffness divided by 100², about 0.4 N·m/rad. With the paper's
+/// static friction s(0) = α0 + α1 = 0.0975 N·m the breakaway deflection s(0)/σ0 is then
+/// 0.24 rad at the rotor, 2.6 Hall steps (0.095 rad) of the paper's board. (The paper's own
+/// bristles, σ0 = 317, deflect 0.3 mrad: far inside one Hall step, invisible.) σ1 = 0.022:
+/// critical damping of the rotor inertia J = 3e-4 kg·m² on that spring, 2·√(σ0·J).
+#[rustfmt::skip]
+const PRESLIDING_KEYS: &[Key] = &[
+    k("sigma0", "N·m/rad", 0.4, "bristle stiffness"),
+    k("sigma1", "N·m·s/rad", 0.022, "bristle damping"),
+];
+
+/// Cogging torque.
+#[rustfmt::skip]
+const COGGING_KEYS: &[Key] = &[
+    k("harmonic", "1/rev", 7.0, "periods per revolution (2 or more)"),
+    k("amp", "N·m", 0.03, "torque amplitude"),
+    k("phase", "rad", 0.0, "phase"),
+];
+
+/// A load torque periodic in angle, one period per revolution.
+#[rustfmt::skip]
+const POSITION_LOAD_KEYS: &[Key] = &[
+    k("amp", "N·m", 0.05, "torque amplitude (one period per revolution)"),
+    k("phase", "rad", 0.0, "phase"),
+];
+
+/// A constant load torque.
+const OFFSET_KEYS: &[Key] = &[k("t0", "N·m", 0.03, "constant load torque")];
+
+/// Friction that differs by direction.
+#[rustfmt::skip]
+const ASYMMETRY_KEYS: &[Key] = &[
+    k("dv", "N·m·s/rad", 0.0008, "viscous friction difference (b ± dv by direction)"),
+    k("dc", "N·m", 0.0, "Coulomb friction difference (fc ± dc by direction)"),
+];
+
+/// The inverter's voltage loss.
+const DEADTIME_KEYS: &[Key] = &[k(
+    "vd",
+    "V",
+    0.3,
+    "inverter voltage loss, sign of the current",
+)];
+
+/// The current sensor's offset.
+const CURRENT_OFFSET_KEYS: &[Key] = &[k("i0", "A", 0.2, "current-sensor offset")];
+
+/// Winding resistance rising as the motor heats. Defaults: copper's resistance rises
+/// 0.393 %/K; k = 0.02/A² is +8 % (≈ +20 K of winding) at 2 A steady and +2 % at 1 A, what a
+/// small BLDC motor with a few K/W winding-to-ambient reaches at the paper's currents (a
+/// tenth of it, +0.8 %, is too small to see in a 60–90 s log). tau = 30 s: a small motor's
+/// winding thermal time constant (the case takes minutes).
+#[rustfmt::skip]
+const THERMAL_KEYS: &[Key] = &[
+    k("k", "1/A²", 0.02, "relative resistance rise per A² of steady current"),
+    k("tau", "s", 30.0, "thermal time constant"),
+];
+
+/// Friction growing with transmitted torque. Default μ = 0.2: high-ratio transmissions (worm
+/// and harmonic gears, lead screws) lose 10–30 % of the torque they transmit; spur gears and
+/// ball screws 2–10 %. Smaller values differ from a lower K_t only while the drive brakes and
+/// are not visible on the paper motor (docs/limits.md).
+const LOAD_FRICTION_KEYS: &[Key] = &[k("mu", "1", 0.2, "friction per N·m of transmitted torque")];
+
+/// A second inertia on a spring-damper coupling. Default: a load twice the paper rotor's
+/// inertia on a coupling that resonates near 5 Hz, lightly damped (ζ ≈ 0.05), as a flexible
+/// coupling or a long shaft.
+#[rustfmt::skip]
+const COMPLIANCE_KEYS: &[Key] = &[
+    k("j2", "kg·m²", 6e-4, "inertia of the load behind the coupling"),
+    k("k", "N·m/rad", 0.2, "stiffness of the coupling"),
+    k("c", "N·m·s/rad", 6e-4, "damping of the coupling"),
+];
+
+/// A torque constant falling with current. Default k = 2e-4/A²: K_t down 2 % at 10 A and
+/// 24 % at 40 A, the board's peak rating; small BLDC motors lose 10-30 % of K_t at two to
+/// three times their continuous current.
+const SATURATION_KEYS: &[Key] = &[k(
+    "k",
+    "1/A²",
+    2e-4,
+    "torque constant falls as K_t/(1 + k·I²)",
+)];
+
+/// The keys of an effect, in the order the spec prints them (see the tables above for their
+/// units, defaults and the reasons behind the defaults).
 pub fn keys(kind: EffectKind) -> &'static [Key] {
     match kind {
         EffectKind::Table => TABLE_KEYS,
-        EffectKind::Backlash => {
-            // Default: a load twice the paper rotor's inertia behind a gap of two Hall steps
-            // of the paper's board (0.19 rad), a worn gear stage seen at the rotor.
-            const K: &[Key] = &[
-                k("j2", "kg·m²", 6e-4, "inertia of the load behind the gap"),
-                k(
-                    "gap",
-                    "rad",
-                    0.19,
-                    "angle the rotor turns alone after a reversal",
-                ),
-            ];
-            K
-        }
-        EffectKind::Coulomb => {
-            const K: &[Key] = &[k("fc", "N·m", 0.05, "Coulomb friction torque")];
-            K
-        }
-        EffectKind::Viscous => {
-            const K: &[Key] = &[k("b", "N·m·s/rad", 0.001, "viscous friction coefficient")];
-            K
-        }
-        EffectKind::Stribeck => {
-            const K: &[Key] = &[
-                k("fs", "N·m", 0.04, "breakaway torque above Coulomb"),
-                k("vs", "rad/s", 5.0, "Stribeck velocity"),
-            ];
-            K
-        }
-        EffectKind::Presliding => {
-            // Defaults: the compliance of a geared axis as seen at the rotor, where presliding
-            // becomes visible. A size-14 harmonic drive winds up about 1 mrad at its output
-            // under its rated torque (torsional stiffness of a few 10³ N·m/rad); with ratio
-            // 100 the rotor sees that stiffness divided by 100², about 0.4 N·m/rad. With the
-            // paper's static friction s(0) = α0 + α1 = 0.0975 N·m the breakaway deflection
-            // s(0)/σ0 is then 0.24 rad at the rotor, 2.6 Hall steps (0.095 rad) of the paper's
-            // board. (The paper's own bristles, σ0 = 317, deflect 0.3 mrad: far inside one
-            // Hall step, invisible.) σ1 = 0.022: critical damping of the rotor inertia
-            // J = 3e-4 kg·m² on that spring, 2·√(σ0·J).
-            const K: &[Key] = &[
-                k("sigma0", "N·m/rad", 0.4, "bristle stiffness"),
-                k("sigma1", "N·m·s/rad", 0.022, "bristle damping"),
-            ];
-            K
-        }
-        EffectKind::Cogging => {
-            const K: &[Key] = &[
-                k(
-                    "harmonic",
-                    "1/rev",
-                    7.0,
-                    "periods per revolution (2 or more)",
-                ),
-                k("amp", "N·m", 0.03, "torque amplitude"),
-                k("phase", "rad", 0.0, "phase"),
-            ];
-            K
-        }
-        EffectKind::PositionLoad => {
-            const K: &[Key] = &[
-                k(
-                    "amp",
-                    "N·m",
-                    0.05,
-                    "torque amplitude (one period per revolution)",
-                ),
-                k("phase", "rad", 0.0, "phase"),
-            ];
-            K
-        }
-        EffectKind::Offset => {
-            const K: &[Key] = &[k("t0", "N·m", 0.03, "constant load torque")];
-            K
-        }
-        EffectKind::Asymmetry => {
-            const K: &[Key] = &[
-                k(
-                    "dv",
-                    "N·m·s/rad",
-                    0.0008,
-                    "viscous friction difference (b ± dv by direction)",
-                ),
-                k(
-                    "dc",
-                    "N·m",
-                    0.0,
-                    "Coulomb friction difference (fc ± dc by direction)",
-                ),
-            ];
-            K
-        }
-        EffectKind::Deadtime => {
-            const K: &[Key] = &[k(
-                "vd",
-                "V",
-                0.3,
-                "inverter voltage loss, sign of the current",
-            )];
-            K
-        }
-        EffectKind::CurrentOffset => {
-            const K: &[Key] = &[k("i0", "A", 0.2, "current-sensor offset")];
-            K
-        }
-        EffectKind::Thermal => {
-            // Defaults: copper's resistance rises 0.393 %/K; k = 0.02/A² is +8 % (≈ +20 K of
-            // winding) at 2 A steady and +2 % at 1 A, what a small BLDC motor with a few K/W
-            // winding-to-ambient reaches at the paper's currents (0.002/A² was a +0.8 % rise,
-            // too small to see in a 60–90 s log). tau = 30 s: a small motor's winding thermal
-            // time constant (the case takes minutes).
-            const K: &[Key] = &[
-                k(
-                    "k",
-                    "1/A²",
-                    0.02,
-                    "relative resistance rise per A² of steady current",
-                ),
-                k("tau", "s", 30.0, "thermal time constant"),
-            ];
-            K
-        }
-        EffectKind::LoadFriction => {
-            // Default μ = 0.2: high-ratio transmissions (worm and harmonic gears, lead
-            // screws) lose 10–30 % of the torque they transmit; spur gears and ball screws
-            // 2–10 %. Smaller values differ from a lower K_t only while the drive brakes and
-            // are not visible on the paper motor (docs/limits.md).
-            const K: &[Key] = &[k("mu", "1", 0.2, "friction per N·m of transmitted torque")];
-            K
-        }
-        EffectKind::Compliance => {
-            // Default: a load twice the paper rotor's inertia on a coupling that resonates
-            // near 5 Hz, lightly damped (ζ ≈ 0.05), as a flexible coupling or a long shaft.
-            const K: &[Key] = &[
-                k(
-                    "j2",
-                    "kg·m²",
-                    6e-4,
-                    "inertia of the load behind the coupling",
-                ),
-                k("k", "N·m/rad", 0.2, "stiffness of the coupling"),
-                k("c", "N·m·s/rad", 6e-4, "damping of the coupling"),
-            ];
-            K
-        }
-        EffectKind::Saturation => {
-            // Default k = 2e-4/A²: K_t down 2 % at 10 A and 24 % at 40 A, the board's peak
-            // rating; small BLDC motors lose 10-30 % of K_t at two to three times their
-            // continuous current.
-            const K: &[Key] = &[k(
-                "k",
-                "1/A²",
-                2e-4,
-                "torque constant falls as K_t/(1 + k·I²)",
-            )];
-            K
-        }
+        EffectKind::Backlash => BACKLASH_KEYS,
+        EffectKind::Coulomb => COULOMB_KEYS,
+        EffectKind::Viscous => VISCOUS_KEYS,
+        EffectKind::Stribeck => STRIBECK_KEYS,
+        EffectKind::Presliding => PRESLIDING_KEYS,
+        EffectKind::Cogging => COGGING_KEYS,
+        EffectKind::PositionLoad => POSITION_LOAD_KEYS,
+        EffectKind::Offset => OFFSET_KEYS,
+        EffectKind::Asymmetry => ASYMMETRY_KEYS,
+        EffectKind::Deadtime => DEADTIME_KEYS,
+        EffectKind::CurrentOffset => CURRENT_OFFSET_KEYS,
+        EffectKind::Thermal => THERMAL_KEYS,
+        EffectKind::LoadFriction => LOAD_FRICTION_KEYS,
+        EffectKind::Compliance => COMPLIANCE_KEYS,
+        EffectKind::Saturation => SATURATION_KEYS,
     }
 }
 

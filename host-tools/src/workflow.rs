@@ -304,143 +304,238 @@ pub fn run(
     on_round: &mut dyn FnMut(&Round),
 ) -> Result<Outcome> {
     let held_out_in_time = cfg.select_logs.is_empty();
-    let split: Vec<(MotorLog, MotorLog)> = if held_out_in_time {
-        cfg.fit_logs
-            .iter()
-            .map(|l| split_in_time(l, SELECT_FRACTION))
-            .collect::<Result<_>>()?
+    let (fit_owned, select_owned) = if held_out_in_time {
+        split_each_in_time(cfg.fit_logs)?
     } else {
-        Vec::new()
+        (Vec::new(), Vec::new())
     };
-    let (fit_owned, select_owned): (Vec<MotorLog>, Vec<MotorLog>) = split.into_iter().unzip();
-    let (fit_logs, select) = if held_out_in_time {
-        (&fit_owned[..], &select_owned[..])
+    let data = if held_out_in_time {
+        LoopData {
+            fit: &fit_owned,
+            select: &select_owned,
+        }
     } else {
-        (cfg.fit_logs, cfg.select_logs)
+        LoopData {
+            fit: cfg.fit_logs,
+            select: cfg.select_logs,
+        }
     };
-    let mut adds = cfg.start.clone();
-    let mut set_aside: Vec<EffectSpec> = Vec::new();
-    let mut rounds: Vec<Round> = Vec::new();
-    let mut kept_at: Option<usize> = None;
-    let mut not_fitted: Vec<(EffectSpec, String)> = Vec::new();
-    let stop;
+    let mut state = LoopState::new(cfg.start.clone());
+    let stop = run_rounds(cfg, &data, fit, on_round, &mut state)?;
+    let mut out = Outcome {
+        rounds: state.rounds,
+        stop,
+        held_out_in_time,
+        refit_on_all: None,
+        not_fitted: state.not_fitted,
+    };
+    if held_out_in_time {
+        out.refit_on_all = Some(refit_on_whole_logs(cfg, fit, &out.final_round().adds)?);
+    }
+    Ok(out)
+}
+
+/// The logs of one loop: fitted (and diagnosed), and selecting among the refits.
+struct LoopData<'a> {
+    fit: &'a [MotorLog],
+    select: &'a [MotorLog],
+}
+
+/// What the loop carries from one round to the next.
+struct LoopState {
+    /// Effects of the next fit.
+    adds: Vec<EffectSpec>,
+    /// Effects not to propose again: refits not kept, and effects the fit refused.
+    set_aside: Vec<EffectSpec>,
+    rounds: Vec<Round>,
+    /// Index in `rounds` of the last kept round.
+    kept_at: Option<usize>,
+    /// Effects the fit refused, with its reason.
+    not_fitted: Vec<(EffectSpec, String)>,
+}
+
+impl LoopState {
+    fn new(start: Vec<EffectSpec>) -> LoopState {
+        LoopState {
+            adds: start,
+            set_aside: Vec::new(),
+            rounds: Vec::new(),
+            kept_at: None,
+            not_fitted: Vec::new(),
+        }
+    }
+
+    /// A refit the fit refused (an effect it cannot estimate yet): its effect is set aside
+    /// with the reason, and, when `more` refits are allowed, the next candidate of the kept
+    /// round `kept_at` is queued. Returns the stop when no candidate is queued.
+    fn set_refused_aside(&mut self, e: anyhow::Error, kept_at: usize, more: bool) -> Option<Stop> {
+        let spec = self.adds.pop().expect("a refit adds an effect");
+        self.not_fitted.push((spec.clone(), format!("{e:#}")));
+        self.set_aside.push(spec);
+        let kept = &self.rounds[kept_at];
+        if more {
+            if let Some(n) = next_addition(&kept.diagnoses, &self.adds, &self.set_aside) {
+                self.adds.push(n.spec);
+                return None;
+            }
+        }
+        let adequate = kept.diagnoses.iter().all(|d| d.verdict.adequate);
+        Some(if adequate {
+            Stop::Adequate
+        } else {
+            Stop::NothingToAdd
+        })
+    }
+
+    /// Records a decided round (the last kept one when it was kept).
+    fn push_round(&mut self, r: Round) {
+        let kept = r.kept;
+        self.rounds.push(r);
+        if kept {
+            self.kept_at = Some(self.rounds.len() - 1);
+        }
+    }
+}
+
+/// Each fitting log split in time: (first parts, held-out last parts), see [`split_in_time`].
+fn split_each_in_time(logs: &[MotorLog]) -> Result<(Vec<MotorLog>, Vec<MotorLog>)> {
+    let split: Vec<(MotorLog, MotorLog)> = logs
+        .iter()
+        .map(|l| split_in_time(l, SELECT_FRACTION))
+        .collect::<Result<_>>()?;
+    Ok(split.into_iter().unzip())
+}
+
+/// The fit request of `cfg` on `logs`, validated on `validate`, with the effects `adds`.
+fn request<'a>(
+    cfg: &'a Config,
+    logs: &'a [MotorLog],
+    validate: &'a [MotorLog],
+    adds: &'a [EffectSpec],
+) -> FitRequest<'a> {
+    FitRequest {
+        kind: cfg.kind,
+        logs,
+        validate,
+        adds,
+        plant: cfg.plant,
+        constraints: cfg.constraints,
+    }
+}
+
+/// Fits, judges and records round after round; returns why the loop stopped.
+fn run_rounds(
+    cfg: &Config,
+    data: &LoopData,
+    fit: &mut dyn FnMut(&FitRequest) -> Result<Model>,
+    on_round: &mut dyn FnMut(&Round),
+    state: &mut LoopState,
+) -> Result<Stop> {
     let mut round = 0;
     loop {
-        let fitted = fit(&FitRequest {
-            kind: cfg.kind,
-            logs: fit_logs,
-            validate: select,
-            adds: &adds,
-            plant: cfg.plant,
-            constraints: cfg.constraints,
-        });
-        let model = match (fitted, kept_at) {
+        let fitted = fit(&request(cfg, data.fit, data.select, &state.adds));
+        let model = match (fitted, state.kept_at) {
             (Ok(m), _) => m,
-            // A refit the fit refuses (an effect it cannot estimate yet): set the effect
-            // aside and try the next candidate of the kept model, in the same round.
-            (Err(e), Some(k)) => {
-                let spec = adds.pop().expect("a refit adds an effect");
-                not_fitted.push((spec.clone(), format!("{e:#}")));
-                set_aside.push(spec);
-                let kept = &rounds[k];
-                if round < cfg.max_rounds {
-                    if let Some(n) = next_addition(&kept.diagnoses, &adds, &set_aside) {
-                        adds.push(n.spec);
-                        continue;
-                    }
-                }
-                let adequate = kept.diagnoses.iter().all(|d| d.verdict.adequate);
-                stop = Some(if adequate {
-                    Stop::Adequate
-                } else {
-                    Stop::NothingToAdd
-                });
-                break;
-            }
+            // A refused refit tries the next candidate of the kept model, in the same round.
+            (Err(e), Some(k)) => match state.set_refused_aside(e, k, round < cfg.max_rounds) {
+                Some(stop) => return Ok(stop),
+                None => continue,
+            },
             (Err(e), None) => {
                 return Err(e).with_context(|| format!("round {round} of the identification loop"))
             }
         };
-        let selection_fit = selection_fit(&model, select);
-        let test = kept_at.map(|k| {
-            let added = adds.last().expect("a refit adds an effect");
-            selection_test(&rounds[k].model, &model, added, select)
-        });
-        let kept = test.is_none_or(|t| t.p_value < SELECTION_ALPHA);
-        let fitted = adds.clone();
-        let diagnoses: Vec<Diagnosis> = if kept {
-            let st = Structure::from_model(&model);
-            fit_logs
-                .iter()
-                .map(|l| diagnose::diagnose(l, &st, &cfg.diagnose))
-                .collect()
-        } else {
-            set_aside.extend(adds.pop());
-            Vec::new()
-        };
-        let base = if kept {
-            &diagnoses
-        } else {
-            &rounds[kept_at.expect("a refit follows a kept round")].diagnoses
-        };
-        let adequate = base.iter().all(|d| d.verdict.adequate);
-        let next = if round == cfg.max_rounds {
-            None
-        } else {
-            next_addition(base, &adds, &set_aside)
-        };
-        let r = Round {
-            adds: fitted,
-            model,
-            diagnoses,
-            selection_fit,
-            selection_test: test,
-            next: next.clone(),
-            kept,
-        };
+        let (r, adequate) = judge_round(cfg, data, state, model, round);
+        let next = r.next.clone();
+        let kept = r.kept;
         on_round(&r);
-        rounds.push(r);
-        if kept {
-            kept_at = Some(rounds.len() - 1);
-        }
-        let round_stop = if let Some(n) = next {
-            adds.push(n.spec);
-            None
-        } else if adequate {
-            Some(Stop::Adequate)
-        } else if round == cfg.max_rounds {
-            Some(Stop::MaxRounds)
-        } else if !kept {
-            Some(Stop::NoGain)
+        state.push_round(r);
+        if let Some(n) = next {
+            state.adds.push(n.spec);
         } else {
-            Some(Stop::NothingToAdd)
-        };
-        if let Some(s) = round_stop {
-            stop = Some(s);
-            break;
+            return Ok(stop_without_next(adequate, round == cfg.max_rounds, kept));
         }
         round += 1;
     }
-    let mut out = Outcome {
-        rounds,
-        stop: stop.expect("the loop ends with a stop"),
-        held_out_in_time,
-        refit_on_all: None,
-        not_fitted,
+}
+
+/// Judges this round's fitted `model`: its selection fit, its test against the kept model it
+/// extends, and, when kept, its diagnoses on every fitting log (a refit not kept sets its
+/// addition aside). Returns the round, with the next addition unless this is the last
+/// round, and whether the model the next round builds on is adequate.
+fn judge_round(
+    cfg: &Config,
+    data: &LoopData,
+    state: &mut LoopState,
+    model: Model,
+    round: usize,
+) -> (Round, bool) {
+    let selection_fit = selection_fit(&model, data.select);
+    let test = state.kept_at.map(|k| {
+        let added = state.adds.last().expect("a refit adds an effect");
+        selection_test(&state.rounds[k].model, &model, added, data.select)
+    });
+    let kept = test.is_none_or(|t| t.p_value < SELECTION_ALPHA);
+    let fitted = state.adds.clone();
+    let diagnoses: Vec<Diagnosis> = if kept {
+        diagnose_each(&model, data.fit, &cfg.diagnose)
+    } else {
+        state.set_aside.extend(state.adds.pop());
+        Vec::new()
     };
-    if held_out_in_time {
-        let model = fit(&FitRequest {
-            kind: cfg.kind,
-            logs: cfg.fit_logs,
-            validate: &[],
-            adds: &out.final_round().adds,
-            plant: cfg.plant,
-            constraints: cfg.constraints,
-        })
-        .context("refitting the final model on the whole fitting logs")?;
-        out.refit_on_all = Some(model);
+    let base = if kept {
+        &diagnoses
+    } else {
+        &state.rounds[state.kept_at.expect("a refit follows a kept round")].diagnoses
+    };
+    let adequate = base.iter().all(|d| d.verdict.adequate);
+    let next = if round == cfg.max_rounds {
+        None
+    } else {
+        next_addition(base, &state.adds, &state.set_aside)
+    };
+    let r = Round {
+        adds: fitted,
+        model,
+        diagnoses,
+        selection_fit,
+        selection_test: test,
+        next,
+        kept,
+    };
+    (r, adequate)
+}
+
+/// The diagnosis of `model` on each of `logs`, in order.
+fn diagnose_each(model: &Model, logs: &[MotorLog], opts: &diagnose::Options) -> Vec<Diagnosis> {
+    let st = Structure::from_model(model);
+    logs.iter()
+        .map(|l| diagnose::diagnose(l, &st, opts))
+        .collect()
+}
+
+/// Why a round with nothing to add next ends the loop: the model it builds on is
+/// `adequate`, the `last_round` ran, its refit was not `kept`, or nothing is left to add.
+fn stop_without_next(adequate: bool, last_round: bool, kept: bool) -> Stop {
+    if adequate {
+        Stop::Adequate
+    } else if last_round {
+        Stop::MaxRounds
+    } else if !kept {
+        Stop::NoGain
+    } else {
+        Stop::NothingToAdd
     }
-    Ok(out)
+}
+
+/// The final structure `adds` refitted on the whole fitting logs, without validation logs.
+fn refit_on_whole_logs(
+    cfg: &Config,
+    fit: &mut dyn FnMut(&FitRequest) -> Result<Model>,
+    adds: &[EffectSpec],
+) -> Result<Model> {
+    fit(&request(cfg, cfg.fit_logs, &[], adds))
+        .context("refitting the final model on the whole fitting logs")
 }
 
 #[cfg(test)]

@@ -38,12 +38,10 @@ fn param(fit: &Value, name: &str) -> Value {
         .clone()
 }
 
-#[test]
-fn known_parameters_are_fixed_or_bounded_and_recorded() {
-    let dir = tempfile::tempdir().unwrap();
-    let d = dir.path();
+/// A 20 s log of the emulated motor under signal d (voltage steps) in `dir`, as `d.csv`.
+fn simulated_log(dir: &Path) {
     ok(
-        d,
+        dir,
         &[
             "simulate",
             "--signal",
@@ -54,48 +52,38 @@ fn known_parameters_are_fixed_or_bounded_and_recorded() {
             "d.csv",
         ],
     );
-    let free: Value = serde_json::from_str(&ok(
-        d,
-        &[
-            "fit",
-            "--json",
-            "--model",
-            "linear",
-            "-o",
-            "free.toml",
-            "d.csv",
-        ],
-    ))
-    .unwrap();
+}
+
+/// `motorid fit --json --model linear EXTRA... -o OUT d.csv`, parsed.
+fn fit_linear(dir: &Path, extra: &[&str], out: &str) -> Value {
+    let mut args = vec!["fit", "--json", "--model", "linear"];
+    args.extend_from_slice(extra);
+    args.extend_from_slice(&["-o", out, "d.csv"]);
+    serde_json::from_str(&ok(dir, &args)).unwrap()
+}
+
+/// Equal up to the last digit of a JSON number's round trip.
+fn same(v: &Value, want: f64) -> bool {
+    (v.as_f64().unwrap() - want).abs() <= 1e-12 * want.abs()
+}
+
+#[test]
+fn a_fixed_key_is_held_a_bounded_key_kept_in_range_and_both_recorded() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    simulated_log(d);
+    let free = fit_linear(d, &[], "free.toml");
     let r_free = param(&free, "R")["value"].as_f64().unwrap();
     let j_free = param(&free, "J")["value"].as_f64().unwrap();
     // The errors are widened for the autocorrelated free-run residual, and say by how much.
     let factor = free["std_error_factor"].as_f64().unwrap();
     assert!(factor > 1.0, "factor {factor}");
 
-    // R held at 1.5 times its estimate, J kept below 80 % of it (Kt spelled as users do).
+    // R held at 1.5 times its estimate, J kept below 80 % of it.
     let (r_fixed, j_hi) = (1.5 * r_free, 0.8 * j_free);
     let fix = format!("R={r_fixed}");
     let bound = format!("J={}..{j_hi}", 0.1 * j_free);
-    let held: Value = serde_json::from_str(&ok(
-        d,
-        &[
-            "fit",
-            "--json",
-            "--model",
-            "linear",
-            "--fix",
-            &fix,
-            "--bound",
-            &bound,
-            "-o",
-            "held.toml",
-            "d.csv",
-        ],
-    ))
-    .unwrap();
-    // Equal up to the last digit of a JSON number's round trip.
-    let same = |v: &Value, want: f64| (v.as_f64().unwrap() - want).abs() <= 1e-12 * want.abs();
+    let held = fit_linear(d, &["--fix", &fix, "--bound", &bound], "held.toml");
     let r = param(&held, "R");
     assert!(same(&r["value"], r_fixed), "{r}");
     assert!(r["note"].as_str().unwrap().contains("--fix"), "{r}");
@@ -114,29 +102,26 @@ fn known_parameters_are_fixed_or_bounded_and_recorded() {
     );
     assert!(toml.contains(&format!("R = {r_fixed}")), "{toml}");
     assert!(same(&held["fixed"]["R"], r_fixed), "{held}");
+}
 
-    // Kt is the table's Kb (tied to it).
-    let kt: Value = serde_json::from_str(&ok(
-        d,
-        &[
-            "fit", "--json", "--model", "linear", "--fix", "Kt=0.07", "-o", "kt.toml", "d.csv",
-        ],
-    ))
-    .unwrap();
+#[test]
+fn kt_is_fixed_through_the_kb_it_is_tied_to() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    simulated_log(d);
+    let kt = fit_linear(d, &["--fix", "Kt=0.07"], "kt.toml");
     assert!(same(&param(&kt, "Kb")["value"], 0.07), "{kt}");
+}
 
-    // Errors: a key this fit does not have, an empty range, a value that is no number.
-    let fit = |extra: &[&str]| -> Vec<String> {
-        let mut a: Vec<String> = ["fit", "--model", "linear", "-o", "bad.toml"]
-            .map(String::from)
-            .to_vec();
-        a.extend(extra.iter().map(|s| s.to_string()));
-        a.push("d.csv".into());
-        a
-    };
+#[test]
+fn an_unknown_key_an_empty_range_or_a_bad_value_is_one_clear_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    simulated_log(d);
     let run = |extra: &[&str], want: &[&str]| {
-        let a = fit(extra);
-        let a: Vec<&str> = a.iter().map(String::as_str).collect();
+        let mut a = vec!["fit", "--model", "linear", "-o", "bad.toml"];
+        a.extend_from_slice(extra);
+        a.push("d.csv");
         fails_with(d, &a, want);
     };
     run(
@@ -150,26 +135,22 @@ fn known_parameters_are_fixed_or_bounded_and_recorded() {
     run(&["--fix", "R=abc"], &["--fix R=abc", "is not a number"]);
     run(&["--fix", "R=inf"], &["--fix R=inf", "not a finite number"]);
     run(&["--fix", "R=1", "--bound", "R=0..2"], &["R", "give one"]);
-    // An added effect's keys can be fixed, and a validation log does not undo it.
-    let c: Value = serde_json::from_str(&ok(
-        d,
-        &[
-            "fit",
-            "--json",
-            "--model",
-            "linear",
-            "--add",
-            "coulomb",
-            "--fix",
-            "coulomb.fc=0.01",
-            "--validate",
-            "d.csv",
-            "-o",
-            "c.toml",
-            "d.csv",
-        ],
-    ))
-    .unwrap();
+}
+
+#[test]
+fn an_added_effects_key_can_be_fixed_and_a_validation_log_does_not_undo_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    simulated_log(d);
+    let extra = [
+        "--add",
+        "coulomb",
+        "--fix",
+        "coulomb.fc=0.01",
+        "--validate",
+        "d.csv",
+    ];
+    let c = fit_linear(d, &extra, "c.toml");
     assert_eq!(c["effects"][0], "coulomb:fc=0.01", "{c}");
     let toml = std::fs::read_to_string(d.join("c.toml")).unwrap();
     assert!(toml.contains("\"coulomb.fc\" = 0.01"), "{toml}");

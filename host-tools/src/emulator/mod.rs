@@ -174,7 +174,8 @@ impl EmulatorConfig {
             .any(|e| e.kind() == control::effects::EffectKind::Compliance)
         {
             bail!(
-                "effect compliance: the emulator has no load state for a second inertia yet;                  `motorid diagnose` names a compliant coupling in measured logs"
+                "effect compliance: the emulator has no load state for a second inertia yet; \
+                 `motorid diagnose` names a compliant coupling in measured logs"
             );
         }
         for e in &self.effects {

@@ -138,64 +138,138 @@ enum EffCols {
     Table(usize, usize),
 }
 
+impl EffCols {
+    /// Number of regression columns (unknowns) of this group.
+    fn width(&self) -> usize {
+        match self {
+            EffCols::One(..) => 1,
+            EffCols::SinCos(..) => 2,
+            EffCols::Table(_, n) => *n,
+        }
+    }
+}
+
+/// The rows of a weak-form regression: one column per unknown and the left-hand side, one
+/// entry per window.
+struct WeakRows {
+    cols: Vec<Vec<f64>>,
+    y: Vec<f64>,
+}
+
+impl WeakRows {
+    fn new(unknowns: usize) -> WeakRows {
+        WeakRows {
+            cols: vec![Vec::new(); unknowns],
+            y: Vec::new(),
+        }
+    }
+
+    /// The least-squares coefficients, or None when there are no more rows than unknowns.
+    fn solve(&self) -> Option<Vec<f64>> {
+        if self.y.len() <= self.cols.len() {
+            return None;
+        }
+        let refs: Vec<&[f64]> = self.cols.iter().map(|c| c.as_slice()).collect();
+        Some(lstsq(&refs, &self.y).beta)
+    }
+}
+
 /// Weak-form estimate of the motor constants, the viscous (and, with `coulomb`, Coulomb)
-/// friction and the linear-in-parameter effects. Returns (b, fc).
+/// friction and the linear-in-parameter effects. Returns (b [N·m·s/rad], fc [N·m]).
 pub fn weak_estimate(m: &mut Model, logs: &[MotorLog], coulomb: bool) -> (f64, f64) {
-    let voltage = m.plant == Plant::Voltage;
-    // Electrical equation.
-    if voltage {
-        let mut cols: Vec<Vec<f64>> = vec![Vec::new(); 3];
-        let mut extra: Vec<(usize, EffectKind)> = Vec::new();
-        for (k, e) in m.effects.iter().enumerate() {
-            if matches!(e.kind(), EffectKind::Deadtime | EffectKind::CurrentOffset) {
-                extra.push((k, e.kind()));
-                cols.push(Vec::new());
-            }
-        }
-        let mut y = Vec::new();
-        for log in logs {
-            let Some(i) = &log.i else { continue };
-            let sgn_i: Vec<f64> = i.iter().map(|&c| smooth_sign(c, CURRENT_EPS)).collect();
-            let ones = vec![1.0; log.len()];
-            for w in weak_form::log_windows(log) {
-                y.push(w.int_zoh(&log.u));
-                cols[0].push(-w.int_d(i));
-                cols[1].push(w.int(i));
-                cols[2].push(-w.int_d(&log.theta));
-                for (c, (_, kind)) in extra.iter().enumerate() {
-                    cols[3 + c].push(match kind {
-                        EffectKind::Deadtime => w.int(&sgn_i),
-                        _ => w.int(&ones),
-                    });
-                }
-            }
-        }
-        if y.len() > cols.len() {
-            let refs: Vec<&[f64]> = cols.iter().map(|c| c.as_slice()).collect();
-            let x = lstsq(&refs, &y).beta;
-            let fallback = control::motor::MotorParams::<f64>::paper();
-            m.motor.l = if x[0] > 0.0 { x[0] } else { fallback.l };
-            m.motor.r = if x[1] > 0.0 { x[1] } else { fallback.r };
-            if x[2] > 0.0 {
-                m.motor.kb = x[2];
-                m.motor.kt = x[2];
-            }
-            for (c, (k, kind)) in extra.iter().enumerate() {
-                let v = x[3 + c];
-                m.effects[*k] = match kind {
-                    EffectKind::Deadtime => Effect::Deadtime { vd: v },
-                    _ => Effect::CurrentOffset { i0: -v / m.motor.r },
-                };
+    if m.plant == Plant::Voltage {
+        estimate_electrical(m, logs);
+    }
+    estimate_mechanical(m, logs, coulomb)
+}
+
+/// The electrical equation's regression: L [H], R [Ω], K_b = K_t [V·s/rad] and the
+/// deadtime and current-offset effects; a motor constant estimated non-positive keeps the
+/// paper motor's value (L, R) or the model's (K_b).
+fn estimate_electrical(m: &mut Model, logs: &[MotorLog]) {
+    let extra = electrical_effects(m);
+    let rows = electrical_rows(logs, &extra);
+    if let Some(x) = rows.solve() {
+        set_electrical(m, &extra, &x);
+    }
+}
+
+/// The effects with a term in the electrical equation (deadtime, current offset): (effect
+/// index, kind), in the model's order.
+fn electrical_effects(m: &Model) -> Vec<(usize, EffectKind)> {
+    m.effects
+        .iter()
+        .enumerate()
+        .filter(|(_, e)| matches!(e.kind(), EffectKind::Deadtime | EffectKind::CurrentOffset))
+        .map(|(k, e)| (k, e.kind()))
+        .collect()
+}
+
+/// Rows of the electrical equation over the windows of every log with a current:
+/// `∫φ·u` [V·s] against −∫φ'·I, ∫φ·I, −∫φ'·θ, then ∫φ·sgn(I) or ∫φ per effect of `extra`.
+fn electrical_rows(logs: &[MotorLog], extra: &[(usize, EffectKind)]) -> WeakRows {
+    let mut rows = WeakRows::new(3 + extra.len());
+    for log in logs {
+        let Some(i) = &log.i else { continue };
+        let sgn_i: Vec<f64> = i.iter().map(|&c| smooth_sign(c, CURRENT_EPS)).collect();
+        let ones = vec![1.0; log.len()];
+        for w in weak_form::log_windows(log) {
+            rows.y.push(w.int_zoh(&log.u));
+            rows.cols[0].push(-w.int_d(i));
+            rows.cols[1].push(w.int(i));
+            rows.cols[2].push(-w.int_d(&log.theta));
+            for (c, (_, kind)) in extra.iter().enumerate() {
+                rows.cols[3 + c].push(match kind {
+                    EffectKind::Deadtime => w.int(&sgn_i),
+                    _ => w.int(&ones),
+                });
             }
         }
     }
-    // Mechanical equation.
-    let mut cols: Vec<Vec<f64>> = vec![Vec::new(); 2];
-    let mut map: Vec<EffCols> = Vec::new();
-    if coulomb {
-        cols.push(Vec::new());
+    rows
+}
+
+/// Stores the electrical coefficients `x` (L, R, K_b, then one per effect of `extra`): the
+/// deadtime's v_d [V] as estimated, the current offset's i0 [A] from its voltage −R·i0.
+fn set_electrical(m: &mut Model, extra: &[(usize, EffectKind)], x: &[f64]) {
+    let fallback = control::motor::MotorParams::<f64>::paper();
+    m.motor.l = if x[0] > 0.0 { x[0] } else { fallback.l };
+    m.motor.r = if x[1] > 0.0 { x[1] } else { fallback.r };
+    if x[2] > 0.0 {
+        m.motor.kb = x[2];
+        m.motor.kt = x[2];
     }
-    let base = cols.len();
+    for (c, (k, kind)) in extra.iter().enumerate() {
+        let v = x[3 + c];
+        m.effects[*k] = match kind {
+            EffectKind::Deadtime => Effect::Deadtime { vd: v },
+            _ => Effect::CurrentOffset { i0: -v / m.motor.r },
+        };
+    }
+}
+
+/// The mechanical equation's regression: J [kg·m²], the viscous friction b, with `coulomb`
+/// the Coulomb friction fc, and the linear-in-parameter effects' keys (each clamped to its
+/// bounds). Returns (b, fc), both 0 when the logs give too few windows.
+fn estimate_mechanical(m: &mut Model, logs: &[MotorLog], coulomb: bool) -> (f64, f64) {
+    let map = mechanical_effects(m);
+    let rows = mechanical_rows(m, logs, coulomb, &map);
+    let Some(x) = rows.solve() else {
+        return (0.0, 0.0);
+    };
+    if x[0] > 0.0 {
+        m.motor.j = x[0];
+    }
+    let b = x[1].max(0.0);
+    let fc = if coulomb { x[2].max(0.0) } else { 0.0 };
+    let base = if coulomb { 3 } else { 2 };
+    set_mechanical_effects(m, &map, &x[base..]);
+    (b, fc)
+}
+
+/// The regressor groups of the model's linear-in-parameter effects, in the model's order.
+fn mechanical_effects(m: &Model) -> Vec<EffCols> {
+    let mut map = Vec::new();
     for (k, e) in m.effects.iter().enumerate() {
         match *e {
             Effect::Coulomb { .. } => map.push(EffCols::One(k, "fc")),
@@ -214,112 +288,145 @@ pub fn weak_estimate(m: &mut Model, logs: &[MotorLog], coulomb: bool) -> (f64, f
             _ => {}
         }
     }
-    for c in &map {
-        match c {
-            EffCols::One(..) => cols.push(Vec::new()),
-            EffCols::SinCos(..) => cols.extend([Vec::new(), Vec::new()]),
-            EffCols::Table(_, n) => cols.extend(std::iter::repeat_n(Vec::new(), *n)),
-        }
-    }
-    let offset = control::effects::total_sensor_offset(&m.effects);
-    let mut y = Vec::new();
-    for log in logs {
-        let ws = smooth_velocity_of(log);
-        let sgn: Vec<f64> = ws.iter().map(|&w| smooth_sign(w, m.sign_width)).collect();
-        let cur: Vec<f64> = match (voltage, &log.i) {
+    map
+}
+
+/// The signals of one log the mechanical regressors are made of.
+struct MechanicalSignals {
+    /// Smoothed velocity [rad/s].
+    ws: Vec<f64>,
+    /// Smooth sign of `ws`, of the model's sign width.
+    sgn: Vec<f64>,
+    /// Current less the sensor offset [A] (voltage plant), or the torque command (torque
+    /// plant).
+    cur: Vec<f64>,
+}
+
+impl MechanicalSignals {
+    /// The signals of `log`; None for a voltage-plant log without a current.
+    fn of(m: &Model, log: &MotorLog) -> Option<MechanicalSignals> {
+        let offset = control::effects::total_sensor_offset(&m.effects);
+        let cur: Vec<f64> = match (m.plant == Plant::Voltage, &log.i) {
             (true, Some(i)) => i.iter().map(|c| c - offset).collect(),
-            (true, None) => continue,
+            (true, None) => return None,
             (false, _) => log.u.clone(),
         };
-        let mut g: Vec<Vec<f64>> = Vec::new();
-        for c in &map {
-            match *c {
-                EffCols::One(k, key) => g.push(match (m.effects[k], key) {
-                    (Effect::Stribeck { vs, .. }, _) => ws
-                        .iter()
-                        .zip(&sgn)
-                        .map(|(w, s)| (-(w / vs).powi(2)).exp() * s)
-                        .collect(),
-                    (Effect::Offset { .. }, _) => vec![1.0; log.len()],
-                    (Effect::LoadFriction { .. }, _) => cur
-                        .iter()
-                        .zip(&sgn)
-                        .map(|(c, s)| (m.motor.kt * c).abs() * s)
-                        .collect(),
-                    // The torque a falling K_t loses, to first order in k: K_t·k·I³.
-                    (Effect::Saturation { .. }, _) => {
-                        cur.iter().map(|c| m.motor.kt * c * c * c).collect()
-                    }
-                    (Effect::Viscous { .. }, _) => ws.clone(),
-                    (Effect::Asymmetry { .. }, "dv") => ws.iter().map(|w| w.abs()).collect(),
-                    (Effect::Asymmetry { .. }, _) => sgn.iter().map(|s| s.abs()).collect(),
-                    _ => sgn.clone(),
-                }),
-                EffCols::SinCos(_, h) => {
-                    g.push(log.theta.iter().map(|t| (h * t).sin()).collect());
-                    g.push(log.theta.iter().map(|t| (h * t).cos()).collect());
-                }
-                EffCols::Table(k, _) => {
-                    g.extend(table_columns(&m.effects[k], &log.theta, &ws, &cur));
-                }
-            }
-        }
+        let ws = smooth_velocity_of(log);
+        let sgn = ws.iter().map(|&w| smooth_sign(w, m.sign_width)).collect();
+        Some(MechanicalSignals { ws, sgn, cur })
+    }
+}
+
+/// Rows of the mechanical equation over the windows of every usable log: `K_t·∫φ·I`
+/// [N·m·s] (or `∫φ·u` on a torque plant) against ∫φ''·θ, −∫φ'·θ, with `coulomb` ∫φ·sgn(ω),
+/// then ∫φ·g for each regressor of `map`.
+fn mechanical_rows(m: &Model, logs: &[MotorLog], coulomb: bool, map: &[EffCols]) -> WeakRows {
+    let base = if coulomb { 3 } else { 2 };
+    let mut rows = WeakRows::new(base + map.iter().map(EffCols::width).sum::<usize>());
+    for log in logs {
+        let Some(s) = MechanicalSignals::of(m, log) else {
+            continue;
+        };
+        let g = effect_regressors(m, map, log, &s);
         for w in weak_form::log_windows(log) {
-            let lhs = if voltage {
-                m.motor.kt * w.int(&cur)
+            let lhs = if m.plant == Plant::Voltage {
+                m.motor.kt * w.int(&s.cur)
             } else {
-                w.int_zoh(&cur)
+                w.int_zoh(&s.cur)
             };
-            y.push(lhs);
-            cols[0].push(w.int_dd(&log.theta));
-            cols[1].push(-w.int_d(&log.theta));
+            rows.y.push(lhs);
+            rows.cols[0].push(w.int_dd(&log.theta));
+            rows.cols[1].push(-w.int_d(&log.theta));
             if coulomb {
-                cols[2].push(w.int(&sgn));
+                rows.cols[2].push(w.int(&s.sgn));
             }
             for (c, gv) in g.iter().enumerate() {
-                cols[base + c].push(w.int(gv));
+                rows.cols[base + c].push(w.int(gv));
             }
         }
     }
-    let mut b = 0.0;
-    let mut fc = 0.0;
-    if y.len() > cols.len() {
-        let refs: Vec<&[f64]> = cols.iter().map(|c| c.as_slice()).collect();
-        let x = lstsq(&refs, &y).beta;
-        if x[0] > 0.0 {
-            m.motor.j = x[0];
-        }
-        b = x[1].max(0.0);
-        if coulomb {
-            fc = x[2].max(0.0);
-        }
-        let mut c = base;
-        for e in &map {
-            match *e {
-                EffCols::One(k, key) => {
-                    let v = x[c];
-                    let slot = Slot::Effect(k, key);
-                    let (lo, hi) = bounds_of(m.effects[k].kind(), key);
-                    slot.set(m, v.clamp(lo, hi));
-                    c += 1;
-                }
-                EffCols::SinCos(k, _) => {
-                    let (a, bb) = (x[c], x[c + 1]);
-                    Slot::Effect(k, "amp").set(m, a.hypot(bb));
-                    Slot::Effect(k, "phase").set(m, bb.atan2(a));
-                    c += 2;
-                }
-                EffCols::Table(k, n) => {
-                    for node in 0..n {
-                        let key = crate::effect_spec::table_value_key(node);
-                        Slot::Effect(k, key).set(m, x[c + node].clamp(-10.0, 10.0));
-                    }
-                    c += n;
-                }
+    rows
+}
+
+/// The torque regressors g of `map`'s effects on one log, sample by sample, one per
+/// unknown in `map`'s order (a sine and a cosine per periodic effect, one per table node).
+fn effect_regressors(
+    m: &Model,
+    map: &[EffCols],
+    log: &MotorLog,
+    s: &MechanicalSignals,
+) -> Vec<Vec<f64>> {
+    let mut g: Vec<Vec<f64>> = Vec::new();
+    for c in map {
+        match *c {
+            EffCols::One(k, key) => g.push(one_regressor(m, k, key, log, s)),
+            EffCols::SinCos(_, h) => {
+                g.push(log.theta.iter().map(|t| (h * t).sin()).collect());
+                g.push(log.theta.iter().map(|t| (h * t).cos()).collect());
+            }
+            EffCols::Table(k, _) => {
+                g.extend(table_columns(&m.effects[k], &log.theta, &s.ws, &s.cur));
             }
         }
     }
-    (b, fc)
+    g
+}
+
+/// The regressor of the key `key` of effect `k`: the torque per unit of that key.
+fn one_regressor(
+    m: &Model,
+    k: usize,
+    key: &str,
+    log: &MotorLog,
+    sig: &MechanicalSignals,
+) -> Vec<f64> {
+    let (ws, sgn, cur) = (&sig.ws, &sig.sgn, &sig.cur);
+    match (m.effects[k], key) {
+        (Effect::Stribeck { vs, .. }, _) => ws
+            .iter()
+            .zip(sgn)
+            .map(|(w, s)| (-(w / vs).powi(2)).exp() * s)
+            .collect(),
+        (Effect::Offset { .. }, _) => vec![1.0; log.len()],
+        (Effect::LoadFriction { .. }, _) => cur
+            .iter()
+            .zip(sgn)
+            .map(|(c, s)| (m.motor.kt * c).abs() * s)
+            .collect(),
+        // The torque a falling K_t loses, to first order in k: K_t·k·I³.
+        (Effect::Saturation { .. }, _) => cur.iter().map(|c| m.motor.kt * c * c * c).collect(),
+        (Effect::Viscous { .. }, _) => ws.clone(),
+        (Effect::Asymmetry { .. }, "dv") => ws.iter().map(|w| w.abs()).collect(),
+        (Effect::Asymmetry { .. }, _) => sgn.iter().map(|s| s.abs()).collect(),
+        _ => sgn.clone(),
+    }
+}
+
+/// Stores the effects' coefficients `x` (in `map`'s order): a key clamped to its bounds, a
+/// periodic effect's sine and cosine as amplitude [N·m] and phase [rad], a table's node
+/// torques clamped to ±10 N·m.
+fn set_mechanical_effects(m: &mut Model, map: &[EffCols], x: &[f64]) {
+    let mut c = 0;
+    for e in map {
+        match *e {
+            EffCols::One(k, key) => {
+                let (lo, hi) = bounds_of(m.effects[k].kind(), key);
+                Slot::Effect(k, key).set(m, x[c].clamp(lo, hi));
+            }
+            EffCols::SinCos(k, _) => {
+                let (a, bb) = (x[c], x[c + 1]);
+                Slot::Effect(k, "amp").set(m, a.hypot(bb));
+                Slot::Effect(k, "phase").set(m, bb.atan2(a));
+            }
+            EffCols::Table(k, n) => {
+                for node in 0..n {
+                    let key = crate::effect_spec::table_value_key(node);
+                    Slot::Effect(k, key).set(m, x[c + node].clamp(-10.0, 10.0));
+                }
+            }
+        }
+        c += e.width();
+    }
 }
 
 fn bounds_of(kind: EffectKind, key: &str) -> (f64, f64) {

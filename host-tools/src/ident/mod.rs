@@ -154,7 +154,8 @@ pub fn fit(req: &FitRequest) -> Result<FitReport> {
     // models do not carry yet: `diagnose` names and sizes it (spec with j2, k, c).
     if req.adds.iter().any(|s| s.kind == EffectKind::Compliance) {
         bail!(
-            "--add compliance: the fitted models have no load state for a second inertia yet;              `motorid diagnose` names and sizes a compliant coupling (j2, k, c) from the log"
+            "--add compliance: the fitted models have no load state for a second inertia yet; \
+             `motorid diagnose` names and sizes a compliant coupling (j2, k, c) from the log"
         );
     }
     // A backlash needs the load's side of the gap as a state, as compliance does.
@@ -315,10 +316,10 @@ fn fit_fingerprint(req: &FitRequest) -> u64 {
 /// The model's velocity is its angle through the firmware's moving average *without* Hall
 /// quantisation (as in the simulation-error fit). Through the full sensor chain, a model
 /// whose angle stays within a fraction of a Hall step of the truth reproduces the
-/// measurement's quantisation pattern sample by sample: on the emulator, the true model
-/// with its inertia 3 % off loses half a point of that fit, as much as a missing effect
-/// costs. That premium for tracking the quantisation noise would decide between candidates
-/// instead of the physics.
+/// measurement's quantisation pattern sample by sample, and a model a little further off
+/// (a slightly wrong inertia) loses as much of that fit as a missing effect costs. That
+/// premium for tracking the quantisation noise would decide between candidates instead of
+/// the physics.
 pub fn validation_score(model: &Model, validate: &[MotorLog]) -> f64 {
     let mut total = 0.0;
     for log in validate {
@@ -346,8 +347,10 @@ pub fn validation_score(model: &Model, validate: &[MotorLog]) -> f64 {
 /// `fit --add` must never make the model worse than the base structure: a wrongly estimated
 /// position-dependent or current-dependent torque makes a free run stick or drift on new
 /// data. Candidates: the fit with the added effects, the same with the effects' magnitudes
-/// at zero, and the base structure fitted afresh (keeping the added effects in the structure
-/// at zero magnitude, so the model still names them). The validation logs decide.
+/// at zero, the added effects estimated by weak form on the residual of the fit and of the
+/// base structure fitted afresh, and that base structure itself (keeping the added effects
+/// in the structure at zero magnitude, so the model still names them). The validation logs
+/// decide ([`validation_score`]).
 fn guard_added_effects(req: &FitRequest, with: Model) -> Result<Model> {
     progress::report(
         "checking the added effects on the validation logs",
@@ -355,139 +358,193 @@ fn guard_added_effects(req: &FitRequest, with: Model) -> Result<Model> {
         f64::NAN,
     );
     let score_with = validation_score(&with, req.validate);
+    let mut choice = GuardChoice {
+        best: (score_with, with.clone(), false),
+        weak_form: None,
+    };
     let zeroed = sim_error::scale_effect_magnitudes(&with, 0.0);
-    let mut best = (score_with, with.clone(), false);
     let s = validation_score(&zeroed, req.validate);
     tracing::debug!(
         "guard: with {score_with:.2} ({:?}), zeroed {s:.2}",
         with.effects
     );
-    if s > best.0 {
-        best = (s, zeroed, true);
+    choice.offer_zeroed(s, zeroed);
+    let cand = weak_form_candidate(&with, &with, req.logs);
+    choice.offer_weak_form(validation_score(&cand, req.validate), cand);
+    progress::report("the base structure fitted afresh", 0, f64::NAN);
+    if let Ok(base) = base_structure_fit(req) {
+        let cand = weak_form_candidate(&base, &with, req.logs);
+        let s = validation_score(&cand, req.validate);
+        tracing::debug!("guard: with {score_with:.2}, residual estimate on the base fit {s:.2}");
+        choice.offer_weak_form(s, cand);
+        let base = base_with_added_effects_at_zero(base, &with);
+        let s = validation_score(&base, req.validate);
+        tracing::debug!("guard: base fitted afresh {s:.2}");
+        choice.offer_zeroed(s, base);
     }
-    // The added effects estimated by weak form on what a fitted model leaves unexplained:
-    // on the full fit, and on the base structure fitted afresh.
-    let with_params: Vec<_> = with
+    Ok(choice.into_model(score_with))
+}
+
+/// The guard's running choice among its candidates, by validation score [%].
+struct GuardChoice {
+    /// The best of the fit as given and the candidates with the added effects at zero:
+    /// (score, model, whether the added effects are at zero).
+    best: (f64, Model, bool),
+    /// The best weak-form candidate among those that beat `best` when they were scored.
+    weak_form: Option<(f64, Model)>,
+}
+
+impl GuardChoice {
+    /// Keeps `m`, a model with the added effects at zero, when it beats the best.
+    fn offer_zeroed(&mut self, score: f64, m: Model) {
+        if score > self.best.0 {
+            self.best = (score, m, true);
+        }
+    }
+
+    /// Keeps `m`, a weak-form candidate, when it beats the best and the weak-form candidate
+    /// kept before.
+    fn offer_weak_form(&mut self, score: f64, m: Model) {
+        if score > self.best.0 && self.weak_form.as_ref().is_none_or(|(r, _)| score > *r) {
+            self.weak_form = Some((score, m));
+        }
+    }
+
+    /// The chosen model: the weak-form candidate when it still beats the best, else the
+    /// best, its rows marked when the added effects were set to zero (`score_with`: the
+    /// validation score of the fit as given).
+    fn into_model(self, score_with: f64) -> Model {
+        if let Some((s, m)) = self.weak_form {
+            if s > self.best.0 {
+                tracing::debug!("residual estimate of the added effects: {:?}", m.effects);
+                return m;
+            }
+        }
+        let (_, mut model, zeroed) = self.best;
+        if zeroed {
+            mark_set_to_zero(&mut model, score_with);
+        }
+        model
+    }
+}
+
+/// The guard's weak-form candidate: `with`'s added effects estimated by weak form on what
+/// the fitted model `from` leaves unexplained ([`effect_residual::estimate`]), its parameter
+/// rows showing the values the model now has.
+fn weak_form_candidate(from: &Model, with: &Model, logs: &[MotorLog]) -> Model {
+    let mut m = effect_residual::estimate(from, with, logs);
+    let mut params = reestimated_base_rows(from, &m);
+    params.extend(weak_form_effect_rows(with, &m));
+    m.parameters = params;
+    m.data.method = format!(
+        "{}; added effects by weak form on the fitted model's residual",
+        from.data.method
+    );
+    m
+}
+
+/// `from`'s rows of the base structure (no effect keys) with the values of `m`: the
+/// electrical regression re-estimates the motor constants (and rescales the mechanical
+/// ones with K_t), and a row whose value moved loses its standard error.
+fn reestimated_base_rows(from: &Model, m: &Model) -> Vec<crate::model::Parameter> {
+    let mut params: Vec<_> = from
+        .parameters
+        .iter()
+        .filter(|p| !p.name.contains('.'))
+        .cloned()
+        .collect();
+    for p in &mut params {
+        let v = match (base_slot(&p.name), p.name.as_str()) {
+            (Some(sl), _) => sl.get(m),
+            (None, "Kt") => m.motor.kt,
+            _ => continue,
+        };
+        if (v - p.value).abs() > 1e-9 * p.value.abs() {
+            p.value = v;
+            p.std_err = None;
+            p.note = "re-estimated by weak form jointly with the added effects".into();
+        }
+    }
+    params
+}
+
+/// The slot of a base-structure row by its name (R, L, Kb, J, b, the LuGre parameters).
+fn base_slot(name: &str) -> Option<free_params::Slot> {
+    use free_params::Slot;
+    match name {
+        "R" => Some(Slot::R),
+        "L" => Some(Slot::L),
+        "Kb" => Some(Slot::Kb),
+        "J" => Some(Slot::J),
+        "b" => Some(Slot::Viscous),
+        "alpha0" => Some(Slot::Lugre("alpha0")),
+        "alpha1" => Some(Slot::Lugre("alpha1")),
+        "alpha2" => Some(Slot::Lugre("alpha2")),
+        "sigma0" => Some(Slot::Lugre("sigma0")),
+        "sigma1" => Some(Slot::Lugre("sigma1")),
+        _ => None,
+    }
+}
+
+/// `with`'s effect rows (`NAME.key`) with the values of `m`'s effects; the estimated keys
+/// (all but a cogging harmonic) say they come from the weak form, without a standard error.
+fn weak_form_effect_rows(with: &Model, m: &Model) -> Vec<crate::model::Parameter> {
+    let mut rows = Vec::new();
+    for mut p in with
         .parameters
         .iter()
         .filter(|p| p.name.contains('.'))
         .cloned()
-        .collect();
-    let residual_candidate = |from: &Model| {
-        let mut m = effect_residual::estimate(from, &with, req.logs);
-        let mut params: Vec<_> = from
-            .parameters
-            .iter()
-            .filter(|p| !p.name.contains('.'))
-            .cloned()
-            .collect();
-        // The electrical regression re-estimates the motor constants (and rescales the
-        // mechanical ones with K_t): show the values the model now has.
-        for p in &mut params {
-            use free_params::Slot;
-            let slot = match p.name.as_str() {
-                "R" => Some(Slot::R),
-                "L" => Some(Slot::L),
-                "Kb" => Some(Slot::Kb),
-                "J" => Some(Slot::J),
-                "b" => Some(Slot::Viscous),
-                "alpha0" => Some(Slot::Lugre("alpha0")),
-                "alpha1" => Some(Slot::Lugre("alpha1")),
-                "alpha2" => Some(Slot::Lugre("alpha2")),
-                "sigma0" => Some(Slot::Lugre("sigma0")),
-                "sigma1" => Some(Slot::Lugre("sigma1")),
-                _ => None,
-            };
-            let v = match (slot, p.name.as_str()) {
-                (Some(sl), _) => sl.get(&m),
-                (None, "Kt") => m.motor.kt,
-                _ => continue,
-            };
-            if (v - p.value).abs() > 1e-9 * p.value.abs() {
-                p.value = v;
-                p.std_err = None;
-                p.note = "re-estimated by weak form jointly with the added effects".into();
-            }
-        }
-        for mut p in with_params.iter().cloned() {
-            if let Some((name, key)) = p.name.split_once('.') {
-                if let Some(e) = m.effects.iter().find(|e| e.kind().name() == name) {
-                    p.value = EffectSpec::from_effect(e).get(key);
-                }
-                if key != "harmonic" {
-                    p.std_err = None;
-                    p.identifiable = true;
-                    p.note = "weak form on the fitted model's residual".into();
-                }
-            }
-            params.push(p);
-        }
-        m.parameters = params;
-        m.data.method = format!(
-            "{}; added effects by weak form on the fitted model's residual",
-            from.data.method
-        );
-        m
-    };
-    let mut residual_best: Option<(f64, Model)> = None;
     {
-        let cand = residual_candidate(&with);
-        let s = validation_score(&cand, req.validate);
-        if s > best.0 {
-            residual_best = Some((s, cand));
-        }
-    }
-    progress::report("the base structure fitted afresh", 0, f64::NAN);
-    if let Ok(mut base) = base_structure_fit(req) {
-        let cand = residual_candidate(&base);
-        let s = validation_score(&cand, req.validate);
-        tracing::debug!("guard: with {score_with:.2}, residual estimate on the base fit {s:.2}");
-        if s > best.0 && residual_best.as_ref().is_none_or(|(r, _)| s > *r) {
-            residual_best = Some((s, cand));
-        }
-        base.effects = sim_error::scale_effect_magnitudes(&with, 0.0).effects;
-        let s = validation_score(&base, req.validate);
-        tracing::debug!("guard: base fitted afresh {s:.2}");
-        if s > best.0 {
-            let mut params = base.parameters.clone();
-            params.extend(
-                with.parameters
-                    .iter()
-                    .filter(|p| p.name.contains('.'))
-                    .cloned(),
-            );
-            base.parameters = params;
-            best = (s, base, true);
-        }
-    }
-    if let Some((s, m)) = residual_best {
-        if s > best.0 {
-            tracing::debug!("residual estimate of the added effects: {:?}", m.effects);
-            return Ok(m);
-        }
-    }
-    let (_, mut model, rejected) = best;
-    if rejected {
-        model.data.method = format!(
-            "{}; the added effects were set to zero: with their estimated magnitudes the \
-             validation fit was worse ({score_with:.1} %)",
-            model.data.method
-        );
-        let effects = model.effects.clone();
-        for p in &mut model.parameters {
-            let Some((name, key)) = p.name.split_once('.') else {
-                continue;
-            };
-            if let Some(e) = effects.iter().find(|e| e.kind().name() == name) {
+        if let Some((name, key)) = p.name.split_once('.') {
+            if let Some(e) = m.effects.iter().find(|e| e.kind().name() == name) {
                 p.value = EffectSpec::from_effect(e).get(key);
             }
             if key != "harmonic" {
                 p.std_err = None;
-                p.note = "magnitude set to zero: the validation data did not support it".into();
+                p.identifiable = true;
+                p.note = "weak form on the fitted model's residual".into();
             }
         }
+        rows.push(p);
     }
-    Ok(model)
+    rows
+}
+
+/// The base structure fitted afresh as a guard candidate: `with`'s added effects in its
+/// structure at zero magnitude, and their rows after the base rows.
+fn base_with_added_effects_at_zero(mut base: Model, with: &Model) -> Model {
+    base.effects = sim_error::scale_effect_magnitudes(with, 0.0).effects;
+    base.parameters.extend(
+        with.parameters
+            .iter()
+            .filter(|p| p.name.contains('.'))
+            .cloned(),
+    );
+    base
+}
+
+/// Says in `model`'s method and effect rows that the added effects were set to zero
+/// (`score_with`: the validation fit [%] with their estimated magnitudes).
+fn mark_set_to_zero(model: &mut Model, score_with: f64) {
+    model.data.method = format!(
+        "{}; the added effects were set to zero: with their estimated magnitudes the \
+         validation fit was worse ({score_with:.1} %)",
+        model.data.method
+    );
+    let effects = model.effects.clone();
+    for p in &mut model.parameters {
+        let Some((name, key)) = p.name.split_once('.') else {
+            continue;
+        };
+        if let Some(e) = effects.iter().find(|e| e.kind().name() == name) {
+            p.value = EffectSpec::from_effect(e).get(key);
+        }
+        if key != "harmonic" {
+            p.std_err = None;
+            p.note = "magnitude set to zero: the validation data did not support it".into();
+        }
+    }
 }
 
 /// A readable summary: parameters, then fits on the fitting and validation logs.
