@@ -23,10 +23,10 @@ use std::path::PathBuf;
 pub const RANDOM_EFFECTS: &[EffectKind] = EffectKind::ALL.split_at(12).0.split_at(4).1;
 
 /// Effect the demo hides when neither `--effect` nor `--random` is given: a constant load
-/// torque (`offset`, 0.03 N·m, a third of the motor's Coulomb friction). Chosen because the
-/// diagnosis finds it on every seed tried and `fit --add` estimates it well, so `motorid demo`
-/// with no argument shows the whole loop working, the error falling included. (Cogging is
-/// found as reliably, but `fit --add cogging` closes less of the gap: 63 %.)
+/// torque (`offset`, 0.03 N·m, a third of the motor's Coulomb friction). It enters the torque
+/// balance as one constant column, which the diagnosis tests directly and `fit --add`
+/// estimates as one more linear coefficient: `motorid demo` with no argument shows the whole
+/// loop, the error falling included.
 pub const DEFAULT_EFFECT: EffectKind = EffectKind::Offset;
 
 /// Physics outside the effect list that the demo can hide (`--unnamed`), through the
