@@ -15,7 +15,7 @@
 //! Coulomb and Stribeck are part of the LuGre law, so they are added to a linear base.
 //! Prints the table of before / after / truth fits (`cargo test -p tests --test
 //! fit_add_effects -- --nocapture`; the ignored full table takes `FIT_ADD_EFFECTS=cogging,deadtime`
-//! to run only some rows).
+//! to run only some rows, and `FIT_ADD_EFFECTS_SEED=2` another draw of the emulator).
 use control::effects::EffectKind;
 use motorid::diagnose;
 use motorid::effect_spec::EffectSpec;
@@ -64,9 +64,18 @@ struct Row {
     truth: (f64, f64),
 }
 
+/// The emulator's seed from `FIT_ADD_EFFECTS_SEED` (the signals' and the current noise's
+/// draw), to measure the table over several draws; unset: the emulator's default.
+fn emulator_seed() -> Option<u64> {
+    std::env::var("FIT_ADD_EFFECTS_SEED").ok()?.parse().ok()
+}
+
 fn case(effect: EffectKind) -> Row {
     let spec = EffectSpec::bare(effect);
-    let cfg = EmulatorConfig::paper().with_effects(vec![spec.to_effect()]);
+    let mut cfg = EmulatorConfig::paper().with_effects(vec![spec.to_effect()]);
+    if let Some(seed) = emulator_seed() {
+        cfg.seed = seed;
+    }
     let mut fit_logs = vec![log(&cfg, SignalKind::A, FIT_SECONDS, "a.csv").0];
     let base_kind = match effect {
         EffectKind::Coulomb | EffectKind::Stribeck => ModelKind::Linear,

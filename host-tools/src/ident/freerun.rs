@@ -440,6 +440,59 @@ pub fn simulate_range(
     })
 }
 
+/// The states of a run other than the angle (velocity, winding current without the sensor's
+/// offset, bristle deflection): what a multiple-shooting segment may take over from the run
+/// before it.
+#[derive(Debug, Clone, Copy)]
+pub struct Carried<D> {
+    pub omega: D,
+    pub current: D,
+    pub z: D,
+}
+
+impl<D: RunScalar> Run<D> {
+    /// The states other than the angle at index `k` of this run (the current without the
+    /// sensor offset of the model `p`).
+    pub fn carried(&self, p: &RunParams<D>, k: usize) -> Carried<D> {
+        let offset = effects::total_sensor_offset(&p.effects);
+        Carried {
+            omega: self.omega[k],
+            current: self.i.as_ref().map_or(D::zero(), |i| i[k] - offset),
+            z: self.z.as_ref().map_or(D::zero(), |z| z[k]),
+        }
+    }
+}
+
+/// The states other than the angle at sample `k` of `log` for a run of the model `p` that
+/// starts there with the velocity `omega0` [rad/s]: the measured current (less the model's
+/// sensor offset; a torque plant: the command), and the bristles on the Stribeck curve
+/// when sliding (at rest no deflection is known).
+fn measured_state<D: RunScalar>(
+    p: &RunParams<D>,
+    log: &MotorLog,
+    k: usize,
+    omega0: f64,
+) -> Carried<D> {
+    let offset = effects::total_sensor_offset(&p.effects);
+    let current = match (p.plant, &log.i) {
+        (Plant::Voltage, Some(i)) => D::constant(i[k]) - offset,
+        (Plant::Voltage, None) => D::zero(),
+        (Plant::Torque, _) => D::constant(log.u[k]),
+    };
+    let z = match &p.lugre {
+        Some(l) if l.sigma0.re() > 0.0 && omega0.abs() > 1e-9 => {
+            let w0 = D::constant(omega0);
+            l.s(w0) * D::constant(omega0.signum()) / l.sigma0
+        }
+        _ => D::zero(),
+    };
+    Carried {
+        omega: D::constant(omega0),
+        current,
+        z,
+    }
+}
+
 /// [`simulate_range`] of the model `p` (whose values are `re`) in its number type.
 pub fn run_range<D: RunScalar>(
     p: &RunParams<D>,
@@ -448,6 +501,21 @@ pub fn run_range<D: RunScalar>(
     start: usize,
     end: usize,
     substeps: usize,
+) -> Result<Run<D>> {
+    run_range_from(p, re, log, start, end, substeps, None)
+}
+
+/// [`run_range`] from the measured angle at `start` and, when `carried` is given, the other
+/// states from there (else from the measurement: the measured velocity and current, the
+/// bristles on the Stribeck curve).
+pub fn run_range_from<D: RunScalar>(
+    p: &RunParams<D>,
+    re: &RunParams<f64>,
+    log: &MotorLog,
+    start: usize,
+    end: usize,
+    substeps: usize,
+    carried: Option<Carried<D>>,
 ) -> Result<Run<D>> {
     let end = end.min(log.len());
     if start >= end {
@@ -458,21 +526,9 @@ pub fn run_range<D: RunScalar>(
     }
     let n = end - start;
     let offset = effects::total_sensor_offset(&p.effects);
-    let omega0 = omega_at(log, start);
-    let i0 = match (p.plant, &log.i) {
-        (Plant::Voltage, Some(i)) => D::constant(i[start]) - offset,
-        (Plant::Voltage, None) => D::zero(),
-        (Plant::Torque, _) => D::constant(log.u[start]),
-    };
-    let z0 = match &p.lugre {
-        // Sliding: the bristles sit on the Stribeck curve; at rest: no deflection known.
-        Some(l) if l.sigma0.re() > 0.0 && omega0.abs() > 1e-9 => {
-            let w0 = D::constant(omega0);
-            l.s(w0) * D::constant(omega0.signum()) / l.sigma0
-        }
-        _ => D::zero(),
-    };
-    let mut x = [D::constant(log.theta[start]), D::constant(omega0), i0, z0];
+    let c0 = carried.unwrap_or_else(|| measured_state(p, log, start, omega_at(log, start)));
+    let omega0 = c0.omega.re();
+    let mut x = [D::constant(log.theta[start]), c0.omega, c0.current, c0.z];
     let mut h = heat_at(p, log, start);
     let mut w_prev = omega0;
     let slope = re.lift::<Slope>();
