@@ -43,7 +43,8 @@ pub struct Args {
     /// Add a physical effect: NAME or NAME:key=value,... (repeatable; list below).
     #[arg(long = "effect", value_name = "SPEC")]
     pub effects: Vec<String>,
-    /// Add the true states as columns theta_true, omega_true, z_true, i_true.
+    /// Add the true states as columns theta_true, omega_true, z_true, i_true (and the load's
+    /// theta_load_true, omega_load_true with compliance or backlash).
     #[arg(long)]
     pub truth: bool,
     /// Pole pairs seen by the Hall sensors (the paper's 0.095 rad resolution is 11).

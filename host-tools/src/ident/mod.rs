@@ -154,7 +154,8 @@ pub fn fit(req: &FitRequest) -> Result<FitReport> {
     // models do not carry yet: `diagnose` names and sizes it (spec with j2, k, c).
     if req.adds.iter().any(|s| s.kind == EffectKind::Compliance) {
         bail!(
-            "--add compliance: the fitted models have no load state for a second inertia yet;              `motorid diagnose` names and sizes a compliant coupling (j2, k, c) from the log"
+            "--add compliance: the fitted models have no load state for a second inertia yet; \
+             `motorid diagnose` names and sizes a compliant coupling (j2, k, c) from the log"
         );
     }
     // A backlash needs the load's side of the gap as a state, as compliance does.
