@@ -170,27 +170,23 @@ impl EmulatorConfig {
     pub fn check(&self) -> Result<()> {
         for e in &self.effects {
             match *e {
-                Effect::Compliance { j2, k, c } => {
-                    if !(j2 > 0.0 && k > 0.0 && c >= 0.0) {
-                        bail!(
-                            "effect compliance: give a load inertia j2 > 0 [kg·m²], a stiffness \
-                             k > 0 [N·m/rad] and a damping c ≥ 0 [N·m·s/rad] (got j2={}, k={}, \
-                             c={})",
-                            crate::validate::show(j2),
-                            crate::validate::show(k),
-                            crate::validate::show(c)
-                        );
-                    }
+                Effect::Compliance { j2, k, c } if !(j2 > 0.0 && k > 0.0 && c >= 0.0) => {
+                    bail!(
+                        "effect compliance: give a load inertia j2 > 0 [kg·m²], a stiffness \
+                         k > 0 [N·m/rad] and a damping c ≥ 0 [N·m·s/rad] (got j2={}, k={}, \
+                         c={})",
+                        crate::validate::show(j2),
+                        crate::validate::show(k),
+                        crate::validate::show(c)
+                    );
                 }
-                Effect::Backlash { j2, gap } => {
-                    if !(j2 > 0.0 && gap >= 0.0) {
-                        bail!(
-                            "effect backlash: give a load inertia j2 > 0 [kg·m²] and a gap ≥ 0 \
-                             [rad] (got j2={}, gap={})",
-                            crate::validate::show(j2),
-                            crate::validate::show(gap)
-                        );
-                    }
+                Effect::Backlash { j2, gap } if !(j2 > 0.0 && gap >= 0.0) => {
+                    bail!(
+                        "effect backlash: give a load inertia j2 > 0 [kg·m²] and a gap ≥ 0 \
+                         [rad] (got j2={}, gap={})",
+                        crate::validate::show(j2),
+                        crate::validate::show(gap)
+                    );
                 }
                 control::effects::Effect::Table {
                     var,
