@@ -148,12 +148,14 @@ fn the_loop_adds_each_effect_and_closes_half_the_gap_to_the_truth() {
     let only = std::env::var("FIT_ADD_EFFECTS").ok();
     let effects: Vec<EffectKind> = EffectKind::ALL
         .into_iter()
-        // Backlash is not emulated, and a table has no default torques to hide.
+        // The fitted models have no load state for compliance or backlash (fit refuses to
+        // add them), and a table has no default torques to hide.
         .filter(|k| {
             !matches!(
                 k,
                 EffectKind::Presliding
                     | EffectKind::Viscous
+                    | EffectKind::Compliance
                     | EffectKind::Backlash
                     | EffectKind::Table
             )

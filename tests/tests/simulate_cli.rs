@@ -96,7 +96,7 @@ fn help_lists_every_signal_and_effect_with_keys() {
     for name in control::effects::EffectKind::ALL.map(|k| k.name()) {
         assert!(text.contains(name), "--help does not list effect {name}");
     }
-    for key in ["harmonic=", "sigma0=", "vd=", "tau="] {
+    for key in ["harmonic=", "sigma0=", "vd=", "tau=", "j2=", "gap="] {
         assert!(text.contains(key), "--help does not list key {key}");
     }
     for sig in ["steady", "ramp", "0.1-1 Hz", "0.5 V"] {
@@ -111,6 +111,10 @@ fn bad_effect_is_one_error_line_and_no_file() {
         ("cogging:h=3", "unknown key 'h'"),
         ("gravity", "gravity"),
         ("offset:t0=abc", "not a number"),
+        ("compliance:k=-1", "compliance"),
+        ("compliance:j2=0", "compliance"),
+        ("backlash:width=0.1", "unknown key 'width'"),
+        ("backlash:gap=-0.1", "gap"),
     ] {
         let out = motorid(
             dir.path(),
@@ -138,4 +142,65 @@ fn bad_effect_is_one_error_line_and_no_file() {
     );
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).starts_with("error:"));
+}
+
+#[test]
+fn compliance_and_backlash_change_the_log_and_report_the_load() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = |effect: Option<&str>, name: &str| {
+        let mut args = vec!["simulate", "--signal", "a", "--duration", "10", "--truth"];
+        if let Some(e) = effect {
+            args.extend(["--effect", e]);
+        }
+        args.extend(["-o", name]);
+        let out = motorid(dir.path(), &args);
+        assert!(
+            out.status.success(),
+            "{effect:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        read(&dir.path().join(name))
+    };
+    let plain = run(None, "plain.csv");
+    assert!(plain.extra("theta_load_true").is_none());
+    let w0 = plain.extra("omega_true").unwrap();
+    for (effect, name) in [
+        ("compliance", "c.csv"),
+        ("backlash", "b.csv"),
+        ("compliance:j2=3e-4,k=2,c=1e-3", "c2.csv"),
+        ("backlash:j2=1e-4,gap=0.5", "b2.csv"),
+    ] {
+        let log = run(Some(effect), name);
+        assert_eq!(log.len(), plain.len());
+        for c in ["theta", "omega", "i"] {
+            assert!(
+                log.extra(&format!("{c}_true")).is_some(),
+                "{effect}: {c}_true"
+            );
+        }
+        // The sensors see the rotor; the load is reported beside it and moves with it.
+        let (th, thl) = (
+            log.extra("theta_true").unwrap(),
+            log.extra("theta_load_true").expect("theta_load_true"),
+        );
+        assert!(log.extra("omega_load_true").is_some());
+        let hall = log.meta["hall_resolution_rad"].parse::<f64>().unwrap();
+        for (k, q) in log.theta.iter().enumerate() {
+            assert!((q - th[k]).abs() <= 0.5 * hall + 1e-9, "{effect}: row {k}");
+        }
+        let travel = th.iter().fold(0.0f64, |a, x| a.max(x.abs()));
+        let lag = th
+            .iter()
+            .zip(thl)
+            .fold(0.0f64, |a, (x, y)| a.max((x - y).abs()));
+        assert!(
+            travel > 10.0 && lag < 0.1 * travel,
+            "{effect}: travel {travel}, lag {lag}"
+        );
+        // The load changes the rotor's motion.
+        let w = log.extra("omega_true").unwrap();
+        let d =
+            (w.iter().zip(w0).map(|(a, b)| (a - b).powi(2)).sum::<f64>() / w.len() as f64).sqrt();
+        assert!(d > 0.1, "{effect}: speed changes by {d} rad/s rms");
+    }
 }

@@ -273,12 +273,8 @@ fn every_effect_changes_the_measurement() {
     for kind in EffectKind::ALL {
         let e = EffectSpec::bare(kind).to_effect();
         let cfg = EmulatorConfig::paper().with_effects(vec![e]);
-        if matches!(
-            kind,
-            EffectKind::Compliance | EffectKind::Backlash | EffectKind::Table
-        ) {
-            // Compliance and backlash are not emulated yet (no load state), and a bare table
-            // has no node torques: refused with a sentence, never ignored.
+        if kind == EffectKind::Table {
+            // A bare table has no node torques: refused with a sentence, never ignored.
             let err = simulate(&cfg, &u, SAMPLE_PERIOD).unwrap_err().to_string();
             assert!(err.contains(kind.name()), "{err}");
             continue;

@@ -2,7 +2,7 @@
 //! and write the log the board would record (motor-log CSV).
 use crate::effect_spec::EffectSpec;
 use crate::emulator::{self, EmulatorConfig, SignalKind};
-use anyhow::{Context, Result};
+use anyhow::Result;
 use std::path::PathBuf;
 
 fn after_help() -> String {
@@ -15,7 +15,9 @@ fn after_help() -> String {
          K_t = K_b = 0.0713, J = 3e-4 kg m^2) with the paper's LuGre friction \
          (alpha0 0.08, alpha1 0.0175, alpha2 0.0016, v0 3.676, sigma0 317.2, sigma1 22.2). \
          --effect adds one physical effect to it (repeat for more; 'presliding' replaces \
-         sigma0 and sigma1). Measured like on the board: Hall angle (2*pi/(6*pole pairs) \
+         sigma0 and sigma1; 'compliance' and 'backlash' each add a load inertia j2 behind \
+         the coupling, which --truth reports as theta_load_true, omega_load_true). Measured \
+         on the rotor like on the board: Hall angle (2*pi/(6*pole pairs) \
          steps), current with noise, velocity by the paper's 10-sample moving average, \
          every 12 ms.\n\n",
     );
@@ -43,7 +45,8 @@ pub struct Args {
     /// Add a physical effect: NAME or NAME:key=value,... (repeatable; list below).
     #[arg(long = "effect", value_name = "SPEC")]
     pub effects: Vec<String>,
-    /// Add the true states as columns theta_true, omega_true, z_true, i_true.
+    /// Add the true states as columns theta_true, omega_true, z_true, i_true (and the load's
+    /// theta_load_true, omega_load_true with compliance or backlash).
     #[arg(long)]
     pub truth: bool,
     /// Pole pairs seen by the Hall sensors (the paper's 0.095 rad resolution is 11).
@@ -80,7 +83,16 @@ pub fn run(args: Args) -> Result<()> {
         fine_step: args.fine_step,
         ..EmulatorConfig::paper()
     };
-    cfg.check().context("emulator settings")?;
+    cfg.check().map_err(|e| {
+        if args.effects.is_empty() {
+            e.context("emulator settings")
+        } else {
+            anyhow::anyhow!(
+                "--effect {}: {e:#}",
+                crate::log::echo(&args.effects.join(" "))
+            )
+        }
+    })?;
     let res = emulator::simulate_signal(&cfg, args.signal, duration).map_err(|e| {
         if args.effects.is_empty() {
             e

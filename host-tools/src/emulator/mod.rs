@@ -24,7 +24,7 @@ pub mod scalar_root;
 pub mod sensors;
 pub mod signals;
 
-pub use plant::{LoadInputs, Plant, TrueState};
+pub use plant::{LoadInputs, LoadState, Plant, TrueState};
 pub use sensors::HallEdge;
 pub use signals::{signal, signal_at, SignalKind, SAMPLE_PERIOD};
 
@@ -168,22 +168,26 @@ impl EmulatorConfig {
 
     /// Refuse what cannot be simulated, with a message for a person.
     pub fn check(&self) -> Result<()> {
-        if self
-            .effects
-            .iter()
-            .any(|e| e.kind() == control::effects::EffectKind::Compliance)
-        {
-            bail!(
-                "effect compliance: the emulator has no load state for a second inertia yet; \
-                 `motorid diagnose` names a compliant coupling in measured logs"
-            );
-        }
         for e in &self.effects {
             match *e {
-                control::effects::Effect::Backlash { .. } => bail!(
-                    "effect backlash: the emulator has no load state for an inertia behind a \
-                     gap yet; `motorid diagnose` names a backlash in measured logs"
-                ),
+                Effect::Compliance { j2, k, c } if !(j2 > 0.0 && k > 0.0 && c >= 0.0) => {
+                    bail!(
+                        "effect compliance: give a load inertia j2 > 0 [kg·m²], a stiffness \
+                         k > 0 [N·m/rad] and a damping c ≥ 0 [N·m·s/rad] (got j2={}, k={}, \
+                         c={})",
+                        crate::validate::show(j2),
+                        crate::validate::show(k),
+                        crate::validate::show(c)
+                    );
+                }
+                Effect::Backlash { j2, gap } if !(j2 > 0.0 && gap >= 0.0) => {
+                    bail!(
+                        "effect backlash: give a load inertia j2 > 0 [kg·m²] and a gap ≥ 0 \
+                         [rad] (got j2={}, gap={})",
+                        crate::validate::show(j2),
+                        crate::validate::show(gap)
+                    );
+                }
                 control::effects::Effect::Table {
                     var,
                     bins,
@@ -273,6 +277,18 @@ pub struct Truth {
     pub z: Vec<f64>,
     /// True current [A].
     pub i: Vec<f64>,
+    /// True angle [rad] and speed [rad/s] of each load behind a coupling (`compliance`,
+    /// `backlash`), in the order of the effects.
+    pub loads: Vec<LoadTruth>,
+}
+
+/// The true states of one load behind a coupling at the samples of a simulation.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct LoadTruth {
+    /// Load angle [rad].
+    pub theta: Vec<f64>,
+    /// Load speed [rad/s].
+    pub omega: Vec<f64>,
 }
 
 /// What [`simulate`] returns: the log as the board would record it, and the truth.
@@ -283,7 +299,9 @@ pub struct SimResult {
 }
 
 impl SimResult {
-    /// The log with the truth as extra columns `theta_true, omega_true, z_true, i_true`.
+    /// The log with the truth as extra columns `theta_true, omega_true, z_true, i_true`, then
+    /// `theta_load_true, omega_load_true` for a load behind a coupling (`theta_load2_true`,
+    /// ... for a second one).
     pub fn log_with_truth(&self) -> MotorLog {
         let mut log = self.log.clone();
         log.extra
@@ -292,6 +310,17 @@ impl SimResult {
             .push(("omega_true".into(), self.truth.omega.clone()));
         log.extra.push(("z_true".into(), self.truth.z.clone()));
         log.extra.push(("i_true".into(), self.truth.i.clone()));
+        for (k, load) in self.truth.loads.iter().enumerate() {
+            let n = if k == 0 {
+                String::new()
+            } else {
+                (k + 1).to_string()
+            };
+            log.extra
+                .push((format!("theta_load{n}_true"), load.theta.clone()));
+            log.extra
+                .push((format!("omega_load{n}_true"), load.omega.clone()));
+        }
         log
     }
 }
@@ -331,7 +360,10 @@ pub fn simulate(cfg: &EmulatorConfig, input: &[f64], ts: f64) -> Result<SimResul
         ..MotorLog::default()
     };
     let (mut i_meas, mut omega_est) = (Vec::with_capacity(n), Vec::with_capacity(n));
-    let mut truth = Truth::default();
+    let mut truth = Truth {
+        loads: vec![LoadTruth::default(); plant.load_states().len()],
+        ..Truth::default()
+    };
     for (k, u) in input.iter().enumerate() {
         let th = plant.hall_angle();
         // k·ts, rounded to the nanosecond so the CSV shows 0.036, not 0.036000000000000004.
@@ -345,6 +377,10 @@ pub fn simulate(cfg: &EmulatorConfig, input: &[f64], ts: f64) -> Result<SimResul
         truth.omega.push(s.omega);
         truth.z.push(s.z);
         truth.i.push(s.i);
+        for (lt, ls) in truth.loads.iter_mut().zip(plant.load_states()) {
+            lt.theta.push(ls.theta);
+            lt.omega.push(ls.omega);
+        }
         plant.apply(*u, ts);
         let s = plant.truth();
         if ![s.theta, s.omega, s.z, s.i].iter().all(|v| v.is_finite())

@@ -33,6 +33,41 @@
 //! Euler damps it; finer steps resolve some chatter at 1.5-4 rad/s. The difference between
 //! 0.2 and 0.1 ms there is ~0.03 rad/s rms, 4% of the 0.79 rad/s velocity resolution of the
 //! board, so the logs do not depend on it (tests/tests/simulate_physics.rs).
+//!
+//! # Loads behind a coupling (`compliance`, `backlash`)
+//! Each such effect adds a load inertia `j2` with its own angle and speed (θ2, ω2), coupled
+//! to the rotor by a torque `τ_c(θ1 − θ2, ω1 − ω2)`; the sensors see the rotor (θ1, ω1):
+//!
+//! ```text
+//! J·dω1/dt = K_t·I − F_f − Σ torque(effect) − T_extra − Σ τ_c
+//! j2·dω2/dt = τ_c,   dθ2/dt = ω2
+//! compliance: τ_c = k·(θ1 − θ2) + c·(ω1 − ω2)
+//! backlash:   τ_c = max(0, k_c·(x − gap/2) + c_c·(ω1 − ω2))  for x = θ1 − θ2 >  gap/2,
+//!             τ_c = min(0, k_c·(x + gap/2) + c_c·(ω1 − ω2))  for x < −gap/2, 0 inside
+//! ```
+//!
+//! The load takes the same backward Euler step as the rotor, in the same solve: for a trial
+//! `ω1'` the load's new speed solves `j2·(ω2' − ω2)/h = τ_c(θ1' − θ2 − h·ω2', ω1' − ω2')`
+//! (in closed form for the linear coupling, by [`super::scalar_root`] for the contact), and
+//! the rotor feels `j2·(ω2' − ω2)/h`. That torque never falls as `ω1'` rises (τ_c never falls
+//! with the deflection or its rate), so the rotor's residual stays increasing and its root
+//! unique. Backward Euler on the coupled pair is stable for any stiffness and never adds
+//! energy: with no input its spring-plus-kinetic energy falls each step by at least
+//! `h·c·(ω1' − ω2')²`. It damps the coupling's mode slightly: a damping ratio of about
+//! `ω_c·h/2` on top of the physical one (ω_c the coupled frequency `√(k·(J + j2)/(J·j2))`;
+//! 0.003 for the default 5 Hz coupling at 0.2 ms) and a frequency low by `(ω_c·h)²/3`. A
+//! coupling far stiffer than the step resolves (`ω_c·h ≫ 1`) is damped out within a step or
+//! two, and the pair then moves as one inertia `J + j2`: the rigid limit.
+//!
+//! Backlash: a rigid, inelastic contact at each end of the gap, made a stiff spring-damper
+//! that engages only beyond the gap and never pulls (the clamps above). Its stiffness
+//! `k_c = μ·(10/h)²` and critical damping `c_c = 2·μ·10/h`, with `μ = J·j2/(J + j2)` the
+//! pair's reduced inertia, give the contact a critically damped frequency of 10/h: backward
+//! Euler settles it within one or two steps (an inelastic impact, the momenta merged), and
+//! under a torque T it yields only `T/k_c` (2·10⁻⁶ rad per N·m for the paper's rotor, a
+//! default load and 0.2 ms). Inside the gap the load has no friction of its own: it coasts.
+//! The load starts at rest in the middle of the gap, so the first motion from rest turns the
+//! rotor alone for gap/2; after a reversal it turns alone across the whole gap.
 use super::scalar_root::find_root;
 use super::sensors::{CurrentSensor, HallEdge, HallSensor};
 use super::EmulatorConfig;
@@ -52,6 +87,115 @@ pub struct LoadInputs {
     pub i: f64,
 }
 
+/// Angle and speed of a load behind a coupling (`compliance`, `backlash`).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct LoadState {
+    /// Load angle θ2 [rad] (on the rotor's side of any gear: the same scale as θ).
+    pub theta: f64,
+    /// Load speed ω2 [rad/s].
+    pub omega: f64,
+}
+
+/// Contact stiffness of a backlash over the fine step, as a frequency times the step: the
+/// critically damped contact rings at `CONTACT_FREQUENCY_STEPS / h` rad/s, which backward
+/// Euler settles in one or two steps (an inelastic impact).
+const CONTACT_FREQUENCY_STEPS: f64 = 10.0;
+
+/// How a load is coupled to the rotor.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Coupling {
+    /// Spring `k` [N·m/rad] and damper `c` [N·m·s/rad].
+    Spring { k: f64, c: f64 },
+    /// Free across `±half` [rad], then a contact `k_c`, `c_c` per fine step `h` (set from
+    /// the reduced inertia `mu` [kg·m²] when the step is known).
+    Gap { half: f64, mu: f64 },
+}
+
+/// A load inertia on the rotor's shaft, behind a coupling.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Load {
+    /// Load inertia j2 [kg·m²].
+    j2: f64,
+    coupling: Coupling,
+    state: LoadState,
+}
+
+impl Load {
+    /// The loads of the effects, at rest at angle 0 (centred in any gap).
+    fn of_effects(effects: &[control::effects::Effect<f64>], j: f64) -> Vec<Load> {
+        use control::effects::Effect;
+        effects
+            .iter()
+            .filter_map(|e| match *e {
+                Effect::Compliance { j2, k, c } => Some(Load {
+                    j2,
+                    coupling: Coupling::Spring { k, c },
+                    state: LoadState::default(),
+                }),
+                Effect::Backlash { j2, gap } => Some(Load {
+                    j2,
+                    coupling: Coupling::Gap {
+                        half: 0.5 * gap,
+                        mu: j * j2 / (j + j2),
+                    },
+                    state: LoadState::default(),
+                }),
+                _ => None,
+            })
+            .collect()
+    }
+
+    /// The load's state at the end of a fine step `h` (backward Euler) when the rotor ends
+    /// it at angle `theta1` and speed `omega1`.
+    fn step(&self, theta1: f64, omega1: f64, h: f64) -> LoadState {
+        let LoadState { theta, omega } = self.state;
+        let j2 = self.j2;
+        let w2 = match self.coupling {
+            // j2·(ω2' − ω2)/h = k·(θ1' − θ2 − h·ω2') + c·(ω1' − ω2'): linear in ω2'.
+            Coupling::Spring { k, c } => {
+                (j2 * omega / h + k * (theta1 - theta) + c * omega1) / (j2 / h + k * h + c)
+            }
+            Coupling::Gap { half, mu } => {
+                let wc = CONTACT_FREQUENCY_STEPS / h;
+                let (kc, cc) = (mu * wc * wc, 2.0 * mu * wc);
+                // Residual increasing in ω2' (τ_c never falls with the deflection or its rate).
+                let resid = |w2: f64| {
+                    let x = theta1 - theta - h * w2;
+                    j2 * (w2 - omega) / h - contact_torque(x, omega1 - w2, half, kc, cc)
+                };
+                let r0 = resid(omega);
+                if r0 == 0.0 {
+                    omega
+                } else {
+                    find_root(
+                        resid,
+                        omega,
+                        r0.abs() * h / j2 + 1e-12,
+                        1e-12 * (1.0 + omega.abs() + omega1.abs()),
+                    )
+                }
+            }
+        };
+        LoadState {
+            theta: theta + h * w2,
+            omega: w2,
+        }
+    }
+}
+
+/// Torque [N·m] a gap of half-width `half` [rad] passes to the load at deflection `x`
+/// [rad] and deflection rate `v` [rad/s]: zero inside, a spring-damper `kc`, `cc` beyond it
+/// that pushes and never pulls.
+fn contact_torque(x: f64, v: f64, half: f64, kc: f64, cc: f64) -> f64 {
+    if x > half {
+        (kc * (x - half) + cc * v).max(0.0)
+    } else if x < -half {
+        (kc * (x + half) + cc * v).min(0.0)
+    } else {
+        0.0
+    }
+}
+
 /// The true state of the emulated motor.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct TrueState {
@@ -69,7 +213,8 @@ pub struct TrueState {
     pub heat: f64,
     /// LuGre friction torque F_f over the last fine step [N·m].
     pub friction: f64,
-    /// Effect torques plus the extra load over the last fine step [N·m].
+    /// Effect torques, the extra load and the couplings' torques to their loads over the
+    /// last fine step [N·m].
     pub load: f64,
     /// Voltage reaching the winding over the last fine step (commanded − losses) [V].
     pub applied_voltage: f64,
@@ -82,6 +227,8 @@ pub struct Plant {
     cfg: EmulatorConfig,
     lugre: LugreParams<f64>,
     state: TrueState,
+    /// Loads behind a coupling (`compliance`, `backlash`), one per such effect.
+    loads: Vec<Load>,
     heats: Vec<f64>,
     /// Largest total |voltage loss| of the effects [V] (bounds the current solve).
     vloss_max: f64,
@@ -119,6 +266,7 @@ impl Plant {
             hall: HallSensor::new(cfg.pole_pairs, 0.0),
             current: CurrentSensor::new(cfg.current_noise, sensor_offset, cfg.seed),
             heats: vec![0.0; cfg.effects.len()],
+            loads: Load::of_effects(&cfg.effects, cfg.motor.j),
             lugre,
             state: TrueState::default(),
             vloss_max,
@@ -168,9 +316,19 @@ impl Plant {
         self.state
     }
 
+    /// Angle and speed of each load behind a coupling, in the order of the effects
+    /// (`compliance`, `backlash`); empty without one.
+    pub fn load_states(&self) -> Vec<LoadState> {
+        self.loads.iter().map(|l| l.state).collect()
+    }
+
     /// Put the motor in a given state (angle, velocity, current, bristle deflection); the
-    /// Hall decoder follows from its present angle.
+    /// Hall decoder follows from its present angle, and each load moves with the rotor,
+    /// relaxed (centred in any gap).
     pub fn set_truth(&mut self, theta: f64, omega: f64, i: f64, z: f64) {
+        for l in &mut self.loads {
+            l.state = LoadState { theta, omega };
+        }
         self.state.theta = theta;
         self.state.omega = omega;
         self.state.i = i;
@@ -255,7 +413,12 @@ impl Plant {
             let (z, zdot) = z_step(&self.lugre, s0.z, w, h);
             let fric = self.lugre.friction_at(w, z, zdot);
             let theta = s0.theta + h * w;
-            let load = self.load_at(t1, theta, w, i);
+            let coupled: f64 = self
+                .loads
+                .iter()
+                .map(|l| l.j2 * (l.step(theta, w, h).omega - l.state.omega) / h)
+                .sum();
+            let load = self.load_at(t1, theta, w, i) + coupled;
             let resid = m.j * (w - s0.omega) / h - m.kt * self.g * i + fric + load;
             (resid, i, z, fric, load, theta)
         };
@@ -266,6 +429,9 @@ impl Plant {
         let step0 = g0.abs() * h / m.j + 1e-9;
         let w = find_root(|w| eval(w).0, guess, step0, 1e-11 * (1.0 + s0.omega.abs()));
         let (_, i, z, fric, load, theta) = eval(w);
+        for l in &mut self.loads {
+            l.state = l.step(theta, w, h);
+        }
         for (hs, e) in self.heats.iter_mut().zip(&self.cfg.effects) {
             *hs = e.heat_step(*hs, i, h);
         }
