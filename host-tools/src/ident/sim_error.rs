@@ -6,7 +6,7 @@
 //! velocity), current, and the angle with a small weight; each normalised by the spread of
 //! the measured signal so that the three are comparable.
 use super::free_params::{parameter_rows, Free, Slot};
-use super::freerun::RunParams;
+use super::freerun::{RunParams, SubstepRoots};
 use super::tangent::{effect_key_mut, RunScalar, Tangent, PARAM_LANES};
 use super::{freerun, nlsq, progress, sensor_chain};
 use crate::log::MotorLog;
@@ -89,21 +89,37 @@ impl<'a> Residuals<'a> {
             return self.eval_sindyc(model);
         }
         let p = RunParams::<f64>::of(model);
-        self.residuals(&p, &p)
+        self.residuals(&p, &p, &mut SubstepRoots::Solve)
+    }
+
+    /// [`Self::eval`] of a (non-SINDYc) model, with the tape of its sub-steps' roots for
+    /// [`Self::eval_with_jacobian`] at the same model.
+    pub fn eval_recording(&self, model: &Model) -> Result<(Vec<f64>, Vec<f64>)> {
+        let p = RunParams::<f64>::of(model);
+        let samples: usize = self.targets.iter().map(|t| t.log.len()).sum();
+        let mut tape = Vec::with_capacity(samples * freerun::SUBSTEPS);
+        let r = self.residuals(&p, &p, &mut SubstepRoots::Record(&mut tape))?;
+        Ok((r, tape))
     }
 
     /// The residuals and their Jacobian with respect to the free parameters `free` of
     /// `model` (one column per parameter): forward sensitivities of the free run in dual
     /// numbers ([`super::tangent`]), [`PARAM_LANES`] columns per run, the runs on rayon's
-    /// threads. Not for SINDYc models.
+    /// threads. `roots`: the tape of [`Self::eval_recording`] at the same model, which
+    /// spares the runs the sub-steps' root search. Not for SINDYc models.
     pub fn eval_with_jacobian(
         &self,
         model: &Model,
         free: &[Free],
+        roots: Option<&[f64]>,
     ) -> Result<(Vec<f64>, Vec<Vec<f64>>)> {
         let re = RunParams::<f64>::of(model);
+        let tape = || match roots {
+            Some(t) => SubstepRoots::Replay(t, 0),
+            None => SubstepRoots::Solve,
+        };
         if free.is_empty() {
-            return Ok((self.residuals(&re, &re)?, Vec::new()));
+            return Ok((self.residuals(&re, &re, &mut tape())?, Vec::new()));
         }
         let chunks: Vec<&[Free]> = free.chunks(PARAM_LANES).collect();
         let runs: Vec<Result<Vec<Tangent>>> = chunks
@@ -113,7 +129,7 @@ impl<'a> Residuals<'a> {
                 for (lane, fr) in chunk.iter().enumerate() {
                     seed(&mut p, &fr.slot, lane);
                 }
-                self.residuals(&p, &re)
+                self.residuals(&p, &re, &mut tape())
             })
             .collect();
         let mut values = Vec::new();
@@ -131,8 +147,14 @@ impl<'a> Residuals<'a> {
     }
 
     /// The residuals of the model `p` (values `re`) in its number type: per log (or per
-    /// segment), the velocity through the firmware's estimator, the current, the angle.
-    fn residuals<D: RunScalar>(&self, p: &RunParams<D>, re: &RunParams<f64>) -> Result<Vec<D>> {
+    /// segment), the velocity through the firmware's estimator, the current, the angle; the
+    /// sub-steps' roots of all its runs in one tape.
+    fn residuals<D: RunScalar>(
+        &self,
+        p: &RunParams<D>,
+        re: &RunParams<f64>,
+        roots: &mut SubstepRoots,
+    ) -> Result<Vec<D>> {
         let c = D::constant;
         let mut r = Vec::new();
         for tg in &self.targets {
@@ -154,7 +176,7 @@ impl<'a> Residuals<'a> {
                     Some(_) => s.saturating_sub(self.window),
                     None => s,
                 };
-                let run = freerun::run_range(p, re, tg.log, a, e, freerun::SUBSTEPS)?;
+                let run = freerun::run_range(p, re, tg.log, a, e, freerun::SUBSTEPS, roots)?;
                 let w = sensor_chain::velocity_estimate(&tg.log.t[a..e], &run.theta, self.window);
                 let off = s - a;
                 r.extend(
@@ -395,13 +417,34 @@ pub fn refine_on(
         }
         m
     };
-    let f = |x: &[f64]| res.eval(&model_at(x));
     let sol = if base.kind == ModelKind::Sindyc || jacobian == Jacobian::FiniteDifferences {
+        let f = |x: &[f64]| res.eval(&model_at(x));
         nlsq::solve_parallel(&f, &x0, &lo, &hi, &scale, opts, progress)?
     } else {
+        // Levenberg–Marquardt asks for the Jacobian at the cheapest point evaluated so far:
+        // its sub-steps' roots are kept from that evaluation.
+        let cheapest: std::sync::Mutex<Option<(Vec<f64>, f64, Vec<f64>)>> = Default::default();
+        let f = |x: &[f64]| {
+            let (r, tape) = res.eval_recording(&model_at(x))?;
+            let c: f64 = r.iter().map(|v| v * v).sum();
+            if let Ok(mut kept) = cheapest.lock() {
+                if kept.as_ref().is_none_or(|k| c < k.1) {
+                    *kept = Some((x.to_vec(), c, tape));
+                }
+            }
+            Ok(r)
+        };
         // Exact Jacobian by forward sensitivities of the free run; without the
         // finite differences' noise the iterations may stop on significance.
-        let jac = |x: &[f64]| Ok(res.eval_with_jacobian(&model_at(x), free)?.1);
+        let jac = |x: &[f64]| {
+            let roots: Option<Vec<f64>> = cheapest
+                .lock()
+                .ok()
+                .and_then(|k| k.as_ref().filter(|k| k.0 == x).map(|k| k.2.clone()));
+            Ok(res
+                .eval_with_jacobian(&model_at(x), free, roots.as_deref())?
+                .1)
+        };
         let opts = nlsq::Options {
             noise_stop: true,
             ..opts
@@ -593,9 +636,21 @@ mod tests {
             } else {
                 Residuals::new(&logs, 10)
             };
-            let (r, jac) = res.eval_with_jacobian(&model, &free).unwrap();
-            // The dual run's values are the f64 run's, to the bit.
+            let (r, jac) = res.eval_with_jacobian(&model, &free, None).unwrap();
+            // The dual run's values are the f64 run's, to the bit; so are its sub-steps'
+            // roots, and with them replayed from the f64 run's tape it gives the same
+            // Jacobian.
+            let (r64, tape) = res.eval_recording(&model).unwrap();
             assert_eq!(r, res.eval(&model).unwrap());
+            assert_eq!(r, r64);
+            let steps = (logs[0].len() - 1) * freerun::SUBSTEPS;
+            assert!(
+                tape.len() >= steps,
+                "{} roots for {steps} sub-steps",
+                tape.len()
+            );
+            let replayed = res.eval_with_jacobian(&model, &free, Some(&tape)).unwrap();
+            assert_eq!((r.clone(), jac.clone()), replayed);
             assert_eq!(jac.len(), free.len());
             for (j, fr) in free.iter().enumerate() {
                 let x = fr.slot.get(&model);
