@@ -522,15 +522,19 @@ pub fn data_scales<'a>(model: &Model, logs: impl Iterator<Item = &'a MotorLog>) 
 /// The cost has nearby local minima (the inductance and inertia compensating a misplaced
 /// effect: a hidden offset or cogging torque; a Stribeck bump below the speeds the axis
 /// holds, with α0 at 0, standing in for Coulomb friction), and which one a refinement
-/// reaches depends on its start. Each of `starts` (structures without the effects: the
-/// weak-form start and the base structure refined alone), with the effects of `model`
+/// reaches depends on its start. Each of `starts` (makers of structures without the effects:
+/// the weak-form start and the base structure refined alone), with the effects of `model`
 /// (their weak-form estimate) moved to their [`better_effect_start`], is refined, and the
 /// refinement that ends cheapest is kept. The cheaper start does not always end cheaper: a
 /// base structure refined into such a corner is close to the data at the start and stays in
 /// the corner, while the weak-form start leaves it.
+///
+/// The starts are made and refined side by side, the first on this thread (which reports
+/// its progress), the others on threads of their own: a refinement's trial runs are
+/// sequential, so one start alone leaves a second core idle between its Jacobians.
 pub fn refine_added_effects(
     model: &mut Model,
-    starts: &[Model],
+    starts: &[&StartMaker],
     base_free: &[Free],
     logs: &[MotorLog],
     opts: nlsq::Options,
@@ -540,26 +544,43 @@ pub fn refine_added_effects(
     let seg = Residuals::segmented(logs, model.sensor.velocity_window);
     let mut free = base_free.to_vec();
     free.extend(super::linear::effect_free(model));
+    let effects = &model.effects;
+    let refine_from = |make: &StartMaker, report: &mut dyn FnMut(usize, f64)| {
+        let mut m = make()?;
+        m.effects = effects.clone();
+        better_effect_start(&mut m, &seg);
+        let rows = refine_on(&mut m, &free, &seg, Jacobian::Sensitivities, opts, report)?;
+        let c = cost(&seg, &m);
+        tracing::debug!("added effects refined: cost {c:.4e}");
+        Ok((c, m, rows))
+    };
+    let Some((first, others)) = starts.split_first() else {
+        bail!("no start for the added effects");
+    };
+    let ends: Vec<Result<(f64, Model, Vec<Parameter>)>> = std::thread::scope(|scope| {
+        let handles: Vec<_> = others
+            .iter()
+            .map(|make| scope.spawn(|| refine_from(*make, &mut |_, _| {})))
+            .collect();
+        let mut ends = vec![refine_from(*first, &mut |it, c| {
+            progress::report(stage, it, c)
+        })];
+        for h in handles {
+            ends.push(match h.join() {
+                Ok(end) => end,
+                Err(panic) => std::panic::resume_unwind(panic),
+            });
+        }
+        ends
+    });
     let mut best: Option<(f64, Model, Vec<Parameter>)> = None;
     let mut first_err = None;
-    for structure in starts {
-        let mut m = structure.clone();
-        m.effects = model.effects.clone();
-        better_effect_start(&mut m, &seg);
-        let refined = refine_on(
-            &mut m,
-            &free,
-            &seg,
-            Jacobian::Sensitivities,
-            opts,
-            &mut |it, c| progress::report(stage, it, c),
-        );
-        match refined {
-            Ok(rows) => {
-                let c = cost(&seg, &m);
-                tracing::debug!("added effects refined: cost {c:.4e}");
-                if best.as_ref().is_none_or(|b| c < b.0) {
-                    best = Some((c, m, rows));
+    // In the order of `starts`: the first of equally cheap ends is kept.
+    for end in ends {
+        match end {
+            Ok(end) => {
+                if best.as_ref().is_none_or(|b| end.0 < b.0) {
+                    best = Some(end);
                 }
             }
             Err(e) => {
@@ -576,6 +597,9 @@ pub fn refine_added_effects(
         (None, None) => bail!("no start for the added effects"),
     }
 }
+
+/// A start of [`refine_added_effects`]: makes a structure without the added effects.
+pub type StartMaker<'a> = dyn Fn() -> Result<Model> + Sync + 'a;
 
 #[cfg(test)]
 mod tests {
