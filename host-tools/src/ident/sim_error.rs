@@ -423,7 +423,7 @@ pub fn refine_on(
     } else {
         // Levenberg–Marquardt asks for the Jacobian at the cheapest point evaluated so far:
         // its sub-steps' roots are kept from that evaluation.
-        let cheapest: std::sync::Mutex<Option<(Vec<f64>, f64, Vec<f64>)>> = Default::default();
+        let cheapest: std::sync::Mutex<Option<CheapestPoint>> = Default::default();
         let f = |x: &[f64]| {
             let (r, tape) = res.eval_recording(&model_at(x))?;
             let c: f64 = r.iter().map(|v| v * v).sum();
@@ -482,6 +482,10 @@ pub fn refine_on(
     rows.extend(fixed_rows);
     Ok(rows)
 }
+
+/// The cheapest point a refinement evaluated: parameters, `Σ r²`, and the tape of its
+/// sub-steps' roots.
+type CheapestPoint = (Vec<f64>, f64, Vec<f64>);
 
 /// Factor by which white-noise standard errors σ²·(JᵀJ)⁻¹ understate the spread of the
 /// estimates when the residual `r` is autocorrelated: `√τ`, τ the residual's integrated
@@ -560,9 +564,9 @@ pub fn refine_added_effects(
     let ends: Vec<Result<(f64, Model, Vec<Parameter>)>> = std::thread::scope(|scope| {
         let handles: Vec<_> = others
             .iter()
-            .map(|make| scope.spawn(|| refine_from(*make, &mut |_, _| {})))
+            .map(|make| scope.spawn(|| refine_from(make, &mut |_, _| {})))
             .collect();
-        let mut ends = vec![refine_from(*first, &mut |it, c| {
+        let mut ends = vec![refine_from(first, &mut |it, c| {
             progress::report(stage, it, c)
         })];
         for h in handles {
