@@ -186,6 +186,7 @@ type Slope = DualVec<f64, 1>;
 /// found in `f64` by [`substep_velocity`] from `w_guess`; in dual numbers the new state then
 /// carries the implicit function's derivatives ([`RunScalar::on_root`]). `slope` holds the
 /// values `re` of `p` as one-lane dual numbers.
+/// The new velocity is taken from `roots` when it replays a tape.
 #[allow(clippy::too_many_arguments)]
 fn implicit_step<D: RunScalar>(
     p: &RunParams<D>,
@@ -196,11 +197,54 @@ fn implicit_step<D: RunScalar>(
     h_th: D,
     h: f64,
     w_guess: f64,
+    roots: &mut SubstepRoots,
 ) -> [D; NX] {
-    let xr = x.map(|v| v.re());
-    let w = substep_velocity(re, slope, &xr, u, h_th.re(), h, w_guess);
+    let w = match roots.replay() {
+        Some(w) => w,
+        None => {
+            let xr = x.map(|v| v.re());
+            let w = substep_velocity(re, slope, &xr, u, h_th.re(), h, w_guess);
+            roots.record(w);
+            w
+        }
+    };
     let (g, s) = substep_residual(p, re, x, u, h_th, h, D::unknown(w));
     s.map(|v| D::on_root(v, g))
+}
+
+/// The sub-steps' new velocities (the roots [`substep_velocity`] finds), in the order a run
+/// takes them. A run in dual numbers computes its values with the same operations as the
+/// `f64` run of the same parameters (the dual numbers' value parts round as `f64` does), so
+/// it meets the same roots: replayed from the `f64` run's tape, it skips the root search,
+/// most of a sub-step's cost.
+#[derive(Debug)]
+pub enum SubstepRoots<'a> {
+    /// Search every root.
+    Solve,
+    /// Search every root and append it to the tape.
+    Record(&'a mut Vec<f64>),
+    /// Take the roots from the tape, from the position held on; past its end, search.
+    Replay(&'a [f64], usize),
+}
+
+impl SubstepRoots<'_> {
+    /// The next root of a replayed tape.
+    fn replay(&mut self) -> Option<f64> {
+        match self {
+            SubstepRoots::Replay(tape, at) => {
+                let w = tape.get(*at).copied();
+                *at += 1;
+                w
+            }
+            _ => None,
+        }
+    }
+
+    fn record(&mut self, w: f64) {
+        if let SubstepRoots::Record(tape) = self {
+            tape.push(w);
+        }
+    }
 }
 
 /// The new velocity of a sub-step: the root of [`substep_residual`] to within
@@ -430,7 +474,7 @@ pub fn simulate_range(
     substeps: usize,
 ) -> Result<Prediction> {
     let p = RunParams::<f64>::of(model);
-    let run = run_range(&p, &p, log, start, end, substeps)?;
+    let run = run_range(&p, &p, log, start, end, substeps, &mut SubstepRoots::Solve)?;
     Ok(Prediction {
         t: log.t[start..end.min(log.len())].to_vec(),
         theta: run.theta,
@@ -493,7 +537,8 @@ fn measured_state<D: RunScalar>(
     }
 }
 
-/// [`simulate_range`] of the model `p` (whose values are `re`) in its number type.
+/// [`simulate_range`] of the model `p` (whose values are `re`) in its number type, the
+/// sub-steps' roots searched, recorded or replayed as `roots` says.
 pub fn run_range<D: RunScalar>(
     p: &RunParams<D>,
     re: &RunParams<f64>,
@@ -501,8 +546,9 @@ pub fn run_range<D: RunScalar>(
     start: usize,
     end: usize,
     substeps: usize,
+    roots: &mut SubstepRoots,
 ) -> Result<Run<D>> {
-    run_range_from(p, re, log, start, end, substeps, None)
+    run_range_from(p, re, log, start, end, substeps, None, roots)
 }
 
 /// [`run_range`] from the measured angle at `start` and, when `carried` is given, the other
@@ -516,6 +562,7 @@ pub fn run_range_from<D: RunScalar>(
     end: usize,
     substeps: usize,
     carried: Option<Carried<D>>,
+    roots: &mut SubstepRoots,
 ) -> Result<Run<D>> {
     let end = end.min(log.len());
     if start >= end {
@@ -561,7 +608,7 @@ pub fn run_range_from<D: RunScalar>(
             let w = x[1].re();
             let guess = w + (w - w_prev);
             w_prev = w;
-            x = implicit_step(p, re, &slope, &x, u, h, dt, guess);
+            x = implicit_step(p, re, &slope, &x, u, h, dt, guess, roots);
             for e in &p.effects {
                 h = e.heat_step(h, x[2], D::constant(dt));
             }

@@ -233,7 +233,10 @@ pub fn refine_free_run(
         let sens = sim_error::Jacobian::Sensitivities;
         sim_error::refine(model, free, req.logs, sens, opts, &mut report)
     } else {
-        let starts = [model.clone(), base_structure_fit(req)?];
+        let weak_form = model.clone();
+        let weak_form_start = || Ok(weak_form.clone());
+        let base_start = || base_structure_fit(req);
+        let starts: [&sim_error::StartMaker; 2] = [&weak_form_start, &base_start];
         sim_error::refine_added_effects(model, &starts, free, req.logs, opts)
     }
 }

@@ -267,9 +267,12 @@ fn solve_with(
     let mut lambda = 1e-3;
     let mut jac = vec![vec![0.0; m]; n];
     let mut iterations = 0;
+    // Whether `jac` is the Jacobian at the current x.
+    let mut jac_at_x = false;
     for it in 0..opts.max_iter {
         iterations = it + 1;
         evals += f.jacobian(&x, &r, hi, scale, &mut jac);
+        jac_at_x = true;
         let g: Vec<f64> = (0..n)
             .map(|j| (0..m).map(|i| jac[j][i] * r[i]).sum())
             .collect();
@@ -306,6 +309,7 @@ fn solve_with(
                     x = xn;
                     r = rn;
                     cost = cn;
+                    jac_at_x = false;
                     lambda = (lambda / 3.0).max(1e-12);
                     accepted = true;
                     small_step = rel < opts.ftol || (opts.noise_stop && insignificant);
@@ -319,8 +323,11 @@ fn solve_with(
             break;
         }
     }
-    // Standard errors at the optimum (recompute the Jacobian at the final x).
-    evals += f.jacobian(&x, &r, hi, scale, &mut jac);
+    // Standard errors at the optimum (the Jacobian at the final x, unless the last
+    // iteration ended without moving).
+    if !jac_at_x {
+        evals += f.jacobian(&x, &r, hi, scale, &mut jac);
+    }
     let sigma2 = 2.0 * cost / ((m - n).max(1) as f64);
     let std_err = covariance_diag(&normal_matrix(&jac), scale)
         .into_iter()
@@ -488,6 +495,64 @@ mod tests {
         .unwrap();
         assert_eq!(par.x, sol.x);
         assert_eq!(par.iterations, sol.iterations);
+    }
+
+    #[test]
+    fn standard_errors_use_the_jacobian_at_the_solution() {
+        // y = a·exp(−b·t) with a deterministic ripple, so the cost at the minimum is not 0;
+        // started where the first steps are rejected.
+        let t: Vec<f64> = (0..60).map(|k| k as f64 * 0.1).collect();
+        let y: Vec<f64> = t
+            .iter()
+            .enumerate()
+            .map(|(k, t)| 2.0 * (-0.7 * t).exp() + 0.01 * (k as f64 * 1.7).sin())
+            .collect();
+        let f = |x: &[f64]| -> Result<Vec<f64>> {
+            Ok(t.iter()
+                .zip(&y)
+                .map(|(t, y)| x[0] * (-x[1] * t).exp() - y)
+                .collect())
+        };
+        let columns = |x: &[f64]| -> Vec<Vec<f64>> {
+            let da = t.iter().map(|t| (-x[1] * t).exp()).collect();
+            let db = t.iter().map(|t| -x[0] * t * (-x[1] * t).exp()).collect();
+            vec![da, db]
+        };
+        let calls = std::sync::atomic::AtomicUsize::new(0);
+        let jac = |x: &[f64]| -> Result<Vec<Vec<f64>>> {
+            calls.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            Ok(columns(x))
+        };
+        // Ending on an accepted step (the cost tolerance) and on steps that no longer
+        // lower the cost (no tolerance): the Jacobian at the solution is computed after
+        // the iterations in the first case, kept from the last iteration in the second.
+        let to_the_end = Options {
+            ftol: 0.0,
+            xtol: 0.0,
+            max_iter: 100,
+            ..Options::default()
+        };
+        let cases = [
+            ([1.0, 0.1], Options::default(), 1),
+            ([50.0, 9.0], Options::default(), 1),
+            ([1.0, 0.1], to_the_end, 0),
+        ];
+        for (x0, opts, after) in cases {
+            calls.store(0, std::sync::atomic::Ordering::Relaxed);
+            let problem = WithJacobian { f: &f, jac: &jac };
+            let (lo, hi, scale) = ([0.0; 2], [100.0; 2], [1.0; 2]);
+            let sol =
+                solve_with_jacobian(problem, &x0, &lo, &hi, &scale, opts, &mut |_, _| {}).unwrap();
+            assert!((sol.x[1] - 0.7).abs() < 1e-2, "{:?}", sol.x);
+            let n = calls.load(std::sync::atomic::Ordering::Relaxed);
+            assert_eq!(n, sol.iterations + after, "Jacobians");
+            let sigma2 = 2.0 * sol.cost / (t.len() - 2) as f64;
+            let expected: Vec<f64> = covariance_diag(&normal_matrix(&columns(&sol.x)), &scale)
+                .into_iter()
+                .map(|v| (sigma2 * v).sqrt())
+                .collect();
+            assert_eq!(sol.std_err, expected);
+        }
     }
 
     #[test]

@@ -6,7 +6,7 @@
 //! velocity), current, and the angle with a small weight; each normalised by the spread of
 //! the measured signal so that the three are comparable.
 use super::free_params::{parameter_rows, Free, Slot};
-use super::freerun::RunParams;
+use super::freerun::{RunParams, SubstepRoots};
 use super::tangent::{effect_key_mut, RunScalar, Tangent, PARAM_LANES};
 use super::{freerun, nlsq, progress, sensor_chain};
 use crate::log::MotorLog;
@@ -123,21 +123,37 @@ impl<'a> Residuals<'a> {
             return self.eval_sindyc(model);
         }
         let p = RunParams::<f64>::of(model);
-        self.residuals(&p, &p)
+        self.residuals(&p, &p, &mut SubstepRoots::Solve)
+    }
+
+    /// [`Self::eval`] of a (non-SINDYc) model, with the tape of its sub-steps' roots for
+    /// [`Self::eval_with_jacobian`] at the same model.
+    pub fn eval_recording(&self, model: &Model) -> Result<(Vec<f64>, Vec<f64>)> {
+        let p = RunParams::<f64>::of(model);
+        let samples: usize = self.targets.iter().map(|t| t.log.len()).sum();
+        let mut tape = Vec::with_capacity(samples * freerun::SUBSTEPS);
+        let r = self.residuals(&p, &p, &mut SubstepRoots::Record(&mut tape))?;
+        Ok((r, tape))
     }
 
     /// The residuals and their Jacobian with respect to the free parameters `free` of
     /// `model` (one column per parameter): forward sensitivities of the free run in dual
     /// numbers ([`super::tangent`]), [`PARAM_LANES`] columns per run, the runs on rayon's
-    /// threads. Not for SINDYc models.
+    /// threads. `roots`: the tape of [`Self::eval_recording`] at the same model, which
+    /// spares the runs the sub-steps' root search. Not for SINDYc models.
     pub fn eval_with_jacobian(
         &self,
         model: &Model,
         free: &[Free],
+        roots: Option<&[f64]>,
     ) -> Result<(Vec<f64>, Vec<Vec<f64>>)> {
         let re = RunParams::<f64>::of(model);
+        let tape = || match roots {
+            Some(t) => SubstepRoots::Replay(t, 0),
+            None => SubstepRoots::Solve,
+        };
         if free.is_empty() {
-            return Ok((self.residuals(&re, &re)?, Vec::new()));
+            return Ok((self.residuals(&re, &re, &mut tape())?, Vec::new()));
         }
         let chunks: Vec<&[Free]> = free.chunks(PARAM_LANES).collect();
         let runs: Vec<Result<Vec<Tangent>>> = chunks
@@ -147,7 +163,7 @@ impl<'a> Residuals<'a> {
                 for (lane, fr) in chunk.iter().enumerate() {
                     seed(&mut p, &fr.slot, lane);
                 }
-                self.residuals(&p, &re)
+                self.residuals(&p, &re, &mut tape())
             })
             .collect();
         let mut values = Vec::new();
@@ -165,8 +181,14 @@ impl<'a> Residuals<'a> {
     }
 
     /// The residuals of the model `p` (values `re`) in its number type: per log (or per
-    /// segment), the velocity through the firmware's estimator, the current, the angle.
-    fn residuals<D: RunScalar>(&self, p: &RunParams<D>, re: &RunParams<f64>) -> Result<Vec<D>> {
+    /// segment), the velocity through the firmware's estimator, the current, the angle; the
+    /// sub-steps' roots of all its runs in one tape.
+    fn residuals<D: RunScalar>(
+        &self,
+        p: &RunParams<D>,
+        re: &RunParams<f64>,
+        roots: &mut SubstepRoots,
+    ) -> Result<Vec<D>> {
         let c = D::constant;
         let mut r = Vec::new();
         for tg in &self.targets {
@@ -193,7 +215,16 @@ impl<'a> Residuals<'a> {
                     (Restart::Angle, Some((pa, run))) if a >= *pa => Some(run.carried(p, a - pa)),
                     _ => None,
                 };
-                let run = freerun::run_range_from(p, re, tg.log, a, e, freerun::SUBSTEPS, carried)?;
+                let run = freerun::run_range_from(
+                    p,
+                    re,
+                    tg.log,
+                    a,
+                    e,
+                    freerun::SUBSTEPS,
+                    carried,
+                    roots,
+                )?;
                 let w = sensor_chain::velocity_estimate(&tg.log.t[a..e], &run.theta, self.window);
                 let off = s - a;
                 r.extend(
@@ -435,13 +466,34 @@ pub fn refine_on(
         }
         m
     };
-    let f = |x: &[f64]| res.eval(&model_at(x));
     let sol = if base.kind == ModelKind::Sindyc || jacobian == Jacobian::FiniteDifferences {
+        let f = |x: &[f64]| res.eval(&model_at(x));
         nlsq::solve_parallel(&f, &x0, &lo, &hi, &scale, opts, progress)?
     } else {
+        // Levenberg–Marquardt asks for the Jacobian at the cheapest point evaluated so far:
+        // its sub-steps' roots are kept from that evaluation.
+        let cheapest: std::sync::Mutex<Option<CheapestPoint>> = Default::default();
+        let f = |x: &[f64]| {
+            let (r, tape) = res.eval_recording(&model_at(x))?;
+            let c: f64 = r.iter().map(|v| v * v).sum();
+            if let Ok(mut kept) = cheapest.lock() {
+                if kept.as_ref().is_none_or(|k| c < k.1) {
+                    *kept = Some((x.to_vec(), c, tape));
+                }
+            }
+            Ok(r)
+        };
         // Exact Jacobian by forward sensitivities of the free run; without the
         // finite differences' noise the iterations may stop on significance.
-        let jac = |x: &[f64]| Ok(res.eval_with_jacobian(&model_at(x), free)?.1);
+        let jac = |x: &[f64]| {
+            let roots: Option<Vec<f64>> = cheapest
+                .lock()
+                .ok()
+                .and_then(|k| k.as_ref().filter(|k| k.0 == x).map(|k| k.2.clone()));
+            Ok(res
+                .eval_with_jacobian(&model_at(x), free, roots.as_deref())?
+                .1)
+        };
         let opts = nlsq::Options {
             noise_stop: true,
             ..opts
@@ -479,6 +531,10 @@ pub fn refine_on(
     rows.extend(fixed_rows);
     Ok(rows)
 }
+
+/// The cheapest point a refinement evaluated: parameters, `Σ r²`, and the tape of its
+/// sub-steps' roots.
+type CheapestPoint = (Vec<f64>, f64, Vec<f64>);
 
 /// Factor by which white-noise standard errors σ²·(JᵀJ)⁻¹ understate the spread of the
 /// estimates when the residual `r` is autocorrelated: `√τ`, τ the residual's integrated
@@ -519,15 +575,19 @@ pub fn data_scales<'a>(model: &Model, logs: impl Iterator<Item = &'a MotorLog>) 
 /// The cost has nearby local minima (the inductance and inertia compensating a misplaced
 /// effect: a hidden offset or cogging torque; a Stribeck bump below the speeds the axis
 /// holds, with α0 at 0, standing in for Coulomb friction), and which one a refinement
-/// reaches depends on its start. Each of `starts` (structures without the effects: the
-/// weak-form start and the base structure refined alone), with the effects of `model`
+/// reaches depends on its start. Each of `starts` (makers of structures without the effects:
+/// the weak-form start and the base structure refined alone), with the effects of `model`
 /// (their weak-form estimate) moved to their [`better_effect_start`], is refined, and the
 /// refinement that ends cheapest is kept. The cheaper start does not always end cheaper: a
 /// base structure refined into such a corner is close to the data at the start and stays in
 /// the corner, while the weak-form start leaves it.
+///
+/// The starts are made and refined side by side, the first on this thread (which reports
+/// its progress), the others on threads of their own: a refinement's trial runs are
+/// sequential, so one start alone leaves a second core idle between its Jacobians.
 pub fn refine_added_effects(
     model: &mut Model,
-    starts: &[Model],
+    starts: &[&StartMaker],
     base_free: &[Free],
     logs: &[MotorLog],
     opts: nlsq::Options,
@@ -537,26 +597,43 @@ pub fn refine_added_effects(
     let seg = Residuals::segmented(logs, model.sensor.velocity_window);
     let mut free = base_free.to_vec();
     free.extend(super::linear::effect_free(model));
+    let effects = &model.effects;
+    let refine_from = |make: &StartMaker, report: &mut dyn FnMut(usize, f64)| {
+        let mut m = make()?;
+        m.effects = effects.clone();
+        better_effect_start(&mut m, &seg);
+        let rows = refine_on(&mut m, &free, &seg, Jacobian::Sensitivities, opts, report)?;
+        let c = cost(&seg, &m);
+        tracing::debug!("added effects refined: cost {c:.4e}");
+        Ok((c, m, rows))
+    };
+    let Some((first, others)) = starts.split_first() else {
+        bail!("no start for the added effects");
+    };
+    let ends: Vec<Result<(f64, Model, Vec<Parameter>)>> = std::thread::scope(|scope| {
+        let handles: Vec<_> = others
+            .iter()
+            .map(|make| scope.spawn(|| refine_from(make, &mut |_, _| {})))
+            .collect();
+        let mut ends = vec![refine_from(first, &mut |it, c| {
+            progress::report(stage, it, c)
+        })];
+        for h in handles {
+            ends.push(match h.join() {
+                Ok(end) => end,
+                Err(panic) => std::panic::resume_unwind(panic),
+            });
+        }
+        ends
+    });
     let mut best: Option<(f64, Model, Vec<Parameter>)> = None;
     let mut first_err = None;
-    for structure in starts {
-        let mut m = structure.clone();
-        m.effects = model.effects.clone();
-        better_effect_start(&mut m, &seg);
-        let refined = refine_on(
-            &mut m,
-            &free,
-            &seg,
-            Jacobian::Sensitivities,
-            opts,
-            &mut |it, c| progress::report(stage, it, c),
-        );
-        match refined {
-            Ok(rows) => {
-                let c = cost(&seg, &m);
-                tracing::debug!("added effects refined: cost {c:.4e}");
-                if best.as_ref().is_none_or(|b| c < b.0) {
-                    best = Some((c, m, rows));
+    // In the order of `starts`: the first of equally cheap ends is kept.
+    for end in ends {
+        match end {
+            Ok(end) => {
+                if best.as_ref().is_none_or(|b| end.0 < b.0) {
+                    best = Some(end);
                 }
             }
             Err(e) => {
@@ -573,6 +650,9 @@ pub fn refine_added_effects(
         (None, None) => bail!("no start for the added effects"),
     }
 }
+
+/// A start of [`refine_added_effects`]: makes a structure without the added effects.
+pub type StartMaker<'a> = dyn Fn() -> Result<Model> + Sync + 'a;
 
 #[cfg(test)]
 mod tests {
@@ -669,9 +749,21 @@ mod tests {
             } else {
                 Residuals::new(&logs, 10)
             };
-            let (r, jac) = res.eval_with_jacobian(&model, &free).unwrap();
-            // The dual run's values are the f64 run's, to the bit.
+            let (r, jac) = res.eval_with_jacobian(&model, &free, None).unwrap();
+            // The dual run's values are the f64 run's, to the bit; so are its sub-steps'
+            // roots, and with them replayed from the f64 run's tape it gives the same
+            // Jacobian.
+            let (r64, tape) = res.eval_recording(&model).unwrap();
             assert_eq!(r, res.eval(&model).unwrap());
+            assert_eq!(r, r64);
+            let steps = (logs[0].len() - 1) * freerun::SUBSTEPS;
+            assert!(
+                tape.len() >= steps,
+                "{} roots for {steps} sub-steps",
+                tape.len()
+            );
+            let replayed = res.eval_with_jacobian(&model, &free, Some(&tape)).unwrap();
+            assert_eq!((r.clone(), jac.clone()), replayed);
             assert_eq!(jac.len(), free.len());
             for (j, fr) in free.iter().enumerate() {
                 let x = fr.slot.get(&model);
