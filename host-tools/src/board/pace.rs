@@ -6,19 +6,55 @@
 //! the periods it missed one after the other (at most [`MAX_CATCH_UP`] of them, then it
 //! drops the rest of the delay), so board time never jumps and no step is merged.
 //!
-//! A host that stops reading (its process paused, the machine overloaded) must not see more
-//! board time pass than the real board lets pass: while more than [`HOST_BACKLOG`] bytes of
-//! the board's output wait unread, periods are due every 12 ms of host time (real time).
-//! The board's link timeout ([`control::board::LINK_TIMEOUT_PERIODS`], 2 s) is then 2 s of
-//! host time at any time factor, and a host that keeps up sees the same run at any factor.
+//! A host that falls behind (its process paused, the machine overloaded, the kernel late
+//! to move the terminal's bytes) must not see more board time pass than the real board lets
+//! pass: while more than [`HOST_BACKLOG`] bytes of the board's output wait unread, or a run
+//! that stops on link loss has heard nothing from the host for [`HOST_QUIET`] periods,
+//! periods are due every 12 ms of host time (real time). The board's link timeout
+//! ([`control::board::LINK_TIMEOUT_PERIODS`], 2 s) is then 2 s of host time at any time
+//! factor, and a host that keeps up sees the same run at any factor.
+use super::sim::BoardSim;
+use control::frame::Mode;
 use std::time::{Duration, Instant};
 
 /// Unread output [bytes] beyond which the host counts as not reading: some 15 samples,
 /// 0.2 s of board time, against the 2 s link timeout.
 pub const HOST_BACKLOG: usize = 512;
+/// Periods without a byte from the host, in a run that stops on link loss, beyond which the
+/// host counts as behind: 0.3 s of board time; a listening host sends a frame every 0.12 s.
+pub const HOST_QUIET: u32 = 25;
 /// Missed periods a late board thread runs to catch up before it drops the rest of its
 /// delay.
 pub const MAX_CATCH_UP: u32 = 10;
+
+/// What the emulator sees of the host when a period is due.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct HostView {
+    /// Bytes of the board's output the host has not read yet, as far as the emulator sees
+    /// (bytes the kernel has not moved yet are not seen).
+    pub unread: usize,
+    /// Periods run since the last byte from the host.
+    pub quiet: u32,
+    /// A run that stops on link loss (speed, experiment) is going.
+    pub watched: bool,
+}
+
+impl HostView {
+    /// The host beside `sim` with `unread` bytes of output not read and `quiet` periods
+    /// since its last byte.
+    pub fn of(sim: &BoardSim, unread: usize, quiet: u32) -> HostView {
+        HostView {
+            unread,
+            quiet,
+            watched: matches!(sim.board().mode(), Mode::Speed | Mode::Experiment),
+        }
+    }
+
+    /// The host is behind the board: periods go at real time.
+    pub fn behind(&self) -> bool {
+        self.unread > HOST_BACKLOG || (self.watched && self.quiet > HOST_QUIET)
+    }
+}
 
 /// The schedule of the board's periods on the host's clock.
 #[derive(Debug, Clone)]
@@ -49,16 +85,11 @@ impl Pacer {
         }
     }
 
-    /// Whether `unread` bytes of output waiting for the host mean it is not reading.
-    fn host_behind(unread: usize) -> bool {
-        unread > HOST_BACKLOG
-    }
-
-    /// Host time from `now` until the next period is due, with `unread` bytes of the board's
-    /// output not yet read by the host (zero: due now).
-    pub fn wait(&self, now: Instant, unread: usize) -> Duration {
+    /// Host time from `now` until the next period is due, the host as `host` (zero: due
+    /// now).
+    pub fn wait(&self, now: Instant, host: HostView) -> Duration {
         let mut due = self.next;
-        if Self::host_behind(unread) {
+        if host.behind() {
             if let Some(last) = self.last {
                 due = due.max(last + self.real.max(self.fast));
             }
@@ -66,11 +97,11 @@ impl Pacer {
         due.saturating_duration_since(now)
     }
 
-    /// A period runs at `now` (with `unread` bytes waiting for the host): schedules the
-    /// next and returns the time since the previous period [µs] of board time (NaN for the
-    /// first), for the board's loop telemetry.
-    pub fn ran(&mut self, now: Instant, unread: usize) -> f32 {
-        let factor = if Self::host_behind(unread) {
+    /// A period runs at `now`, the host as `host`: schedules the next and returns the time
+    /// since the previous period [µs] of board time (NaN for the first), for the board's
+    /// loop telemetry.
+    pub fn ran(&mut self, now: Instant, host: HostView) -> f32 {
+        let factor = if host.behind() {
             self.speed.min(1.0)
         } else {
             self.speed
@@ -92,7 +123,6 @@ mod tests {
     use super::*;
     use crate::board::flash::RamFlash;
     use crate::board::hw::Wiring;
-    use crate::board::sim::BoardSim;
     use crate::emulator::EmulatorConfig;
     use control::commission::CommissionOutcome;
     use control::frame::{
@@ -160,8 +190,10 @@ mod tests {
     /// `motorid board`'s loop in simulated host time: the board (at time factor `speed`,
     /// its thread awake when `board_awake(t)`) paced by [`Pacer`], the host beside it;
     /// `start` is sent before the first period; runs until `periods` periods have run.
+    /// `backlog_seen` false: the emulator never sees the unread output (the kernel holds it).
     fn play<F: Fn(f64) -> bool>(
         speed: f64,
+        backlog_seen: bool,
         board_awake: impl Fn(f64) -> bool,
         host: &mut Host<F>,
         wiring: Wiring,
@@ -177,17 +209,25 @@ mod tests {
         let mut pacer = Pacer::new(speed, t0);
         // Host time advances in steps of 50 µs.
         let dt = Duration::from_micros(50);
-        let (mut now, mut ran) = (t0, 0);
+        let (mut now, mut ran, mut quiet) = (t0, 0, 0);
         while ran < periods {
             let t = (now - t0).as_secs_f64();
             host.act(t);
             if board_awake(t) {
-                sim.receive(&std::mem::take(&mut host.sent));
-                while pacer.wait(now, host.unread.len()).is_zero() {
-                    let us = pacer.ran(now, host.unread.len());
+                if !host.sent.is_empty() {
+                    sim.receive(&std::mem::take(&mut host.sent));
+                    quiet = 0;
+                }
+                let view = |sim: &BoardSim, host: &Host<F>, quiet| {
+                    let unread = if backlog_seen { host.unread.len() } else { 0 };
+                    HostView::of(sim, unread, quiet)
+                };
+                while pacer.wait(now, view(&sim, host, quiet)).is_zero() {
+                    let us = pacer.ran(now, view(&sim, host, quiet));
                     sim.tick_timed(us);
                     host.unread.extend(sim.take_output());
                     ran += 1;
+                    quiet += 1;
                 }
             }
             now += dt;
@@ -228,14 +268,34 @@ mod tests {
             duration_s: 10.0,
         });
         let mut steady = Host::new(|_| true);
-        play(50.0, |_| true, &mut steady, Wiring::default(), &start, 900);
-        let mut pausing = Host::new(|t: f64| (t * 1.0e3).rem_euclid(100.0) < 40.0);
-        play(50.0, |_| true, &mut pausing, Wiring::default(), &start, 900);
-        // What the pausing host had not read yet when the board's periods ran out.
-        pausing.read();
-        assert!(!steady.link_lost && !pausing.link_lost, "link lost");
+        play(
+            50.0,
+            true,
+            |_| true,
+            &mut steady,
+            Wiring::default(),
+            &start,
+            900,
+        );
+        assert!(!steady.link_lost, "link lost");
         assert_eq!(steady.samples.len(), 834);
-        assert_eq!(pausing.samples, steady.samples);
+        // The emulator sees the output pile up, or it does not (the kernel holds it): then
+        // the host's silence in the run tells.
+        for backlog_seen in [true, false] {
+            let mut pausing = Host::new(|t: f64| (t * 1.0e3).rem_euclid(100.0) < 40.0);
+            let (w, s) = (Wiring::default(), &start);
+            play(50.0, backlog_seen, |_| true, &mut pausing, w, s, 900);
+            // What the pausing host had not read yet when the board's periods ran out.
+            pausing.read();
+            assert!(
+                !pausing.link_lost,
+                "link lost, backlog seen: {backlog_seen}"
+            );
+            assert_eq!(
+                pausing.samples, steady.samples,
+                "backlog seen: {backlog_seen}"
+            );
+        }
     }
 
     #[test]
@@ -254,10 +314,11 @@ mod tests {
             * usize::from(control::commission::HOLD_PERIODS)
             + 50;
         let mut regular = Host::new(|_| true);
-        play(50.0, |_| true, &mut regular, wiring, &start, periods);
+        play(50.0, true, |_| true, &mut regular, wiring, &start, periods);
         let mut late = Host::new(|t: f64| (t * 1.0e3).rem_euclid(45.0) < 5.0);
         play(
             50.0,
+            true,
             |t: f64| (t * 1.0e3).rem_euclid(70.0) < 40.0,
             &mut late,
             wiring,

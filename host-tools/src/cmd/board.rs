@@ -1,7 +1,7 @@
 //! `motorid board`: the emulated board behind a pseudo-terminal.
 use crate::board::flash::RamFlash;
 use crate::board::hw::{parse_order, Wiring};
-use crate::board::pace::{self, Pacer};
+use crate::board::pace::{HostView, Pacer};
 use crate::board::pty::Pty;
 use crate::board::sim::BoardSim;
 use crate::effect_spec::EffectSpec;
@@ -123,34 +123,43 @@ pub fn run(args: Args) -> Result<()> {
     // Board time is the count of periods run; the host's clock only says when the next one
     // is due (see `crate::board::pace`).
     let mut pacer = Pacer::new(args.speed, Instant::now());
+    // Periods since the last byte from the host.
+    let mut quiet = 0u32;
     loop {
         // What the host sent so far is handled before the period, as the firmware's link
         // task hands it to the control loop.
         loop {
             match in_rx.try_recv() {
-                Ok(bytes) => sim.receive(&bytes),
+                Ok(bytes) => {
+                    sim.receive(&bytes);
+                    quiet = 0;
+                }
                 Err(mpsc::TryRecvError::Empty) => break,
                 Err(mpsc::TryRecvError::Disconnected) => bail!("the pseudo-terminal closed"),
             }
         }
         out.flush(&mut sim);
-        let unread = out.unread(&pty);
-        let wait = pacer.wait(Instant::now(), unread);
+        let host = HostView::of(&sim, out.unread(&pty), quiet);
+        let wait = pacer.wait(Instant::now(), host);
         if wait.is_zero() {
-            let period_us = pacer.ran(Instant::now(), unread);
+            let period_us = pacer.ran(Instant::now(), host);
             sim.tick_timed(period_us);
+            quiet = quiet.saturating_add(1);
             out.flush(&mut sim);
             continue;
         }
         // Wait for host bytes until the period is due; a host that is behind is looked at
         // again every millisecond (it may read meanwhile).
-        let wait = if unread > pace::HOST_BACKLOG {
+        let wait = if host.behind() {
             wait.min(Duration::from_millis(1))
         } else {
             wait
         };
         match in_rx.recv_timeout(wait) {
-            Ok(bytes) => sim.receive(&bytes),
+            Ok(bytes) => {
+                sim.receive(&bytes);
+                quiet = 0;
+            }
             Err(mpsc::RecvTimeoutError::Timeout) => {}
             Err(mpsc::RecvTimeoutError::Disconnected) => bail!("the pseudo-terminal closed"),
         }
