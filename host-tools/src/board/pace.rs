@@ -171,7 +171,7 @@ mod tests {
                 match decode_frame::<BoardMsg>(f) {
                     Ok(BoardMsg::Sample(s)) => {
                         self.samples.push(s);
-                        if self.samples.len() % 10 == 0 {
+                        if self.samples.len().is_multiple_of(10) {
                             self.sent.extend(frame(&HostMsg::Heartbeat));
                         }
                     }

@@ -111,7 +111,7 @@ pub fn run(args: Args) -> Result<()> {
     let written = Arc::clone(&queued);
     std::thread::spawn(move || {
         while let Ok(bytes) = out_rx.recv() {
-            let ok = master_w.write_all(&bytes).is_ok();
+            let ok = write_through(&mut master_w, &bytes);
             written.fetch_sub(bytes.len(), Ordering::Relaxed);
             if !ok {
                 break;
@@ -191,4 +191,25 @@ impl Output {
     fn unread(&self, pty: &Pty) -> usize {
         self.queued.load(Ordering::Relaxed) + pty.unread()
     }
+}
+
+/// Writes `bytes` to the terminal, waiting while its buffer is full; false when the terminal
+/// is gone.
+fn write_through(w: &mut impl Write, mut bytes: &[u8]) -> bool {
+    while !bytes.is_empty() {
+        match w.write(bytes) {
+            Ok(0) => std::thread::sleep(Duration::from_millis(1)),
+            Ok(n) => bytes = &bytes[n..],
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    std::io::ErrorKind::Interrupted | std::io::ErrorKind::WouldBlock
+                ) =>
+            {
+                std::thread::sleep(Duration::from_millis(1))
+            }
+            Err(_) => return false,
+        }
+    }
+    true
 }
