@@ -541,6 +541,16 @@ impl Board {
             HostMsg::SetMode {
                 mode: Mode::Commission,
             }
+            | HostMsg::Commission
+                if matches!(self.run, Run::Commission(_)) =>
+            {
+                // A retry of the request that started the run (its Ack was late or lost):
+                // the run goes on, restarting it mid-hold would learn from a moving rotor.
+                BoardMsg::Ack
+            }
+            HostMsg::SetMode {
+                mode: Mode::Commission,
+            }
             | HostMsg::Commission => {
                 let volts = self.commission_volts();
                 let i_limit = self.commission_current();

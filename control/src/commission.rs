@@ -317,6 +317,13 @@ impl Commissioner {
         if self.hold >= HOLDS {
             return CommissionStep::Done(self.result());
         }
+        // The first period's current was driven before the run (another run's drive, a
+        // rotor still turning): it is neither a sample of a level nor a bound on the voltage.
+        let i_vector = if self.hold == 0 && self.period == u16::MAX {
+            f32::NAN
+        } else {
+            i_vector
+        };
         if (6..12).contains(&self.hold) {
             // The second forward pass: one electrical revolution, from the state the first
             // pass ended in (the motion into sector 0 of the second pass counts).

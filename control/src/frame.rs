@@ -31,7 +31,7 @@
 //! | `StartExperiment { signal, duration_s }` | `Ack`, then samples until done (`t` and `seq` restart at 0) |
 //! | `Stop` / `ClearFault` | `Ack` |
 //! | `Heartbeat` | nothing (any frame keeps a speed or experiment run alive) |
-//! | `Commission` | `Ack`, then `Commission { outcome, seq }` when done |
+//! | `Commission` | `Ack`, then `Commission { outcome, seq }` when done (during a commissioning run: `Ack`, the run goes on) |
 //! | `ReadCommission` | `Commission { outcome, seq }` (the last run, or the stored one) |
 //! | `ReadTelemetry` | `Telemetry(..)`: the last complete window of [`crate::telemetry`] |
 //! | (nothing) | `Sample { .. }` every 12 ms while running, `Telemetry(..)` every second while running, `Fault`, `Warning` |

@@ -174,7 +174,9 @@ fn a_run_the_board_ends_early_is_an_error_and_writes_no_log() {
     let d = dir.path();
     std::fs::write(d.join("m.toml"), PAPER_LUGRE_MODEL).unwrap();
     ok(&motorid(d, &["export", "m.toml", "-o", "c.bin"]));
-    // Five times real time: the board's 2 s link timeout is 0.4 s here, the run 4 s.
+    // Five times real time: the 20 s run takes 4 s. While `record` is paused its output
+    // piles up unread and the board runs at real time: a pause of 3 s outlasts the board's
+    // 2 s link timeout, as on the real board.
     let board = Board::start_at(d, "5");
     ok(&motorid(d, &["upload", "c.bin", "--port", &board.port]));
     let rec = Command::new(motorid_bin())
@@ -192,7 +194,7 @@ fn a_run_the_board_ends_early_is_an_error_and_writes_no_log() {
     };
     std::thread::sleep(Duration::from_millis(1000));
     signal("-STOP");
-    std::thread::sleep(Duration::from_millis(1500));
+    std::thread::sleep(Duration::from_millis(3000));
     signal("-CONT");
     let out = rec.wait_with_output().unwrap();
     let err = String::from_utf8_lossy(&out.stderr);

@@ -81,9 +81,12 @@ impl Link {
     /// The next message from the board, or `None` after `timeout` without one. Frames that
     /// do not decode are skipped (the board's stream resynchronises at the next zero byte).
     /// A board warning is held as a `warning:` line ([`crate::warnings`]) and returned.
+    /// Only a wait that brought no byte counts as silence: bytes waiting when this process
+    /// resumes from a pause are read (up to two frames past the deadline to finish one).
     pub fn recv(&mut self, timeout: Duration) -> Result<Option<BoardMsg>> {
         let deadline = Instant::now() + timeout;
         let mut byte = [0u8; 1];
+        let mut late = 0usize;
         loop {
             match self.port.read(&mut byte) {
                 Ok(1) => {
@@ -92,6 +95,11 @@ impl Link {
                             crate::warnings::hold(format!("{}: {}", self.name, warning_text(w)));
                         }
                         return Ok(Some(msg));
+                    }
+                    // Past the deadline, at most two frames' worth of bytes to finish one.
+                    late += usize::from(Instant::now() >= deadline);
+                    if late <= 2 * MAX_ENCODED_LEN {
+                        continue;
                     }
                 }
                 Ok(_) => {}

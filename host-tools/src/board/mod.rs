@@ -9,6 +9,7 @@
 //! | [`sim`] | the emulated board: `control::board` (the firmware's logic) on [`hw`] |
 //! | [`hw`] | the emulated hardware: motor, six-step bridge, Hall inputs, wiring |
 //! | [`flash`] | the emulated coefficient flash (RAM or file) for `control::slots` |
+//! | [`pace`] | when the emulated board runs its next period, on the host's clock |
 //! | [`pty`] | a raw pseudo-terminal whose slave device clients open as a serial port |
 //! | [`link`] | the serial link client: identify, upload, experiments, with retries |
 pub mod coeff_text;
@@ -16,6 +17,7 @@ pub mod coeffs;
 pub mod flash;
 pub mod hw;
 pub mod link;
+pub mod pace;
 pub mod pty;
 pub mod rig;
 pub mod sim;

@@ -15,10 +15,15 @@ pub struct Pty {
     pub path: PathBuf,
     /// The emulator keeps the slave open itself, so that clients may come and go without
     /// the master seeing a hang-up.
-    _slave: OwnedFd,
+    slave: OwnedFd,
 }
 
 impl Pty {
+    /// Bytes the emulator wrote that no client has read yet (the slave's input queue).
+    pub fn unread(&self) -> usize {
+        rustix::io::ioctl_fionread(&self.slave).map_or(0, |n| n as usize)
+    }
+
     /// Open a pseudo-terminal in raw mode (no echo, no line editing, all 256 byte values).
     pub fn open() -> Result<Pty> {
         let master = openpt(OpenptFlags::RDWR | OpenptFlags::NOCTTY)
@@ -39,7 +44,7 @@ impl Pty {
         Ok(Pty {
             master: File::from(master),
             path,
-            _slave: slave,
+            slave,
         })
     }
 }

@@ -178,6 +178,7 @@ pub fn decode_blob(bytes: &[u8]) -> Result<Coefficients> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use control::commission::{CommissionError, CommissionOutcome};
     use control::frame::{decode_frame, encode_frame, Excitation, Fault, Nack, Sample, CHUNK_LEN};
 
     fn frame(msg: &HostMsg) -> Vec<u8> {
@@ -628,5 +629,74 @@ mod tests {
         let k = lost.expect("no link-loss stop");
         assert!(k as u32 <= control::board::LINK_TIMEOUT_PERIODS, "{k}");
         assert!(!sim.is_running());
+    }
+
+    /// Ticks until the commissioning ends; its outcome.
+    fn commission_result(sim: &mut BoardSim, extra: &[(usize, HostMsg)]) -> CommissionOutcome {
+        for k in 0..2000 {
+            for (_, m) in extra.iter().filter(|(at, _)| *at == k) {
+                sim.receive(&frame(m));
+            }
+            sim.tick();
+            for m in replies(sim) {
+                if let BoardMsg::Commission { outcome, .. } = m {
+                    if !matches!(
+                        outcome,
+                        CommissionOutcome::Running
+                            | CommissionOutcome::Failed(CommissionError::Aborted)
+                    ) {
+                        return outcome;
+                    }
+                }
+            }
+        }
+        panic!("no commissioning result")
+    }
+
+    /// A board wired with the Hall connector 231 and the phases 321, commissioning.
+    fn commissioning_board() -> BoardSim {
+        let wiring = Wiring {
+            hall_order: [1, 2, 0],
+            phase_order: [2, 1, 0],
+            current_inverted: false,
+        };
+        let mut sim = BoardSim::new(EmulatorConfig::paper(), wiring, RamFlash::new(None)).unwrap();
+        replies(&mut sim);
+        sim.receive(&frame(&HostMsg::Commission));
+        assert_eq!(replies(&mut sim), [BoardMsg::Ack]);
+        sim
+    }
+
+    #[test]
+    fn a_retried_commission_request_leaves_the_run_as_it_was() {
+        // The host resends `Commission` when the Ack comes late: in the middle of a hold,
+        // of the counted revolution, of the backward pass.
+        let once = commission_result(&mut commissioning_board(), &[]);
+        assert!(matches!(once, CommissionOutcome::Done(_)), "{once:?}");
+        for at in [7, 160, 330] {
+            let mut sim = commissioning_board();
+            let again = commission_result(&mut sim, &[(at, HostMsg::Commission)]);
+            assert_eq!(again, once, "Commission again after {at} periods");
+        }
+    }
+
+    #[test]
+    fn commissioning_started_on_a_turning_rotor_learns_the_same_table() {
+        // A run stopped mid-way and started again at once: the rotor is still turning and
+        // the winding still carries the stopped run's current.
+        let CommissionOutcome::Done(once) = commission_result(&mut commissioning_board(), &[])
+        else {
+            panic!("the first run failed");
+        };
+        for at in [7, 160, 330] {
+            let mut sim = commissioning_board();
+            let again =
+                commission_result(&mut sim, &[(at, HostMsg::Stop), (at, HostMsg::Commission)]);
+            let CommissionOutcome::Done(c) = again else {
+                panic!("restarted after {at} periods: {again:?}");
+            };
+            assert_eq!(c.sequence, once.sequence, "restarted after {at} periods");
+            assert_eq!(c.edges_per_elec_rev, 6);
+        }
     }
 }

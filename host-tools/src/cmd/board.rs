@@ -1,6 +1,7 @@
 //! `motorid board`: the emulated board behind a pseudo-terminal.
 use crate::board::flash::RamFlash;
 use crate::board::hw::{parse_order, Wiring};
+use crate::board::pace::{HostView, Pacer};
 use crate::board::pty::Pty;
 use crate::board::sim::BoardSim;
 use crate::effect_spec::EffectSpec;
@@ -8,7 +9,8 @@ use crate::emulator::EmulatorConfig;
 use anyhow::{bail, Context, Result};
 use std::io::{Read, Write};
 use std::path::PathBuf;
-use std::sync::mpsc;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{mpsc, Arc};
 use std::time::{Duration, Instant};
 
 /// Run the emulated board: the firmware's control step and serial protocol (from the
@@ -23,6 +25,8 @@ pub struct Args {
     #[arg(long)]
     pub pty: bool,
     /// Time factor: 1 = real time (one 12 ms step every 12 ms), 10 = ten times faster.
+    /// While the host leaves the board's output unread, the board runs at real time, so a
+    /// paused host loses the link after the board's 2 s timeout at any factor.
     #[arg(long, value_parser = crate::validate::parse_speed, allow_hyphen_values = true, default_value_t = 1.0)]
     pub speed: f64,
     /// Add a physical effect to the emulated motor (`NAME` or `NAME:key=value,...`, as in
@@ -102,51 +106,110 @@ pub fn run(args: Args) -> Result<()> {
         }
     });
     let (out_tx, out_rx) = mpsc::sync_channel::<Vec<u8>>(4096);
+    // Bytes handed to the writer and not yet written to the terminal.
+    let queued = Arc::new(AtomicUsize::new(0));
+    let written = Arc::clone(&queued);
     std::thread::spawn(move || {
         while let Ok(bytes) = out_rx.recv() {
-            if master_w.write_all(&bytes).is_err() {
+            let ok = write_through(&mut master_w, &bytes);
+            written.fetch_sub(bytes.len(), Ordering::Relaxed);
+            if !ok {
                 break;
             }
         }
     });
+    let out = Output { tx: out_tx, queued };
 
-    let period = Duration::from_secs_f64(f64::from(control::CONTROL_PERIOD_S) / args.speed);
-    let mut next = Instant::now() + period;
-    let mut last_tick: Option<Instant> = None;
+    // Board time is the count of periods run; the host's clock only says when the next one
+    // is due (see `crate::board::pace`).
+    let mut pacer = Pacer::new(args.speed, Instant::now());
+    // Periods since the last byte from the host.
+    let mut quiet = 0u32;
     loop {
-        // Wait for host bytes until the next period starts.
+        // What the host sent so far is handled before the period, as the firmware's link
+        // task hands it to the control loop.
         loop {
-            let now = Instant::now();
-            if now >= next {
-                break;
+            match in_rx.try_recv() {
+                Ok(bytes) => {
+                    sim.receive(&bytes);
+                    quiet = 0;
+                }
+                Err(mpsc::TryRecvError::Empty) => break,
+                Err(mpsc::TryRecvError::Disconnected) => bail!("the pseudo-terminal closed"),
             }
-            match in_rx.recv_timeout(next - now) {
-                Ok(bytes) => sim.receive(&bytes),
-                Err(mpsc::RecvTimeoutError::Timeout) => break,
-                Err(mpsc::RecvTimeoutError::Disconnected) => bail!("the pseudo-terminal closed"),
+        }
+        out.flush(&mut sim);
+        let host = HostView::of(&sim, out.unread(&pty), quiet);
+        let wait = pacer.wait(Instant::now(), host);
+        if wait.is_zero() {
+            let period_us = pacer.ran(Instant::now(), host);
+            sim.tick_timed(period_us);
+            quiet = quiet.saturating_add(1);
+            out.flush(&mut sim);
+            continue;
+        }
+        // Wait for host bytes until the period is due; a host that is behind is looked at
+        // again every millisecond (it may read meanwhile).
+        let wait = if host.behind() {
+            wait.min(Duration::from_millis(1))
+        } else {
+            wait
+        };
+        match in_rx.recv_timeout(wait) {
+            Ok(bytes) => {
+                sim.receive(&bytes);
+                quiet = 0;
             }
-            flush(&mut sim, &out_tx);
+            Err(mpsc::RecvTimeoutError::Timeout) => {}
+            Err(mpsc::RecvTimeoutError::Disconnected) => bail!("the pseudo-terminal closed"),
         }
-        // The loop period in board time (host time × the time factor), for the telemetry.
-        let now = Instant::now();
-        let period_us = last_tick.map_or(f32::NAN, |t| {
-            ((now - t).as_secs_f64() * args.speed * 1.0e6) as f32
-        });
-        last_tick = Some(now);
-        sim.tick_timed(period_us);
-        flush(&mut sim, &out_tx);
-        next += period;
-        let now = Instant::now();
-        if next + 10 * period < now {
-            // Far behind (a slow machine at a high --speed): do not try to catch up.
-            next = now + period;
-        }
+        out.flush(&mut sim);
     }
 }
 
-fn flush(sim: &mut BoardSim, out: &mpsc::SyncSender<Vec<u8>>) {
-    let bytes = sim.take_output();
-    if !bytes.is_empty() {
-        let _ = out.try_send(bytes);
+/// The board's output on its way to the host.
+struct Output {
+    tx: mpsc::SyncSender<Vec<u8>>,
+    /// Bytes handed to the writer thread, not yet written to the terminal.
+    queued: Arc<AtomicUsize>,
+}
+
+impl Output {
+    /// Hands the board's output to the writer (dropped when the writer is far behind).
+    fn flush(&self, sim: &mut BoardSim) {
+        let bytes = sim.take_output();
+        let n = bytes.len();
+        if n > 0 {
+            self.queued.fetch_add(n, Ordering::Relaxed);
+            if self.tx.try_send(bytes).is_err() {
+                self.queued.fetch_sub(n, Ordering::Relaxed);
+            }
+        }
     }
+
+    /// Bytes of output the host has not read yet: queued for the terminal or in it.
+    fn unread(&self, pty: &Pty) -> usize {
+        self.queued.load(Ordering::Relaxed) + pty.unread()
+    }
+}
+
+/// Writes `bytes` to the terminal, waiting while its buffer is full; false when the terminal
+/// is gone.
+fn write_through(w: &mut impl Write, mut bytes: &[u8]) -> bool {
+    while !bytes.is_empty() {
+        match w.write(bytes) {
+            Ok(0) => std::thread::sleep(Duration::from_millis(1)),
+            Ok(n) => bytes = &bytes[n..],
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    std::io::ErrorKind::Interrupted | std::io::ErrorKind::WouldBlock
+                ) =>
+            {
+                std::thread::sleep(Duration::from_millis(1))
+            }
+            Err(_) => return false,
+        }
+    }
+    true
 }
