@@ -548,23 +548,23 @@ pub fn run_range<D: RunScalar>(
     substeps: usize,
     roots: &mut SubstepRoots,
 ) -> Result<Run<D>> {
-    run_range_from(p, re, log, start, end, substeps, None, roots)
+    run_range_from(p, re, log, start..end, substeps, None, roots)
 }
 
-/// [`run_range`] from the measured angle at `start` and, when `carried` is given, the other
+/// [`run_range`] over the samples `range`, from the measured angle at its start and, when `carried` is given, the other
 /// states from there (else from the measurement: the measured velocity and current, the
 /// bristles on the Stribeck curve).
 pub fn run_range_from<D: RunScalar>(
     p: &RunParams<D>,
     re: &RunParams<f64>,
     log: &MotorLog,
-    start: usize,
-    end: usize,
+    range: std::ops::Range<usize>,
     substeps: usize,
     carried: Option<Carried<D>>,
     roots: &mut SubstepRoots,
 ) -> Result<Run<D>> {
-    let end = end.min(log.len());
+    let start = range.start;
+    let end = range.end.min(log.len());
     if start >= end {
         bail!(
             "{}: empty sample range {start}..{end}",

@@ -212,15 +212,16 @@ impl<'a> Residuals<'a> {
                     None => s,
                 };
                 let carried = match (tg.restart, &prev) {
-                    (Restart::Angle, Some((pa, run))) if a >= *pa => Some(run.carried(p, a - pa)),
+                    (Restart::Angle, Some((pa, run))) if a >= *pa && a - *pa < run.theta.len() => {
+                        Some(run.carried(p, a - pa))
+                    }
                     _ => None,
                 };
                 let run = freerun::run_range_from(
                     p,
                     re,
                     tg.log,
-                    a,
-                    e,
+                    a..e,
                     freerun::SUBSTEPS,
                     carried,
                     roots,
