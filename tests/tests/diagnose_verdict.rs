@@ -360,19 +360,25 @@ const VERDICT_LIMITS: &str =
     "\nLimits seen here: a correct model's residual is far noisier in the windows of a slip \
      or an input step than at rest, and over one held voltage step the rotor turns at a \
      steady speed whose Hall rounding error beats slowly with the 12 ms sampling, one error \
-     shared by every window of the hold. The checks and carriers therefore use the \
-     jackknifed cluster-robust Wald test (clustered by held input; decision 0011). On the \
-     multisines a and b a correct model is called not adequate on 1 to 4 logs in 20, above \
-     the stated 1 % (a compliance named now and then by the findings' forward selection, \
-     whose F-test is not robust to the shared error; a carrier on a few windows). On \
-     voltage steps (d) the rounding drift within a hold is serial correlation whatever the \
-     model, so whiteness cannot decide there, and the carriers leave out what one hold \
-     decides alone: \"Cannot judge\" on most logs, and not adequate on the rest, where the \
-     acceleration carries the drift. Judge a model on a multisine. On the low-speed signal \
-     c the torque equation keeps too few windows or held inputs for its tests (most \
-     windows touch a standstill or a reversal): mostly \"Cannot judge\". A torque \
-     constant that falls 3 % by 10 A goes unseen on the fitting signal a, whose current \
-     rarely leaves that range; on steps the log cannot judge it. A compliant coupling is \
-     named `compliance` with its load inertia and natural frequency. A gap has no \
-     candidate of its own yet: its nearest named physics is a soft coupling (`compliance` \
-     at about 1 Hz), which is what `diagnose` reports.\n";
+     shared by every window of the hold. The checks, the carriers and the findings' entry \
+     test therefore use the jackknifed cluster-robust Wald test (clustered by held input; \
+     decision 0011). On the multisines a and b no named effect is found on a correct model; \
+     what remains above the stated 1 % are the verdict's own checks and carriers (the input \
+     check or a carrier of the voltage equation at p between 1e-4 and 5e-4 on a few logs, \
+     and a time carrier at p = 3e-11 on one log of b). The robust entry test needs more \
+     data than an F-test that takes every window for equally noisy: a load friction of \
+     μ = 0.2 hidden in voltage steps is found on 180 s, not on 60 s, where the braking \
+     windows that show it are also the noisiest. On voltage steps (d) the rounding drift \
+     within a hold is serial correlation whatever the model, so whiteness cannot decide \
+     there, and the carriers leave out what one hold decides alone: \"Cannot judge\" on most \
+     logs, and not adequate on the rest, where the acceleration carries the drift. Judge a \
+     model on a multisine. On the low-speed signal c the torque equation keeps too few \
+     windows or held inputs for its tests (most windows touch a standstill or a reversal): \
+     mostly \"Cannot judge\". A torque constant that falls 3 % by 10 A goes unseen on the \
+     fitting signal a, whose current rarely leaves that range; on steps the log cannot \
+     judge it. A compliant coupling is named `compliance` with its load inertia and natural \
+     frequency. A gap is named `backlash` with its load inertia and gap: the load coasts \
+     across the gap whenever the rotor slows down and is caught again, which a soft \
+     coupling (`compliance` near 1 to 2 Hz) imitates less well; where both explain about \
+     equally, `diagnose` names both and the experiment that separates them (a slow reversal \
+     at low speed: a gap is a dead band of free travel).\n";
