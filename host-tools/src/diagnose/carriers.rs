@@ -190,7 +190,13 @@ fn test_columns(rows: &Rows, cols: &[Vec<f64>], spans_constant: bool) -> Tested 
         .iter()
         .map(|c| thin(super::select_rows(&rows.wf.integral(c), rows.keep)))
         .collect();
-    let (test, share) = statistics::robust_test_beyond(&resid, &ones_w, &w, &cluster);
+    let (test, share) = statistics::robust_test_beyond(
+        &resid,
+        &[&ones_w],
+        &w,
+        &cluster,
+        statistics::CLUSTER_LEVERAGE_CAP,
+    );
     let (p_value, dropped_share) = test.map_or((f64::NAN, 0.0), |t| (t.p_value, t.dropped_share));
     // The shape for the report: the residual against the columns alone (and a constant
     // where they do not span one).

@@ -93,6 +93,7 @@ pub(super) fn base_equations(f: &Forms, st: &Structure) -> (EqData, EqData) {
         min_torque: 0.0,
         coulomb_col: None,
         cand: vec![],
+        cluster: super::verdict::hold_clusters(&s.raw_u, &wf.centres),
     };
     if f.voltage {
         let i = s.i.as_ref().unwrap();
@@ -115,6 +116,7 @@ pub(super) fn base_equations(f: &Forms, st: &Structure) -> (EqData, EqData) {
         min_torque: min_torque(st, s),
         coulomb_col: None,
         cand: vec![],
+        cluster: super::verdict::hold_clusters(&s.raw_u, &wf.centres),
     };
     for e in &st.effects {
         if matches!(e, Effect::Coulomb { fc } if *fc <= 0.0) {
@@ -378,6 +380,12 @@ pub(super) fn mechanical_pass(
     all_rows.1.extend(pre.nuisance);
     let keep = moving_windows(f);
     map_rows(&mut mech, |c| select_rows(c, &keep));
+    mech.cluster = std::mem::take(&mut mech.cluster)
+        .into_iter()
+        .zip(&keep)
+        .filter(|(_, k)| **k)
+        .map(|(c, _)| c)
+        .collect();
     let scale = noise_weights(f, st, &mech, &keep, opts, alpha_per_test, units);
     if let Some(w) = &scale {
         map_rows(&mut mech, |c| c.iter().zip(w).map(|(a, b)| a * b).collect());

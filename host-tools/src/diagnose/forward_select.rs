@@ -1,8 +1,16 @@
 //! Forward selection of missing effects in one equation: starting from the model's own
 //! columns (the base), add the candidate effect that removes the most residual, while it is
-//! significant (F-test at the family's per-test level with the residual's effective sample
-//! size), relevant (a share of the base residual and a torque above the relevance floor),
-//! favoured by BIC and physically plausible; one variant per effect kind.
+//! significant (the entry test: the jackknifed cluster-robust Wald test of its columns beyond
+//! the base, on disjoint windows clustered by held input, at the family's per-test level),
+//! relevant (a share of the base residual and a torque above the relevance floor), favoured
+//! by BIC and physically plausible; one variant per effect kind.
+//!
+//! Why a robust entry test: a correct model's residual is far noisier in the windows of a
+//! slip or an input step than elsewhere, and the windows of one held input share one error
+//! of the angle's reading (`docs/decisions/0011-robust-wald-verdict.md`). A nested-model
+//! F-test counts such windows as independent evidence of equal weight, and a column that
+//! lives in a few of them (a resonance excited by the steps, a dead angle after reversals)
+//! passes it on a correct model.
 use super::candidates::{self, Equation, Units};
 use super::harmonics;
 use super::{
@@ -30,9 +38,23 @@ pub(super) struct Selection {
     pub base_beta: Vec<f64>,
 }
 
+/// The entry test of a candidate against the current base.
+#[derive(Debug, Clone, Copy)]
+struct Entry {
+    /// Hotelling's `T²` of the candidate's coefficients ([`statistics::robust_wald_test`]);
+    /// NaN when the test cannot decide on this log.
+    t2: f64,
+    /// Its p-value; 1 when the test cannot decide.
+    p_value: f64,
+    /// Fraction of the current residual sum of squares the candidate removes (every row).
+    explained: f64,
+    /// Change of BIC with the effective sample size (negative: the larger model is better).
+    delta_bic: f64,
+}
+
 /// The candidate that won its kind in one round: its index in `data.cand`, the residual sum
-/// of squares with it, and its test against the current base.
-type Best = (usize, f64, statistics::FTest);
+/// of squares with it, and its entry test against the current base.
+type Best = (usize, f64, Entry);
 
 /// One equation's columns (base, then every candidate's) and their Gram matrix.
 struct Problem<'a> {
@@ -110,6 +132,60 @@ impl<'a> Problem<'a> {
         self.units.mech_scale * (ss / n.max(1) as f64).sqrt()
     }
 
+    /// The entry test of candidate `ci` beyond `base`: the jackknifed cluster-robust Wald
+    /// test ([`statistics::robust_test_beyond`], leverage cap
+    /// [`statistics::ENTRY_LEVERAGE_CAP`]) clustered by held input, on disjoint windows. The
+    /// weak-form windows overlap by half, so the rows of one parity tile the log without
+    /// sharing a sample, and either tiling is a valid test; an effect that lives in a few
+    /// windows (cogging in the slowest stretches) shows more in the tiling whose windows
+    /// centre on them, so both are tested and the smaller p-value, doubled (Bonferroni over
+    /// the two), is the test's. `rss_cur` and `rss1` are the residual sums of squares without
+    /// and with the candidate on every row, `n_eff` their effective sample size (for BIC).
+    fn entry_test(&self, base: &[usize], ci: usize, rss_cur: f64, rss1: f64, n_eff: f64) -> Entry {
+        let tiling = |parity: usize| {
+            let rows =
+                |c: &[f64]| -> Vec<f64> { c.iter().skip(parity).step_by(2).copied().collect() };
+            let y = rows(&self.data.y);
+            let null: Vec<Vec<f64>> = base.iter().map(|&j| rows(&self.all_cols[j])).collect();
+            let null_refs: Vec<&[f64]> = null.iter().map(|c| c.as_slice()).collect();
+            let cols: Vec<Vec<f64>> = self.cand_idx[ci]
+                .iter()
+                .map(|&j| rows(&self.all_cols[j]))
+                .collect();
+            let cluster: Vec<usize> = self
+                .data
+                .cluster
+                .iter()
+                .skip(parity)
+                .step_by(2)
+                .copied()
+                .collect();
+            statistics::robust_test_beyond(
+                &y,
+                &null_refs,
+                &cols,
+                &cluster,
+                statistics::ENTRY_LEVERAGE_CAP,
+            )
+            .0
+        };
+        let test = [tiling(0), tiling(1)]
+            .into_iter()
+            .flatten()
+            .min_by(|a, b| a.p_value.total_cmp(&b.p_value));
+        let explained = if rss_cur > 0.0 {
+            ((rss_cur - rss1) / rss_cur).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        Entry {
+            t2: test.map_or(f64::NAN, |t| t.t2),
+            p_value: test.map_or(1.0, |t| (2.0 * t.p_value).min(1.0)),
+            explained,
+            delta_bic: statistics::delta_bic(rss_cur, rss1, self.cand_idx[ci].len(), n_eff),
+        }
+    }
+
     /// The best variant of every kind not chosen yet, tested against `base` (residual sum of
     /// squares `rss_cur`, effective sample size `n_eff`).
     fn best_by_kind(
@@ -119,7 +195,8 @@ impl<'a> Problem<'a> {
         rss_cur: f64,
         n_eff: f64,
     ) -> Vec<Best> {
-        let mut best: Vec<Best> = Vec::new();
+        // The best variant of each kind by its score: (index, rss with it, score).
+        let mut best: Vec<(usize, f64)> = Vec::new();
         let mut kind_score: Vec<f64> = Vec::new();
         for (ci, (v, _)) in self.data.cand.iter().enumerate() {
             if chosen.contains(&v.kind) {
@@ -136,7 +213,6 @@ impl<'a> Problem<'a> {
             {
                 continue;
             }
-            let t = statistics::f_test(rss_cur, rss1, self.cand_idx[ci].len(), base.len(), n_eff);
             // Cogging harmonics compete by leave-one-out: a high harmonic's column lives in
             // the few slow windows, where it can fit one window's error (see
             // `harmonics::leave_one_out_rss`).
@@ -151,17 +227,19 @@ impl<'a> Problem<'a> {
             };
             match best
                 .iter()
-                .position(|(j, _, _)| self.data.cand[*j].0.kind == v.kind)
+                .position(|(j, _)| self.data.cand[*j].0.kind == v.kind)
             {
                 Some(k) if kind_score[k] <= score => {}
-                Some(k) => (best[k], kind_score[k]) = ((ci, rss1, t), score),
+                Some(k) => (best[k], kind_score[k]) = ((ci, rss1), score),
                 None => {
-                    best.push((ci, rss1, t));
+                    best.push((ci, rss1));
                     kind_score.push(score);
                 }
             }
         }
-        best
+        best.into_iter()
+            .map(|(ci, rss1)| (ci, rss1, self.entry_test(base, ci, rss_cur, rss1, n_eff)))
+            .collect()
     }
 
     /// The first round's tests, for tables: every kind's best variant against the base.
@@ -215,7 +293,7 @@ impl<'a> Problem<'a> {
             score,
             equation: self.data.eq,
             p_value: t.p_value,
-            f: t.f,
+            t2: t.t2,
             delta_bic: t.delta_bic,
             kind: Some(v.kind),
         };
@@ -377,6 +455,7 @@ mod tests {
                 variant(EffectKind::Offset, vec![1.0; n]),
                 variant(EffectKind::Viscous, unrelated),
             ],
+            cluster: (0..n).collect(),
         }
     }
 

@@ -46,7 +46,7 @@ pub fn experiment(a: &str, b: &str) -> String {
     } else if pair("thermal", "time") || a == "thermal" || b == "thermal" {
         "a long run at high current followed by a rest with the same excitation: heating grows and decays with its time constant, wear or a supply sag does not"
     } else if pair("backlash", "compliance") {
-        "slow reversals at low acceleration, then a step in one direction: backlash shows a dead angle after each reversal in which the rotor turns lighter, a compliant coupling rings at its resonance after the step"
+        "a slow reversal at low speed (`motorid simulate --signal ramp`, or `motorid record --signal ramp`: slow ramps from rest in each direction), then steps (signal d): a gap shows as a dead band after each change of direction, in which the rotor travels the gap's angle freely with no torque passed to the load; a compliant coupling passes torque at once and shows as a resonance that the steps excite and the rotor's angle rings at"
     } else if pair("reversal", "frequency") {
         "steps in one direction only, without reversals: a resonance still rings after each step, backlash does not show"
     } else if pair("acceleration", "current") || pair("saturation", "acceleration") {

@@ -11,9 +11,10 @@
 //!    every window of the torque equation (the reversals and standstills where it lives
 //!    included), on top of a model with Coulomb or Stribeck friction; see
 //!    [`candidates::PRESLIDING_DEFLECTION_GRID`] and [`PRESLIDING_GAIN`].
-//! 3. Forward selection: the candidate that explains most of the residual is tested with a
-//!    nested-model F-test; the residual's autocorrelation shrinks the sample count to an
-//!    effective one ([`statistics::effective_n`]) so that coloured noise is not taken for evidence.
+//! 3. Forward selection: the candidate that explains most of the residual is tested beyond
+//!    the base with the jackknifed cluster-robust Wald test on disjoint windows, clustered by
+//!    held input ([`statistics::robust_wald_test`]), so that a few noisy windows or the
+//!    shared error of one held input are not taken for evidence.
 //!    It is kept when it is **significant** (p below [`FAMILY_ALPHA`] divided by the number of
 //!    candidate variants tested, Bonferroni, and a lower BIC) **and relevant** (it explains at
 //!    least [`MIN_EXPLAINED`] of the model's own residual sum of squares, and its torque is at
@@ -124,8 +125,11 @@ pub struct Finding {
     /// One sentence of physics.
     pub explanation: String,
     pub equation: Equation,
+    /// p-value of the entry test (the cluster-robust Wald test of the effect's columns
+    /// beyond the base, [`forward_select`]).
     pub p_value: f64,
-    pub f: f64,
+    /// Hotelling's `T²` of that test (NaN when it could not decide).
+    pub t2: f64,
     pub delta_bic: f64,
     #[serde(skip)]
     pub kind: Option<EffectKind>,
@@ -216,6 +220,9 @@ pub(super) struct EqData {
     /// value for it: the threshold then follows the refitted Coulomb friction ([`min_torque`]).
     pub(super) coulomb_col: Option<usize>,
     pub(super) cand: Vec<(Variant, Vec<Vec<f64>>)>,
+    /// Held input of each row ([`verdict::hold_clusters`]): rows that may share an error of
+    /// the angle's reading, one cluster of the entry test ([`forward_select`]).
+    pub(super) cluster: Vec<usize>,
 }
 
 /// Diagnose a log against a model structure: the log in weak form, the base and candidate
@@ -667,6 +674,7 @@ fn presliding_pass(
         min_torque: mech.min_torque,
         coulomb_col: mech.coulomb_col,
         cand,
+        cluster: verdict::hold_clusters(&s.raw_u, &wf.centres),
     }
 }
 

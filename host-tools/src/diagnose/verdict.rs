@@ -104,7 +104,13 @@ fn lag_test(
     lagged: &[Vec<f64>],
     cluster: &[usize],
 ) -> (Option<statistics::RobustTest>, f64) {
-    statistics::robust_test_beyond(y, &vec![1.0; y.len()], lagged, cluster)
+    statistics::robust_test_beyond(
+        y,
+        &[&vec![1.0; y.len()]],
+        lagged,
+        cluster,
+        statistics::CLUSTER_LEVERAGE_CAP,
+    )
 }
 
 /// Robust test of `x` on the input `u` at lags `0..=m` (same indexing as `x`), against a
