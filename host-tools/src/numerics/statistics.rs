@@ -249,7 +249,24 @@ pub fn robust_wald_test_capped(
     cluster: &[usize],
     cap: f64,
 ) -> Option<RobustTest> {
+    wald_test_beyond_basis(u, z, &[], cluster, cap)
+}
+
+/// [`robust_wald_test_capped`] of `u` and `z` that are residuals after the null model whose
+/// columns span the orthonormal basis `null` (empty: no null model). A cluster's
+/// leave-one-out score then takes the null model's leverage on that cluster into account as
+/// well as the tested columns' (the full model is refitted without the cluster).
+fn wald_test_beyond_basis(
+    u: &[f64],
+    z: &[Vec<f64>],
+    null: &[Vec<f64>],
+    cluster: &[usize],
+    cap: f64,
+) -> Option<RobustTest> {
     let n = u.len().min(cluster.len());
+    if null.iter().any(|c| c.len() < n) {
+        return None;
+    }
     if z.is_empty() || n == 0 || z.iter().any(|c| c.len() < n) {
         return None;
     }
@@ -273,7 +290,7 @@ pub fn robust_wald_test_capped(
         .iter()
         .map(|c| c.iter().zip(u).map(|(x, y)| x * y).sum())
         .collect();
-    let scores = jackknife_scores(u, &q, &a, &bounds)?;
+    let scores = jackknife_scores(u, &q, null, &a, &bounds)?;
     let mut t = hotelling(&a, &scores)?;
     t.dropped_share = dropped_share;
     Some(t)
@@ -376,13 +393,19 @@ fn without_decided_directions(
     }
 }
 
-/// Each cluster's score `(I − A_g)⁻¹ Q_gᵀ e_g`, with `e = u − Q·a` the residual after the
-/// columns: the score the cluster would have with the coefficients fitted without it (the
-/// jackknife; for a one-row cluster, HC3's `q_i·e_i/(1 − h_i)`). One column per basis
-/// direction, one row per cluster.
+/// Each cluster's score `Q_gᵀ (I − H_g)⁻¹ e_g`, with `e = u − Q·a` the residual after the
+/// columns and `H_g = F_g F_gᵀ` the cluster's block of the hat matrix of the full model, whose
+/// orthonormal basis `F = [N, Q]` joins the null model's `null` and the tested `q`: the score
+/// the cluster would have with every coefficient fitted without it (the jackknife; for a
+/// one-row cluster, HC3's `q_i·e_i/(1 − h_i)`). By Woodbury,
+/// `(I − F_g F_gᵀ)⁻¹ = I + F_g (I − F_gᵀF_g)⁻¹ F_gᵀ`. One column per tested direction, one
+/// row per cluster. A leave-out fit that a cluster decides alone (an eigenvalue of
+/// `F_gᵀF_g` within [`LEAVE_OUT_FLOOR`] of one) gives that cluster a large score, which only
+/// weakens the test.
 fn jackknife_scores(
     u: &[f64],
     q: &[Vec<f64>],
+    null: &[Vec<f64>],
     a: &[f64],
     bounds: &[(usize, usize)],
 ) -> Option<Vec<Vec<f64>>> {
@@ -390,37 +413,53 @@ fn jackknife_scores(
     let e: Vec<f64> = (0..u.len())
         .map(|i| u[i] - q.iter().zip(a).map(|(c, ac)| c[i] * ac).sum::<f64>())
         .collect();
+    let full: Vec<&[f64]> = null.iter().chain(q).map(|c| c.as_slice()).collect();
+    let f = full.len();
     let mut scores: Vec<Vec<f64>> = vec![Vec::with_capacity(bounds.len()); r];
     for &(lo, hi) in bounds {
         if hi - lo == 1 {
-            // One row: `A = q_i q_iᵀ`, whose inverse of `I − A` on `q_i` is `1/(1 − h_i)`.
-            let h: f64 = q.iter().map(|c| c[lo] * c[lo]).sum();
+            // One row: `(I − h_i)⁻¹` is the scalar `1/(1 − h_i)` of the full model's leverage.
+            let h: f64 = full.iter().map(|c| c[lo] * c[lo]).sum();
+            let inv = 1.0 / (1.0 - h).max(LEAVE_OUT_FLOOR);
             for (col, c) in scores.iter_mut().zip(q) {
-                col.push(c[lo] * e[lo] / (1.0 - h));
+                col.push(c[lo] * e[lo] * inv);
             }
             continue;
         }
-        let b: Vec<f64> = q
+        let bf: Vec<f64> = full
             .iter()
             .map(|c| (lo..hi).map(|i| c[i] * e[i]).sum())
             .collect();
-        let evd = cluster_leverage(q, (lo, hi))
-            .self_adjoint_eigen(faer::Side::Lower)
-            .ok()?;
+        let leverage = faer::Mat::<f64>::from_fn(f, f, |c1, c2| {
+            (lo..hi).map(|i| full[c1][i] * full[c2][i]).sum::<f64>()
+        });
+        let evd = leverage.self_adjoint_eigen(faer::Side::Lower).ok()?;
         let (lam, vecs) = (evd.S().column_vector(), evd.U());
-        let mut sg = vec![0.0; r];
-        for m in 0..r {
-            let vb: f64 = (0..r).map(|c| vecs[(c, m)] * b[c]).sum::<f64>() / (1.0 - lam[m]);
-            for c in 0..r {
-                sg[c] += vecs[(c, m)] * vb;
+        // t = (I − F_gᵀF_g)⁻¹ F_gᵀ e_g.
+        let mut t = vec![0.0; f];
+        for m in 0..f {
+            let vb: f64 = (0..f).map(|c| vecs[(c, m)] * bf[c]).sum::<f64>()
+                / (1.0 - lam[m]).max(LEAVE_OUT_FLOOR);
+            for c in 0..f {
+                t[c] += vecs[(c, m)] * vb;
             }
         }
-        for (col, v) in scores.iter_mut().zip(sg) {
+        // s_g = Q_gᵀe_g + Q_gᵀF_g·t; Q_gᵀe_g is the tail of F_gᵀe_g, Q_gᵀF_g the tail rows of
+        // F_gᵀF_g.
+        let k0 = f - r;
+        for (j, col) in scores.iter_mut().enumerate() {
+            let row = k0 + j;
+            let v = bf[row] + (0..f).map(|c| leverage[(row, c)] * t[c]).sum::<f64>();
             col.push(v);
         }
     }
     Some(scores)
 }
+
+/// Smallest `1 − λ` a leave-one-cluster-out fit divides by: a cluster that holds all of a
+/// direction's information (λ = 1) leaves no fit without it, and its score is then bounded
+/// instead of infinite (a large score only weakens the test).
+const LEAVE_OUT_FLOOR: f64 = 1e-9;
 
 /// Hotelling's `T² = (G−1)/G · aᵀ(SᵀS)⁻¹a` of the projections `a` against the cluster scores
 /// `S` (one column per direction), and its p-value from `F = (G−r)/(r(G−1))·T² ~ F(r, G−r)`.
@@ -523,8 +562,14 @@ pub fn robust_test_beyond(
     } else {
         0.0
     };
+    let n = y.len();
+    if null.iter().any(|c| c.len() < n) {
+        return (None, share);
+    }
+    let null_cols: Vec<Vec<f64>> = null.iter().map(|c| c[..n].to_vec()).collect();
+    let null_basis = orthonormal_span(&null_cols, n).unwrap_or_default();
     (
-        robust_wald_test_capped(&base.resid, &z, cluster, cap),
+        wald_test_beyond_basis(&base.resid, &z, &null_basis, cluster, cap),
         share,
     )
 }
@@ -708,6 +753,73 @@ mod tests {
 
     /// A column the null model already spans is not tested as rounding noise, and too few
     /// clusters make the test undecidable rather than passed.
+    #[test]
+    fn jackknife_scores_are_the_leave_one_cluster_out_residuals_of_the_full_model() {
+        // A null column concentrated in the first clusters (as an inertia column is in the
+        // windows of a voltage step) and two tested columns, on clusters of 1 to 6 rows.
+        let n = 60;
+        let noise = white_noise(4 * n, 7);
+        let draw = |k: usize, i: usize| noise[k * n + i];
+        let cluster: Vec<usize> = (0..n)
+            .map(|i| if i < 6 { i } else { 6 + (i - 6) / 6 })
+            .collect();
+        let ncol: Vec<f64> = (0..n)
+            .map(|i| {
+                if i < 12 {
+                    3.0 + draw(0, i)
+                } else {
+                    0.1 * draw(0, i)
+                }
+            })
+            .collect();
+        let ones = vec![1.0; n];
+        let null_cols = vec![ones.clone(), ncol.clone()];
+        let nb = orthonormal_span(&null_cols, n).unwrap();
+        let raw: Vec<Vec<f64>> = (1..3)
+            .map(|k| (0..n).map(|i| draw(k, i)).collect())
+            .collect();
+        let z: Vec<Vec<f64>> = raw
+            .iter()
+            .map(|c| residualise(c, &[&ones, &ncol]))
+            .collect();
+        let q = orthonormal_span(&z, n).unwrap();
+        let y: Vec<f64> = (0..n).map(|i| draw(3, i)).collect();
+        let u = residualise(&y, &[&ones, &ncol]);
+        let a: Vec<f64> = q
+            .iter()
+            .map(|c| c.iter().zip(&u).map(|(x, v)| x * v).sum())
+            .collect();
+        let bounds = cluster_bounds(&cluster);
+        let scores = jackknife_scores(&u, &q, &nb, &a, &bounds).unwrap();
+        for (g, &(lo, hi)) in bounds.iter().enumerate() {
+            // Refit y on [1, ncol, q] without the cluster; its residuals on the cluster.
+            let keep: Vec<usize> = (0..n).filter(|&i| i < lo || i >= hi).collect();
+            let cols: Vec<Vec<f64>> = [&ones, &ncol, &q[0], &q[1]]
+                .iter()
+                .map(|c| keep.iter().map(|&i| c[i]).collect())
+                .collect();
+            let refs: Vec<&[f64]> = cols.iter().map(|c| c.as_slice()).collect();
+            let yk: Vec<f64> = keep.iter().map(|&i| y[i]).collect();
+            let fit = crate::numerics::least_squares::lstsq(&refs, &yk);
+            for (j, qj) in q.iter().enumerate() {
+                let s: f64 = (lo..hi)
+                    .map(|i| {
+                        let pred = fit.beta[0]
+                            + fit.beta[1] * ncol[i]
+                            + fit.beta[2] * q[0][i]
+                            + fit.beta[3] * q[1][i];
+                        qj[i] * (y[i] - pred)
+                    })
+                    .sum();
+                assert!(
+                    (scores[j][g] - s).abs() < 1e-6 * (1.0 + s.abs()),
+                    "cluster {g} direction {j}: {} vs {s}",
+                    scores[j][g]
+                );
+            }
+        }
+    }
+
     #[test]
     fn robust_wald_test_drops_spanned_columns_and_refuses_too_few_clusters() {
         let n = 300;
