@@ -510,16 +510,14 @@ fn hotelling(a: &[f64], scores: &[Vec<f64>]) -> Option<RobustTest> {
 pub const CLUSTER_LEVERAGE_CAP: f64 = 0.5;
 
 /// The leverage cap of the entry test of a named effect (`diagnose::forward_select`): 0.9.
-/// The jackknife already takes each cluster out of the fit before its score counts, so a
-/// window that decides much of a direction is no evidence for it on its own (its score is
-/// its leave-out error); the cap only keeps that leave-out fit resting on at least a tenth
-/// of the direction's information. An effect's column is one physical law over the whole
-/// log, often largest in a few windows (cogging in the slowest ones, a braking drive at the
-/// steps): at [`CLUSTER_LEVERAGE_CAP`] a 7th cogging harmonic of 0.03 N·m that explains a
-/// fifth of a 60 s multisine's residual loses the direction that holds it (p = 0.03 on
-/// the rest), and is found at p = 5e-8 with this cap. The verdict's checks keep
-/// [`CLUSTER_LEVERAGE_CAP`]: their flexible columns can follow one window, and the share
-/// left out decides "cannot judge" there.
+/// The level needs no cap: a cluster's jackknifed score is its error with the whole model
+/// fitted without it, so a direction one cluster decides alone gets a score as large as its
+/// projection and a T² near one, which cannot reject. The cap bounds the leave-out inflation
+/// `1/(1 − h)` at ten, for numerical stability. An effect's column is one physical law over
+/// the whole log, often largest in a few windows (cogging in the slowest ones, a braking
+/// drive at the steps), so a lower cap would drop the directions that hold it. The verdict's
+/// checks keep [`CLUSTER_LEVERAGE_CAP`]: their flexible columns can follow one window, and
+/// the share left out decides "cannot judge" there (decision 0011).
 pub const ENTRY_LEVERAGE_CAP: f64 = 0.9;
 
 /// Singular values below this fraction of the largest count as zero in
