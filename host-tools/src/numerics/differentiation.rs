@@ -46,6 +46,23 @@ pub fn smooth_velocity_of(log: &MotorLog) -> Vec<f64> {
     smooth_velocity(log, half)
 }
 
+/// Centred velocity estimate [rad/s] at the log's own time stamps `t` [s]: slope of the angle
+/// over ±`half` samples (one-sided at the ends).
+pub fn centred_velocity(t: &[f64], theta: &[f64], half: usize) -> Vec<f64> {
+    let n = theta.len();
+    (0..n)
+        .map(|k| {
+            let a = k.saturating_sub(half);
+            let b = (k + half).min(n.saturating_sub(1));
+            if b > a && t[b] > t[a] {
+                (theta[b] - theta[a]) / (t[b] - t[a])
+            } else {
+                0.0
+            }
+        })
+        .collect()
+}
+
 /// Centred moving average over `±m` samples (shrinking at the ends).
 pub fn moving_average(x: &[f64], m: usize) -> Vec<f64> {
     let n = x.len();

@@ -2,7 +2,7 @@
 //! `z` from the time-delay (Hankel) embedding of that velocity (the paper's §4.3, eq. 46),
 //! fitted on all fitting logs and scaled to unit RMS (the paper normalises `z` too; its scale
 //! is arbitrary and absorbed by the coefficients).
-use super::{velocity_half, SindycOptions};
+use super::{centred_velocity, velocity_half, SindycOptions};
 use crate::ident::hankel::{HankelEmbedding, Selection};
 use crate::log::MotorLog;
 use anyhow::{bail, Context, Result};
@@ -67,23 +67,6 @@ impl HiddenState {
             z_correlation,
         })
     }
-}
-
-/// Centred velocity estimate: slope of the angle over ±`half` samples (one-sided at the
-/// ends).
-pub fn centred_velocity(t: &[f64], theta: &[f64], half: usize) -> Vec<f64> {
-    let n = theta.len();
-    (0..n)
-        .map(|k| {
-            let a = k.saturating_sub(half);
-            let b = (k + half).min(n.saturating_sub(1));
-            if b > a && t[b] > t[a] {
-                (theta[b] - theta[a]) / (t[b] - t[a])
-            } else {
-                0.0
-            }
-        })
-        .collect()
 }
 
 /// Pearson correlation of two equally long series (0 when one is constant).
