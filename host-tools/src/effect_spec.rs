@@ -81,23 +81,10 @@ const TABLE_KEYS: &[Key] = &[
     k("b13", "N·m", 0.0, "table torque at node 13"),
     k("b14", "N·m", 0.0, "table torque at node 14"),
     k("b15", "N·m", 0.0, "table torque at node 15"),
-    k("b16", "N·m", 0.0, "table torque at node 16"),
-    k("b17", "N·m", 0.0, "table torque at node 17"),
-    k("b18", "N·m", 0.0, "table torque at node 18"),
-    k("b19", "N·m", 0.0, "table torque at node 19"),
-    k("b20", "N·m", 0.0, "table torque at node 20"),
-    k("b21", "N·m", 0.0, "table torque at node 21"),
-    k("b22", "N·m", 0.0, "table torque at node 22"),
-    k("b23", "N·m", 0.0, "table torque at node 23"),
-    k("b24", "N·m", 0.0, "table torque at node 24"),
-    k("b25", "N·m", 0.0, "table torque at node 25"),
-    k("b26", "N·m", 0.0, "table torque at node 26"),
-    k("b27", "N·m", 0.0, "table torque at node 27"),
-    k("b28", "N·m", 0.0, "table torque at node 28"),
-    k("b29", "N·m", 0.0, "table torque at node 29"),
-    k("b30", "N·m", 0.0, "table torque at node 30"),
-    k("b31", "N·m", 0.0, "table torque at node 31"),
 ];
+
+// One key per node the board can hold: a key beyond them would parse and then be dropped.
+const _: () = assert!(TABLE_KEYS.len() == 4 + TABLE_MAX_BINS);
 
 /// The name of the torque at node `k` of a table (`b0`, `b1`, ...).
 pub fn table_value_key(k: usize) -> &'static str {
@@ -719,6 +706,7 @@ mod tests {
             ("table:var=current,lo=2,hi=1", "below hi"),
             ("table:b32=1", "unknown key"),
             ("backlash:gap=-0.1", "-0.1 is outside 0 .. 1000"),
+            ("table:bins=4,b20=1", "unknown key 'b20'"),
         ] {
             let e = EffectSpec::parse(bad).unwrap_err().to_string();
             assert!(e.contains(why), "{bad}: {e}");
