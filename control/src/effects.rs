@@ -266,6 +266,74 @@ pub enum Effect<F> {
     },
 }
 
+impl<A: Copy> Effect<A> {
+    /// The same effect with every number mapped by `c` (`|x| x as f32` for the board's blob,
+    /// a constant dual number for a Jacobian); the variant, `harmonic`, `var` and `bins` are
+    /// kept.
+    pub fn map<B>(&self, c: impl Fn(A) -> B) -> Effect<B> {
+        match *self {
+            Effect::Coulomb { fc } => Effect::Coulomb { fc: c(fc) },
+            Effect::Viscous { b } => Effect::Viscous { b: c(b) },
+            Effect::Stribeck { fs, vs } => Effect::Stribeck {
+                fs: c(fs),
+                vs: c(vs),
+            },
+            Effect::Presliding { sigma0, sigma1 } => Effect::Presliding {
+                sigma0: c(sigma0),
+                sigma1: c(sigma1),
+            },
+            Effect::Cogging {
+                harmonic,
+                amp,
+                phase,
+            } => Effect::Cogging {
+                harmonic,
+                amp: c(amp),
+                phase: c(phase),
+            },
+            Effect::PositionLoad { amp, phase } => Effect::PositionLoad {
+                amp: c(amp),
+                phase: c(phase),
+            },
+            Effect::Offset { t0 } => Effect::Offset { t0: c(t0) },
+            Effect::Asymmetry { dv, dc } => Effect::Asymmetry {
+                dv: c(dv),
+                dc: c(dc),
+            },
+            Effect::Deadtime { vd } => Effect::Deadtime { vd: c(vd) },
+            Effect::CurrentOffset { i0 } => Effect::CurrentOffset { i0: c(i0) },
+            Effect::Thermal { k, tau } => Effect::Thermal {
+                k: c(k),
+                tau: c(tau),
+            },
+            Effect::LoadFriction { mu } => Effect::LoadFriction { mu: c(mu) },
+            Effect::Saturation { k } => Effect::Saturation { k: c(k) },
+            Effect::Compliance { j2, k, c: d } => Effect::Compliance {
+                j2: c(j2),
+                k: c(k),
+                c: c(d),
+            },
+            Effect::Backlash { j2, gap } => Effect::Backlash {
+                j2: c(j2),
+                gap: c(gap),
+            },
+            Effect::Table {
+                var,
+                bins,
+                lo,
+                hi,
+                values,
+            } => Effect::Table {
+                var,
+                bins,
+                lo: c(lo),
+                hi: c(hi),
+                values: values.map(&c),
+            },
+        }
+    }
+}
+
 impl<F: Float> Effect<F> {
     /// The effect's kind (name without parameters).
     pub fn kind(&self) -> EffectKind {
@@ -497,6 +565,81 @@ mod tests {
             .torque(&at(0.0, 2.0, 0.0))
             .is_finite());
         assert!(e.torque(&at(0.0, f64::NAN, 0.0)).is_finite());
+    }
+
+    #[test]
+    fn map_keeps_the_variant_and_maps_every_number() {
+        let mut values = [0.0; TABLE_MAX_BINS];
+        values[3] = 0.7;
+        let every = [
+            Effect::Coulomb { fc: 0.1 },
+            Effect::Viscous { b: 0.2 },
+            Effect::Stribeck { fs: 0.3, vs: 0.4 },
+            Effect::Presliding {
+                sigma0: 0.5,
+                sigma1: 0.6,
+            },
+            Effect::Cogging {
+                harmonic: 7,
+                amp: 0.7,
+                phase: 0.8,
+            },
+            Effect::PositionLoad {
+                amp: 0.9,
+                phase: 1.0,
+            },
+            Effect::Offset { t0: 1.1 },
+            Effect::Asymmetry { dv: 1.2, dc: 1.3 },
+            Effect::Deadtime { vd: 1.4 },
+            Effect::CurrentOffset { i0: 1.5 },
+            Effect::Thermal { k: 1.6, tau: 1.7 },
+            Effect::LoadFriction { mu: 1.8 },
+            Effect::Saturation { k: 1.9 },
+            Effect::Compliance {
+                j2: 2.0,
+                k: 2.1,
+                c: 2.2,
+            },
+            Effect::Backlash { j2: 2.3, gap: 2.4 },
+            Effect::Table {
+                var: TableVar::Omega,
+                bins: 5,
+                lo: 2.5,
+                hi: 2.6,
+                values,
+            },
+        ];
+        // The numbers each variant holds (a table: lo, hi and all its values).
+        let numbers = [
+            1,
+            1,
+            2,
+            2,
+            2,
+            2,
+            1,
+            2,
+            1,
+            1,
+            2,
+            1,
+            1,
+            3,
+            2,
+            2 + TABLE_MAX_BINS,
+        ];
+        for ((e, kind), n) in every.iter().zip(EffectKind::ALL).zip(numbers) {
+            assert_eq!(e.kind(), kind);
+            let calls = core::cell::Cell::new(0);
+            let doubled = e.map(|x| {
+                calls.set(calls.get() + 1);
+                2.0 * x
+            });
+            assert_eq!(calls.get(), n, "{kind:?}: every number mapped once");
+            assert_eq!(doubled.kind(), kind);
+            // Halving undoes doubling exactly: no number is lost or changed otherwise.
+            assert_eq!(doubled.map(|x| 0.5 * x), *e);
+        }
     }
 
     #[test]

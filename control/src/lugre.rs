@@ -12,7 +12,7 @@
 use num_traits::Float;
 use serde::{Deserialize, Serialize};
 
-use crate::effects::Effect;
+use crate::effects::{Effect, EffectKind};
 use crate::pi::saturate;
 
 /// Parameters of the LuGre model (SI units, rotary: torques in N·m, velocities in rad/s).
@@ -87,6 +87,31 @@ impl<F: Float> LugreParams<F> {
             }
         }
         p
+    }
+
+    /// The effect kinds a friction law is made of, in the order [`Self::to_effects`] gives.
+    pub const LAW_KINDS: [EffectKind; 4] = [
+        EffectKind::Coulomb,
+        EffectKind::Stribeck,
+        EffectKind::Viscous,
+        EffectKind::Presliding,
+    ];
+
+    /// The law as effects, the inverse of [`Self::friction_law`]: Coulomb (α0), Stribeck
+    /// (α1, v0), viscous (α2), presliding (σ0, σ1). `friction_law(&p.to_effects()) == p`.
+    pub fn to_effects(&self) -> [Effect<F>; 4] {
+        [
+            Effect::Coulomb { fc: self.alpha0 },
+            Effect::Stribeck {
+                fs: self.alpha1,
+                vs: self.v0,
+            },
+            Effect::Viscous { b: self.alpha2 },
+            Effect::Presliding {
+                sigma0: self.sigma0,
+                sigma1: self.sigma1,
+            },
+        ]
     }
 
     /// Stribeck curve `s(v) = α0 + α1·exp(−(v/v0)²)` [N·m].
@@ -248,6 +273,19 @@ impl<F: Float> LugreObserver<F> {
 mod tests {
     use super::*;
     use proptest::prelude::*;
+
+    proptest! {
+        #[test]
+        fn to_effects_inverts_friction_law(
+            alpha0 in -1.0f64..1.0, alpha1 in -1.0f64..1.0, alpha2 in -1.0f64..1.0,
+            v0 in 0.01f64..100.0, sigma0 in 0.0f64..1e4, sigma1 in 0.0f64..1e3,
+        ) {
+            let p = LugreParams { alpha0, alpha1, alpha2, v0, sigma0, sigma1 };
+            let effects = p.to_effects();
+            prop_assert_eq!(LugreParams::friction_law(&effects), p);
+            prop_assert_eq!(effects.map(|e| e.kind()), LugreParams::<f64>::LAW_KINDS);
+        }
+    }
 
     #[test]
     fn paper_values() {

@@ -266,7 +266,8 @@ fn load_friction_tested(d: &Diagnosis, seed: u64) -> &motorid::diagnose::Tested 
 
 /// The paper's LuGre law as effects, without the one of `kind`.
 fn lugre_without(p: &control::lugre::LugreParams<f64>, kind: EffectKind) -> Structure {
-    let effects = motorid::diagnose::lugre_effects(p)
+    let effects = p
+        .to_effects()
         .into_iter()
         .filter(|e| e.kind() != kind)
         .collect();

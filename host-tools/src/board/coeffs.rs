@@ -41,70 +41,6 @@ impl Default for LoopSettings {
     }
 }
 
-/// The same effect with every number mapped by `c` (e.g. `|x| x as f32`).
-pub fn map_effect<A: Copy, B>(e: &Effect<A>, c: impl Fn(A) -> B) -> Effect<B> {
-    match *e {
-        Effect::Coulomb { fc } => Effect::Coulomb { fc: c(fc) },
-        Effect::Viscous { b } => Effect::Viscous { b: c(b) },
-        Effect::Stribeck { fs, vs } => Effect::Stribeck {
-            fs: c(fs),
-            vs: c(vs),
-        },
-        Effect::Presliding { sigma0, sigma1 } => Effect::Presliding {
-            sigma0: c(sigma0),
-            sigma1: c(sigma1),
-        },
-        Effect::Cogging {
-            harmonic,
-            amp,
-            phase,
-        } => Effect::Cogging {
-            harmonic,
-            amp: c(amp),
-            phase: c(phase),
-        },
-        Effect::PositionLoad { amp, phase } => Effect::PositionLoad {
-            amp: c(amp),
-            phase: c(phase),
-        },
-        Effect::Offset { t0 } => Effect::Offset { t0: c(t0) },
-        Effect::Asymmetry { dv, dc } => Effect::Asymmetry {
-            dv: c(dv),
-            dc: c(dc),
-        },
-        Effect::Deadtime { vd } => Effect::Deadtime { vd: c(vd) },
-        Effect::CurrentOffset { i0 } => Effect::CurrentOffset { i0: c(i0) },
-        Effect::Thermal { k, tau } => Effect::Thermal {
-            k: c(k),
-            tau: c(tau),
-        },
-        Effect::LoadFriction { mu } => Effect::LoadFriction { mu: c(mu) },
-        Effect::Saturation { k } => Effect::Saturation { k: c(k) },
-        Effect::Compliance { j2, k, c: d } => Effect::Compliance {
-            j2: c(j2),
-            k: c(k),
-            c: c(d),
-        },
-        Effect::Backlash { j2, gap } => Effect::Backlash {
-            j2: c(j2),
-            gap: c(gap),
-        },
-        Effect::Table {
-            var,
-            bins,
-            lo,
-            hi,
-            values,
-        } => Effect::Table {
-            var,
-            bins,
-            lo: c(lo),
-            hi: c(hi),
-            values: values.map(&c),
-        },
-    }
-}
-
 fn eq_f32(e: &SparseEq<f64>) -> SparseEq<f32> {
     let terms: Vec<_> = e.terms.iter().map(|&(t, k)| (t, k as f32)).collect();
     SparseEq::from_slice(&terms).unwrap_or_else(SparseEq::new)
@@ -273,7 +209,7 @@ pub fn coefficients(model: &Model, loop_settings: LoopSettings) -> Result<Coeffi
             .map_err(|_| anyhow!("field 'effects': too many effects"))?;
     }
     for e in &model.effects {
-        co.effects.push(map_effect(e, |x| x as f32)).map_err(|_| {
+        co.effects.push(e.map(|x| x as f32)).map_err(|_| {
             anyhow!(
                 "field 'effects': the board holds at most {} effects",
                 blob::MAX_EFFECTS

@@ -37,7 +37,7 @@ pub fn f32_shortest(x: f32) -> f64 {
 pub fn effect_specs(co: &Coefficients) -> Vec<EffectSpec> {
     co.effects
         .iter()
-        .map(|e| EffectSpec::from_effect(&coeffs::map_effect(e, f32_shortest)))
+        .map(|e| EffectSpec::from_effect(&e.map(f32_shortest)))
         .collect()
 }
 

@@ -906,7 +906,9 @@ impl Structure {
     pub fn lugre_paper(plant: Plant) -> Structure {
         Structure::with_effects(
             plant,
-            lugre_effects(&control::lugre::LugreParams::<f64>::paper()),
+            control::lugre::LugreParams::<f64>::paper()
+                .to_effects()
+                .to_vec(),
         )
     }
 
@@ -917,7 +919,7 @@ impl Structure {
         use crate::model::ModelKind;
         let mut effects = Vec::new();
         match (m.kind, &m.lugre) {
-            (ModelKind::Lugre, Some(l)) => effects = lugre_effects(l),
+            (ModelKind::Lugre, Some(l)) => effects = l.to_effects().to_vec(),
             (ModelKind::Sindyc, _) => {
                 effects.push(Effect::Coulomb { fc: 0.0 });
                 effects.push(Effect::Viscous { b: 0.0 });

@@ -34,7 +34,7 @@ use super::candidates::Signals;
 use crate::log::Plant;
 use crate::numerics::statistics;
 use crate::numerics::weak_form::WeakForm;
-use control::effects::{total_sensor_offset, total_voltage_loss, Effect, EffectInputs, EffectKind};
+use control::effects::{total_sensor_offset, total_voltage_loss, Effect, EffectInputs};
 use control::lugre::{LugreObserver, LugreParams};
 use control::motor::MotorParams;
 use serde::Serialize;
@@ -286,12 +286,7 @@ pub fn model_torque(effects: &[Effect<f64>], s: &Signals, current: &[f64], kt: f
     let mut observer = LugreParams::from_effects(effects)
         .filter(|p| p.is_valid())
         .map(LugreObserver::new);
-    let law_kinds = [
-        EffectKind::Coulomb,
-        EffectKind::Stribeck,
-        EffectKind::Viscous,
-        EffectKind::Presliding,
-    ];
+    let law_kinds = LugreParams::<f64>::LAW_KINDS;
     (0..s.len())
         .map(|k| {
             let x = EffectInputs {

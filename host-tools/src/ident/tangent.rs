@@ -92,7 +92,7 @@ impl<const N: usize> RunScalar for DualVec<f64, N> {
 
 /// An effect with its parameters as constants of another number type.
 pub fn lift_effect<D: RunScalar>(e: &Effect<f64>) -> Effect<D> {
-    crate::board::coeffs::map_effect(e, D::constant)
+    e.map(D::constant)
 }
 
 /// The number behind key `key` of an effect (the keys of an effect spec), if it has one.
