@@ -309,7 +309,7 @@ fn sample_reports(run: &FineRun, w: &Windows, ex: &Exact) {
     let (m, tru, log) = (run.cfg.motor, &run.tru, &run.log);
     let (kt, j) = (m.kt, m.j);
     let (wins, nw) = (&w.wins, w.wins.len());
-    let s_meas = run.steady(&smooth_velocity(log, 5));
+    let s_meas = run.steady(&smooth_velocity(log));
     w.report(
         "samples: I_true, θ_true, F_true",
         wins.iter()
@@ -358,7 +358,7 @@ fn angle_and_friction_reports(run: &FineRun, w: &Windows, ex: &Exact) {
     let (kt, j) = (m.kt, m.j);
     let (wins, nw) = (&w.wins, w.wins.len());
     let s_true = run.steady(&tru.omega);
-    let s_meas = run.steady(&smooth_velocity(log, 5));
+    let s_meas = run.steady(&smooth_velocity(log));
     w.report(
         "exact I,F; θ_true samples",
         (0..nw)
@@ -439,7 +439,7 @@ fn step_correction(run: &FineRun) -> impl Fn(&Window) -> f64 + '_ {
 fn volts_reports(run: &FineRun, w: &Windows, ex: &Exact) {
     let (m, log) = (run.cfg.motor, &run.log);
     let (wins, nw) = (&w.wins, w.wins.len());
-    let s_meas = run.steady(&smooth_velocity(log, 5));
+    let s_meas = run.steady(&smooth_velocity(log));
     let i_volt: Vec<f64> = wins
         .iter()
         .map(|w| {
