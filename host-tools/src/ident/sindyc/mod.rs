@@ -275,8 +275,8 @@ pub fn fit_model(req: &super::FitRequest) -> Result<crate::model::Model> {
         ..SindycOptions::default()
     };
     let res = identify(req.logs, req.validate, req.adds, &opts)?;
-    eprintln!("SINDYc equations:\n{}", res.equations_text);
-    eprintln!(
+    tracing::debug!("SINDYc equations:\n{}", res.equations_text);
+    tracing::debug!(
         "SINDYc Pareto path (terms vs validation fit):\n{}",
         res.pareto_text
     );
