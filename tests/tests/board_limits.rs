@@ -1,5 +1,5 @@
 //! The board's limits on the emulated board, through the firmware's own logic
-//! (`control::board::Board` in `motorid::board::sim::BoardSim`): the standing current limit,
+//! (`control::board::Board` in `motorid::board::emulated_board::EmulatedBoard`): the standing current limit,
 //! the speed ramp, the speed limit and the size of the experiment signals.
 use control::blob::{Coefficients, ModelKind, DERATE_FRACTION};
 use control::commission::{CommissionError, CommissionOutcome};
@@ -7,9 +7,9 @@ use control::effects::Effect;
 use control::frame::{BoardMsg, Excitation, Fault, HostMsg, Mode};
 use control::lugre::LugreParams;
 use control::step::{Faults, MEASURED_CURRENT_GAIN};
-use motorid::board::flash::{RamFlash, PAGE};
+use motorid::board::emulated_board::EmulatedBoard;
+use motorid::board::emulated_flash::{RamFlash, PAGE};
 use motorid::board::hw::Wiring;
-use motorid::board::sim::BoardSim;
 use motorid::emulator::EmulatorConfig;
 
 /// The paper's motor with its LuGre compensation, as `motorid export` writes it for the
@@ -27,12 +27,12 @@ fn paper_coefficients(u_max: f32, i_max: f32) -> Coefficients {
 }
 
 /// The emulated paper motor on a board whose flash holds `co`.
-fn board_with(co: &Coefficients) -> BoardSim {
+fn board_with(co: &Coefficients) -> EmulatedBoard {
     let mut slots = control::slots::Slots::new(RamFlash::new(None), 0, PAGE as u32).unwrap();
     slots
         .store(&motorid::board::coeffs::encode(co).unwrap())
         .unwrap();
-    let sim = BoardSim::new(
+    let sim = EmulatedBoard::new(
         EmulatorConfig::paper(),
         Wiring::default(),
         slots.into_inner(),
@@ -52,7 +52,7 @@ struct Period {
 }
 
 /// Runs `n` periods with a heartbeat now and then; returns each period and the first fault.
-fn run(sim: &mut BoardSim, n: usize) -> (Vec<Period>, Option<Fault>) {
+fn run(sim: &mut EmulatedBoard, n: usize) -> (Vec<Period>, Option<Fault>) {
     let mut periods = Vec::new();
     let mut fault = None;
     for k in 0..n {
@@ -212,7 +212,7 @@ fn the_speed_reference_ramps_at_half_the_limit_torque_and_reverses_within_the_li
 
 #[test]
 fn speed_references_beyond_the_speed_limit_are_refused() {
-    let nack = |sim: &mut BoardSim, w: f32| {
+    let nack = |sim: &mut EmulatedBoard, w: f32| {
         sim.handle(&HostMsg::SetSpeed { omega_ref: w });
         let out = sim.take_output();
         let msgs: Vec<BoardMsg> = out
@@ -292,7 +292,7 @@ fn no_experiment_signal_exceeds_its_current_limit() {
 }
 
 /// Runs speed mode to `w` [rad/s] for `n` periods from where the board is now.
-fn speed_run(sim: &mut BoardSim, w: f32, n: usize) -> (Vec<Period>, Option<Fault>) {
+fn speed_run(sim: &mut EmulatedBoard, w: f32, n: usize) -> (Vec<Period>, Option<Fault>) {
     sim.handle(&HostMsg::SetSpeed { omega_ref: w });
     sim.handle(&HostMsg::SetMode { mode: Mode::Speed });
     run(sim, n)
@@ -305,7 +305,7 @@ fn a_run_started_while_the_rotor_turns_holds_the_current_limit() {
     // turning rotor (14 V), not around 0 V, which would brake with 65 A.
     let co = paper_coefficients(24.0, 30.0);
     let lim = i_limit(&co);
-    type Start = fn(&mut BoardSim);
+    type Start = fn(&mut EmulatedBoard);
     let starts: [(&str, Start); 4] = [
         ("speed 200", |s| {
             s.handle(&HostMsg::SetSpeed { omega_ref: 200.0 });
@@ -518,7 +518,7 @@ fn a_model_back_emf_far_below_the_motors_stops_at_the_first_braking_period() {
     slots
         .store(&motorid::board::coeffs::encode(&co).unwrap())
         .unwrap();
-    let mut sim = BoardSim::new(plant, Wiring::default(), slots.into_inner()).unwrap();
+    let mut sim = EmulatedBoard::new(plant, Wiring::default(), slots.into_inner()).unwrap();
     let (p, fault) = speed_run(&mut sim, 20.0, 400);
     let over = beyond_trip(&p, i_max);
     let peak = peak_current(&p);
@@ -562,7 +562,7 @@ fn a_load_step_at_speed_holds_the_current_limit() {
         slots
             .store(&motorid::board::coeffs::encode(&co).unwrap())
             .unwrap();
-        let mut sim = BoardSim::new(plant, Wiring::default(), slots.into_inner()).unwrap();
+        let mut sim = EmulatedBoard::new(plant, Wiring::default(), slots.into_inner()).unwrap();
         let (p, fault) = speed_run(&mut sim, 150.0, 300);
         let peak = peak_current(&p);
         let over = beyond_trip(&p, f64::from(co.limits.i_max));
@@ -600,7 +600,7 @@ fn a_load_that_drives_the_motor_past_the_speed_limit_is_an_over_speed_fault() {
     slots
         .store(&motorid::board::coeffs::encode(&co).unwrap())
         .unwrap();
-    let mut sim = BoardSim::new(plant, Wiring::default(), slots.into_inner()).unwrap();
+    let mut sim = EmulatedBoard::new(plant, Wiring::default(), slots.into_inner()).unwrap();
     let w_max = f64::from(sim.board().speed_limit());
     sim.handle(&HostMsg::SetSpeed { omega_ref: 200.0 });
     sim.handle(&HostMsg::SetMode { mode: Mode::Speed });
@@ -673,7 +673,7 @@ fn the_speed_limit_follows_the_measured_bus_voltage() {
 }
 
 /// The board's replies since the last call.
-fn replies(sim: &mut BoardSim) -> Vec<BoardMsg> {
+fn replies(sim: &mut EmulatedBoard) -> Vec<BoardMsg> {
     sim.take_output()
         .split_inclusive(|&b| b == 0)
         .map(|f| control::frame::decode_frame(f).unwrap())
@@ -728,12 +728,12 @@ fn without_an_armed_hardware_stop_only_commissioning_runs() {
 /// nominal bus voltage [V].
 fn dead_time_drop() -> f64 {
     f64::from(control::board::dead_time_drop(
-        motorid::board::sim::V_BUS_NOMINAL,
+        motorid::board::emulated_board::V_BUS_NOMINAL,
     ))
 }
 
 /// Runs commissioning to its end (at most `n` periods); returns the true peak current [A].
-fn commission(sim: &mut BoardSim, n: usize) -> f64 {
+fn commission(sim: &mut EmulatedBoard, n: usize) -> f64 {
     replies(sim);
     sim.handle(&HostMsg::Commission);
     let mut peak = 0.0f64;
@@ -759,7 +759,7 @@ fn commissioning_holds_its_current_on_a_winding_far_below_the_blobs_r() {
         plant.effects.push(Effect::Deadtime {
             vd: dead_time_drop(),
         });
-        let mut sim = BoardSim::new(plant, Wiring::default(), RamFlash::new(None)).unwrap();
+        let mut sim = EmulatedBoard::new(plant, Wiring::default(), RamFlash::new(None)).unwrap();
         let i_comm = f64::from(sim.board().commission_current());
         let peak = commission(&mut sim, 600);
         let co = sim.coefficients().clone();
@@ -787,7 +787,7 @@ fn a_current_sense_that_sees_no_current_fails_commissioning_and_keeps_the_blob()
         slots
             .store(&motorid::board::coeffs::encode(&co).unwrap())
             .unwrap();
-        let mut sim = BoardSim::new(plant, Wiring::default(), slots.into_inner()).unwrap();
+        let mut sim = EmulatedBoard::new(plant, Wiring::default(), slots.into_inner()).unwrap();
         sim.hardware_mut().set_current_sense_gain(0.0);
         let seq = sim.coeff_seq();
         let peak = commission(&mut sim, 600);
@@ -820,7 +820,7 @@ fn commissioning_measures_r_and_its_default_motor_allows_no_speed_mode() {
         vd: dead_time_drop(),
     });
     let r_true = plant.motor.r;
-    let mut sim = BoardSim::new(plant, Wiring::default(), RamFlash::new(None)).unwrap();
+    let mut sim = EmulatedBoard::new(plant, Wiring::default(), RamFlash::new(None)).unwrap();
     replies(&mut sim);
     sim.handle(&HostMsg::Commission);
     for _ in 0..600 {
@@ -880,7 +880,7 @@ fn an_inverted_current_sense_without_commissioning_stops_near_the_current_limit(
         current_inverted: true,
         ..Wiring::default()
     };
-    let mut sim = BoardSim::new(EmulatorConfig::paper(), wiring, slots.into_inner()).unwrap();
+    let mut sim = EmulatedBoard::new(EmulatorConfig::paper(), wiring, slots.into_inner()).unwrap();
     let (p, fault) = speed_run(&mut sim, 100.0, 20);
     let peak = peak_current(&p);
     let lim = i_limit(&co);
@@ -904,7 +904,7 @@ fn an_inverted_current_sense_without_commissioning_stops_near_the_current_limit(
     slots
         .store(&motorid::board::coeffs::encode(&co).unwrap())
         .unwrap();
-    let mut sim = BoardSim::new(EmulatorConfig::paper(), wiring, slots.into_inner()).unwrap();
+    let mut sim = EmulatedBoard::new(EmulatorConfig::paper(), wiring, slots.into_inner()).unwrap();
     sim.handle(&HostMsg::StartExperiment {
         signal: Excitation::Steady { volts: 10.0 },
         duration_s: 1.0,

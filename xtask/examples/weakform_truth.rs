@@ -6,7 +6,13 @@
 //! uses are swapped in one at a time. Residuals are printed in N·m (window integral divided
 //! by ∫φ), with their correlation with effect regressors.
 //!
-//! `cargo run --release -p host-tools --example weakform_truth -- [a|b|steady] [seconds]`
+//! `cargo run --release -p xtask --example weakform_truth -- [a|b|steady] [seconds]`
+//!
+//! Environment variables:
+//! - `MOVING=1`: keep only the windows where the true rotor speed stays at or above 1 rad/s
+//!   throughout, as `diagnose` does.
+//! - `HIDDEN=SPEC;SPEC...`: effects (in `--effect` syntax) the emulator adds for the final
+//!   `diagnose` run, while the model structure stays the paper's LuGre one.
 use control::lugre::LugreParams;
 use motorid::diagnose::candidates::Signals;
 use motorid::emulator::{signal, EmulatorConfig, Plant, SignalKind, SAMPLE_PERIOD};
