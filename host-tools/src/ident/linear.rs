@@ -451,6 +451,19 @@ pub fn motor_free(plant: Plant) -> Vec<Free> {
     }
 }
 
+/// Every LuGre parameter ([`crate::model::LUGRE_KEYS`]) as a free parameter, bounded only to
+/// be non-negative (up to 1e6, in its own unit).
+pub fn lugre_free() -> Vec<Free> {
+    crate::model::LUGRE_KEYS
+        .into_iter()
+        .map(|f| Free {
+            slot: Slot::Lugre(f),
+            lo: 0.0,
+            hi: 1e6,
+        })
+        .collect()
+}
+
 /// The effects' continuous keys as free parameters.
 pub fn effect_free(m: &Model) -> Vec<Free> {
     let mut out = Vec::new();
