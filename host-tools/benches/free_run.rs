@@ -13,8 +13,7 @@
 use control::effects::Effect;
 use criterion::{criterion_group, criterion_main, Criterion};
 use motorid::emulator::{simulate_signal, EmulatorConfig, SignalKind};
-use motorid::ident::free_params::{Free, Slot};
-use motorid::ident::linear::{effect_free, motor_free};
+use motorid::ident::linear::{effect_free, lugre_free, motor_free};
 use motorid::ident::sim_error::Residuals;
 use motorid::log::Plant;
 use motorid::model::{Model, ModelKind};
@@ -30,14 +29,7 @@ fn bench(c: &mut Criterion) {
     model.motor = cfg.motor;
     model.lugre = Some(cfg.lugre);
     model.effects = cfg.effects.clone();
-    let mut free: Vec<Free> = ["alpha0", "alpha1", "alpha2", "v0", "sigma0", "sigma1"]
-        .into_iter()
-        .map(|f| Free {
-            slot: Slot::Lugre(f),
-            lo: 0.0,
-            hi: 1e6,
-        })
-        .collect();
+    let mut free = lugre_free();
     free.extend(motor_free(Plant::Voltage));
     free.extend(effect_free(&model));
     let res = Residuals::segmented(&logs, model.sensor.velocity_window);

@@ -81,7 +81,8 @@ fn data() -> Data {
         w = (w + DT * (84.0 * uk - 30.0 * (5.0 * w).tanh())) / (1.0 + 78.0 * DT);
         th += w * DT;
     }
-    let xdot = motorid::ident::sindyc::centred_velocity(&t, &x, 5);
+    let half = motorid::scales::samples_for(motorid::ident::sindyc::VELOCITY_HALF_S, DT, t.len());
+    let xdot = motorid::ident::sindyc::centred_velocity(&t, &x, half);
     let emb = HankelEmbedding::fit(&xdot, DEFAULT_DELAYS, Selection::Range(31, 60)).unwrap();
     let z = emb.extract(&xdot).unwrap();
     Data {

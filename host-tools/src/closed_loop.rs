@@ -3,7 +3,7 @@
 //! compensation (the paper's eqs. 38–40 in `control::compensation`), the same PI gains in
 //! every case, tracking a sinusoidal or a stepped speed reference.
 //!
-//! Each run is the firmware's control step in f32 ([`crate::board::rig::Rig`]) configured
+//! Each run is the firmware's control step in f32 ([`crate::board::step_rig::Rig`]) configured
 //! from the coefficient blob `motorid export` would write, so what is measured here is what
 //! the board would run. Scores: RMS of `ω_ref − ω` over the whole run and over the samples
 //! where `|ω_ref|` is below [`LOW_SPEED`], with `ω` the emulator's true velocity (the
@@ -21,8 +21,8 @@
 //! < 10 % but raise the compensated one, and kp 0.2 starts to oscillate against the
 //! estimator's lag.
 use crate::board::coeffs::{self, LoopSettings};
-use crate::board::rig::{Rig, RigSample};
-use crate::board::sim::V_BUS_NOMINAL;
+use crate::board::emulated_board::V_BUS_NOMINAL;
+use crate::board::step_rig::{Rig, RigSample};
 use crate::emulator::EmulatorConfig;
 use crate::model::{Model, ModelKind};
 use anyhow::{anyhow, Result};

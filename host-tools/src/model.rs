@@ -25,6 +25,10 @@ use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::Path;
 
+/// The keys of MODEL.toml's `[lugre]` table: the LuGre parameters of
+/// [`control::lugre::LugreParams`] by name.
+pub const LUGRE_KEYS: [&str; 6] = ["alpha0", "alpha1", "alpha2", "v0", "sigma0", "sigma1"];
+
 /// Which friction law the model uses.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum, Default)]
 #[serde(rename_all = "snake_case")]
@@ -502,10 +506,7 @@ impl Model {
             }
         })?;
         unknown_keys(text, "motor", &["r", "l", "kt", "kb", "j"])
-            .and_then(|()| {
-                let lugre = ["alpha0", "alpha1", "alpha2", "v0", "sigma0", "sigma1"];
-                unknown_keys(text, "lugre", &lugre)
-            })
+            .and_then(|()| unknown_keys(text, "lugre", &LUGRE_KEYS))
             .map_err(|e| anyhow!("{p}: {e}"))?;
         Ok(model)
     }

@@ -121,6 +121,7 @@ fn upload_record_and_speed_control_over_a_pty() {
     assert_eq!(rows.len(), 2000);
     for w in rows.windows(2) {
         let dt = w[1][0] - w[0][0];
+        // f32 seconds from the board: an ulp at 24 s is 2e-6 s.
         assert!((dt - 0.012).abs() < 1e-4, "time step {dt}");
     }
     let u_max = rows.iter().map(|r| r[1].abs()).fold(0.0, f64::max);
@@ -134,6 +135,7 @@ fn upload_record_and_speed_control_over_a_pty() {
     assert!(span > 10.0 * 0.0952, "angle span {span}");
     for x in &th {
         let steps = x / (std::f64::consts::TAU / 66.0);
+        // 1e-3 steps: f32 angles from the board (an ulp is 1e-7 of the angle).
         assert!(
             (steps - steps.round()).abs() < 1e-3,
             "theta {x} not Hall-quantised"
@@ -183,6 +185,8 @@ fn upload_record_and_speed_control_over_a_pty() {
     assert!(!d.join("f.csv").exists());
     let tail: Vec<f64> = rows[rows.len() - 100..].iter().map(|r| r[4]).collect();
     let mean = tail.iter().sum::<f64>() / tail.len() as f64;
+    // 10 %: the logged speed is the 0.79 rad/s-resolution estimate and the loop has had
+    // 5 s; a run that failed to regulate would be far off.
     assert!(
         (mean - 30.0).abs() < 3.0,
         "mean speed over the last 1.2 s: {mean}"
@@ -406,6 +410,7 @@ fn assert_runs_at_30(d: &Path, port: &str, what: &str) {
     let (_, rows, _) = read_log(&d.join("s.csv"));
     let tail: Vec<f64> = rows[rows.len() - 80..].iter().map(|r| r[4]).collect();
     let mean = tail.iter().sum::<f64>() / tail.len() as f64;
+    // 10 %, as in the first speed run.
     assert!((mean - 30.0).abs() < 3.0, "{what}: mean speed {mean}");
 }
 

@@ -89,6 +89,7 @@ fn a_fixed_key_is_held_a_bounded_key_kept_in_range_and_both_recorded() {
     assert!(r["note"].as_str().unwrap().contains("--fix"), "{r}");
     let j = param(&held, "J");
     let jv = j["value"].as_f64().unwrap();
+    // At the bound up to a JSON round trip's last digit, as in `same`.
     assert!(
         jv <= j_hi * (1.0 + 1e-12),
         "J = {jv} above its bound {j_hi}"

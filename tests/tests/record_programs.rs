@@ -100,7 +100,8 @@ fn steady_and_ramp_programs_play_on_the_board() {
         .unwrap();
     assert_eq!(r.len() + lost, 22 * 250, "samples ({lost} lost)");
     assert!(lost < 250, "{lost} samples lost");
-    // One clock across the runs: steps of 12 ms (several where a sample was lost).
+    // One clock across the runs: steps of 12 ms (several where a sample was lost), to 1 % of
+    // a step: the board sends f32 seconds, whose ulp over this 66 s program is under 8 µs.
     for w in r.windows(2) {
         let steps = (w[1][0] - w[0][0]) / 0.012;
         assert!(
@@ -115,6 +116,7 @@ fn steady_and_ramp_programs_play_on_the_board() {
         }
     }
     assert_eq!(levels.len(), 22, "{levels:?}");
+    // 1e-5 V: the board sends f32 volts (an ulp at 1.2 V is 1.2e-7 V).
     assert!((levels[0] - 0.8).abs() < 1e-5, "{levels:?}");
     assert!((levels[10] - 1.2).abs() < 1e-5, "{levels:?}");
     assert!((levels[21] + 1.2).abs() < 1e-5, "{levels:?}");
@@ -137,11 +139,15 @@ fn steady_and_ramp_programs_play_on_the_board() {
         .map(|w| (w[1][1] - w[0][1]) / 0.012)
         .filter(|s| s.abs() < 1.0)
         .fold(0.0f64, |a, s| a.max(s));
+    // 1 mV/s: tells the 12 mV/s ramp from the 9.5 mV/s one; f32 volts differenced over a
+    // 12 ms step are good to about 1e-5 V/s.
     assert!(
         (slope_max - 12e-3).abs() < 1e-3,
         "steepest slope {slope_max} V/s"
     );
     let u_top = r.iter().map(|x| x[1]).fold(f64::MIN, f64::max);
+    // 5 %: the top is the last sample before the ramp turns, within a step of it; a wrong
+    // amplitude would miss by far more.
     assert!((u_top - 0.4).abs() < 0.02, "ramp top {u_top} V");
 
     // Refused: above the board's limit, above its rating, and for a-d (scaled by the board).

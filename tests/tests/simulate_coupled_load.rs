@@ -102,6 +102,7 @@ fn a_free_compliant_pair_rings_at_the_two_mass_frequency_and_never_gains_energy(
         0.5 * j * x[1] * x[1] + 0.5 * j2 * x[3] * x[3] + 0.5 * k * (x[0] - x[2]).powi(2)
     };
     let e: Vec<f64> = xs[10..].iter().map(energy).collect();
+    // 1e-12: f64 rounding of the energy sum; any growth from the scheme would be far larger.
     for (n, w) in e.windows(2).enumerate() {
         assert!(
             w[1] <= w[0] * (1.0 + 1e-12),
@@ -114,6 +115,8 @@ fn a_free_compliant_pair_rings_at_the_two_mass_frequency_and_never_gains_energy(
     let x = xs[xs.len() - 1];
     let common = (j * x[1] + j2 * x[3]) / (j + j2);
     let rest = 0.5 * (j + j2) * common * common;
+    // The push puts at least half as much again into the coupled mode as into the common
+    // motion (so its decay is measurable), and the damper takes at least 80 % of it.
     assert!(e[0] > 1.5 * rest, "{} vs {rest}", e[0]);
     assert!(
         e[e.len() - 1] < rest + 0.2 * (e[0] - rest),
@@ -134,15 +137,18 @@ fn a_coupling_far_stiffer_than_the_step_moves_as_one_inertia() {
         };
         let j = cfg.motor.j;
         let xs = run(&cfg, 0.6);
+        // 1e3: five times the rigid motion's 200 rad/s at 0.6 s; an unstable mode grows past it.
         assert!(xs.iter().flatten().all(|v| v.is_finite() && v.abs() < 1e3));
         let at = |t: f64| xs[(t / fine_step).round() as usize - 1];
         let accel = (at(0.6)[1] - at(0.12)[1]) / 0.48;
         let rigid = 0.3 / (j + j2);
+        // 0.1 %: the spring's deflection is j2·a/k = 2e-7 rad, the rigid motion exact under
+        // backward Euler; a coupling that does not hold would give J alone, 3 times faster.
         assert!(
             (accel / rigid - 1.0).abs() < 1e-3,
             "step {fine_step}: {accel} rad/s² vs rigid {rigid}"
         );
-        // The load keeps up with the rotor.
+        // The load keeps up with the rotor (0.1 %, as above).
         let x = at(0.6);
         assert!((x[1] - x[3]).abs() < 1e-3 * x[1], "{x:?}");
     }
@@ -175,6 +181,8 @@ fn a_gap_turns_the_rotor_alone_then_picks_up_the_load() {
     let at = |t: f64| xs[(t / h).round() as usize - 1];
     let after = at(t_hit + 3e-3);
     let want = merged + torque / (j + j2) * 3e-3;
+    // 1 %: the contact takes a few fine steps; a contact that merged no momentum would
+    // leave ω_hit, three times `merged`.
     assert!(
         (after[1] / want - 1.0).abs() < 0.01,
         "ω after contact {} vs {want}",
@@ -182,6 +190,7 @@ fn a_gap_turns_the_rotor_alone_then_picks_up_the_load() {
     );
     let accel = (at(0.4)[1] - at(0.2)[1]) / 0.2;
     let rigid = torque / (j + j2);
+    // 0.1 %, as for the stiff coupling.
     assert!((accel / rigid - 1.0).abs() < 1e-3, "{accel} vs {rigid}");
 
     // No gap: one inertia J + j2 from the start.
@@ -190,6 +199,7 @@ fn a_gap_turns_the_rotor_alone_then_picks_up_the_load() {
     for (n, x) in xs.iter().enumerate().skip(20) {
         let t = (n + 1) as f64 * h;
         let want = torque / (j + j2) * t;
+        // 0.1 % after the first 20 steps, as for the stiff coupling.
         assert!(
             (x[1] / want - 1.0).abs() < 1e-3,
             "t {t}: ω {} vs {want}",

@@ -32,6 +32,9 @@ fn steady_speed_matches_the_torque_balance() {
         let end = settle(&cfg, v, 3.0);
         let lhs = m.kt * (v - m.kb * end.omega) / m.r;
         let rhs = p.steady_friction(end.omega);
+        // After 3 s, many mechanical time constants, only the settling tail and the
+        // integrator's root-finding tolerance are left: 1e-6 N·m is 1e-5 of the smallest
+        // torque here, 1e-5 relative in speed likewise.
         assert!(
             (lhs - rhs).abs() < 1e-6,
             "V={v}: motor torque {lhs} vs friction {rhs} at ω={}",
@@ -43,7 +46,8 @@ fn steady_speed_matches_the_torque_balance() {
             "V={v}: {} vs closed form {want}",
             end.omega
         );
-        // Current at rest of the winding: I = (V − K_b·ω)/R.
+        // Current at rest of the winding: I = (V − K_b·ω)/R (settled: L/R is 1.4 ms; 1e-6 A
+        // for the same tail).
         assert!((end.i - (v - m.kb * end.omega) / m.r).abs() < 1e-6);
     }
 }
@@ -68,6 +72,8 @@ fn steady_speed_with_velocity_and_electrical_effects() {
             let end = settle(&cfg, v, 4.0);
             let want = steady_speed(&cfg, v).unwrap();
             let base = steady_speed(&quiet(), v).unwrap();
+            // 1e-4 relative, looser than without effects: the heat state (tau 0.3 s) is
+            // still settling after 4 s.
             assert!(
                 (end.omega - want).abs() < 1e-4 * (1.0 + want.abs()),
                 "{spec} V={v}: simulated {} vs closed form {want}",
@@ -75,6 +81,7 @@ fn steady_speed_with_velocity_and_electrical_effects() {
             );
             change = change.max((want - base).abs());
         }
+        // 0.05 rad/s: far above the 1e-4 agreement above, so the change is the effect's.
         assert!(
             change > 0.05,
             "{spec}: the effect should change the steady speed"
@@ -95,6 +102,8 @@ fn below_breakaway_the_rotor_only_deflects_the_bristles() {
     let z = torque / p.sigma0;
     let s = p.s(0.0);
     let theta = -(s / p.sigma0) * (1.0 - torque / s).ln();
+    // z approaches its end value with σ1/σ0 ≈ 70 ms: settled to 0.1 % after 2 s. The angle's
+    // formula leaves out the inertia and α2 on the way: 1 %. At rest: 1e-6 rad/s.
     assert!((end.z - z).abs() < 1e-3 * z, "z {} vs {z}", end.z);
     assert!(
         (end.theta - theta).abs() < 1e-2 * theta,
@@ -116,6 +125,7 @@ fn presliding_creep_follows_sigma1_over_sigma0() {
     let v = 0.01 * m.r / m.kt;
     let end = settle(&cfg, v, tau);
     let want = 0.01 / p.sigma0 * (1.0 - (-1.0f64).exp());
+    // 5 %: the linear creep leaves out the bristles' sliding, of order T/(2·s(0)) = 5 % here.
     assert!(
         (end.theta - want).abs() < 0.05 * want,
         "θ(τ) {} vs {want}",
@@ -154,6 +164,7 @@ fn energy_is_conserved() {
     let stored = 0.5 * m.j * s.omega * s.omega + 0.5 * m.l * s.i * s.i;
     let residual = e_in - e_r - e_f - e_l - stored;
     assert!(e_in > 10.0, "energy in {e_in} J");
+    // 1 %: the backward Euler step dissipates a little energy of its own (first order in h).
     assert!(
         residual.abs() < 0.01 * e_in,
         "in {e_in} J, R {e_r}, friction {e_f}, load {e_l}, stored {stored}: residual {residual}"
@@ -202,6 +213,7 @@ fn integrator_converges_when_the_step_is_halved() {
         );
         assert!(e2 < hi * e1, "{kind:?}: current changes {e1} then {e2}");
         let scale = w3.iter().fold(0.0f64, |a, x| a.max(x.abs()));
+        // At the default 0.2 ms the step changes the speed by under 1 % of its range.
         assert!(d2 < 0.01 * scale, "{kind:?}: {d2} rad/s vs range {scale}");
     }
     // Signal c runs at 1.5-3 rad/s, where the paper's σ1 with the Stribeck slope leaves the
@@ -210,6 +222,7 @@ fn integrator_converges_when_the_step_is_halved() {
     let (w1, _) = run(SignalKind::C, 0.2e-3);
     let (w2, _) = run(SignalKind::C, 0.1e-3);
     let d = rms_diff(&w1, &w2);
+    // A twentieth of the board's velocity resolution: invisible in a log.
     assert!(d < 0.05 * 0.79, "signal c: {d} rad/s rms between steps");
 }
 
@@ -225,6 +238,7 @@ fn stable_even_at_one_step_per_sample() {
     let (wf, _) = series(&quiet(), SignalKind::A, 30.0);
     assert!(w.iter().all(|x| x.is_finite()));
     let scale = wf.iter().fold(0.0f64, |a, x| a.max(x.abs()));
+    // 5 % of the range: a step 60 times coarser is first-order less accurate, not unstable.
     assert!(rms_diff(&w, &wf) < 0.05 * scale);
 }
 
@@ -241,6 +255,8 @@ fn hall_quantisation_step_is_two_pi_over_six_pole_pairs() {
         let mut steps = std::collections::BTreeSet::new();
         for (k, th) in r.log.theta.iter().enumerate() {
             let q = th / step;
+            // 1e-9 steps: rounding of the decoder's count times the step; likewise 1e-12 rad
+            // on the quantisation error and 1e-9 on the smallest change below.
             assert!(
                 (q - q.round()).abs() < 1e-9,
                 "θ={th} is not a multiple of {step}"
@@ -251,6 +267,7 @@ fn hall_quantisation_step_is_two_pi_over_six_pole_pairs() {
         }
         assert!(steps.len() > 20);
         let meta: f64 = r.log.meta["hall_resolution_rad"].parse().unwrap();
+        // The metadata is the same f64 printed in full: equal to its last bit or two.
         assert!((meta - step).abs() < 1e-15);
         // Smallest change between two samples is exactly one step.
         let min = r
@@ -319,6 +336,7 @@ fn extra_load_closure_brings_other_physics() {
     // Below breakaway with a hard-sign extra friction: still stuck, not chattering.
     let cfg = quiet().with_extra_load(|x: LoadInputs| 0.05 * x.omega.signum());
     let end = settle(&cfg, 0.4, 1.0);
+    // 1e-6 rad/s: stuck, a chattering sign would show as rad/s.
     assert!(end.omega.abs() < 1e-6, "ω = {}", end.omega);
 }
 

@@ -6,7 +6,13 @@
 //! uses are swapped in one at a time. Residuals are printed in N·m (window integral divided
 //! by ∫φ), with their correlation with effect regressors.
 //!
-//! `cargo run --release -p host-tools --example weakform_truth -- [a|b|steady] [seconds]`
+//! `cargo run --release -p xtask --example weakform_truth -- [a|b|steady] [seconds]`
+//!
+//! Environment variables:
+//! - `MOVING=1`: keep only the windows where the true rotor speed stays at or above 1 rad/s
+//!   throughout, as `diagnose` does.
+//! - `HIDDEN=SPEC;SPEC...`: effects (in `--effect` syntax) the emulator adds for the final
+//!   `diagnose` run, while the model structure stays the paper's LuGre one.
 use control::lugre::LugreParams;
 use motorid::diagnose::candidates::Signals;
 use motorid::emulator::{signal, EmulatorConfig, Plant, SignalKind, SAMPLE_PERIOD};
@@ -309,7 +315,7 @@ fn sample_reports(run: &FineRun, w: &Windows, ex: &Exact) {
     let (m, tru, log) = (run.cfg.motor, &run.tru, &run.log);
     let (kt, j) = (m.kt, m.j);
     let (wins, nw) = (&w.wins, w.wins.len());
-    let s_meas = run.steady(&smooth_velocity(log, 5));
+    let s_meas = run.steady(&smooth_velocity(log));
     w.report(
         "samples: I_true, θ_true, F_true",
         wins.iter()
@@ -358,7 +364,7 @@ fn angle_and_friction_reports(run: &FineRun, w: &Windows, ex: &Exact) {
     let (kt, j) = (m.kt, m.j);
     let (wins, nw) = (&w.wins, w.wins.len());
     let s_true = run.steady(&tru.omega);
-    let s_meas = run.steady(&smooth_velocity(log, 5));
+    let s_meas = run.steady(&smooth_velocity(log));
     w.report(
         "exact I,F; θ_true samples",
         (0..nw)
@@ -439,7 +445,7 @@ fn step_correction(run: &FineRun) -> impl Fn(&Window) -> f64 + '_ {
 fn volts_reports(run: &FineRun, w: &Windows, ex: &Exact) {
     let (m, log) = (run.cfg.motor, &run.log);
     let (wins, nw) = (&w.wins, w.wins.len());
-    let s_meas = run.steady(&smooth_velocity(log, 5));
+    let s_meas = run.steady(&smooth_velocity(log));
     let i_volt: Vec<f64> = wins
         .iter()
         .map(|w| {

@@ -18,7 +18,7 @@
 //! break input) is checked at every fine integration step: a winding current above
 //! [`HW_TRIP_A`] turns the bridge off until [`Hardware::rearm`], and the next measurement
 //! reports it.
-use super::rig::TICK_HZ;
+use super::step_rig::TICK_HZ;
 use crate::emulator::{EmulatorConfig, Plant};
 use anyhow::{bail, Result};
 use control::board::{commutation_step, Drive, Measurements, HW_TRIP_A};

@@ -1,6 +1,6 @@
 //! When the emulated board runs its next control period, on the host's clock.
 //!
-//! The board's logic counts time in control periods: each [`super::sim::BoardSim::tick`]
+//! The board's logic counts time in control periods: each [`super::emulated_board::EmulatedBoard::tick`]
 //! is one 12 ms period of board time, whatever the host's clock did meanwhile. At time
 //! factor `s` a period is due every 12/s ms of host time; a board thread that was late runs
 //! the periods it missed one after the other (at most [`MAX_CATCH_UP`] of them, then it
@@ -13,7 +13,7 @@
 //! periods are due every 12 ms of host time (real time). The board's link timeout
 //! ([`control::board::LINK_TIMEOUT_PERIODS`], 2 s) is then 2 s of host time at any time
 //! factor, and a host that keeps up sees the same run at any factor.
-use super::sim::BoardSim;
+use super::emulated_board::EmulatedBoard;
 use control::frame::Mode;
 use std::time::{Duration, Instant};
 
@@ -42,7 +42,7 @@ pub struct HostView {
 impl HostView {
     /// The host beside `sim` with `unread` bytes of output not read and `quiet` periods
     /// since its last byte.
-    pub fn of(sim: &BoardSim, unread: usize, quiet: u32) -> HostView {
+    pub fn of(sim: &EmulatedBoard, unread: usize, quiet: u32) -> HostView {
         HostView {
             unread,
             quiet,
@@ -121,7 +121,7 @@ impl Pacer {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::board::flash::RamFlash;
+    use crate::board::emulated_flash::RamFlash;
     use crate::board::hw::Wiring;
     use crate::emulator::EmulatorConfig;
     use control::commission::CommissionOutcome;
@@ -200,7 +200,8 @@ mod tests {
         start: &[HostMsg],
         periods: usize,
     ) {
-        let mut sim = BoardSim::new(EmulatorConfig::paper(), wiring, RamFlash::new(None)).unwrap();
+        let mut sim =
+            EmulatedBoard::new(EmulatorConfig::paper(), wiring, RamFlash::new(None)).unwrap();
         for m in start {
             sim.receive(&frame(m));
         }
@@ -218,7 +219,7 @@ mod tests {
                     sim.receive(&std::mem::take(&mut host.sent));
                     quiet = 0;
                 }
-                let view = |sim: &BoardSim, host: &Host<F>, quiet| {
+                let view = |sim: &EmulatedBoard, host: &Host<F>, quiet| {
                     let unread = if backlog_seen { host.unread.len() } else { 0 };
                     HostView::of(sim, unread, quiet)
                 };

@@ -1,9 +1,9 @@
 //! `motorid board`: the emulated board behind a pseudo-terminal.
-use crate::board::flash::RamFlash;
+use crate::board::emulated_board::EmulatedBoard;
+use crate::board::emulated_flash::RamFlash;
 use crate::board::hw::{parse_order, Wiring};
 use crate::board::pace::{HostView, Pacer};
 use crate::board::pty::Pty;
-use crate::board::sim::BoardSim;
 use crate::effect_spec::EffectSpec;
 use crate::emulator::EmulatorConfig;
 use anyhow::{bail, Context, Result};
@@ -75,9 +75,9 @@ pub fn run(args: Args) -> Result<()> {
     };
     // An existing flash file must be a flash image: a regular file of at most the flash's size.
     if let Some(f) = args.flash.as_ref().filter(|f| f.exists()) {
-        crate::input::read(f, crate::board::flash::SIZE as u64, "flash image")?;
+        crate::input::read(f, crate::board::emulated_flash::SIZE as u64, "flash image")?;
     }
-    let mut sim = BoardSim::new(plant, wiring, RamFlash::new(args.flash.clone()))?;
+    let mut sim = EmulatedBoard::new(plant, wiring, RamFlash::new(args.flash.clone()))?;
     let pty = Pty::open()?;
     println!("{}", pty.path.display());
     std::io::stdout().flush()?;
@@ -176,7 +176,7 @@ struct Output {
 
 impl Output {
     /// Hands the board's output to the writer (dropped when the writer is far behind).
-    fn flush(&self, sim: &mut BoardSim) {
+    fn flush(&self, sim: &mut EmulatedBoard) {
         let bytes = sim.take_output();
         let n = bytes.len();
         if n > 0 {

@@ -44,7 +44,7 @@ pub fn run(args: Args) -> Result<()> {
 
 #[cfg(feature = "probe")]
 pub fn run(args: Args) -> Result<()> {
-    use crate::board::flash::{RamFlash, PAGE, SIZE};
+    use crate::board::emulated_flash::{RamFlash, PAGE, SIZE};
     use anyhow::{anyhow, bail, Context};
     use control::slots::Slots;
     use embedded_storage::nor_flash::ReadNorFlash;

@@ -12,7 +12,6 @@
 //! lives in a few of them (a resonance excited by the steps, a dead angle after reversals)
 //! passes it on a correct model.
 use super::candidates::{self, Equation, Units};
-use super::harmonics;
 use super::{
     explain, plausible, EqData, Finding, Options, Tested, MAX_FINDINGS, MIN_TORQUE_FRACTION,
     PRESLIDING_GAIN,
@@ -215,13 +214,13 @@ impl<'a> Problem<'a> {
             }
             // Cogging harmonics compete by leave-one-out: a high harmonic's column lives in
             // the few slow windows, where it can fit one window's error (see
-            // `harmonics::leave_one_out_rss`).
+            // the `diagnose::harmonics` module doc).
             let score = if v.kind == EffectKind::Cogging {
                 let cols: Vec<&[f64]> = subset
                     .iter()
                     .map(|&j| self.all_cols[j].as_slice())
                     .collect();
-                harmonics::leave_one_out_rss(&cols, &self.data.y)
+                crate::numerics::least_squares::leave_one_out_rss(&cols, &self.data.y)
             } else {
                 rss1
             };

@@ -4,6 +4,18 @@
 //! Cogging torque repeats `h ≥ 2` times per revolution, a gravity or unbalanced load once. An
 //! error that is periodic in angle shows as a large fraction of its variance explained by
 //! `a·sin(hθ) + b·cos(hθ)` for one `h`.
+//!
+//! # Comparing harmonics
+//! The harmonic search compares its candidates by the leave-one-out residual
+//! ([`crate::numerics::least_squares::leave_one_out_rss`]), not the in-sample one:
+//! the weak form's window integral of `sin(h·θ)` is the bump's spectrum at `h·ω`, so a high
+//! harmonic's column is non-zero only in the few windows where the rotor runs slowly, those
+//! that start from or pass near a standstill. There the Hall angle steps only every few
+//! samples and whatever the model misses near a standstill is largest, and a harmonic's two
+//! columns can fit one such window's error, "explaining" as large a share of the residual as
+//! a real cogging torque does. Left out in turn, that window is predicted no better by the
+//! high harmonic, while a real harmonic predicts the windows it was not fitted on. The test
+//! `a_glitch_in_one_slow_window_is_not_a_high_harmonic` holds this mechanism.
 use crate::numerics::least_squares::lstsq;
 
 /// Highest harmonic searched by default. Hall sensors quantise the angle: a harmonic is
@@ -91,76 +103,6 @@ pub fn sample_average_gain(harmonic: f64, omega: f64, dt: f64) -> f64 {
     }
 }
 
-/// Leave-one-out (PRESS) residual sum of squares of the least-squares fit of `y` on `cols`:
-/// `Σ (e_r / (1 − h_r))²`, each row's residual as predicted by the fit *without* that row
-/// (`h_r` its leverage). Columns are scaled to unit RMS first; all-zero columns and directions
-/// below 1e-10 of the largest singular value are dropped.
-///
-/// Why the harmonic search compares its candidates by this and not by the in-sample residual:
-/// the weak form's window integral of `sin(h·θ)` is the bump's spectrum at `h·ω`, so a high
-/// harmonic's column is non-zero only in the few windows where the rotor runs slowly, those
-/// that start from or pass near a standstill. There the Hall angle steps only every few
-/// samples and whatever the model misses near a standstill is largest, and a harmonic's two
-/// columns can fit one such window's error, "explaining" as large a share of the residual as
-/// a real cogging torque does. Left out in turn, that window is predicted no better by the
-/// high harmonic, while a real harmonic predicts the windows it was not fitted on. The test
-/// `a_glitch_in_one_slow_window_is_not_a_high_harmonic` holds this mechanism.
-pub fn leave_one_out_rss(cols: &[&[f64]], y: &[f64]) -> f64 {
-    let n = y.len();
-    let scaled: Vec<Vec<f64>> = cols
-        .iter()
-        .filter_map(|c| {
-            let ms = c.iter().take(n).map(|v| v * v).sum::<f64>() / n.max(1) as f64;
-            (ms > 0.0 && ms.is_finite()).then(|| c.iter().take(n).map(|v| v / ms.sqrt()).collect())
-        })
-        .collect();
-    let p = scaled.len();
-    if p == 0 || n <= p {
-        return y.iter().map(|v| v * v).sum();
-    }
-    let a = faer::Mat::<f64>::from_fn(n, p, |i, j| scaled[j][i]);
-    let Ok(svd) = a.thin_svd() else {
-        return f64::INFINITY;
-    };
-    let s = svd.S().column_vector();
-    let smax = (0..p).map(|k| s[k]).fold(0.0, f64::max);
-    let u = svd.U();
-    let keep: Vec<usize> = (0..p).filter(|&k| s[k] > 1e-10 * smax).collect();
-    // Fitted values and leverages from the orthonormal basis U of the column space.
-    let uy: Vec<f64> = keep
-        .iter()
-        .map(|&k| (0..n).map(|i| u[(i, k)] * y[i]).sum())
-        .collect();
-    (0..n)
-        .map(|i| {
-            let (mut fit, mut lev) = (0.0, 0.0);
-            for (&k, c) in keep.iter().zip(&uy) {
-                fit += u[(i, k)] * c;
-                lev += u[(i, k)] * u[(i, k)];
-            }
-            let e = if lev < MAX_LEVERAGE {
-                (y[i] - fit) / (1.0 - lev)
-            } else {
-                // A row the fit can follow on its own: refit without it.
-                let others: Vec<usize> = (0..n).filter(|&r| r != i).collect();
-                let sub: Vec<Vec<f64>> = cols
-                    .iter()
-                    .map(|c| others.iter().map(|&r| c[r]).collect())
-                    .collect();
-                let refs: Vec<&[f64]> = sub.iter().map(|c| c.as_slice()).collect();
-                let ys: Vec<f64> = others.iter().map(|&r| y[r]).collect();
-                let f = lstsq(&refs, &ys);
-                y[i] - cols.iter().zip(&f.beta).map(|(c, b)| b * c[i]).sum::<f64>()
-            };
-            e * e
-        })
-        .sum()
-}
-
-/// Leverage above which [`leave_one_out_rss`] refits without the row instead of dividing by
-/// `1 − h` (which loses its digits as `h → 1`).
-const MAX_LEVERAGE: f64 = 0.99;
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -184,50 +126,6 @@ mod tests {
         assert!((d.phase - 0.4).abs() < 0.1, "{d:?}");
         assert!(d.explained > 0.5);
         assert!(lines[2].explained < 0.05);
-    }
-
-    /// A regressor that is non-zero in one row only fits that row exactly: in-sample it
-    /// explains the row's whole error, left out it predicts nothing. A harmonic spread over
-    /// every row keeps its gain.
-    #[test]
-    fn leave_one_out_discounts_a_fit_carried_by_one_row() {
-        let n = 200;
-        let noise: Vec<f64> = (0..n)
-            .map(|k| 0.01 * (((k * 7919) % 101) as f64 / 50.0 - 1.0))
-            .collect();
-        let spread: Vec<f64> = (0..n).map(|k| (0.3 * k as f64).sin()).collect();
-        let mut y: Vec<f64> = noise
-            .iter()
-            .zip(&spread)
-            .map(|(e, s)| e + 0.01 * s)
-            .collect();
-        y[50] += 0.2; // one outlier row
-        let spike: Vec<f64> = (0..n).map(|k| if k == 50 { 1.0 } else { 0.0 }).collect();
-        let ones = vec![1.0; n];
-        let rss = |cols: &[&[f64]]| {
-            let f = lstsq(cols, &y);
-            f.rss
-        };
-        let (r0, l0) = (rss(&[&ones]), leave_one_out_rss(&[&ones], &y));
-        let (rs, ls) = (
-            rss(&[&ones, &spike]),
-            leave_one_out_rss(&[&ones, &spike], &y),
-        );
-        let (rh, lh) = (
-            rss(&[&ones, &spread]),
-            leave_one_out_rss(&[&ones, &spread], &y),
-        );
-        // In-sample, the spike wins by far; left out, only the spread harmonic gains.
-        assert!(r0 - rs > 3.0 * (r0 - rh), "{r0} {rs} {rh}");
-        assert!(
-            l0 - ls < 0.05 * (l0 - l0.min(lh)).max(1e-12),
-            "{l0} {ls} {lh}"
-        );
-        assert!(lh < l0, "{l0} {lh}");
-        // With no column left (all zero), the sum of squares of y.
-        let zero = vec![0.0; n];
-        let yy: f64 = y.iter().map(|v| v * v).sum();
-        assert!((leave_one_out_rss(&[&zero], &y) - yy).abs() < 1e-12 * yy);
     }
 
     /// On emulated logs (60 s of signal a, three noise draws) the harmonic search names the hidden

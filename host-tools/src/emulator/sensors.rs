@@ -9,7 +9,7 @@
 //! The decoder sees *every* edge (on the board it runs in the Hall-edge interrupt), so fast
 //! rotation does not alias at the 12 ms sampling.
 use control::hall::{step_angle, HallDecoder, HallTable};
-use control::velocity::{MovingAverage, VelocityEstimator, PAPER_WINDOW};
+use control::velocity::{MovingAverage, VelocityEstimator, MAX_WINDOW, PAPER_WINDOW};
 use rand::rngs::StdRng;
 use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
@@ -170,11 +170,14 @@ impl CurrentSensor {
     }
 }
 
-/// The firmware's velocity estimator applied to a whole angle series: the paper's moving
-/// average (`control::velocity::MovingAverage`, 10 samples), `(θ_k − θ_{k−10})/(10·T)`.
-pub fn estimate_velocity(theta: &[f64], ts: f64) -> Vec<f64> {
-    let mut est = MovingAverage::new(PAPER_WINDOW, ts);
-    theta.iter().map(|th| est.update(*th, 0)).collect()
+/// The firmware's velocity estimator (`control::velocity::MovingAverage`, the very code the
+/// board runs) applied to a whole angle series sampled every `ts` [s]:
+/// `(θ_k − θ_{k−N})/(N·ts)` over `window` = N samples (clamped to 1..=`MAX_WINDOW`; fewer
+/// samples at the start, 0 at the first). Linear in θ: in dual numbers it carries the
+/// angle's derivatives through.
+pub fn estimate_velocity<F: num_traits::Float>(theta: &[F], window: usize, ts: F) -> Vec<F> {
+    let mut est = MovingAverage::new(window.clamp(1, MAX_WINDOW) as u8, ts);
+    theta.iter().map(|&th| est.update(th, 0)).collect()
 }
 
 /// The board's sensor chain applied to a true (or model) angle series sampled every `ts`:
@@ -193,7 +196,7 @@ pub fn sensor_chain(theta: &[f64], pole_pairs: u16, ts: f64) -> (Vec<f64>, Vec<f
             hall.angle()
         })
         .collect();
-    let w = estimate_velocity(&q, ts);
+    let w = estimate_velocity(&q, PAPER_WINDOW as usize, ts);
     (q, w)
 }
 
@@ -252,7 +255,7 @@ mod tests {
         let step = hall_resolution(11);
         let mut th = vec![0.0; 20];
         th.extend(vec![step; 20]);
-        let w = estimate_velocity(&th, 0.012);
+        let w = estimate_velocity(&th, PAPER_WINDOW as usize, 0.012);
         assert!((w[25] - step / 0.12).abs() < 1e-12);
         assert!((step / 0.12 - 0.79).abs() < 0.01);
         assert_eq!(w[35], 0.0);

@@ -13,7 +13,7 @@
 //! Only the added effects' magnitudes change; the base model's parameters are kept.
 use crate::log::{MotorLog, Plant};
 use crate::model::Model;
-use crate::numerics::differentiation::smooth_velocity_of;
+use crate::numerics::differentiation::smooth_velocity;
 use crate::numerics::least_squares::lstsq;
 use crate::numerics::weak_form;
 use control::effects::{smooth_sign, Effect, CURRENT_EPS};
@@ -141,7 +141,7 @@ fn mechanical(m: &mut Model, logs: &[MotorLog]) {
             (true, None) => continue,
             (false, _) => log.u.clone(),
         };
-        let ws = smooth_velocity_of(log);
+        let ws = smooth_velocity(log);
         let fric: Vec<f64> = ws
             .iter()
             .map(|&w| match &m.lugre {

@@ -11,7 +11,7 @@ use super::free_params::{effect_keys, effect_keys_of, Free, Slot};
 use super::FitRequest;
 use crate::log::{MotorLog, Plant};
 use crate::model::{Model, ModelKind, Parameter};
-use crate::numerics::differentiation::smooth_velocity_of;
+use crate::numerics::differentiation::smooth_velocity;
 use crate::numerics::least_squares::lstsq;
 use crate::numerics::weak_form;
 use crate::scales;
@@ -70,7 +70,7 @@ pub fn skeleton(req: &FitRequest, kind: ModelKind) -> Model {
 /// velocity units (a linear axis in m/s) the friction switches as sharply relative to the
 /// speeds the data reaches.
 pub fn sign_width(logs: &[MotorLog]) -> f64 {
-    let w: Vec<f64> = logs.iter().flat_map(smooth_velocity_of).collect();
+    let w: Vec<f64> = logs.iter().flat_map(smooth_velocity).collect();
     VELOCITY_EPS * scales::velocity_scale(&w)
 }
 
@@ -87,7 +87,7 @@ fn set_table_range(spec: &mut crate::effect_spec::EffectSpec, logs: &[MotorLog],
     let mut xs: Vec<f64> = Vec::new();
     for log in logs {
         match var {
-            TableVar::Omega => xs.extend(smooth_velocity_of(log)),
+            TableVar::Omega => xs.extend(smooth_velocity(log)),
             _ if plant == Plant::Voltage => xs.extend(log.i.iter().flatten().copied()),
             _ => xs.extend(log.u.iter().copied()),
         }
@@ -311,7 +311,7 @@ impl MechanicalSignals {
             (true, None) => return None,
             (false, _) => log.u.clone(),
         };
-        let ws = smooth_velocity_of(log);
+        let ws = smooth_velocity(log);
         let sgn = ws.iter().map(|&w| smooth_sign(w, m.sign_width)).collect();
         Some(MechanicalSignals { ws, sgn, cur })
     }
@@ -449,6 +449,19 @@ pub fn motor_free(plant: Plant) -> Vec<Free> {
         ],
         Plant::Torque => vec![f(Slot::J, 1e-9, 1e6)],
     }
+}
+
+/// Every LuGre parameter ([`crate::model::LUGRE_KEYS`]) as a free parameter, bounded only to
+/// be non-negative (up to 1e6, in its own unit).
+pub fn lugre_free() -> Vec<Free> {
+    crate::model::LUGRE_KEYS
+        .into_iter()
+        .map(|f| Free {
+            slot: Slot::Lugre(f),
+            lo: 0.0,
+            hi: 1e6,
+        })
+        .collect()
 }
 
 /// The effects' continuous keys as free parameters.

@@ -87,7 +87,7 @@ pub fn steady_points(m: &Model, log: &MotorLog, quasi: bool) -> Vec<SteadyPoint>
     let offset = control::effects::total_sensor_offset(&m.effects);
     // Motor torque minus the load torque of the model's other effects (offset, cogging...,
     // at their current estimates): what is left is the friction.
-    let ws = crate::numerics::differentiation::smooth_velocity(log, 5);
+    let ws = crate::numerics::differentiation::smooth_velocity(log);
     let torque = |k: usize| -> Option<f64> {
         let cur = match (m.plant, &log.i) {
             (Plant::Voltage, Some(i)) => i[k] - offset,

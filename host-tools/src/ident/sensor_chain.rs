@@ -5,8 +5,8 @@
 //! quantised angle over `velocity_window` samples (the paper: 10 samples at 12 ms), i.e.
 //! `ω̂_k = (θ_k − θ_{k−N}) / (t_k − t_{k−N})`. Passing the model's true states through the same
 //! chain makes model and measurement comparable where the sensor cannot resolve the motion.
+use crate::emulator::sensors::estimate_velocity;
 use crate::log::MotorLog;
-use control::velocity::{MovingAverage, VelocityEstimator, MAX_WINDOW};
 
 /// Hall quantisation of an angle: the nearest step (the board's sensors sit half a step
 /// either side of angle 0, see `emulator::sensors`).
@@ -18,17 +18,13 @@ pub fn quantise(theta: f64, resolution: f64) -> f64 {
     }
 }
 
-/// The firmware's moving-average velocity estimate (`control::velocity::MovingAverage`, the
-/// very code the board runs): `(θ_k − θ_{k−N})/(N·T)` with T the median sample period of `t`
-/// (fewer samples at the start; 0 at the first sample). Linear in θ: in dual numbers it
-/// carries the angle's derivatives through.
+/// The firmware's moving-average velocity estimate ([`estimate_velocity`]) of an angle series
+/// at the median sample period of its time stamps `t`.
 pub fn velocity_estimate<F: num_traits::Float>(t: &[f64], theta: &[F], window: usize) -> Vec<F> {
     let mut d: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
     d.sort_by(|a, b| a.total_cmp(b));
     let ts = d.get(d.len() / 2).copied().unwrap_or(0.0);
-    let ts = F::from(ts).unwrap_or_else(F::zero);
-    let mut est = MovingAverage::new(window.clamp(1, MAX_WINDOW) as u8, ts);
-    theta.iter().map(|&th| est.update(th, 0)).collect()
+    estimate_velocity(theta, window, F::from(ts).unwrap_or_else(F::zero))
 }
 
 /// The log's Hall resolution: `# hall_resolution_rad`, else 0 (no quantisation known).

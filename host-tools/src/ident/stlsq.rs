@@ -20,7 +20,8 @@
 //!   `‖θ_j ξ_j‖` is below `threshold·‖y‖`. (With unit-norm columns the contribution is the
 //!   normalised coefficient, so this is pysindy's `normalize_columns=True` threshold
 //!   divided by `‖y‖`.)
-use faer::{Mat, MatRef, Side};
+use crate::numerics::least_squares::solve_spd;
+use faer::{Mat, MatRef};
 
 /// STLSQ settings.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -212,49 +213,6 @@ impl Normal {
     /// STLSQ for target `k` over every usable term; coefficients in the library's units.
     pub fn stlsq(&self, k: usize, opts: &StlsqOptions) -> Vec<f64> {
         self.denormalise(&self.stlsq_normalised(k, &self.usable(), opts))
-    }
-}
-
-/// Solve `A x = b` for a symmetric positive semi-definite `A` with unit-ish diagonal:
-/// Cholesky, or the eigen pseudo-inverse when `A` is (nearly) singular.
-fn solve_spd(a: MatRef<'_, f64>, b: MatRef<'_, f64>) -> Vec<f64> {
-    use faer::linalg::solvers::Solve;
-    let q = a.nrows();
-    let amax = (0..q).map(|i| a[(i, i)].abs()).fold(0.0, f64::max);
-    if let Ok(llt) = a.llt(Side::Lower) {
-        let l = llt.L();
-        let min_piv = (0..q)
-            .map(|i| l[(i, i)] * l[(i, i)])
-            .fold(f64::INFINITY, f64::min);
-        if min_piv > 1e-12 * amax {
-            let x = llt.solve(b);
-            let v: Vec<f64> = (0..q).map(|i| x[(i, 0)]).collect();
-            if v.iter().all(|x| x.is_finite()) {
-                return v;
-            }
-        }
-    }
-    // Pseudo-inverse: x = Σ_{λ_i > cut} u_i (u_iᵀ b) / λ_i.
-    let mut x = vec![0.0; q];
-    let Ok(evd) = a.self_adjoint_eigen(Side::Lower) else {
-        return x;
-    };
-    let s = evd.S().column_vector();
-    let u = evd.U();
-    let lmax = (0..q).map(|i| s[i].abs()).fold(0.0, f64::max);
-    let cut = 1e-12 * lmax.max(f64::MIN_POSITIVE);
-    for c in 0..q {
-        if s[c] > cut {
-            let proj: f64 = (0..q).map(|r| u[(r, c)] * b[(r, 0)]).sum::<f64>() / s[c];
-            for r in 0..q {
-                x[r] += u[(r, c)] * proj;
-            }
-        }
-    }
-    if x.iter().all(|v| v.is_finite()) {
-        x
-    } else {
-        vec![0.0; q]
     }
 }
 

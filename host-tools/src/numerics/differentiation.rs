@@ -1,7 +1,27 @@
-//! Smoothed derivatives of sampled signals, for evaluating nonlinear terms (the sign of ω,
-//! |ω|, an acceleration carrier) — never as a regression target, which the weak form
+//! Velocity from a sampled angle, for evaluating nonlinear terms (the sign of ω, |ω|, an
+//! acceleration carrier) — never as a regression target, which the weak form
 //! ([`super::weak_form`]) handles without differentiating.
+//!
+//! Two estimators, for two different uses, over one half-width [`VELOCITY_HALF_S`]:
+//! * [`smoothed_derivative`] / [`smooth_velocity`]: the least-squares slope over the window
+//!   (Savitzky–Golay, first order) at a uniform period: the lowest-variance slope of a
+//!   quantised angle, where ω only enters a nonlinear term.
+//! * [`centred_velocity`]: the two-point slope across the window at the log's own time
+//!   stamps, `(θ_{k+h} − θ_{k−h})/(t_{k+h} − t_{k−h})`: the firmware's moving-average
+//!   estimator (control::velocity::MovingAverage) centred. Its mean over a box window
+//!   telescopes to a difference of two angles, which the SINDYc current regression
+//!   integrates exactly ([`crate::ident::sindyc::rows::held_current_normal`]); a weighted
+//!   slope does not.
 use crate::log::MotorLog;
+
+/// Half-width [s] of both velocity estimators: ±5 samples at the paper's 12 ms, about one
+/// Hall step at 1.6 rad/s, and the span of the firmware's 10-sample moving average.
+pub const VELOCITY_HALF_S: f64 = 0.06;
+
+/// [`VELOCITY_HALF_S`] in samples of `log` (at least one).
+pub fn velocity_half(log: &MotorLog) -> usize {
+    crate::scales::samples_for(VELOCITY_HALF_S, log.sample_period(), log.len())
+}
 
 /// Least-squares slope over `±m` samples (Savitzky–Golay, first order) of a signal sampled
 /// every `dt`: a smoothed derivative of a quantised signal; the window shrinks at the ends.
@@ -30,24 +50,14 @@ pub fn smoothed_derivative(x: &[f64], dt: f64, m: usize) -> Vec<f64> {
         .collect()
 }
 
-/// The rotor velocity of a log [rad/s]: [`smoothed_derivative`] of its angle over `±half`
-/// samples at the log's sample period.
-pub fn smooth_velocity(log: &MotorLog, half: usize) -> Vec<f64> {
-    smoothed_derivative(&log.theta, log.sample_period(), half)
-}
-
-/// Half-width [s] of [`smooth_velocity_of`]: ±5 samples at the paper's 12 ms, about one Hall
-/// step at 1.6 rad/s.
-pub const VELOCITY_HALF_S: f64 = 0.06;
-
-/// [`smooth_velocity`] over ±[`VELOCITY_HALF_S`] at the log's own period.
-pub fn smooth_velocity_of(log: &MotorLog) -> Vec<f64> {
-    let half = crate::scales::samples_for(VELOCITY_HALF_S, log.sample_period(), log.len());
-    smooth_velocity(log, half)
+/// The rotor velocity of a log [rad/s]: [`smoothed_derivative`] of its angle over
+/// ±[`velocity_half`] samples at the log's sample period.
+pub fn smooth_velocity(log: &MotorLog) -> Vec<f64> {
+    smoothed_derivative(&log.theta, log.sample_period(), velocity_half(log))
 }
 
 /// Centred velocity estimate [rad/s] at the log's own time stamps `t` [s]: slope of the angle
-/// over ±`half` samples (one-sided at the ends).
+/// between the samples `half` before and after (one-sided at the ends).
 pub fn centred_velocity(t: &[f64], theta: &[f64], half: usize) -> Vec<f64> {
     let n = theta.len();
     (0..n)

@@ -6,9 +6,12 @@
 //! - [`ols`]: the reporting fit: faer's thin SVD, refusing a rank-deficient problem, with
 //!   each parameter's standard deviation `σ²·V·S⁻²·Vᵀ`, `σ² = ‖y − Xβ‖²/(n − p)`, and the
 //!   condition number, for tables of identified parameters.
+//! - [`solve_spd`]: normal equations already formed (STLSQ), by Cholesky with a
+//!   pseudo-inverse fallback for a singular system.
+//! - [`leave_one_out_rss`]: the PRESS residual of a fit, each row predicted without itself.
 use anyhow::{bail, Result};
 use faer::linalg::solvers::SolveLstsq;
-use faer::{Col, Mat};
+use faer::{Col, Mat, MatRef};
 
 /// Result of a least-squares fit `y ≈ Σ beta_j·col_j`.
 #[derive(Debug, Clone)]
@@ -278,6 +281,113 @@ pub fn ols(cols: &[Vec<f64>], y: &[f64]) -> Result<Ols> {
     })
 }
 
+/// Leave-one-out (PRESS) residual sum of squares of the least-squares fit of `y` on `cols`:
+/// `Σ (e_r / (1 − h_r))²`, each row's residual as predicted by the fit *without* that row
+/// (`h_r` its leverage). Columns are scaled to unit RMS first; all-zero columns and directions
+/// below 1e-10 of the largest singular value are dropped.
+pub fn leave_one_out_rss(cols: &[&[f64]], y: &[f64]) -> f64 {
+    let n = y.len();
+    let scaled: Vec<Vec<f64>> = cols
+        .iter()
+        .filter_map(|c| {
+            let ms = c.iter().take(n).map(|v| v * v).sum::<f64>() / n.max(1) as f64;
+            (ms > 0.0 && ms.is_finite()).then(|| c.iter().take(n).map(|v| v / ms.sqrt()).collect())
+        })
+        .collect();
+    let p = scaled.len();
+    if p == 0 || n <= p {
+        return y.iter().map(|v| v * v).sum();
+    }
+    let a = faer::Mat::<f64>::from_fn(n, p, |i, j| scaled[j][i]);
+    let Ok(svd) = a.thin_svd() else {
+        return f64::INFINITY;
+    };
+    let s = svd.S().column_vector();
+    let smax = (0..p).map(|k| s[k]).fold(0.0, f64::max);
+    let u = svd.U();
+    let keep: Vec<usize> = (0..p).filter(|&k| s[k] > 1e-10 * smax).collect();
+    // Fitted values and leverages from the orthonormal basis U of the column space.
+    let uy: Vec<f64> = keep
+        .iter()
+        .map(|&k| (0..n).map(|i| u[(i, k)] * y[i]).sum())
+        .collect();
+    (0..n)
+        .map(|i| {
+            let (mut fit, mut lev) = (0.0, 0.0);
+            for (&k, c) in keep.iter().zip(&uy) {
+                fit += u[(i, k)] * c;
+                lev += u[(i, k)] * u[(i, k)];
+            }
+            let e = if lev < MAX_LEVERAGE {
+                (y[i] - fit) / (1.0 - lev)
+            } else {
+                // A row the fit can follow on its own: refit without it.
+                let others: Vec<usize> = (0..n).filter(|&r| r != i).collect();
+                let sub: Vec<Vec<f64>> = cols
+                    .iter()
+                    .map(|c| others.iter().map(|&r| c[r]).collect())
+                    .collect();
+                let refs: Vec<&[f64]> = sub.iter().map(|c| c.as_slice()).collect();
+                let ys: Vec<f64> = others.iter().map(|&r| y[r]).collect();
+                let f = lstsq(&refs, &ys);
+                y[i] - cols.iter().zip(&f.beta).map(|(c, b)| b * c[i]).sum::<f64>()
+            };
+            e * e
+        })
+        .sum()
+}
+
+/// Leverage above which [`leave_one_out_rss`] refits without the row instead of dividing by
+/// `1 − h` (which loses its digits as `h → 1`).
+const MAX_LEVERAGE: f64 = 0.99;
+
+/// Solve `A x = b` (one right-hand side) for a symmetric positive semi-definite `A` with
+/// unit-ish diagonal, such as the normal equations of unit-norm columns: faer's Cholesky, or
+/// when it fails or a pivot is below 1e-12 of the largest diagonal entry, the minimum-norm
+/// solution from the self-adjoint eigen-decomposition (eigenvalues below 1e-12 of the
+/// largest dropped). Never panics; all zeros if nothing finite comes out.
+pub fn solve_spd(a: MatRef<'_, f64>, b: MatRef<'_, f64>) -> Vec<f64> {
+    use faer::linalg::solvers::Solve;
+    use faer::Side;
+    let q = a.nrows();
+    let amax = (0..q).map(|i| a[(i, i)].abs()).fold(0.0, f64::max);
+    if let Ok(llt) = a.llt(Side::Lower) {
+        let l = llt.L();
+        let min_piv = (0..q)
+            .map(|i| l[(i, i)] * l[(i, i)])
+            .fold(f64::INFINITY, f64::min);
+        if min_piv > 1e-12 * amax {
+            let x = llt.solve(b);
+            let v: Vec<f64> = (0..q).map(|i| x[(i, 0)]).collect();
+            if v.iter().all(|x| x.is_finite()) {
+                return v;
+            }
+        }
+    }
+    // Pseudo-inverse: x = Σ_{λ_i > cut} u_i (u_iᵀ b) / λ_i.
+    let mut x = vec![0.0; q];
+    let Ok(evd) = a.self_adjoint_eigen(Side::Lower) else {
+        return x;
+    };
+    let s = evd.S().column_vector();
+    let u = evd.U();
+    let lmax = (0..q).map(|i| s[i].abs()).fold(0.0, f64::max);
+    let cut = 1e-12 * lmax.max(f64::MIN_POSITIVE);
+    for c in 0..q {
+        if s[c] > cut {
+            let proj: f64 = (0..q).map(|r| u[(r, c)] * b[(r, 0)]).sum::<f64>() / s[c];
+            for r in 0..q {
+                x[r] += u[(r, c)] * proj;
+            }
+        }
+    }
+    if x.iter().all(|v| v.is_finite()) {
+        x
+    } else {
+        vec![0.0; q]
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -319,5 +429,79 @@ mod tests {
     fn rank_deficiency_is_an_error() {
         let x: Vec<f64> = (0..10).map(|k| k as f64).collect();
         assert!(ols(&[x.clone(), x.iter().map(|v| 2.0 * v).collect()], &x).is_err());
+    }
+
+    /// A regressor that is non-zero in one row only fits that row exactly: in-sample it
+    /// explains the row's whole error, left out it predicts nothing. A harmonic spread over
+    /// every row keeps its gain.
+    #[test]
+    fn leave_one_out_discounts_a_fit_carried_by_one_row() {
+        let n = 200;
+        let noise: Vec<f64> = (0..n)
+            .map(|k| 0.01 * (((k * 7919) % 101) as f64 / 50.0 - 1.0))
+            .collect();
+        let spread: Vec<f64> = (0..n).map(|k| (0.3 * k as f64).sin()).collect();
+        let mut y: Vec<f64> = noise
+            .iter()
+            .zip(&spread)
+            .map(|(e, s)| e + 0.01 * s)
+            .collect();
+        y[50] += 0.2; // one outlier row
+        let spike: Vec<f64> = (0..n).map(|k| if k == 50 { 1.0 } else { 0.0 }).collect();
+        let ones = vec![1.0; n];
+        let rss = |cols: &[&[f64]]| {
+            let f = lstsq(cols, &y);
+            f.rss
+        };
+        let (r0, l0) = (rss(&[&ones]), leave_one_out_rss(&[&ones], &y));
+        let (rs, ls) = (
+            rss(&[&ones, &spike]),
+            leave_one_out_rss(&[&ones, &spike], &y),
+        );
+        let (rh, lh) = (
+            rss(&[&ones, &spread]),
+            leave_one_out_rss(&[&ones, &spread], &y),
+        );
+        // In-sample, the spike wins by far; left out, only the spread harmonic gains.
+        assert!(r0 - rs > 3.0 * (r0 - rh), "{r0} {rs} {rh}");
+        assert!(
+            l0 - ls < 0.05 * (l0 - l0.min(lh)).max(1e-12),
+            "{l0} {ls} {lh}"
+        );
+        assert!(lh < l0, "{l0} {lh}");
+        // With no column left (all zero), the sum of squares of y.
+        let zero = vec![0.0; n];
+        let yy: f64 = y.iter().map(|v| v * v).sum();
+        assert!((leave_one_out_rss(&[&zero], &y) - yy).abs() < 1e-12 * yy);
+    }
+    /// A well-conditioned system is solved to rounding; a singular one (two equal columns)
+    /// gets the minimum-norm solution, which splits the weight equally between them.
+    #[test]
+    fn solve_spd_is_exact_or_minimum_norm() {
+        let a = Mat::<f64>::from_fn(3, 3, |r, c| if r == c { 2.0 } else { 0.5 });
+        let x_true = [1.0, -2.0, 0.5];
+        let b = Mat::<f64>::from_fn(3, 1, |r, _| (0..3).map(|c| a[(r, c)] * x_true[c]).sum());
+        let x = solve_spd(a.as_ref(), b.as_ref());
+        for (got, want) in x.iter().zip(x_true) {
+            // A 3×3 solve with condition number 2: rounding only.
+            assert!((got - want).abs() < 1e-12, "{x:?}");
+        }
+        // Columns 0 and 1 identical (1e-9: the eigen path rounds at 1e-15 relative): A = [[1,1,0],[1,1,0],[0,0,1]], b from x = (2, 0, 3).
+        let a = Mat::<f64>::from_fn(
+            3,
+            3,
+            |r, c| if r < 2 && c < 2 || r == c { 1.0 } else { 0.0 },
+        );
+        let b = Mat::<f64>::from_fn(3, 1, |r, _| [2.0, 2.0, 3.0][r]);
+        let x = solve_spd(a.as_ref(), b.as_ref());
+        assert!(
+            (x[0] - 1.0).abs() < 1e-9 && (x[1] - 1.0).abs() < 1e-9,
+            "{x:?}"
+        );
+        assert!((x[2] - 3.0).abs() < 1e-9, "{x:?}");
+        // A zero matrix: no direction to solve along, all zeros.
+        let z = Mat::<f64>::zeros(2, 2);
+        let b = Mat::<f64>::from_fn(2, 1, |_, _| 1.0);
+        assert_eq!(solve_spd(z.as_ref(), b.as_ref()), vec![0.0, 0.0]);
     }
 }

@@ -6,17 +6,18 @@ use plotters::prelude::*;
 /// Chart size in pixels (width, height): fits a laptop screen two charts high.
 pub const SIZE: (u32, u32) = (900, 320);
 
-/// Colours of successive series.
+/// Colours of successive series: the Okabe–Ito palette, told apart with any colour vision
+/// deficiency and in greyscale print.
 const PALETTE: [RGBColor; 6] = [
-    RGBColor(31, 119, 180),
-    RGBColor(214, 39, 40),
-    RGBColor(44, 160, 44),
-    RGBColor(255, 127, 14),
-    RGBColor(148, 103, 189),
-    RGBColor(140, 86, 75),
+    RGBColor(0, 0, 0),
+    RGBColor(0, 114, 178),
+    RGBColor(213, 94, 0),
+    RGBColor(0, 158, 115),
+    RGBColor(204, 121, 167),
+    RGBColor(230, 159, 0),
 ];
 
-/// Colour of series `k`.
+/// Colour of series `k` (cycling through the palette), for every chart the tool draws.
 pub fn colour(k: usize) -> RGBColor {
     PALETTE[k % PALETTE.len()]
 }

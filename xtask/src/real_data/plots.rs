@@ -1,5 +1,6 @@
 //! SVG figures of the real-data results (plotters), written atomically.
 use anyhow::{anyhow, Result};
+use motorid::report::svg::colour;
 use plotters::prelude::*;
 use std::path::Path;
 
@@ -17,7 +18,7 @@ pub struct Series {
     pub label: String,
     pub points: Vec<(f64, f64)>,
     pub style: Style,
-    /// Index into the palette.
+    /// Index into the palette ([`colour`]).
     pub color: usize,
 }
 
@@ -40,16 +41,6 @@ impl Series {
         }
     }
 }
-
-/// A colour-blind-safe palette (Okabe–Ito).
-const PALETTE: [RGBColor; 6] = [
-    RGBColor(0, 0, 0),
-    RGBColor(0, 114, 178),
-    RGBColor(213, 94, 0),
-    RGBColor(0, 158, 115),
-    RGBColor(204, 121, 167),
-    RGBColor(230, 159, 0),
-];
 
 fn range(series: &[Series], f: impl Fn(&(f64, f64)) -> f64) -> (f64, f64) {
     let (lo, hi) = series
@@ -96,7 +87,7 @@ pub fn figure(
             .draw()
             .map_err(|e| err(&e))?;
         for s in series {
-            let c = PALETTE[s.color % PALETTE.len()];
+            let c = colour(s.color);
             match s.style {
                 Style::Line => {
                     let ann = chart

@@ -46,7 +46,7 @@ pub mod rows;
 pub mod search;
 pub mod simulate;
 
-pub use crate::numerics::differentiation::{centred_velocity, VELOCITY_HALF_S};
+pub use crate::numerics::differentiation::{centred_velocity, velocity_half, VELOCITY_HALF_S};
 pub use embedding::correlation;
 pub use model_file::{equations_text, from_table, pareto_text, to_table};
 pub use rows::{weak_rows, weak_rows_generic, weak_rows_uniform};
@@ -83,11 +83,6 @@ pub const MAX_DELAYS: usize = 1000;
 /// times the logs' [`crate::scales::velocity_scale`]: the middle (geometrically) of the
 /// decade either side the refinement may move it over, 0.5–50 rad/s on the paper's motor.
 pub const STRIBECK_START: f64 = 5.0;
-/// [`VELOCITY_HALF_S`] in samples of `log` (at least one).
-pub fn velocity_half(log: &MotorLog) -> usize {
-    crate::scales::samples_for(VELOCITY_HALF_S, log.sample_period(), log.len())
-}
-
 /// Settings of [`identify`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct SindycOptions {
@@ -280,8 +275,8 @@ pub fn fit_model(req: &super::FitRequest) -> Result<crate::model::Model> {
         ..SindycOptions::default()
     };
     let res = identify(req.logs, req.validate, req.adds, &opts)?;
-    eprintln!("SINDYc equations:\n{}", res.equations_text);
-    eprintln!(
+    tracing::debug!("SINDYc equations:\n{}", res.equations_text);
+    tracing::debug!(
         "SINDYc Pareto path (terms vs validation fit):\n{}",
         res.pareto_text
     );

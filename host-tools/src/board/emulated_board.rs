@@ -3,9 +3,9 @@
 //! two-slot storage) on emulated hardware ([`super::hw`]: the motor emulator behind a
 //! six-step bridge, Hall inputs and a current sense, wired in any order).
 //!
-//! Feed received bytes to [`BoardSim::receive`], call [`BoardSim::tick`] every control
-//! period, send what [`BoardSim::take_output`] returns.
-use super::flash::RamFlash;
+//! Feed received bytes to [`EmulatedBoard::receive`], call [`EmulatedBoard::tick`] every control
+//! period, send what [`EmulatedBoard::take_output`] returns.
+use super::emulated_flash::RamFlash;
 use super::hw::{Hardware, Wiring};
 use crate::emulator::EmulatorConfig;
 use anyhow::{anyhow, Result};
@@ -22,7 +22,7 @@ pub const V_BUS_NOMINAL: f32 = 22.2;
 
 /// The emulated board: [`control::board::Board`] (the firmware's logic) on emulated
 /// hardware, with the serial transport and the flash of `control`.
-pub struct BoardSim {
+pub struct EmulatedBoard {
     hw: Hardware,
     board: Board,
     slots: Slots<RamFlash>,
@@ -39,12 +39,12 @@ fn put(out: &mut Vec<u8>, msg: BoardMsg) {
     }
 }
 
-impl BoardSim {
+impl EmulatedBoard {
     /// A board at power-up: loads the newest valid coefficient slot of `flash` (or runs
     /// without compensation, with a warning, as the firmware does); the motor is connected
     /// as `wiring` says.
-    pub fn new(plant: EmulatorConfig, wiring: Wiring, flash: RamFlash) -> Result<BoardSim> {
-        let mut slots = Slots::new(flash, 0, super::flash::PAGE as u32)
+    pub fn new(plant: EmulatorConfig, wiring: Wiring, flash: RamFlash) -> Result<EmulatedBoard> {
+        let mut slots = Slots::new(flash, 0, super::emulated_flash::PAGE as u32)
             .map_err(|e| anyhow!("emulated flash geometry: {e:?}"))?;
         let loaded = slots
             .load()
@@ -59,7 +59,7 @@ impl BoardSim {
         );
         // The emulated stop arms at once; the board learns it as from the firmware's boot.
         board.set_hardware_stop(true, false);
-        let mut sim = BoardSim {
+        let mut sim = EmulatedBoard {
             hw: Hardware::new(plant, wiring)?,
             board,
             slots,
@@ -150,12 +150,12 @@ impl BoardSim {
     }
 
     /// One 12 ms control period: measure, run the board logic, drive the motor. The loop
-    /// period the telemetry reports is the nominal one (see [`BoardSim::tick_timed`]).
+    /// period the telemetry reports is the nominal one (see [`EmulatedBoard::tick_timed`]).
     pub fn tick(&mut self) {
         self.tick_timed(control::CONTROL_PERIOD_S * 1.0e6);
     }
 
-    /// [`BoardSim::tick`] with the time since the previous period started [µs] of board
+    /// [`EmulatedBoard::tick`] with the time since the previous period started [µs] of board
     /// time, for the telemetry's loop period and jitter (`motorid board` measures it on the
     /// host's clock). The emulated board has no cycle counter: its `step_cycles_max` is 0;
     /// and it never overruns: a late host thread stretches a period (jitter), the step still
@@ -186,7 +186,7 @@ mod tests {
         encode_frame(msg, &mut buf).unwrap().to_vec()
     }
 
-    fn replies(sim: &mut BoardSim) -> Vec<BoardMsg> {
+    fn replies(sim: &mut EmulatedBoard) -> Vec<BoardMsg> {
         sim.take_output()
             .split_inclusive(|&b| b == 0)
             .map(|f| decode_frame::<BoardMsg>(f).unwrap())
@@ -206,7 +206,7 @@ mod tests {
 
     #[test]
     fn upload_with_a_retried_chunk_commits_once_and_is_refused_while_running() {
-        let mut sim = BoardSim::new(
+        let mut sim = EmulatedBoard::new(
             EmulatorConfig::paper(),
             Wiring::default(),
             RamFlash::new(None),
@@ -260,7 +260,7 @@ mod tests {
     }
 
     /// Upload `co` through the board's own upload handler.
-    fn upload(sim: &mut BoardSim, co: &Coefficients) {
+    fn upload(sim: &mut EmulatedBoard, co: &Coefficients) {
         let blob = crate::board::coeffs::encode(co).unwrap();
         let crc = control::blob::CRC32.checksum(&blob);
         sim.receive(&frame(&HostMsg::UploadBegin {
@@ -279,7 +279,7 @@ mod tests {
     }
 
     /// Ticks until a fault (returned with the samples seen) or `n` periods.
-    fn run_until_fault(sim: &mut BoardSim, n: usize) -> (Option<Fault>, Vec<Sample>) {
+    fn run_until_fault(sim: &mut EmulatedBoard, n: usize) -> (Option<Fault>, Vec<Sample>) {
         let mut samples = Vec::new();
         for k in 0..n {
             if k.is_multiple_of(50) {
@@ -312,8 +312,8 @@ mod tests {
         }
     }
 
-    fn sim_with(plant: EmulatorConfig, co: Option<&Coefficients>) -> BoardSim {
-        let mut sim = BoardSim::new(plant, Wiring::default(), RamFlash::new(None)).unwrap();
+    fn sim_with(plant: EmulatorConfig, co: Option<&Coefficients>) -> EmulatedBoard {
+        let mut sim = EmulatedBoard::new(plant, Wiring::default(), RamFlash::new(None)).unwrap();
         replies(&mut sim);
         if let Some(co) = co {
             upload(&mut sim, co);
@@ -534,8 +534,12 @@ mod tests {
         // Two uploads (slot 0, then slot 1), then a double ECC error in slot 1's header, as
         // a commit cut by a power loss leaves it: the board boots on slot 0 instead of
         // hanging, and the next upload rewrites slot 1.
-        let mut slots =
-            Slots::new(RamFlash::new(None), 0, super::super::flash::PAGE as u32).unwrap();
+        let mut slots = Slots::new(
+            RamFlash::new(None),
+            0,
+            super::super::emulated_flash::PAGE as u32,
+        )
+        .unwrap();
         let old = identified();
         let mut new = identified();
         new.pi.kp = 0.125;
@@ -546,8 +550,9 @@ mod tests {
             .store(&crate::board::coeffs::encode(&new).unwrap())
             .unwrap();
         let mut flash = slots.into_inner();
-        flash.inject_ecc_error(super::super::flash::PAGE + 8);
-        let mut sim = BoardSim::new(EmulatorConfig::paper(), Wiring::default(), flash).unwrap();
+        flash.inject_ecc_error(super::super::emulated_flash::PAGE + 8);
+        let mut sim =
+            EmulatedBoard::new(EmulatorConfig::paper(), Wiring::default(), flash).unwrap();
         assert_eq!(replies(&mut sim), []);
         assert_eq!((sim.coeff_seq(), sim.coefficients()), (1, &old));
         // Speed mode is allowed: the board has valid coefficients.
@@ -566,7 +571,7 @@ mod tests {
         // coefficients, warns, and allows identify and commissioning only.
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("flash.bin");
-        let page = super::super::flash::PAGE as u32;
+        let page = super::super::emulated_flash::PAGE as u32;
         let mut slots = Slots::new(RamFlash::new(Some(path.clone())), 0, page).unwrap();
         slots
             .store(&crate::board::coeffs::encode(&identified()).unwrap())
@@ -576,7 +581,7 @@ mod tests {
         bytes[control::slots::SLOT_HEADER_LEN + 30] ^= 0x01;
         std::fs::write(&path, &bytes).unwrap();
 
-        let mut sim = BoardSim::new(
+        let mut sim = EmulatedBoard::new(
             EmulatorConfig::paper(),
             Wiring::default(),
             RamFlash::new(Some(path)),
@@ -632,7 +637,7 @@ mod tests {
     }
 
     /// Ticks until the commissioning ends; its outcome.
-    fn commission_result(sim: &mut BoardSim, extra: &[(usize, HostMsg)]) -> CommissionOutcome {
+    fn commission_result(sim: &mut EmulatedBoard, extra: &[(usize, HostMsg)]) -> CommissionOutcome {
         for k in 0..2000 {
             for (_, m) in extra.iter().filter(|(at, _)| *at == k) {
                 sim.receive(&frame(m));
@@ -654,13 +659,14 @@ mod tests {
     }
 
     /// A board wired with the Hall connector 231 and the phases 321, commissioning.
-    fn commissioning_board() -> BoardSim {
+    fn commissioning_board() -> EmulatedBoard {
         let wiring = Wiring {
             hall_order: [1, 2, 0],
             phase_order: [2, 1, 0],
             current_inverted: false,
         };
-        let mut sim = BoardSim::new(EmulatorConfig::paper(), wiring, RamFlash::new(None)).unwrap();
+        let mut sim =
+            EmulatedBoard::new(EmulatorConfig::paper(), wiring, RamFlash::new(None)).unwrap();
         replies(&mut sim);
         sim.receive(&frame(&HostMsg::Commission));
         assert_eq!(replies(&mut sim), [BoardMsg::Ack]);

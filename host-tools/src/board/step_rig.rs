@@ -1,4 +1,5 @@
-//! The emulated board: the firmware's control step ([`control::step::ControlStep`], in f32
+//! The firmware's control step alone (no link, modes or storage: those are
+//! [`super::emulated_board`]): the step ([`control::step::ControlStep`], in f32
 //! as on the STM32G431) driving the emulated motor ([`crate::emulator::Plant`]) through the
 //! board's sensors, one 12 ms period at a time.
 //!
