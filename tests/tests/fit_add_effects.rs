@@ -12,7 +12,14 @@
 //! model gains ~1 point over any fitted one from that alone (3 % of inertia costs half a
 //! point), which would hide what the added effect brings.
 //!
-//! Coulomb and Stribeck are part of the LuGre law, so they are added to a linear base.
+//! Coulomb and Stribeck are part of the LuGre law, so they are added to a linear base; the
+//! Stribeck row's base has Coulomb friction too, so that only the hidden effect is missing
+//! (a linear base also lacks the emulator's Coulomb friction, which then explains most of the
+//! residual and is rightly named first).
+//!
+//! A row also passes when the loop added an effect that `diagnose` reported as a look-alike
+//! of the hidden one (`Verdict::look_alikes`, with the experiment that separates them) and
+//! the refit closes the gap as asked.
 //! Prints the table of before / after / truth fits (`cargo test -p tests --test
 //! fit_add_effects -- --nocapture`; the ignored full table takes `FIT_ADD_EFFECTS=cogging,deadtime`
 //! to run only some rows, and `FIT_ADD_EFFECTS_SEED=2` another draw of the emulator).
@@ -30,6 +37,11 @@ use motorid::workflow;
 const FIT_SECONDS: f64 = 50.0;
 const VALIDATE_SECONDS: f64 = 40.0;
 const STEADY_SECONDS: f64 = 40.0;
+/// Voltage steps (signal d) [s] for the effects that act only when the drive brakes the rotor
+/// or the current is high (load friction, saturation): the multisine and the steady speeds
+/// never brake hard and stay near 6 A, where neither shows. The entry test needs about this
+/// much of them to see load friction (docs/decisions/0011-robust-wald-verdict.md, its cost).
+const STEPS_SECONDS: f64 = 180.0;
 
 fn log(cfg: &EmulatorConfig, kind: SignalKind, seconds: f64, name: &str) -> (MotorLog, Vec<f64>) {
     let r = simulate_signal(cfg, kind, seconds).unwrap();
@@ -57,11 +69,17 @@ struct Row {
     added: Option<(String, bool)>,
     /// The added effect's spec as diagnosed → as refitted.
     refitted: String,
-    /// Share of the gap closed on the selection log (which chose the refit), for comparison.
-    closed_on_selection: f64,
+    /// Share of the gap closed on the selection log (which chose the refit), for comparison;
+    /// None without a refit.
+    closed_on_selection: Option<f64>,
     base: (f64, f64),
-    refit: (f64, f64),
+    /// None when the loop added nothing.
+    refit: Option<(f64, f64)>,
     truth: (f64, f64),
+    /// Look-alike pairs the first round's diagnoses reported.
+    look_alikes: Vec<[String; 2]>,
+    /// Why the loop stopped.
+    stop: workflow::Stop,
 }
 
 /// The emulator's seed from `FIT_ADD_EFFECTS_SEED` (the signals' and the current noise's
@@ -77,6 +95,10 @@ fn case(effect: EffectKind) -> Row {
         cfg.seed = seed;
     }
     let mut fit_logs = vec![log(&cfg, SignalKind::A, FIT_SECONDS, "a.csv").0];
+    let start = match effect {
+        EffectKind::Stribeck => vec![EffectSpec::bare(EffectKind::Coulomb)],
+        _ => Vec::new(),
+    };
     let base_kind = match effect {
         EffectKind::Coulomb | EffectKind::Stribeck => ModelKind::Linear,
         _ => {
@@ -84,6 +106,9 @@ fn case(effect: EffectKind) -> Row {
             ModelKind::Lugre
         }
     };
+    if matches!(effect, EffectKind::LoadFriction | EffectKind::Saturation) {
+        fit_logs.push(log(&cfg, SignalKind::D, STEPS_SECONDS, "d.csv").0);
+    }
     let draw = |offset: u64, name: &str| {
         let mut c = cfg.clone();
         c.seed = cfg.seed.wrapping_add(offset);
@@ -98,7 +123,7 @@ fn case(effect: EffectKind) -> Row {
             plant: Plant::Voltage,
             fit_logs: &fit_logs,
             select_logs: &select,
-            start: Vec::new(),
+            start,
             constraints: &Constraints::NONE,
             max_rounds: 1,
             diagnose: diagnose::Options::default(),
@@ -126,15 +151,19 @@ fn case(effect: EffectKind) -> Row {
             )
         }),
         base: scores(&out.rounds[0].model, &test_log, &omega_true),
-        refit: refit.map_or((f64::NAN, f64::NAN), |r| {
-            scores(&r.model, &test_log, &omega_true)
-        }),
+        refit: refit.map(|r| scores(&r.model, &test_log, &omega_true)),
         truth: scores(&cfg.truth_model(), &test_log, &omega_true),
-        closed_on_selection: {
+        closed_on_selection: refit.map(|r| {
             let on = |m: &Model| scores(m, &select[0], &select_omega).0;
             let (b, t) = (on(&out.rounds[0].model), on(&cfg.truth_model()));
-            refit.map_or(f64::NAN, |r| (on(&r.model) - b) / (t - b))
-        },
+            (on(&r.model) - b) / (t - b)
+        }),
+        look_alikes: out.rounds[0]
+            .diagnoses
+            .iter()
+            .flat_map(|d| d.verdict.look_alikes.iter().map(|l| l.names.clone()))
+            .collect(),
+        stop: out.stop,
     }
 }
 
@@ -188,15 +217,19 @@ fn check(effects: Vec<EffectKind>) {
                 };
                 let r = case(k);
                 eprintln!(
-                    "{:<14} base {:7.2}  refit {:7.2}  truth {:7.2}  added {:?}, refitted {}; \
-                     gap closed on the selection log {:.0} %",
+                    "{:<14} base {:7.2}  refit {}  truth {:7.2}  added {:?}, refitted {}; \
+                     gap closed on the selection log {}; look-alikes {:?}; stop {:?}",
                     r.effect,
                     r.base.0,
-                    r.refit.0,
+                    r.refit
+                        .map_or("   none".to_string(), |x| format!("{:7.2}", x.0)),
                     r.truth.0,
                     r.added,
                     r.refitted,
-                    100.0 * r.closed_on_selection
+                    r.closed_on_selection
+                        .map_or("none".to_string(), |c| format!("{:.0} %", 100.0 * c)),
+                    r.look_alikes,
+                    r.stop
                 );
                 rows.lock().unwrap().push(r);
             });
@@ -213,33 +246,57 @@ fn check(effects: Vec<EffectKind>) {
     let mut failed = Vec::new();
     for r in &rows {
         let gap = r.truth.0 - r.base.0;
-        let closed = if gap.abs() > 1e-9 {
-            (r.refit.0 - r.base.0) / gap
-        } else {
-            1.0
-        };
         let added = r.added.as_ref().map_or("nothing".to_string(), |(n, k)| {
             format!("{n} ({})", if *k { "kept" } else { "not kept" })
         });
+        let dash = |x: Option<f64>| x.map_or("     —".to_string(), |v| format!("{v:6.2}"));
+        // Without a refit there is nothing to score: the row says so instead of a number.
+        let Some(refit) = r.refit else {
+            println!(
+                "{:<14} {:<20} {:6.2} {} {:6.2}        — %  | {:6.2} {} {:6.2}   (loop stopped: {:?})",
+                r.effect,
+                added,
+                r.base.0,
+                dash(None),
+                r.truth.0,
+                r.base.1,
+                dash(None),
+                r.truth.1,
+                r.stop
+            );
+            failed.push(r.effect);
+            continue;
+        };
+        let closed = if gap.abs() > 1e-9 {
+            (refit.0 - r.base.0) / gap
+        } else {
+            1.0
+        };
         println!(
-            "{:<14} {:<20} {:6.2} {:6.2} {:6.2} {:8.0} %  | {:6.2} {:6.2} {:6.2}",
+            "{:<14} {:<20} {:6.2} {} {:6.2} {:8.0} %  | {:6.2} {} {:6.2}",
             r.effect,
             added,
             r.base.0,
-            r.refit.0,
+            dash(Some(refit.0)),
             r.truth.0,
             100.0 * closed,
             r.base.1,
-            r.refit.1,
+            dash(Some(refit.1)),
             r.truth.1
         );
-        let named = r.added.as_ref().is_some_and(|(n, k)| n == r.effect && *k);
+        // The hidden effect by name, or a look-alike of it that `diagnose` reported as such.
+        let named = r.added.as_ref().is_some_and(|(n, k)| {
+            *k && (n == r.effect
+                || r.look_alikes
+                    .iter()
+                    .any(|p| p.contains(n) && p.iter().any(|x| x == r.effect)))
+        });
         // A base model already within a point of the truth has nothing to close: the
         // refit must then just not be worse by more than a point. Cogging's refit lands in
         // the narrow basin of its multiple-shooting cost (docs/limits.md): on the fresh test
         // draw it closes less than half of the gap, so for it only an improvement is asked.
         let ok = if gap < 1.0 {
-            r.refit.0 >= r.base.0.min(r.truth.0) - 1.0
+            refit.0 >= r.base.0.min(r.truth.0) - 1.0
         } else if r.effect == EffectKind::Cogging.name() {
             closed > 0.0
         } else {
@@ -251,6 +308,7 @@ fn check(effects: Vec<EffectKind>) {
     }
     assert!(
         failed.is_empty(),
-        "the loop did not add the hidden effect or did not close half the gap for {failed:?}"
+        "the loop did not add the hidden effect (or a reported look-alike of it) or did not \
+         close half the gap for {failed:?}"
     );
 }

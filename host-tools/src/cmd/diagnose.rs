@@ -82,6 +82,28 @@ struct JsonEffect<'a> {
     spec: &'a str,
     score: f64,
     explanation: &'a str,
+    /// Another finding this one looks like on this log (both entered forward selection and
+    /// share much of what they explain), and the experiment that tells them apart.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    looks_like: Option<JsonLooksLike<'a>>,
+}
+
+#[derive(serde::Serialize)]
+struct JsonLooksLike<'a> {
+    name: &'a str,
+    experiment: &'a str,
+}
+
+/// The finding a found look-alike pair pairs `name` with, and the separating experiment.
+fn found_look_alike<'a>(v: &'a diagnose::Verdict, name: &str) -> Option<(&'a str, &'a str)> {
+    v.look_alikes
+        .iter()
+        .filter(|l| l.both_found)
+        .find_map(|l| match &l.names {
+            [a, b] if a == name => Some((b.as_str(), l.experiment.as_str())),
+            [a, b] if b == name => Some((a.as_str(), l.experiment.as_str())),
+            _ => None,
+        })
 }
 
 pub fn run(args: Args) -> Result<()> {
@@ -119,6 +141,8 @@ pub fn run(args: Args) -> Result<()> {
                 spec: &f.spec,
                 score: f.score,
                 explanation: &f.explanation,
+                looks_like: found_look_alike(&d.verdict, &f.name)
+                    .map(|(name, experiment)| JsonLooksLike { name, experiment }),
             })
             .collect();
         let unexplained: Vec<JsonUnexplained> = d
@@ -163,6 +187,17 @@ fn print_text(model: &Model, args: &Args, d: &diagnose::Diagnosis) {
     let v = &d.verdict;
     print_verdict(model, args, d);
     for l in &v.look_alikes {
+        if l.both_found {
+            println!(
+                "Look-alikes, both found: {} ({:.0}% alone) and {} ({:.0}% alone) explain much of the same residual on this log, so they are not two independent effects: add the first and diagnose again before adding the second. To tell them apart: {}.",
+                l.names[0],
+                100.0 * l.shares[0],
+                l.names[1],
+                100.0 * l.shares[1],
+                l.experiment
+            );
+            continue;
+        }
         println!(
             "Look-alikes: {} ({:.0}%) and {} ({:.0}%) explain the residual about equally on this log. To tell them apart: {}.",
             l.names[0],
@@ -229,6 +264,9 @@ fn print_verdict(model: &Model, args: &Args, d: &diagnose::Diagnosis) {
         for f in &d.effects {
             println!("  {:<15} score {:.3}  {}", f.name, f.score, f.spec);
             println!("      {}", f.explanation);
+            if let Some((other, _)) = found_look_alike(v, &f.name) {
+                println!("      looks like {other} on this log (see Look-alikes below)");
+            }
         }
     }
     if !v.unexplained.is_empty() {

@@ -6,6 +6,13 @@
 //! on a run that never brakes. Forward selection keeps the one that explains more, but when
 //! the other was also significant and explained at least [`CLOSE`] of as much, `diagnose`
 //! says so and names an experiment in which they differ.
+//!
+//! Two look-alikes can also both enter forward selection: the runner-up still explains a
+//! significant part of what is left after the leader. They are reported as a pair too (not
+//! as two independent findings) when, besides the shares being close, the leader already
+//! explains at least `1 − CLOSE` of what the runner-up explains alone: its share beyond the
+//! leader is at most [`CLOSE`] of its share alone. Two independent effects keep their whole
+//! share when the other enters, however close their sizes.
 use super::{carriers::Carrier, Finding, Tested};
 use serde::Serialize;
 
@@ -22,6 +29,9 @@ pub struct LookAlike {
     pub shares: [f64; 2],
     /// An experiment (a log to record or simulate) in which the two differ.
     pub experiment: String,
+    /// True when both entered forward selection (both are findings): the runner-up's share
+    /// beyond the leader is then what the data tells apart, the rest they share.
+    pub both_found: bool,
 }
 
 /// The experiment that separates two effects or carriers (order does not matter).
@@ -67,7 +77,7 @@ pub fn find(
     carriers: &[Carrier],
     alpha_per_test: f64,
 ) -> Vec<LookAlike> {
-    let mut out = Vec::new();
+    let mut out = found_pairs(findings, tested);
     for f in findings {
         let Some(first) = tested.iter().find(|t| t.name == f.name && t.kept) else {
             continue;
@@ -91,6 +101,7 @@ pub fn find(
                 names: [f.name.clone(), t.name.clone()],
                 shares: [first.explained, t.explained],
                 experiment: experiment(&f.name, &t.name),
+                both_found: false,
             });
         }
     }
@@ -105,6 +116,7 @@ pub fn find(
                 names: ["offset".to_string(), "asymmetry".to_string()],
                 shares: [f.score, f.score],
                 experiment: experiment("offset", "asymmetry"),
+                both_found: false,
             });
         }
     }
@@ -114,7 +126,49 @@ pub fn find(
                 names: [a.variable.to_string(), b.variable.to_string()],
                 shares: [a.share, b.share],
                 experiment: experiment(a.variable, b.variable),
+                both_found: false,
             });
+        }
+    }
+    out
+}
+
+/// Pairs of findings of one equation that both entered forward selection and look alike:
+/// the runner-up explains alone at least [`CLOSE`] of what the leader explains alone, and at
+/// most [`CLOSE`] of its own share is left once the leader is in (see the module doc). The
+/// shares are each one's own against the base (the first round of selection).
+fn found_pairs(findings: &[Finding], tested: &[Tested]) -> Vec<LookAlike> {
+    let alone = |f: &Finding| {
+        tested
+            .iter()
+            .find(|t| t.name == f.name && t.equation == f.equation && t.kept)
+            .map(|t| t.explained)
+    };
+    let mut out = Vec::new();
+    for (k, a) in findings.iter().enumerate() {
+        for b in &findings[k + 1..] {
+            if a.equation != b.equation {
+                continue;
+            }
+            let (Some(sa), Some(sb)) = (alone(a), alone(b)) else {
+                continue;
+            };
+            // The leader explains more alone; the runner-up's finding score is its share
+            // beyond the findings that entered before it (the leader among them).
+            let (lead, run, s_lead, s_run) = if sa >= sb {
+                (a, b, sa, sb)
+            } else {
+                (b, a, sb, sa)
+            };
+            let beyond = run.score;
+            if s_lead > 0.0 && s_run >= CLOSE * s_lead && beyond <= CLOSE * s_run {
+                out.push(LookAlike {
+                    names: [lead.name.clone(), run.name.clone()],
+                    shares: [s_lead, s_run],
+                    experiment: experiment(&lead.name, &run.name),
+                    both_found: true,
+                });
+            }
         }
     }
     out
@@ -123,6 +177,57 @@ pub fn find(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::diagnose::candidates::Equation;
+
+    fn finding(name: &str, score: f64) -> Finding {
+        Finding {
+            name: name.into(),
+            spec: name.into(),
+            score,
+            explanation: String::new(),
+            equation: Equation::Mechanical,
+            p_value: 1e-9,
+            t2: 1.0,
+            delta_bic: -10.0,
+            kind: None,
+        }
+    }
+
+    fn tested(name: &str, explained: f64) -> Tested {
+        Tested {
+            name: name.into(),
+            equation: Equation::Mechanical,
+            spec: name.into(),
+            explained,
+            p_value: 1e-9,
+            kept: true,
+        }
+    }
+
+    /// Two findings that share what they explain are one look-alike pair with the experiment
+    /// that separates them; two that explain different parts of the residual are not.
+    #[test]
+    fn two_findings_that_share_the_residual_are_a_pair() {
+        // Compliance alone 0.27, backlash alone 0.25 but only 0.12 beyond compliance.
+        let shared = find(
+            &[finding("compliance", 0.27), finding("backlash", 0.12)],
+            &[tested("compliance", 0.27), tested("backlash", 0.25)],
+            &[],
+            1e-4,
+        );
+        assert_eq!(shared.len(), 1, "{shared:?}");
+        assert!(shared[0].both_found);
+        assert_eq!(shared[0].names, ["compliance", "backlash"]);
+        assert_eq!(shared[0].experiment, experiment("backlash", "compliance"));
+        // An offset and a position load of similar size, each keeping its share.
+        let apart = find(
+            &[finding("offset", 0.30), finding("position_load", 0.25)],
+            &[tested("offset", 0.30), tested("position_load", 0.26)],
+            &[],
+            1e-4,
+        );
+        assert!(apart.iter().all(|l| !l.both_found), "{apart:?}");
+    }
 
     #[test]
     fn every_named_pair_has_its_own_experiment_in_either_order() {
