@@ -61,6 +61,13 @@ impl Restart {
     /// less, which biases the inertia and the bristle stiffness σ0 low. Those logs come
     /// from Hall sensors, whose angle's centred slope is off by up to a Hall step per 10
     /// samples, so the velocity there continues from the run before instead.
+    ///
+    /// A load behind a coupling (`compliance`, `backlash`) is never measured. With
+    /// [`Restart::Angle`] its deflection from the rotor and its speed continue from the run
+    /// before (the deflection, not its angle: the segment's rotor angle jumps to the
+    /// measurement, and the load moves with it, so the coupling's torque carries over
+    /// unchanged); with [`Restart::State`] it starts moving with the rotor, undeflected
+    /// (`freerun::run_range_from`), as the velocity and bristles start from the measurement.
     pub fn for_log(log: &MotorLog) -> Restart {
         match log.omega {
             Some(_) => Restart::Angle,
@@ -740,17 +747,71 @@ mod tests {
     fn sensitivities_match_central_differences() {
         let cfg = EmulatorConfig::paper();
         let res_a = simulate_signal(&cfg, SignalKind::A, 6.0).unwrap();
-        let logs = [res_a.log];
         let (model, free) = model_and_free(&cfg);
+        check_sensitivities(&model, &free, &[res_a.log]);
+    }
+
+    /// The loads behind a coupling, a spring and a gap at once (their states in the same
+    /// sub-step root), on a log of a motor with a compliant load, so that both move: the
+    /// dual run's Jacobian in their parameters and the rotor's inertia is the derivative of
+    /// the f64 run, and replays its roots bit for bit.
+    #[test]
+    fn sensitivities_match_central_differences_with_loads() {
+        let truth = Effect::Compliance {
+            j2: 6e-4,
+            k: 0.2,
+            c: 6e-4,
+        };
+        let cfg = EmulatorConfig::paper().with_effects(vec![truth]);
+        let res_a = simulate_signal(&cfg, SignalKind::A, 6.0).unwrap();
+        let mut m = cfg.truth_model();
+        m.effects = vec![
+            Effect::Compliance {
+                j2: 5e-4,
+                k: 0.25,
+                c: 1e-3,
+            },
+            Effect::Backlash {
+                j2: 1e-4,
+                gap: 0.05,
+            },
+        ];
+        let mut free = vec![Free {
+            slot: Slot::J,
+            lo: 1e-9,
+            hi: 1.0,
+        }];
+        free.extend(super::super::linear::effect_free(&m));
+        let names: Vec<String> = free.iter().map(|f| f.slot.name(&m)).collect();
+        assert_eq!(
+            names,
+            [
+                "J",
+                "compliance.j2",
+                "compliance.k",
+                "compliance.c",
+                "backlash.j2",
+                "backlash.gap"
+            ]
+        );
+        check_sensitivities(&m, &free, &[res_a.log]);
+    }
+
+    /// The exact Jacobian of `model`'s residuals on `logs` in the parameters `free`, free
+    /// run and 120-sample segments: the dual run's values and a replay of the f64 run's
+    /// sub-step roots are the f64 run's to the bit, and each column is the central
+    /// differences' within 1e-4 relative.
+    fn check_sensitivities(model: &Model, free: &[Free], logs: &[MotorLog]) {
+        let model = model.clone();
         for segmented in [false, true] {
             let res = if segmented {
-                let mut r = Residuals::segmented(&logs, 10);
+                let mut r = Residuals::segmented(logs, 10);
                 r.segment = Some(120);
                 r
             } else {
-                Residuals::new(&logs, 10)
+                Residuals::new(logs, 10)
             };
-            let (r, jac) = res.eval_with_jacobian(&model, &free, None).unwrap();
+            let (r, jac) = res.eval_with_jacobian(&model, free, None).unwrap();
             // The dual run's values are the f64 run's, to the bit; so are its sub-steps'
             // roots, and with them replayed from the f64 run's tape it gives the same
             // Jacobian.
@@ -763,7 +824,7 @@ mod tests {
                 "{} roots for {steps} sub-steps",
                 tape.len()
             );
-            let replayed = res.eval_with_jacobian(&model, &free, Some(&tape)).unwrap();
+            let replayed = res.eval_with_jacobian(&model, free, Some(&tape)).unwrap();
             assert_eq!((r.clone(), jac.clone()), replayed);
             assert_eq!(jac.len(), free.len());
             for (j, fr) in free.iter().enumerate() {
