@@ -336,8 +336,8 @@ pub fn load_torque(effects: &[Effect<f64>], s: &Signals) -> Vec<f64> {
             }
             Effect::Backlash { j2, gap } if j2 > 0.0 && s.dt > 0.0 => {
                 let mut a = s.backlash_acceleration(gap);
-                for k in 1..n.saturating_sub(1) {
-                    a[k] += (s.omega[k + 1] - s.omega[k - 1]) / (2.0 * s.dt);
+                for (k, w) in s.omega.windows(3).enumerate() {
+                    a[k + 1] += (w[2] - w[0]) / (2.0 * s.dt);
                 }
                 (j2, a)
             }

@@ -359,7 +359,9 @@ pub fn scale_effect_magnitudes(model: &Model, f: f64) -> Model {
 /// its magnitudes can be off, and its phases by up to h times half a Hall step (the
 /// quantised angle lags the true one by half a step on average): the shifts are
 /// h·(0, ±¼, ±½) Hall steps. Factor 0 ("without the effect") is a candidate, so adding an
-/// effect never starts worse than not adding it.
+/// effect never starts worse than not adding it. A load behind a coupling (`compliance`,
+/// `backlash`) is also tried with its inertia taken out of the rotor's, and a coupling's
+/// resonance at other frequencies (below).
 pub fn better_effect_start(model: &mut Model, res: &Residuals) {
     if model.effects.is_empty() {
         return;
@@ -378,28 +380,76 @@ pub fn better_effect_start(model: &mut Model, res: &Residuals) {
         &[0.0]
     };
     let factors = [0.0, 0.25, 0.5, 0.75, 1.0, 1.25];
-    let starts: Vec<(f64, f64)> = factors
+    let load_inertia: f64 = model
+        .effects
+        .iter()
+        .map(|e| match *e {
+            control::effects::Effect::Compliance { j2, .. }
+            | control::effects::Effect::Backlash { j2, .. } => j2.max(0.0),
+            _ => 0.0,
+        })
+        .sum();
+    // A structure fitted without a load carries its inertia in J (the pair moves as one
+    // below the coupling's resonance): a load is also tried with its inertia taken out of J,
+    // where that leaves the rotor at least a tenth of it.
+    let moves: &[bool] = if load_inertia > 0.0 {
+        &[false, true]
+    } else {
+        &[false]
+    };
+    // A coupling's resonance is tried a factor 2 and 4 either side (its stiffness scaled by
+    // the square, the damper so that the damping ratio stays): off by more than half its
+    // width, a resonance leaves the simulation error flat in the coupling's parameters.
+    let has_spring = model
+        .effects
+        .iter()
+        .any(|e| matches!(e, control::effects::Effect::Compliance { .. }));
+    let stiffness: &[f64] = if has_spring {
+        &[1.0, 0.25, 4.0, 1.0 / 16.0, 16.0]
+    } else {
+        &[1.0]
+    };
+    let starts: Vec<Start> = factors
         .iter()
         .flat_map(|&f| shifts.iter().map(move |&d| (f, d)))
-        .filter(|&(f, d)| f > 0.0 || d == 0.0)
+        .flat_map(|(f, d)| moves.iter().map(move |&mv| (f, d, mv)))
+        .flat_map(|(f, d, mv)| stiffness.iter().map(move |&kf| (f, d, mv, kf)))
+        .filter(|&(f, d, mv, kf)| f > 0.0 || (d == 0.0 && !mv && kf == 1.0))
+        .filter(|&(f, _, mv, _)| !mv || model.motor.j - f * load_inertia >= 0.1 * model.motor.j)
         .collect();
-    let trial = |f: f64, d: f64| shift_phases(&scale_effect_magnitudes(model, f), d * step);
-    let costs: Vec<f64> = starts
-        .par_iter()
-        .map(|&(f, d)| cost(res, &trial(f, d)))
-        .collect();
-    let mut best = (f64::INFINITY, 1.0, 0.0);
-    for (&(f, d), &c) in starts.iter().zip(&costs) {
+    let trial = |&(f, d, mv, kf): &Start| {
+        let mut m = shift_phases(&scale_effect_magnitudes(model, f), d * step);
+        if mv {
+            m.motor.j -= f * load_inertia;
+        }
+        if kf != 1.0 {
+            for e in &mut m.effects {
+                if let control::effects::Effect::Compliance { k, c, .. } = e {
+                    *k *= kf;
+                    *c *= kf.sqrt();
+                }
+            }
+        }
+        m
+    };
+    let costs: Vec<f64> = starts.par_iter().map(|st| cost(res, &trial(st))).collect();
+    let mut best = (f64::INFINITY, (1.0, 0.0, false, 1.0));
+    for (st, &c) in starts.iter().zip(&costs) {
         tracing::debug!(
-            "effects {:?} x {f}, shift {d} Hall steps: cost {c:.4e}",
+            "effects {:?}, start (factor, shift in Hall steps, load inertia out of J, \
+             stiffness factor) {st:?}: cost {c:.4e}",
             model.effects
         );
         if c < best.0 {
-            best = (c, f, d);
+            best = (c, *st);
         }
     }
-    *model = trial(best.1, best.2);
+    *model = trial(&best.1);
 }
+
+/// A start of [`better_effect_start`]: magnitude factor, phase shift [Hall steps], whether the
+/// loads' inertia is taken out of J, stiffness factor of a coupling.
+type Start = (f64, f64, bool, f64);
 
 /// `model` with the phase of each angle-periodic effect moved as the angle would be moved by
 /// `dtheta` [rad]: `h·dtheta` for a cogging torque of harmonic h, `dtheta` for a position load.
