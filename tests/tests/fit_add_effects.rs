@@ -177,8 +177,9 @@ fn the_loop_adds_each_effect_and_closes_half_the_gap_to_the_truth() {
     let only = std::env::var("FIT_ADD_EFFECTS").ok();
     let effects: Vec<EffectKind> = EffectKind::ALL
         .into_iter()
-        // The fitted models have no load state for compliance or backlash (fit refuses to
-        // add them), and a table has no default torques to hide.
+        // Compliance and backlash are fitted by `fit --add` in fit_add_load.rs (their default
+        // specs are the emulator's, so this table's start would be the truth); a table has
+        // no default torques to hide.
         .filter(|k| {
             !matches!(
                 k,

@@ -208,7 +208,7 @@ pub fn coefficients(model: &Model, loop_settings: LoopSettings) -> Result<Coeffi
             })
             .map_err(|_| anyhow!("field 'effects': too many effects"))?;
     }
-    for e in &model.effects {
+    for e in model.effects.iter().filter(|e| !is_absent_load(e)) {
         co.effects.push(e.map(|x| x as f32)).map_err(|_| {
             anyhow!(
                 "field 'effects': the board holds at most {} effects",
@@ -219,6 +219,12 @@ pub fn coefficients(model: &Model, loop_settings: LoopSettings) -> Result<Coeffi
     co.validate()
         .map_err(|e| anyhow!("the board refuses the coefficients: {e}"))?;
     Ok(co)
+}
+
+/// A load behind a coupling (`compliance`, `backlash`) of no inertia: an added load the
+/// fit set to zero, which the model names but which acts on nothing; not put in the blob.
+pub fn is_absent_load(e: &Effect<f64>) -> bool {
+    matches!(*e, Effect::Compliance { j2, .. } | Effect::Backlash { j2, .. } if j2 <= 0.0)
 }
 
 /// Encode a blob (bytes ready for a file, the flash slot or an upload).

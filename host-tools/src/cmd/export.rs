@@ -4,6 +4,7 @@ use crate::board::coeff_text;
 use crate::board::coeffs::{self, LoopSettings};
 use crate::model::Model;
 use anyhow::{Context, Result};
+use control::effects::EffectKind as K;
 use std::path::PathBuf;
 
 /// Write the coefficient blob (magic, version, postcard payload, CRC-32) for a model.
@@ -70,7 +71,6 @@ pub fn run(args: Args) -> Result<()> {
     // The board smooths the sign of the velocity over its own fixed width.
     if model.sign_width != control::effects::VELOCITY_EPS
         && model.effects.iter().any(|e| {
-            use control::effects::EffectKind as K;
             matches!(
                 e.kind(),
                 K::Coulomb | K::Stribeck | K::Asymmetry | K::LoadFriction
@@ -84,6 +84,26 @@ pub fn run(args: Args) -> Result<()> {
             model.sign_width,
             control::effects::VELOCITY_EPS
         );
+    }
+    // The board compensates friction and the effects' torques on the rotor; a load behind
+    // a coupling is a state of the plant the control step does not simulate.
+    for e in &model.effects {
+        let name = e.kind().name();
+        if coeffs::is_absent_load(e) {
+            eprintln!(
+                "note: {}: the model's {name} has no load inertia (j2 = 0); it is left out of \
+                 the coefficients",
+                crate::log::echo_path(&args.model)
+            );
+        } else if matches!(e.kind(), K::Compliance | K::Backlash) {
+            eprintln!(
+                "note: {}: the coefficients carry the {name} load ({}) for the record; the \
+                 board's compensation has no load state and compensates friction only, not \
+                 the load's inertia",
+                crate::log::echo_path(&args.model),
+                crate::effect_spec::EffectSpec::from_effect(e)
+            );
+        }
     }
     let co = coeffs::coefficients(&model, settings)
         .with_context(|| crate::log::echo_path(&args.model).to_string())?;

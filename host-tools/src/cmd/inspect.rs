@@ -121,7 +121,15 @@ pub fn run(args: Args) -> Result<()> {
         println!("effects:    none");
     }
     for s in specs {
-        println!("effect:     {s}");
+        // The control step compensates torques on the rotor; a load behind a coupling is a
+        // state of the plant it does not simulate (its torque term is zero there).
+        let note = match s.kind {
+            control::effects::EffectKind::Compliance | control::effects::EffectKind::Backlash => {
+                "  (carried, not compensated: the board has no load state)"
+            }
+            _ => "",
+        };
+        println!("effect:     {s}{note}");
     }
     println!(
         "hall:       {} pole pairs, table {:?}; velocity estimator {:?}",

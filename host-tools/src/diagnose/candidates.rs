@@ -898,6 +898,7 @@ pub fn present_columns(e: &Effect<f64>, s: &Signals) -> Vec<(Equation, Vec<f64>)
             let z = c / (2.0 * (k * j2).sqrt());
             vec![(mech, s.load_acceleration(f, z))]
         }
+        Effect::Backlash { j2, gap } if j2 > 0.0 => vec![(mech, s.backlash_acceleration(gap))],
         Effect::Deadtime { .. } if voltage => {
             let i = s.i.as_ref().unwrap();
             vec![(

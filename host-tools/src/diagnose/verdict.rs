@@ -280,13 +280,15 @@ pub fn parameter_check(given: &[f64], refit: &[f64], p: usize, level: f64) -> Ch
 
 /// The model's own load torque [N·m] at each sample, evaluated on the measured motion: its
 /// friction law (the LuGre observer run along the velocity when the model has bristles) plus
-/// every torque effect. `current` is the true winding current (measured minus the model's
+/// every torque effect, plus the torque `j2·θ̈2` each load behind a coupling takes from the
+/// rotor, its motion simulated from the measured rotor ([`load_torque`]). `current` is the true winding current (measured minus the model's
 /// sensor offset; the command for a torque plant); `kt` the torque per unit of it.
 pub fn model_torque(effects: &[Effect<f64>], s: &Signals, current: &[f64], kt: f64) -> Vec<f64> {
     let mut observer = LugreParams::from_effects(effects)
         .filter(|p| p.is_valid())
         .map(LugreObserver::new);
     let law_kinds = LugreParams::<f64>::LAW_KINDS;
+    let loads = load_torque(effects, s);
     (0..s.len())
         .map(|k| {
             let x = EffectInputs {
@@ -304,8 +306,43 @@ pub fn model_torque(effects: &[Effect<f64>], s: &Signals, current: &[f64], kt: f
                 .filter(|e| observer.is_none() || !law_kinds.contains(&e.kind()))
                 .map(|e| e.torque_with_width(&x, s.velocity_eps()))
                 .sum::<f64>()
+                + loads[k]
         })
         .collect()
+}
+
+/// The torque [N·m] the loads behind a coupling take from the rotor at each sample, `j2·θ̈2`
+/// with the load driven by the measured rotor: on a spring, [`Signals::load_acceleration`]
+/// at the coupling's natural frequency and damping ratio against a fixed rotor; behind a
+/// gap, [`Signals::backlash_acceleration`] (the load's acceleration less the rotor's) plus
+/// the rotor's own, both central differences of the speeds. Zeros without such a load.
+pub fn load_torque(effects: &[Effect<f64>], s: &Signals) -> Vec<f64> {
+    let n = s.len();
+    let mut out = vec![0.0; n];
+    for e in effects {
+        let (j2, acc) = match *e {
+            Effect::Compliance { j2, k, c } if j2 > 0.0 && k > 0.0 => {
+                let wn = (k / j2).sqrt();
+                let zeta = c / (2.0 * (k * j2).sqrt());
+                (
+                    j2,
+                    s.load_acceleration(wn / (2.0 * std::f64::consts::PI), zeta),
+                )
+            }
+            Effect::Backlash { j2, gap } if j2 > 0.0 && s.dt > 0.0 => {
+                let mut a = s.backlash_acceleration(gap);
+                for (k, w) in s.omega.windows(3).enumerate() {
+                    a[k + 1] += (w[2] - w[0]) / (2.0 * s.dt);
+                }
+                (j2, a)
+            }
+            _ => continue,
+        };
+        for (o, a) in out.iter_mut().zip(&acc) {
+            *o += j2 * a;
+        }
+    }
+    out
 }
 
 /// The model's equation residuals with its own parameters, on every window of `wf`:

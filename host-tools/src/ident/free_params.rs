@@ -139,8 +139,8 @@ pub fn effect_keys(kind: EffectKind) -> Vec<(&'static str, f64, f64)> {
         EffectKind::Saturation => vec![("k", 0.0, 1.0)],
         // A load from a hundredth to a hundred times a small rotor, couplings from 0.5 Hz up.
         EffectKind::Compliance => vec![("j2", 1e-6, 1.0), ("k", 1e-4, 1e4), ("c", 0.0, 10.0)],
-        // The gap is structural (a grid in `diagnose`, given by the spec).
-        EffectKind::Backlash => vec![("j2", 1e-6, 1.0)],
+        // A gap from none up to a quarter revolution of the rotor.
+        EffectKind::Backlash => vec![("j2", 1e-6, 1.0), ("gap", 0.0, 0.5 * PI)],
         // The node values of a table depend on its `bins`: see [`table_keys`].
         EffectKind::Table => vec![],
     }

@@ -150,19 +150,17 @@ pub fn fit(req: &FitRequest) -> Result<FitReport> {
              presliding bristle state) and add the other effects to it"
         );
     }
-    // A compliant coupling needs the load's angle and speed as states, which the free-run
-    // models do not carry yet: `diagnose` names and sizes it (spec with j2, k, c).
-    if req.adds.iter().any(|s| s.kind == EffectKind::Compliance) {
+    // A free run carries at most `MAX_LOADS` loads behind a coupling.
+    let loads = req
+        .adds
+        .iter()
+        .filter(|s| matches!(s.kind, EffectKind::Compliance | EffectKind::Backlash))
+        .count();
+    if loads > freerun::MAX_LOADS {
         bail!(
-            "--add compliance: the fitted models have no load state for a second inertia yet; \
-             `motorid diagnose` names and sizes a compliant coupling (j2, k, c) from the log"
-        );
-    }
-    // A backlash needs the load's side of the gap as a state, as compliance does.
-    if req.adds.iter().any(|s| s.kind == EffectKind::Backlash) {
-        bail!(
-            "--add backlash: the fitted models have no load state for an inertia behind a gap \
-             yet; `motorid diagnose` names and sizes a backlash (j2, gap) from the log"
+            "--add: {loads} loads behind a coupling (compliance, backlash); a model carries \
+             at most {}",
+            freerun::MAX_LOADS
         );
     }
     if req.kind == ModelKind::Sindyc && req.adds.iter().any(|s| s.kind == EffectKind::Table) {

@@ -61,6 +61,13 @@ impl Restart {
     /// less, which biases the inertia and the bristle stiffness σ0 low. Those logs come
     /// from Hall sensors, whose angle's centred slope is off by up to a Hall step per 10
     /// samples, so the velocity there continues from the run before instead.
+    ///
+    /// A load behind a coupling (`compliance`, `backlash`) is never measured. With
+    /// [`Restart::Angle`] its deflection from the rotor and its speed continue from the run
+    /// before (the deflection, not its angle: the segment's rotor angle jumps to the
+    /// measurement, and the load moves with it, so the coupling's torque carries over
+    /// unchanged); with [`Restart::State`] it starts moving with the rotor, undeflected
+    /// (`freerun::run_range_from`), as the velocity and bristles start from the measurement.
     pub fn for_log(log: &MotorLog) -> Restart {
         match log.omega {
             Some(_) => Restart::Angle,
@@ -352,7 +359,9 @@ pub fn scale_effect_magnitudes(model: &Model, f: f64) -> Model {
 /// its magnitudes can be off, and its phases by up to h times half a Hall step (the
 /// quantised angle lags the true one by half a step on average): the shifts are
 /// h·(0, ±¼, ±½) Hall steps. Factor 0 ("without the effect") is a candidate, so adding an
-/// effect never starts worse than not adding it.
+/// effect never starts worse than not adding it. A load behind a coupling (`compliance`,
+/// `backlash`) is also tried with its inertia taken out of the rotor's, and a coupling's
+/// resonance at other frequencies (below).
 pub fn better_effect_start(model: &mut Model, res: &Residuals) {
     if model.effects.is_empty() {
         return;
@@ -371,28 +380,76 @@ pub fn better_effect_start(model: &mut Model, res: &Residuals) {
         &[0.0]
     };
     let factors = [0.0, 0.25, 0.5, 0.75, 1.0, 1.25];
-    let starts: Vec<(f64, f64)> = factors
+    let load_inertia: f64 = model
+        .effects
+        .iter()
+        .map(|e| match *e {
+            control::effects::Effect::Compliance { j2, .. }
+            | control::effects::Effect::Backlash { j2, .. } => j2.max(0.0),
+            _ => 0.0,
+        })
+        .sum();
+    // A structure fitted without a load carries its inertia in J (the pair moves as one
+    // below the coupling's resonance): a load is also tried with its inertia taken out of J,
+    // where that leaves the rotor at least a tenth of it.
+    let moves: &[bool] = if load_inertia > 0.0 {
+        &[false, true]
+    } else {
+        &[false]
+    };
+    // A coupling's resonance is tried a factor 2 and 4 either side (its stiffness scaled by
+    // the square, the damper so that the damping ratio stays): off by more than half its
+    // width, a resonance leaves the simulation error flat in the coupling's parameters.
+    let has_spring = model
+        .effects
+        .iter()
+        .any(|e| matches!(e, control::effects::Effect::Compliance { .. }));
+    let stiffness: &[f64] = if has_spring {
+        &[1.0, 0.25, 4.0, 1.0 / 16.0, 16.0]
+    } else {
+        &[1.0]
+    };
+    let starts: Vec<Start> = factors
         .iter()
         .flat_map(|&f| shifts.iter().map(move |&d| (f, d)))
-        .filter(|&(f, d)| f > 0.0 || d == 0.0)
+        .flat_map(|(f, d)| moves.iter().map(move |&mv| (f, d, mv)))
+        .flat_map(|(f, d, mv)| stiffness.iter().map(move |&kf| (f, d, mv, kf)))
+        .filter(|&(f, d, mv, kf)| f > 0.0 || (d == 0.0 && !mv && kf == 1.0))
+        .filter(|&(f, _, mv, _)| !mv || model.motor.j - f * load_inertia >= 0.1 * model.motor.j)
         .collect();
-    let trial = |f: f64, d: f64| shift_phases(&scale_effect_magnitudes(model, f), d * step);
-    let costs: Vec<f64> = starts
-        .par_iter()
-        .map(|&(f, d)| cost(res, &trial(f, d)))
-        .collect();
-    let mut best = (f64::INFINITY, 1.0, 0.0);
-    for (&(f, d), &c) in starts.iter().zip(&costs) {
+    let trial = |&(f, d, mv, kf): &Start| {
+        let mut m = shift_phases(&scale_effect_magnitudes(model, f), d * step);
+        if mv {
+            m.motor.j -= f * load_inertia;
+        }
+        if kf != 1.0 {
+            for e in &mut m.effects {
+                if let control::effects::Effect::Compliance { k, c, .. } = e {
+                    *k *= kf;
+                    *c *= kf.sqrt();
+                }
+            }
+        }
+        m
+    };
+    let costs: Vec<f64> = starts.par_iter().map(|st| cost(res, &trial(st))).collect();
+    let mut best = (f64::INFINITY, (1.0, 0.0, false, 1.0));
+    for (st, &c) in starts.iter().zip(&costs) {
         tracing::debug!(
-            "effects {:?} x {f}, shift {d} Hall steps: cost {c:.4e}",
+            "effects {:?}, start (factor, shift in Hall steps, load inertia out of J, \
+             stiffness factor) {st:?}: cost {c:.4e}",
             model.effects
         );
         if c < best.0 {
-            best = (c, f, d);
+            best = (c, *st);
         }
     }
-    *model = trial(best.1, best.2);
+    *model = trial(&best.1);
 }
+
+/// A start of [`better_effect_start`]: magnitude factor, phase shift [Hall steps], whether the
+/// loads' inertia is taken out of J, stiffness factor of a coupling.
+type Start = (f64, f64, bool, f64);
 
 /// `model` with the phase of each angle-periodic effect moved as the angle would be moved by
 /// `dtheta` [rad]: `h·dtheta` for a cogging torque of harmonic h, `dtheta` for a position load.
@@ -740,17 +797,71 @@ mod tests {
     fn sensitivities_match_central_differences() {
         let cfg = EmulatorConfig::paper();
         let res_a = simulate_signal(&cfg, SignalKind::A, 6.0).unwrap();
-        let logs = [res_a.log];
         let (model, free) = model_and_free(&cfg);
+        check_sensitivities(&model, &free, &[res_a.log]);
+    }
+
+    /// The loads behind a coupling, a spring and a gap at once (their states in the same
+    /// sub-step root), on a log of a motor with a compliant load, so that both move: the
+    /// dual run's Jacobian in their parameters and the rotor's inertia is the derivative of
+    /// the f64 run, and replays its roots bit for bit.
+    #[test]
+    fn sensitivities_match_central_differences_with_loads() {
+        let truth = Effect::Compliance {
+            j2: 6e-4,
+            k: 0.2,
+            c: 6e-4,
+        };
+        let cfg = EmulatorConfig::paper().with_effects(vec![truth]);
+        let res_a = simulate_signal(&cfg, SignalKind::A, 6.0).unwrap();
+        let mut m = cfg.truth_model();
+        m.effects = vec![
+            Effect::Compliance {
+                j2: 5e-4,
+                k: 0.25,
+                c: 1e-3,
+            },
+            Effect::Backlash {
+                j2: 1e-4,
+                gap: 0.05,
+            },
+        ];
+        let mut free = vec![Free {
+            slot: Slot::J,
+            lo: 1e-9,
+            hi: 1.0,
+        }];
+        free.extend(super::super::linear::effect_free(&m));
+        let names: Vec<String> = free.iter().map(|f| f.slot.name(&m)).collect();
+        assert_eq!(
+            names,
+            [
+                "J",
+                "compliance.j2",
+                "compliance.k",
+                "compliance.c",
+                "backlash.j2",
+                "backlash.gap"
+            ]
+        );
+        check_sensitivities(&m, &free, &[res_a.log]);
+    }
+
+    /// The exact Jacobian of `model`'s residuals on `logs` in the parameters `free`, free
+    /// run and 120-sample segments: the dual run's values and a replay of the f64 run's
+    /// sub-step roots are the f64 run's to the bit, and each column is the central
+    /// differences' within 1e-4 relative.
+    fn check_sensitivities(model: &Model, free: &[Free], logs: &[MotorLog]) {
+        let model = model.clone();
         for segmented in [false, true] {
             let res = if segmented {
-                let mut r = Residuals::segmented(&logs, 10);
+                let mut r = Residuals::segmented(logs, 10);
                 r.segment = Some(120);
                 r
             } else {
-                Residuals::new(&logs, 10)
+                Residuals::new(logs, 10)
             };
-            let (r, jac) = res.eval_with_jacobian(&model, &free, None).unwrap();
+            let (r, jac) = res.eval_with_jacobian(&model, free, None).unwrap();
             // The dual run's values are the f64 run's, to the bit; so are its sub-steps'
             // roots, and with them replayed from the f64 run's tape it gives the same
             // Jacobian.
@@ -763,7 +874,7 @@ mod tests {
                 "{} roots for {steps} sub-steps",
                 tape.len()
             );
-            let replayed = res.eval_with_jacobian(&model, &free, Some(&tape)).unwrap();
+            let replayed = res.eval_with_jacobian(&model, free, Some(&tape)).unwrap();
             assert_eq!((r.clone(), jac.clone()), replayed);
             assert_eq!(jac.len(), free.len());
             for (j, fr) in free.iter().enumerate() {
