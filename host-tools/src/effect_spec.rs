@@ -345,6 +345,21 @@ impl EffectSpec {
                 }
             }
         }
+        if self.kind == EffectKind::Compliance {
+            // A spring or damper of negative sign gives energy back: the coupled free run
+            // (and the board's plant) would be unstable, and the implicit step's divisor
+            // j2/h + k·h + c could vanish.
+            for key in ["k", "c"] {
+                if let Some(&v) = self.values.get(key).filter(|v| **v < 0.0) {
+                    bail!(
+                        "effect 'compliance': key '{key}' must be 0 or more (got {}): a \
+                         coupling's stiffness k [N·m/rad] and damping c [N·m·s/rad] cannot \
+                         give energy back",
+                        crate::validate::show(v)
+                    );
+                }
+            }
+        }
         if self.kind == EffectKind::Table {
             let whole = |key: &str| self.values.get(key).is_none_or(|v| v.fract() == 0.0);
             if !whole("var") || !whole("bins") {
@@ -707,6 +722,8 @@ mod tests {
             ("table:b32=1", "unknown key"),
             ("backlash:gap=-0.1", "-0.1 is outside 0 .. 1000"),
             ("table:bins=4,b20=1", "unknown key 'b20'"),
+            ("compliance:k=-1", "key 'k' must be 0 or more"),
+            ("compliance:c=-0.001", "key 'c' must be 0 or more"),
         ] {
             let e = EffectSpec::parse(bad).unwrap_err().to_string();
             assert!(e.contains(why), "{bad}: {e}");

@@ -17,9 +17,8 @@
 //! (a linear base also lacks the emulator's Coulomb friction, which then explains most of the
 //! residual and is rightly named first).
 //!
-//! A row also passes when the loop added an effect that `diagnose` reported as a look-alike
-//! of the hidden one (`Verdict::look_alikes`, with the experiment that separates them) and
-//! the refit closes the gap as asked.
+//! The look-alike pairs the first round reported are printed beside each row; a row passes
+//! only when the hidden effect itself was added.
 //! Prints the table of before / after / truth fits (`cargo test -p tests --test
 //! fit_add_effects -- --nocapture`; the ignored full table takes `FIT_ADD_EFFECTS=cogging,deadtime`
 //! to run only some rows, and `FIT_ADD_EFFECTS_SEED=2` another draw of the emulator).
@@ -177,9 +176,11 @@ fn the_loop_adds_each_effect_and_closes_half_the_gap_to_the_truth() {
     let only = std::env::var("FIT_ADD_EFFECTS").ok();
     let effects: Vec<EffectKind> = EffectKind::ALL
         .into_iter()
-        // Compliance and backlash are fitted by `fit --add` in fit_add_load.rs (their default
-        // specs are the emulator's, so this table's start would be the truth); a table has
-        // no default torques to hide.
+        // Compliance and backlash are fitted by `fit --add` in fit_add_load.rs: on a log with
+        // one of them `diagnose` may name the other first or both as a pair (docs/limits.md),
+        // which this table's by-name check does not take. Saturation is not a `diagnose`
+        // candidate: on these logs it shows only as the acceleration carrier, with no term to
+        // add (docs/limits.md). A table has no default torques to hide.
         .filter(|k| {
             !matches!(
                 k,
@@ -187,6 +188,7 @@ fn the_loop_adds_each_effect_and_closes_half_the_gap_to_the_truth() {
                     | EffectKind::Viscous
                     | EffectKind::Compliance
                     | EffectKind::Backlash
+                    | EffectKind::Saturation
                     | EffectKind::Table
             )
         })
@@ -285,13 +287,10 @@ fn check(effects: Vec<EffectKind>) {
             dash(Some(refit.1)),
             r.truth.1
         );
-        // The hidden effect by name, or a look-alike of it that `diagnose` reported as such.
-        let named = r.added.as_ref().is_some_and(|(n, k)| {
-            *k && (n == r.effect
-                || r.look_alikes
-                    .iter()
-                    .any(|p| p.contains(n) && p.iter().any(|x| x == r.effect)))
-        });
+        // The hidden effect by name: a look-alike the loop added instead does not pass (the
+        // pairs include ones reported whatever the shares say, and an effect that closes no
+        // gap would pass on "not worse" alone).
+        let named = r.added.as_ref().is_some_and(|(n, k)| *k && n == r.effect);
         // A base model already within a point of the truth has nothing to close: the
         // refit must then just not be worse by more than a point. Cogging's refit lands in
         // the narrow basin of its multiple-shooting cost (docs/limits.md): on the fresh test

@@ -189,7 +189,7 @@ fn print_text(model: &Model, args: &Args, d: &diagnose::Diagnosis) {
     for l in &v.look_alikes {
         if l.both_found {
             println!(
-                "Look-alikes, both found: {} ({:.0}% alone) and {} ({:.0}% alone) explain much of the same residual on this log, so they are not two independent effects: add the first and diagnose again before adding the second. To tell them apart: {}.",
+                "Look-alikes, both found: {} ({:.0}% alone) and {} ({:.0}% alone) explain much of the same residual on this log (their columns overlap, so the log cannot tell whether one or both are there): add the first and diagnose again before adding the second. To tell them apart: {}.",
                 l.names[0],
                 100.0 * l.shares[0],
                 l.names[1],
