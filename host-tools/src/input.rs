@@ -130,21 +130,32 @@ pub fn read_lines(
         if from == 0 {
             (line, line_len) = (1, 0);
         }
-        for (k, &b) in bytes[from..].iter().enumerate() {
-            if b == b'\n' {
-                line += 1;
-                line_len = 0;
-            } else {
-                line_len += 1;
-                if line_len > max_line {
-                    let end = from + k + 1;
-                    if bytes[end - line_len..end].contains(&b'\r') {
-                        bail!("{p}:{line}: {LONE_CR}");
-                    }
-                    bail!(
-                        "{p}:{line}: line longer than {max_line} bytes; a {what}'s lines are \
-                         a few KiB at most (is this a {what}?)"
-                    );
+        let mut k = from;
+        while k < bytes.len() {
+            // The current line runs on for `run` bytes of those read (to its end, or to the
+            // last byte read).
+            let end_of_line = memchr::memchr(b'\n', &bytes[k..]);
+            let run = end_of_line.unwrap_or(bytes.len() - k);
+            if line_len + run > max_line {
+                // The line's bytes up to the first one past the cap.
+                let end = k + (max_line - line_len) + 1;
+                if bytes[end - (max_line + 1)..end].contains(&b'\r') {
+                    bail!("{p}:{line}: {LONE_CR}");
+                }
+                bail!(
+                    "{p}:{line}: line longer than {max_line} bytes; a {what}'s lines are \
+                     a few KiB at most (is this a {what}?)"
+                );
+            }
+            match end_of_line {
+                Some(_) => {
+                    line += 1;
+                    line_len = 0;
+                    k += run + 1;
+                }
+                None => {
+                    line_len += run;
+                    k = bytes.len();
                 }
             }
         }
@@ -180,5 +191,33 @@ mod tests {
         let e = read(&big, 1024, "blob").unwrap_err();
         assert!(e.to_string().contains("too large"), "{e}");
         assert_eq!(read(&big, 4096, "blob").unwrap().len(), 2048);
+    }
+
+    #[test]
+    fn an_overlong_line_is_named_by_its_number_across_reads() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("x.csv");
+        let text = |t: &str| -> Result<Vec<u8>> {
+            std::fs::write(&path, t).unwrap();
+            read_lines(&path, 1 << 30, 10, "log", |_| false)
+        };
+        // A line of exactly the cap is read; one byte more is not.
+        assert!(text("12345\n1234567890\n12345\n").is_ok());
+        let e = text("12345\n1234567890\n12345678901\nab\n").unwrap_err();
+        assert!(e.to_string().ends_with(":3: line longer than 10 bytes; a log's lines are a few KiB at most (is this a log?)"), "{e}");
+        let e = text("ab\rcd\ref\rgh\rij\r").unwrap_err();
+        assert!(e.to_string().ends_with(&format!(":1: {LONE_CR}")), "{e}");
+        // Lines that span the reads of 64 KiB.
+        let long = |n: usize| "7".repeat(n);
+        let t = format!("a\nb\nc\n{}\n{}\nd\n", long(65_000), long(70_000));
+        std::fs::write(&path, &t).unwrap();
+        let e = read_lines(&path, 1 << 30, MAX_LINE, "log", |_| false).unwrap_err();
+        assert!(e.to_string().contains(":5: line longer than 65536"), "{e}");
+        let t = format!("a\n{}\n{}\nd", long(65_536), long(65_536));
+        std::fs::write(&path, &t).unwrap();
+        assert_eq!(
+            read_lines(&path, 1 << 30, MAX_LINE, "log", |_| false).unwrap(),
+            t.as_bytes()
+        );
     }
 }

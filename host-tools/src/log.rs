@@ -549,14 +549,7 @@ impl MotorLog {
         let pre = Preamble::scan(text, &p)?;
         let body = &text[pre.body_start..];
         let delimiter = sniff_delimiter(body.lines().next().unwrap_or(""));
-        let mut rdr = csv::ReaderBuilder::new()
-            .has_headers(true)
-            .delimiter(delimiter)
-            .trim(csv::Trim::All)
-            .comment(Some(b'#'))
-            // A row with another number of fields is reported below, with its one line.
-            .flexible(true)
-            .from_reader(body.as_bytes());
+        let mut rdr = csv_reader(delimiter, true).from_reader(body.as_bytes());
         let header_line = pre.header_line;
         let headers: Vec<String> = rdr
             .headers()
@@ -577,12 +570,11 @@ impl MotorLog {
         let columns = StdColumns::find(&headers, map, plant, &places.header(path))?;
         let rows = CsvRows {
             p: &p,
-            header_line,
             headers: &headers,
             std_cols: &columns.indices(),
             delimiter,
         };
-        let (cols, row_lines) = rows.read(&mut rdr)?;
+        let (cols, row_lines) = rows.read(&mut rdr, header_line)?;
         if let Places::Csv { row_lines: r, .. } = &mut places {
             *r = row_lines;
         }
@@ -1013,29 +1005,46 @@ impl Preamble {
     }
 }
 
+/// The reader of a log's body: `delimiter`, `#` comment lines, every row read whatever its
+/// number of fields (a row with another number of fields is reported by [`CsvRows`], with its
+/// line). Header names are trimmed here; fields by [`CsvRows`] (the reader's own field
+/// trimming allocates a record per row, twice).
+fn csv_reader(delimiter: u8, has_headers: bool) -> csv::ReaderBuilder {
+    let mut b = csv::ReaderBuilder::new();
+    b.has_headers(has_headers)
+        .delimiter(delimiter)
+        .trim(csv::Trim::Headers)
+        .comment(Some(b'#'))
+        .flexible(true);
+    b
+}
+
 /// The data rows of a CSV log: what a row is checked against.
 struct CsvRows<'a> {
     /// The file, as messages name it.
     p: &'a str,
-    header_line: usize,
     headers: &'a [String],
     /// Indices of the standard columns (must be finite numbers).
     std_cols: &'a [usize],
     delimiter: u8,
 }
 
+/// A log's columns (one series per header) and each row's line.
+type Columns = (Vec<Vec<f64>>, Vec<usize>);
+
 impl CsvRows<'_> {
-    /// Every row's fields as numbers, one series per header, and each row's line.
-    fn read(&self, rdr: &mut csv::Reader<&[u8]>) -> Result<(Vec<Vec<f64>>, Vec<usize>)> {
-        let (p, header_line) = (self.p, self.header_line);
+    /// Every row `rdr` has left as numbers, one series per header, and each row's line;
+    /// `first_line` is the file's line of the reader's first line.
+    fn read(&self, rdr: &mut csv::Reader<&[u8]>, first_line: usize) -> Result<Columns> {
+        let p = self.p;
         let mut cols: Vec<Vec<f64>> = vec![Vec::new(); self.headers.len()];
         let mut row_lines: Vec<usize> = Vec::new();
-        let mut rec = csv::StringRecord::new();
+        let mut rec = csv::ByteRecord::new();
         loop {
-            let more = rdr.read_record(&mut rec).map_err(|e| {
+            let more = rdr.read_byte_record(&mut rec).map_err(|e| {
                 let line = e
                     .position()
-                    .map(|q| q.line() as usize + header_line - 1)
+                    .map(|q| q.line() as usize + first_line - 1)
                     .unwrap_or(0);
                 anyhow!("{p}:{line}: {}", csv_problem(&e))
             })?;
@@ -1044,7 +1053,7 @@ impl CsvRows<'_> {
             }
             let line = rec
                 .position()
-                .map(|q| q.line() as usize + header_line - 1)
+                .map(|q| q.line() as usize + first_line - 1)
                 .unwrap_or(0);
             row_lines.push(line);
             if rec.len() != self.headers.len() {
@@ -1055,6 +1064,10 @@ impl CsvRows<'_> {
                 );
             }
             for (c, field) in rec.iter().enumerate() {
+                // A field of text read whole is text (the delimiter and line ends are ASCII).
+                let field = std::str::from_utf8(field)
+                    .map_err(|_| anyhow!("{p}:{line}: not UTF-8 text"))?
+                    .trim();
                 cols[c].push(self.field(line, c, field)?);
             }
         }

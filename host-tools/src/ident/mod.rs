@@ -554,18 +554,20 @@ pub fn summary(model: &Model, req: &FitRequest) -> Result<String> {
 }
 
 /// Score a fitted model on the request's logs (fitted, then validation).
+/// Every log's free run is independent: they run in parallel.
 pub fn score_logs(model: &Model, req: &FitRequest) -> Vec<LogScores> {
-    let mut out = Vec::new();
-    for (role, logs) in [("fit", req.logs), ("validation", req.validate)] {
-        for log in logs {
-            out.push(LogScores {
-                role,
-                file: log.source.display().to_string(),
-                scores: score(model, log).map_err(|e| format!("{e:#}")),
-            });
-        }
-    }
-    out
+    use rayon::prelude::*;
+    let logs: Vec<(&'static str, &MotorLog)> = [("fit", req.logs), ("validation", req.validate)]
+        .into_iter()
+        .flat_map(|(role, logs)| logs.iter().map(move |l| (role, l)))
+        .collect();
+    logs.par_iter()
+        .map(|&(role, log)| LogScores {
+            role,
+            file: log.source.display().to_string(),
+            scores: score(model, log).map_err(|e| format!("{e:#}")),
+        })
+        .collect()
 }
 
 /// The summary text of a fitted model and its scores.
@@ -729,19 +731,34 @@ pub fn parameter_table(model: &Model) -> String {
 /// Score a model on a log: free-run fits of angle, velocity and current, as they are and
 /// through the sensor chain.
 pub fn score(model: &Model, log: &MotorLog) -> Result<Scores> {
-    let pred = freerun::simulate(model, log)?;
-    score_prediction(model, log, &pred)
+    // The measured velocity does not wait for the free run.
+    let (pred, wmeas) = rayon::join(
+        || freerun::simulate(model, log),
+        || sensor_chain::measured_velocity(log, model.sensor.velocity_window),
+    );
+    score_against(model, log, &pred?, &wmeas)
 }
 
 /// Score an existing prediction (see [`score`]).
 pub fn score_prediction(model: &Model, log: &MotorLog, pred: &Prediction) -> Result<Scores> {
+    let wmeas = sensor_chain::measured_velocity(log, model.sensor.velocity_window);
+    score_against(model, log, pred, &wmeas)
+}
+
+/// [`score_prediction`] with the log's measured velocity `wmeas` (the firmware's estimator
+/// on its angle).
+fn score_against(
+    model: &Model,
+    log: &MotorLog,
+    pred: &Prediction,
+    wmeas: &[f64],
+) -> Result<Scores> {
     let src = crate::log::echo_path(&log.source);
     let window = model.sensor.velocity_window;
     let res = match sensor_chain::hall_resolution(log) {
         r if r > 0.0 => r,
         _ => model.sensor.hall_resolution_rad,
     };
-    let wmeas = sensor_chain::measured_velocity(log, window);
     let named =
         |col: &str, r: Result<f64>| r.map_err(|e| anyhow::anyhow!("{src}: column '{col}': {e}"));
     let fi = match (&log.i, &pred.i) {
@@ -750,13 +767,13 @@ pub fn score_prediction(model: &Model, log: &MotorLog, pred: &Prediction) -> Res
     };
     let fit = Fits {
         x: named("theta", fitpct::fit_percent(&log.theta, &pred.theta))?,
-        xdot: named("omega", fitpct::fit_percent(&wmeas, &pred.omega))?,
+        xdot: named("omega", fitpct::fit_percent(wmeas, &pred.omega))?,
         i: fi,
     };
     let (q, wq) = sensor_chain::through_sensor(&pred.t, &pred.theta, res, window);
     let fit_sensor = Fits {
         x: named("theta", fitpct::fit_percent(&log.theta, &q))?,
-        xdot: named("omega", fitpct::fit_percent(&wmeas, &wq))?,
+        xdot: named("omega", fitpct::fit_percent(wmeas, &wq))?,
         i: fi,
     };
     Ok(Scores {

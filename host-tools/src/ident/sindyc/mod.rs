@@ -185,11 +185,15 @@ pub fn identify(
         lib.add(Term::StribeckXdot, [true, false, false], opts.plant);
         Some(lib.len() - 1)
     };
-    let nes = rows::normal_equations(&lib, fit_logs, &hidden, opts.plant)?;
-    let held = match opts.plant {
-        Plant::Voltage => rows::held_current_normal(&lib, fit_logs, &hidden),
-        Plant::Torque => None,
-    };
+    // Two passes over the data, independent of each other.
+    let (nes, held) = rayon::join(
+        || rows::normal_equations(&lib, fit_logs, &hidden, opts.plant),
+        || match opts.plant {
+            Plant::Voltage => rows::held_current_normal(&lib, fit_logs, &hidden),
+            Plant::Torque => None,
+        },
+    );
+    let nes = nes?;
     let mut search = Search::new(&lib, nes, held, fit_logs, val_logs, &hidden, opts);
     let mut pareto = Vec::new();
     let mut allowed = search.allowed();

@@ -268,6 +268,25 @@ fn mul4(a: &M4, b: &M4) -> M4 {
     c
 }
 
+/// [`mul4`] for a finite `b`, skipping the zeros of `a` (a Jacobian's columns of the states
+/// the model does not depend on, and their powers): a skipped term is `±0`, and a sum that
+/// starts at `+0` is never `−0`, so adding it changes no bit of the product.
+fn mul4_sparse(a: &M4, b: &M4) -> M4 {
+    let mut c = [[0.0; 4]; 4];
+    for i in 0..4 {
+        for k in 0..4 {
+            let aik = a[i][k];
+            if aik == 0.0 {
+                continue;
+            }
+            for j in 0..4 {
+                c[i][j] += aik * b[k][j];
+            }
+        }
+    }
+    c
+}
+
 fn mul4v(a: &M4, v: &[f64; 4]) -> [f64; 4] {
     let mut out = [0.0; 4];
     for (o, r) in out.iter_mut().zip(a) {
@@ -301,9 +320,9 @@ pub fn phi1_times(a: &M4, b: &[f64; 4]) -> Option<[f64; 4]> {
     let scale = 0.5f64.powi(s);
     let m1 = a.map(|r| r.map(|v| v * scale));
     let c = b.map(|v| v * scale);
-    let m2 = mul4(&m1, &m1);
-    let m3 = mul4(&m2, &m1);
-    let m4 = mul4(&m2, &m2);
+    let m2 = mul4_sparse(&m1, &m1);
+    let m3 = mul4_sparse(&m2, &m1);
+    let m4 = mul4_sparse(&m2, &m2);
     // 1/(k+1)! for k = 0..11.
     let mut coef = [0.0; 12];
     let mut f = 1.0;
@@ -324,14 +343,14 @@ pub fn phi1_times(a: &M4, b: &[f64; 4]) -> Option<[f64; 4]> {
         q
     };
     let (q0, q1, q2) = (block(0), block(1), block(2));
-    let inner = mul4(&m4, &q2);
+    let inner = mul4_sparse(&m4, &q2);
     let mut mid = q1;
     for (r, row) in mid.iter_mut().enumerate() {
         for (v, w) in row.iter_mut().zip(inner[r]) {
             *v += w;
         }
     }
-    let outer = mul4(&m4, &mid);
+    let outer = mul4_sparse(&m4, &mid);
     let mut p = q0;
     for (r, row) in p.iter_mut().enumerate() {
         for (v, w) in row.iter_mut().zip(outer[r]) {
@@ -343,7 +362,7 @@ pub fn phi1_times(a: &M4, b: &[f64; 4]) -> Option<[f64; 4]> {
         return Some(g);
     }
     // E = exp(B) = I + B·φ1(B).
-    let mut e = mul4(&m1, &p);
+    let mut e = mul4_sparse(&m1, &p);
     for (r, row) in e.iter_mut().enumerate() {
         row[r] += 1.0;
     }
