@@ -298,11 +298,12 @@ fn restart_stribeck(
         }
         t
     };
-    let costs: Vec<f64> = starts
-        .par_iter()
-        .map(|&(a1, v0)| sim_error::cost(&res, &with(a1, v0)))
-        .collect();
+    // Only a start cheaper than where the refinement ended is of use: the others' runs
+    // stop once their segments so far cost more (∞).
     let ended_cost = sim_error::cost(&res, m);
+    let order: Vec<usize> = (0..starts.len()).collect();
+    let costs =
+        sim_error::lowest_costs(&res, &order, ended_cost, |k| with(starts[k].0, starts[k].1));
     let Some((&(a1, v0), &best)) = starts.iter().zip(&costs).min_by(|a, b| a.1.total_cmp(b.1))
     else {
         return Ok(None);

@@ -68,6 +68,11 @@ fn cost_of(r: &[f64]) -> f64 {
 /// Residual evaluations as the solver needs them: one point, and the Jacobian at a point.
 trait Residual {
     fn eval(&mut self, x: &[f64]) -> Result<Vec<f64>>;
+    /// The residuals at a trial point, or `None` when their `½‖r‖²` is known to exceed
+    /// `cost` (the point would be rejected) before they are all computed.
+    fn eval_below(&mut self, x: &[f64], _cost: f64) -> Result<Option<Vec<f64>>> {
+        self.eval(x).map(Some)
+    }
     /// The Jacobian at x (residuals r there) into `jac` (column j = ∂r/∂x_j); returns the
     /// number of evaluations it took.
     fn jacobian(
@@ -125,15 +130,28 @@ pub type ResidualFn<'a> = dyn Fn(&[f64]) -> Result<Vec<f64>> + Sync + 'a;
 /// A Jacobian function: the columns `∂r/∂x_j` at a point.
 pub type JacobianFn<'a> = dyn Fn(&[f64]) -> Result<Vec<Vec<f64>>> + Sync + 'a;
 
+/// A residual function that may give up: the residuals at a point, or `None` once their
+/// `½‖r‖²` is known to exceed the given cost.
+pub type BoundedResidualFn<'a> = dyn Fn(&[f64], f64) -> Result<Option<Vec<f64>>> + Sync + 'a;
+
 /// A residual function with its own (analytic) Jacobian.
 pub struct WithJacobian<'a> {
     pub f: &'a ResidualFn<'a>,
     pub jac: &'a JacobianFn<'a>,
+    /// For trial points: `f` that may stop early when the point cannot be accepted (its
+    /// cost above the current one); `None`: `f`.
+    pub f_below: Option<&'a BoundedResidualFn<'a>>,
 }
 
 impl Residual for WithJacobian<'_> {
     fn eval(&mut self, x: &[f64]) -> Result<Vec<f64>> {
         (self.f)(x)
+    }
+    fn eval_below(&mut self, x: &[f64], cost: f64) -> Result<Option<Vec<f64>>> {
+        match self.f_below {
+            Some(f) => f(x, cost),
+            None => (self.f)(x).map(Some),
+        }
     }
     fn jacobian(
         &mut self,
@@ -300,7 +318,8 @@ fn solve_with(
                 break;
             }
             evals += 1;
-            if let Ok(rn) = f.eval(&xn) {
+            // A trial that cannot lower the cost may stop early: it is rejected either way.
+            if let Ok(Some(rn)) = f.eval_below(&xn, cost) {
                 let cn = cost_of(&rn);
                 if cn.is_finite() && cn < cost {
                     let rel = (cost - cn) / cost.max(1e-300);
@@ -318,6 +337,9 @@ fn solve_with(
             }
             lambda *= 4.0;
         }
+        tracing::trace!(
+            "LM iteration {iterations}: cost {cost:.6e}, λ {lambda:.1e}, {evals} evaluations"
+        );
         progress(iterations, cost);
         if !accepted || small_step {
             break;
@@ -539,7 +561,11 @@ mod tests {
         ];
         for (x0, opts, after) in cases {
             calls.store(0, std::sync::atomic::Ordering::Relaxed);
-            let problem = WithJacobian { f: &f, jac: &jac };
+            let problem = WithJacobian {
+                f: &f,
+                jac: &jac,
+                f_below: None,
+            };
             let (lo, hi, scale) = ([0.0; 2], [100.0; 2], [1.0; 2]);
             let sol =
                 solve_with_jacobian(problem, &x0, &lo, &hi, &scale, opts, &mut |_, _| {}).unwrap();
@@ -553,6 +579,57 @@ mod tests {
                 .collect();
             assert_eq!(sol.std_err, expected);
         }
+    }
+
+    #[test]
+    fn trials_given_up_above_the_cost_keep_the_iterates() {
+        // An exponential from a start whose first trial steps raise the cost; the bounded
+        // evaluation gives up (None) whenever the trial costs more than the current point.
+        let t: Vec<f64> = (0..80).map(|k| k as f64 * 0.1).collect();
+        let y: Vec<f64> = t
+            .iter()
+            .enumerate()
+            .map(|(k, t)| 2.0 * (-0.7 * t).exp() + 0.01 * (k as f64 * 1.7).sin())
+            .collect();
+        let f = |x: &[f64]| -> Result<Vec<f64>> {
+            Ok(t.iter()
+                .zip(&y)
+                .map(|(t, y)| x[0] * (-x[1] * t).exp() - y)
+                .collect())
+        };
+        let jac = |x: &[f64]| -> Result<Vec<Vec<f64>>> {
+            let da = t.iter().map(|t| (-x[1] * t).exp()).collect();
+            let db = t.iter().map(|t| -x[0] * t * (-x[1] * t).exp()).collect();
+            Ok(vec![da, db])
+        };
+        let given_up = std::sync::atomic::AtomicUsize::new(0);
+        let f_below = |x: &[f64], cost: f64| -> Result<Option<Vec<f64>>> {
+            let r = f(x)?;
+            if cost_of(&r) > cost {
+                given_up.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                return Ok(None);
+            }
+            Ok(Some(r))
+        };
+        let (x0, lo, hi, scale) = ([50.0, 9.0], [0.0; 2], [100.0; 2], [1.0; 2]);
+        let run = |f_below: Option<&BoundedResidualFn>| {
+            let problem = WithJacobian {
+                f: &f,
+                jac: &jac,
+                f_below,
+            };
+            let opts = Options::default();
+            solve_with_jacobian(problem, &x0, &lo, &hi, &scale, opts, &mut |_, _| {}).unwrap()
+        };
+        let (plain, bounded) = (run(None), run(Some(&f_below)));
+        assert!(given_up.load(std::sync::atomic::Ordering::Relaxed) > 0);
+        assert_eq!(plain.x, bounded.x);
+        assert_eq!(plain.cost, bounded.cost);
+        assert_eq!(plain.std_err, bounded.std_err);
+        assert_eq!(
+            (plain.iterations, plain.evaluations),
+            (bounded.iterations, bounded.evaluations)
+        );
     }
 
     #[test]

@@ -130,7 +130,29 @@ impl<'a> Residuals<'a> {
             return self.eval_sindyc(model);
         }
         let p = RunParams::<f64>::of(model);
-        self.residuals(&p, &p, &mut SubstepRoots::Solve)
+        let r = self.residuals(&p, &p, &mut SubstepRoots::Solve, &mut |_| false)?;
+        Ok(r.unwrap_or_default())
+    }
+
+    /// `Σ r²` of a (non-SINDYc) model, or `None` as soon as the residuals of the segments
+    /// run so far sum to more than `bound()` (read after every segment; it may fall while
+    /// the run goes on): the rest of the run is then not simulated. The sum is the one
+    /// [`cost`] gives, term by term in the same order, so a model that is not given up
+    /// costs the same to the bit, and one given up costs more than a bound it was given.
+    pub fn cost_below(&self, model: &Model, bound: &dyn Fn() -> f64) -> Result<Option<f64>> {
+        if model.kind == ModelKind::Sindyc {
+            return Ok(Some(self.eval_sindyc(model)?.iter().map(|v| v * v).sum()));
+        }
+        let p = RunParams::<f64>::of(model);
+        let mut total = 0.0;
+        let mut checked = 0;
+        let mut above = |r: &[f64]| {
+            total = r[checked..].iter().fold(total, |acc, v| acc + v * v);
+            checked = r.len();
+            total > bound()
+        };
+        let r = self.residuals(&p, &p, &mut SubstepRoots::Solve, &mut above)?;
+        Ok(r.map(|_| total))
     }
 
     /// [`Self::eval`] of a (non-SINDYc) model, with the tape of its sub-steps' roots for
@@ -139,8 +161,30 @@ impl<'a> Residuals<'a> {
         let p = RunParams::<f64>::of(model);
         let samples: usize = self.targets.iter().map(|t| t.log.len()).sum();
         let mut tape = Vec::with_capacity(samples * freerun::SUBSTEPS);
-        let r = self.residuals(&p, &p, &mut SubstepRoots::Record(&mut tape))?;
-        Ok((r, tape))
+        let r = self.residuals(&p, &p, &mut SubstepRoots::Record(&mut tape), &mut |_| false)?;
+        Ok((r.unwrap_or_default(), tape))
+    }
+
+    /// [`Self::eval_recording`], or `None` as soon as the residuals of the segments run so
+    /// far have `Σ r²` above `bound` (the rest of the run is then not simulated): a trial
+    /// point that cannot be accepted against a cost of `bound / 2`.
+    pub fn eval_recording_below(
+        &self,
+        model: &Model,
+        bound: f64,
+    ) -> Result<Option<(Vec<f64>, Vec<f64>)>> {
+        let p = RunParams::<f64>::of(model);
+        let samples: usize = self.targets.iter().map(|t| t.log.len()).sum();
+        let mut tape = Vec::with_capacity(samples * freerun::SUBSTEPS);
+        let mut total = 0.0;
+        let mut checked = 0;
+        let mut above = |r: &[f64]| {
+            total = r[checked..].iter().fold(total, |acc, v| acc + v * v);
+            checked = r.len();
+            total > bound
+        };
+        let r = self.residuals(&p, &p, &mut SubstepRoots::Record(&mut tape), &mut above)?;
+        Ok(r.map(|r| (r, tape)))
     }
 
     /// The residuals and their Jacobian with respect to the free parameters `free` of
@@ -160,7 +204,8 @@ impl<'a> Residuals<'a> {
             None => SubstepRoots::Solve,
         };
         if free.is_empty() {
-            return Ok((self.residuals(&re, &re, &mut tape())?, Vec::new()));
+            let r = self.residuals(&re, &re, &mut tape(), &mut |_| false)?;
+            return Ok((r.unwrap_or_default(), Vec::new()));
         }
         let chunks: Vec<&[Free]> = free.chunks(PARAM_LANES).collect();
         let runs: Vec<Result<Vec<Tangent>>> = chunks
@@ -170,7 +215,8 @@ impl<'a> Residuals<'a> {
                 for (lane, fr) in chunk.iter().enumerate() {
                     seed(&mut p, &fr.slot, lane);
                 }
-                self.residuals(&p, &re, &mut tape())
+                let r = self.residuals(&p, &re, &mut tape(), &mut |_| false)?;
+                Ok(r.unwrap_or_default())
             })
             .collect();
         let mut values = Vec::new();
@@ -189,13 +235,15 @@ impl<'a> Residuals<'a> {
 
     /// The residuals of the model `p` (values `re`) in its number type: per log (or per
     /// segment), the velocity through the firmware's estimator, the current, the angle; the
-    /// sub-steps' roots of all its runs in one tape.
+    /// sub-steps' roots of all its runs in one tape. After each segment `give_up` sees the
+    /// residuals so far: when it says so, the rest is not simulated and the answer is `None`.
     fn residuals<D: RunScalar>(
         &self,
         p: &RunParams<D>,
         re: &RunParams<f64>,
         roots: &mut SubstepRoots,
-    ) -> Result<Vec<D>> {
+        give_up: &mut dyn FnMut(&[D]) -> bool,
+    ) -> Result<Option<Vec<D>>> {
         let c = D::constant;
         let mut r = Vec::new();
         for tg in &self.targets {
@@ -257,9 +305,12 @@ impl<'a> Residuals<'a> {
                 );
                 prev = Some((a, run));
                 s = e;
+                if give_up(&r) {
+                    return Ok(None);
+                }
             }
         }
-        Ok(r)
+        Ok(Some(r))
     }
 
     /// Free-run residuals of a SINDYc model (simulated by `ident::sindyc`).
@@ -321,6 +372,46 @@ pub fn cost(res: &Residuals, model: &Model) -> f64 {
     res.eval(model)
         .map(|r| r.iter().map(|v| v * v).sum())
         .unwrap_or(f64::INFINITY)
+}
+
+/// The costs ([`cost`]) of the models `model(k)`, `k < count`, evaluated side by side on
+/// rayon's threads, taken up in the order `order` (a permutation of `0..count`; the likely
+/// cheapest first). A model's run stops once its segments so far cost more than `bound` or
+/// the lowest cost of the models already evaluated, and its cost is then ∞ (as for a model
+/// that diverges): the lowest cost, and the first model in `0..count` with it, are those
+/// the full costs give, to the bit, whatever the threads' timing; the others may be ∞.
+pub fn lowest_costs(
+    res: &Residuals,
+    order: &[usize],
+    bound: f64,
+    model: impl Fn(usize) -> Model + Sync,
+) -> Vec<f64> {
+    use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering::Relaxed};
+    // Costs are ≥ 0, where the order of f64 bit patterns is the order of the values.
+    let lowest = AtomicU64::new(bound.max(0.0).to_bits());
+    let next = AtomicUsize::new(0);
+    let costs: Vec<AtomicU64> = (0..order.len())
+        .map(|_| AtomicU64::new(f64::INFINITY.to_bits()))
+        .collect();
+    (0..rayon::current_num_threads().max(1))
+        .into_par_iter()
+        .for_each(|_| {
+            while let Some(&k) = order.get(next.fetch_add(1, Relaxed)) {
+                let below = || f64::from_bits(lowest.load(Relaxed));
+                if let Ok(Some(c)) = res.cost_below(&model(k), &below) {
+                    if c.is_finite() {
+                        lowest.fetch_min(c.to_bits(), Relaxed);
+                        if let Some(slot) = costs.get(k) {
+                            slot.store(c.to_bits(), Relaxed);
+                        }
+                    }
+                }
+            }
+        });
+    costs
+        .iter()
+        .map(|c| f64::from_bits(c.load(Relaxed)))
+        .collect()
 }
 
 /// The effects of `model` with their magnitudes multiplied by `f` (keys other than the
@@ -432,12 +523,20 @@ pub fn better_effect_start(model: &mut Model, res: &Residuals) {
         }
         m
     };
-    let costs: Vec<f64> = starts.par_iter().map(|st| cost(res, &trial(st))).collect();
+    // Nearest the weak-form estimate first: its cost is the first bound the others meet.
+    let mut order: Vec<usize> = (0..starts.len()).collect();
+    order.sort_by(|&a, &b| {
+        let off = |(f, d, mv, kf): Start| {
+            (f - 1.0).abs() + d.abs() + f64::from(u8::from(mv)) + kf.ln().abs()
+        };
+        off(starts[a]).total_cmp(&off(starts[b]))
+    });
+    let costs = lowest_costs(res, &order, f64::INFINITY, |k| trial(&starts[k]));
     let mut best = (f64::INFINITY, (1.0, 0.0, false, 1.0));
     for (st, &c) in starts.iter().zip(&costs) {
         tracing::debug!(
             "effects {:?}, start (factor, shift in Hall steps, load inertia out of J, \
-             stiffness factor) {st:?}: cost {c:.4e}",
+             stiffness factor) {st:?}: cost {c:.4e} (∞: above the lowest)",
             model.effects
         );
         if c < best.0 {
@@ -531,16 +630,21 @@ pub fn refine_on(
         // Levenberg–Marquardt asks for the Jacobian at the cheapest point evaluated so far:
         // its sub-steps' roots are kept from that evaluation.
         let cheapest: std::sync::Mutex<Option<CheapestPoint>> = Default::default();
-        let f = |x: &[f64]| {
-            let (r, tape) = res.eval_recording(&model_at(x))?;
+        // A trial point is rejected when it costs more than the current point (bound: the
+        // current cost): its run stops once the segments so far cost more.
+        let f_below = |x: &[f64], current: f64| {
+            let Some((r, tape)) = res.eval_recording_below(&model_at(x), 2.0 * current)? else {
+                return Ok(None);
+            };
             let c: f64 = r.iter().map(|v| v * v).sum();
             if let Ok(mut kept) = cheapest.lock() {
                 if kept.as_ref().is_none_or(|k| c < k.1) {
                     *kept = Some((x.to_vec(), c, tape));
                 }
             }
-            Ok(r)
+            Ok(Some(r))
         };
+        let f = |x: &[f64]| Ok(f_below(x, f64::INFINITY)?.unwrap_or_default());
         // Exact Jacobian by forward sensitivities of the free run; without the
         // finite differences' noise the iterations may stop on significance.
         let jac = |x: &[f64]| {
@@ -556,9 +660,20 @@ pub fn refine_on(
             noise_stop: true,
             ..opts
         };
-        let problem = nlsq::WithJacobian { f: &f, jac: &jac };
+        let problem = nlsq::WithJacobian {
+            f: &f,
+            jac: &jac,
+            f_below: Some(&f_below),
+        };
         nlsq::solve_with_jacobian(problem, &x0, &lo, &hi, &scale, opts, progress)?
     };
+    tracing::debug!(
+        "refined {} parameters: {} iterations, {} evaluations, cost {:.4e}",
+        free.len(),
+        sol.iterations,
+        sol.evaluations,
+        sol.cost
+    );
     for (fr, v) in free.iter().zip(&sol.x) {
         fr.slot.set(model, *v);
     }
@@ -790,6 +905,57 @@ mod tests {
         assert!(
             (c_seg - c_free).abs() > 1e-6 * c_free,
             "without a velocity column: segments {c_seg:.9e}, free run {c_free:.9e}"
+        );
+    }
+
+    /// Grid costs given up early keep the lowest cost and its first model to the bit, and
+    /// a model's cost that is not given up is [`cost`]'s.
+    #[test]
+    fn costs_given_up_keep_the_lowest_to_the_bit() {
+        let cfg = EmulatorConfig::paper();
+        let logs = [simulate_signal(&cfg, SignalKind::A, 12.0).unwrap().log];
+        let mut seg = Residuals::segmented(&logs, 10);
+        seg.segment = Some(120);
+        let (model, _) = model_and_free(&cfg);
+        // Inertias around the model's, and the cheapest of them again at the end (a tie).
+        let mut factors = vec![1.3, 0.7, 1.1, 0.9, 1.0, 1.2, 0.8];
+        let with_j = |f: f64| {
+            let mut m = model.clone();
+            m.motor.j *= f;
+            m
+        };
+        let seven: Vec<f64> = factors.iter().map(|f| cost(&seg, &with_j(*f))).collect();
+        let lowest = seven.iter().copied().fold(f64::INFINITY, f64::min);
+        let first = seven.iter().position(|c| *c == lowest).unwrap();
+        factors.push(factors[first]);
+        let at = |k: usize| with_j(factors[k]);
+        let full: Vec<f64> = (0..factors.len()).map(|k| cost(&seg, &at(k))).collect();
+        for order in [vec![0, 1, 2, 3, 4, 5, 6, 7], vec![7, 4, 6, 5, 3, 2, 1, 0]] {
+            let costs = lowest_costs(&seg, &order, f64::INFINITY, at);
+            for (k, (c, f)) in costs.iter().zip(&full).enumerate() {
+                assert!(
+                    c == f || (c.is_infinite() && f > &lowest),
+                    "{k}: {c} vs {f}"
+                );
+            }
+            assert_eq!(costs[first], lowest);
+            assert_eq!(costs[7], lowest, "the tie is not given up");
+            assert!(costs.iter().all(|c| *c >= lowest));
+        }
+        // Against a bound below every cost, every model is given up within its first
+        // segments; at the lowest cost, only that cost (and its tie) are kept.
+        let costs = lowest_costs(&seg, &[0, 1, 2, 3, 4, 5, 6, 7], 0.5 * lowest, at);
+        assert!(costs.iter().all(|c| c.is_infinite()), "{costs:?}");
+        let costs = lowest_costs(&seg, &[0, 1, 2, 3, 4, 5, 6, 7], lowest, at);
+        assert_eq!((costs[first], costs[7]), (lowest, lowest));
+        // The free run of one log is one segment: nothing to give up before its end.
+        let free = Residuals::new(&logs, 10);
+        let m = at(0);
+        let c = free.cost_below(&m, &|| 0.0).unwrap();
+        assert_eq!(c, None);
+        assert_eq!(
+            free.cost_below(&m, &|| f64::INFINITY).unwrap(),
+            Some(cost(&free, &m))
         );
     }
 
