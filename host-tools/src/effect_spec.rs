@@ -14,6 +14,8 @@ pub struct Key {
     pub unit: &'static str,
     pub default: f64,
     pub meaning: &'static str,
+    /// Never negative, whatever its unit allows elsewhere (a width, a spring, a damper).
+    pub nonnegative: bool,
 }
 
 impl Key {
@@ -22,10 +24,11 @@ impl Key {
     /// stays finite and quick. Signs are free where a fit may estimate either sign; a time
     /// constant or a velocity scale must be positive.
     pub fn range(&self) -> (f64, f64) {
-        if self.name == "gap" {
-            // A backlash gap is a width: never negative.
-            return (0.0, 1e3);
-        }
+        let (lo, hi) = self.unit_range();
+        (if self.nonnegative { lo.max(0.0) } else { lo }, hi)
+    }
+
+    fn unit_range(&self) -> (f64, f64) {
         match self.unit {
             "N·m" | "N·m·s/rad" | "V" | "A" => (-1e4, 1e4),
             "N·m/rad" => (-1e9, 1e9),
@@ -54,6 +57,15 @@ const fn k(name: &'static str, unit: &'static str, default: f64, meaning: &'stat
         unit,
         default,
         meaning,
+        nonnegative: false,
+    }
+}
+
+/// [`k`] for a key that is never negative.
+const fn k0(name: &'static str, unit: &'static str, default: f64, meaning: &'static str) -> Key {
+    Key {
+        nonnegative: true,
+        ..k(name, unit, default, meaning)
     }
 }
 
@@ -101,7 +113,8 @@ pub fn table_value_key(k: usize) -> &'static str {
 #[rustfmt::skip]
 const BACKLASH_KEYS: &[Key] = &[
     k("j2", "kg·m²", 6e-4, "inertia of the load behind the gap"),
-    k("gap", "rad", 0.19, "angle the rotor turns alone after a reversal"),
+    // A gap is a width.
+    k0("gap", "rad", 0.19, "angle the rotor turns alone after a reversal"),
 ];
 
 /// Coulomb friction.
@@ -190,8 +203,10 @@ const LOAD_FRICTION_KEYS: &[Key] = &[k("mu", "1", 0.2, "friction per N·m of tra
 #[rustfmt::skip]
 const COMPLIANCE_KEYS: &[Key] = &[
     k("j2", "kg·m²", 6e-4, "inertia of the load behind the coupling"),
-    k("k", "N·m/rad", 0.2, "stiffness of the coupling"),
-    k("c", "N·m·s/rad", 6e-4, "damping of the coupling"),
+    // A spring or damper of negative sign would give energy back: the coupled free run and
+    // the plant would be unstable, and the implicit step's divisor j2/h + k·h + c could vanish.
+    k0("k", "N·m/rad", 0.2, "stiffness of the coupling"),
+    k0("c", "N·m·s/rad", 6e-4, "damping of the coupling"),
 ];
 
 /// A torque constant falling with current. Default k = 2e-4/A²: K_t down 2 % at 10 A and
@@ -341,21 +356,6 @@ impl EffectSpec {
                         "effect 'cogging': harmonic must be a whole number of 2 or more (got {}); \
                          one period per revolution is 'position_load'",
                         crate::validate::show(*h)
-                    );
-                }
-            }
-        }
-        if self.kind == EffectKind::Compliance {
-            // A spring or damper of negative sign gives energy back: the coupled free run
-            // (and the board's plant) would be unstable, and the implicit step's divisor
-            // j2/h + k·h + c could vanish.
-            for key in ["k", "c"] {
-                if let Some(&v) = self.values.get(key).filter(|v| **v < 0.0) {
-                    bail!(
-                        "effect 'compliance': key '{key}' must be 0 or more (got {}): a \
-                         coupling's stiffness k [N·m/rad] and damping c [N·m·s/rad] cannot \
-                         give energy back",
-                        crate::validate::show(v)
                     );
                 }
             }
@@ -722,8 +722,11 @@ mod tests {
             ("table:b32=1", "unknown key"),
             ("backlash:gap=-0.1", "-0.1 is outside 0 .. 1000"),
             ("table:bins=4,b20=1", "unknown key 'b20'"),
-            ("compliance:k=-1", "key 'k' must be 0 or more"),
-            ("compliance:c=-0.001", "key 'c' must be 0 or more"),
+            ("compliance:k=-1", "key 'k' [N·m/rad]: -1 is outside 0 .."),
+            (
+                "compliance:c=-0.001",
+                "key 'c' [N·m·s/rad]: -0.001 is outside 0 ..",
+            ),
         ] {
             let e = EffectSpec::parse(bad).unwrap_err().to_string();
             assert!(e.contains(why), "{bad}: {e}");

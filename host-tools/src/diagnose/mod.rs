@@ -885,22 +885,6 @@ pub fn explain(spec: &EffectSpec, score: f64, eq: Equation) -> String {
     )
 }
 
-/// A LuGre law as effects: Coulomb (α0), Stribeck (α1, v0), viscous (α2), presliding (σ0, σ1).
-pub fn lugre_effects(l: &control::lugre::LugreParams<f64>) -> Vec<Effect<f64>> {
-    vec![
-        Effect::Coulomb { fc: l.alpha0 },
-        Effect::Stribeck {
-            fs: l.alpha1,
-            vs: l.v0,
-        },
-        Effect::Viscous { b: l.alpha2 },
-        Effect::Presliding {
-            sigma0: l.sigma0,
-            sigma1: l.sigma1,
-        },
-    ]
-}
-
 impl Structure {
     /// The paper motor's LuGre law (the emulator's own friction) with its K_t.
     pub fn lugre_paper(plant: Plant) -> Structure {
