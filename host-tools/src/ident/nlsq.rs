@@ -519,27 +519,39 @@ mod tests {
         assert_eq!(par.iterations, sol.iterations);
     }
 
-    #[test]
-    fn standard_errors_use_the_jacobian_at_the_solution() {
-        // y = a·exp(−b·t) with a deterministic ripple, so the cost at the minimum is not 0;
-        // started where the first steps are rejected.
-        let t: Vec<f64> = (0..60).map(|k| k as f64 * 0.1).collect();
-        let y: Vec<f64> = t
+    /// `n` samples every 0.1 s of y = 2·exp(−0.7·t) plus a deterministic ripple of 0.01, so
+    /// that the cost at the minimum is not 0.
+    fn rippled_decay(n: usize) -> (Vec<f64>, Vec<f64>) {
+        let t: Vec<f64> = (0..n).map(|k| k as f64 * 0.1).collect();
+        let y = t
             .iter()
             .enumerate()
             .map(|(k, t)| 2.0 * (-0.7 * t).exp() + 0.01 * (k as f64 * 1.7).sin())
             .collect();
-        let f = |x: &[f64]| -> Result<Vec<f64>> {
-            Ok(t.iter()
-                .zip(&y)
-                .map(|(t, y)| x[0] * (-x[1] * t).exp() - y)
-                .collect())
-        };
-        let columns = |x: &[f64]| -> Vec<Vec<f64>> {
-            let da = t.iter().map(|t| (-x[1] * t).exp()).collect();
-            let db = t.iter().map(|t| -x[0] * t * (-x[1] * t).exp()).collect();
-            vec![da, db]
-        };
+        (t, y)
+    }
+
+    /// Residuals of the model a·exp(−b·t), x = [a, b].
+    fn decay_residuals(t: &[f64], y: &[f64], x: &[f64]) -> Vec<f64> {
+        t.iter()
+            .zip(y)
+            .map(|(t, y)| x[0] * (-x[1] * t).exp() - y)
+            .collect()
+    }
+
+    /// Jacobian columns of [`decay_residuals`]: ∂/∂a, ∂/∂b.
+    fn decay_columns(t: &[f64], x: &[f64]) -> Vec<Vec<f64>> {
+        let da = t.iter().map(|t| (-x[1] * t).exp()).collect();
+        let db = t.iter().map(|t| -x[0] * t * (-x[1] * t).exp()).collect();
+        vec![da, db]
+    }
+
+    #[test]
+    fn standard_errors_use_the_jacobian_at_the_solution() {
+        // Started where the first steps are rejected.
+        let (t, y) = rippled_decay(60);
+        let f = |x: &[f64]| Ok(decay_residuals(&t, &y, x));
+        let columns = |x: &[f64]| decay_columns(&t, x);
         let calls = std::sync::atomic::AtomicUsize::new(0);
         let jac = |x: &[f64]| -> Result<Vec<Vec<f64>>> {
             calls.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
@@ -585,23 +597,9 @@ mod tests {
     fn trials_given_up_above_the_cost_keep_the_iterates() {
         // An exponential from a start whose first trial steps raise the cost; the bounded
         // evaluation gives up (None) whenever the trial costs more than the current point.
-        let t: Vec<f64> = (0..80).map(|k| k as f64 * 0.1).collect();
-        let y: Vec<f64> = t
-            .iter()
-            .enumerate()
-            .map(|(k, t)| 2.0 * (-0.7 * t).exp() + 0.01 * (k as f64 * 1.7).sin())
-            .collect();
-        let f = |x: &[f64]| -> Result<Vec<f64>> {
-            Ok(t.iter()
-                .zip(&y)
-                .map(|(t, y)| x[0] * (-x[1] * t).exp() - y)
-                .collect())
-        };
-        let jac = |x: &[f64]| -> Result<Vec<Vec<f64>>> {
-            let da = t.iter().map(|t| (-x[1] * t).exp()).collect();
-            let db = t.iter().map(|t| -x[0] * t * (-x[1] * t).exp()).collect();
-            Ok(vec![da, db])
-        };
+        let (t, y) = rippled_decay(80);
+        let f = |x: &[f64]| Ok(decay_residuals(&t, &y, x));
+        let jac = |x: &[f64]| Ok(decay_columns(&t, x));
         let given_up = std::sync::atomic::AtomicUsize::new(0);
         let f_below = |x: &[f64], cost: f64| -> Result<Option<Vec<f64>>> {
             let r = f(x)?;
