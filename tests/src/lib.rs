@@ -56,6 +56,16 @@ pub fn motorid(dir: &Path, args: &[&str]) -> Output {
         .expect("cannot start motorid")
 }
 
+/// The stdout of a command that must succeed; its stderr is the failure's message.
+pub fn stdout_of_success(out: Output) -> String {
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout).expect("stdout is UTF-8")
+}
+
 /// Run `xtask ARGS...` (the project automation: `cargo xtask ARGS...`) in `dir`.
 pub fn xtask(dir: &Path, args: &[&str]) -> Output {
     Command::new(bin_dir().join("xtask"))

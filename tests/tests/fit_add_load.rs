@@ -7,16 +7,7 @@
 //! choice was made on it either).
 use motorid::model::Model;
 use std::path::Path;
-use tests::motorid;
-
-fn ok(out: std::process::Output) -> String {
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8(out.stdout).unwrap()
-}
+use tests::{motorid, stdout_of_success as ok};
 
 /// Simulate `signal` for 90 s with `effect` into `name`.
 fn simulate(d: &Path, signal: &str, seed: &str, effect: &str, name: &str) {

@@ -1,15 +1,6 @@
 //! A torque constant that falls with current (`saturation`), through the user's commands:
 //! simulate it on voltage steps, fit it with `fit --add saturation`, take it to the board.
-use tests::motorid;
-
-fn ok(out: std::process::Output) -> String {
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8(out.stdout).unwrap()
-}
+use tests::{motorid, stdout_of_success as ok};
 
 #[test]
 fn fit_add_saturation_recovers_k_and_exports_it() {
