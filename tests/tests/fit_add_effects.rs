@@ -308,7 +308,7 @@ fn check(effects: Vec<EffectKind>) {
     }
     assert!(
         failed.is_empty(),
-        "the loop did not add the hidden effect (or a reported look-alike of it) or did not \
-         close half the gap for {failed:?}"
+        "the loop did not add the hidden effect by name or did not close half the gap for \
+         {failed:?}"
     );
 }
