@@ -1,7 +1,8 @@
 //! The board's logic, written once: the command handler, the modes (idle, speed,
 //! experiment, commissioning), the limits and the fault logic. The firmware
-//! (`firmware/src/main.rs`) and the emulated board (`host-tools/src/board/sim.rs`) both run
-//! this [`Board`]; they only move bytes, read sensors and drive the bridge.
+//! (`firmware/src/main.rs`) and the emulated board
+//! (`host-tools/src/board/emulated_board.rs`) both run this [`Board`]; they only move bytes,
+//! read sensors and drive the bridge.
 //!
 //! Per 12 ms period the transport calls [`Board::tick`] with the [`Measurements`] and applies
 //! the [`Drive`] it returns; every host message goes to [`Board::handle`] (uploads to
