@@ -8,7 +8,7 @@ use control::frame::{BoardMsg, Excitation, Fault, HostMsg, Mode};
 use control::lugre::LugreParams;
 use control::step::{Faults, MEASURED_CURRENT_GAIN};
 use motorid::board::emulated_board::EmulatedBoard;
-use motorid::board::emulated_flash::{RamFlash, PAGE};
+use motorid::board::emulated_flash::RamFlash;
 use motorid::board::hw::Wiring;
 use motorid::emulator::EmulatorConfig;
 
@@ -28,7 +28,7 @@ fn paper_coefficients(u_max: f32, i_max: f32) -> Coefficients {
 
 /// The emulated paper motor on a board whose flash holds `co`.
 fn board_with(co: &Coefficients) -> EmulatedBoard {
-    let mut slots = control::slots::Slots::new(RamFlash::new(None), 0, PAGE as u32).unwrap();
+    let mut slots = RamFlash::new(None).into_slots().unwrap();
     slots
         .store(&motorid::board::coeffs::encode(co).unwrap())
         .unwrap();
@@ -531,7 +531,7 @@ fn a_model_back_emf_far_below_the_motors_stops_at_the_first_braking_period() {
     co.motor.kb *= 0.4;
     let i_max = f64::from(co.limits.i_max);
     let plant = EmulatorConfig::paper().with_extra_load(|x| if x.t > 0.5 { -0.8 } else { 0.0 });
-    let mut slots = control::slots::Slots::new(RamFlash::new(None), 0, PAGE as u32).unwrap();
+    let mut slots = RamFlash::new(None).into_slots().unwrap();
     slots
         .store(&motorid::board::coeffs::encode(&co).unwrap())
         .unwrap();
@@ -575,7 +575,7 @@ fn a_load_step_at_speed_holds_the_current_limit() {
             };
             on * torque * (x.omega / 5.0).clamp(-1.0, 1.0)
         });
-        let mut slots = control::slots::Slots::new(RamFlash::new(None), 0, PAGE as u32).unwrap();
+        let mut slots = RamFlash::new(None).into_slots().unwrap();
         slots
             .store(&motorid::board::coeffs::encode(&co).unwrap())
             .unwrap();
@@ -613,7 +613,7 @@ fn a_load_that_drives_the_motor_past_the_speed_limit_is_an_over_speed_fault() {
     co.motor.r = 2.0;
     let mut plant = EmulatorConfig::paper().with_extra_load(|x| if x.t > 1.5 { -1.1 } else { 0.0 });
     plant.motor.r = 2.0;
-    let mut slots = control::slots::Slots::new(RamFlash::new(None), 0, PAGE as u32).unwrap();
+    let mut slots = RamFlash::new(None).into_slots().unwrap();
     slots
         .store(&motorid::board::coeffs::encode(&co).unwrap())
         .unwrap();
@@ -807,7 +807,7 @@ fn a_current_sense_that_sees_no_current_fails_commissioning_and_keeps_the_blob()
     for noise in [0.0, 0.05] {
         let mut plant = EmulatorConfig::paper();
         plant.current_noise = noise;
-        let mut slots = control::slots::Slots::new(RamFlash::new(None), 0, PAGE as u32).unwrap();
+        let mut slots = RamFlash::new(None).into_slots().unwrap();
         slots
             .store(&motorid::board::coeffs::encode(&co).unwrap())
             .unwrap();
@@ -897,7 +897,7 @@ fn an_inverted_current_sense_without_commissioning_stops_near_the_current_limit(
     // model's window alone and stops with a current-sense fault within a few periods: the
     // true current never goes much beyond the standing limit, let alone the trip.
     let co = paper_coefficients(24.0, 10.0);
-    let mut slots = control::slots::Slots::new(RamFlash::new(None), 0, PAGE as u32).unwrap();
+    let mut slots = RamFlash::new(None).into_slots().unwrap();
     slots
         .store(&motorid::board::coeffs::encode(&co).unwrap())
         .unwrap();
@@ -926,7 +926,7 @@ fn an_inverted_current_sense_without_commissioning_stops_near_the_current_limit(
 
     // An open-loop experiment from rest (a steady 10 V, far above the 1.7 V that drive the
     // limit at standstill) goes through the same window: the same stop.
-    let mut slots = control::slots::Slots::new(RamFlash::new(None), 0, PAGE as u32).unwrap();
+    let mut slots = RamFlash::new(None).into_slots().unwrap();
     slots
         .store(&motorid::board::coeffs::encode(&co).unwrap())
         .unwrap();

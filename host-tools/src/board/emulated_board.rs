@@ -44,8 +44,7 @@ impl EmulatedBoard {
     /// without compensation, with a warning, as the firmware does); the motor is connected
     /// as `wiring` says.
     pub fn new(plant: EmulatorConfig, wiring: Wiring, flash: RamFlash) -> Result<EmulatedBoard> {
-        let mut slots = Slots::new(flash, 0, super::emulated_flash::PAGE as u32)
-            .map_err(|e| anyhow!("emulated flash geometry: {e:?}"))?;
+        let mut slots = flash.into_slots()?;
         let loaded = slots
             .load()
             .map_err(|e| anyhow!("emulated flash read: {e:?}"))?;
@@ -204,14 +203,45 @@ mod tests {
         m
     }
 
-    #[test]
-    fn upload_with_a_retried_chunk_commits_once_and_is_refused_while_running() {
-        let mut sim = EmulatedBoard::new(
+    /// Sends `blob` through the upload handler (begin, each chunk `sends` times, commit).
+    fn send_blob(sim: &mut EmulatedBoard, blob: &[u8], sends: usize) {
+        sim.receive(&frame(&HostMsg::UploadBegin {
+            total_len: blob.len() as u16,
+            crc: control::blob::CRC32.checksum(blob),
+        }));
+        for (k, c) in blob.chunks(CHUNK_LEN).enumerate() {
+            for _ in 0..sends {
+                sim.receive(&frame(&chunk(k as u16, c)));
+            }
+        }
+        sim.receive(&frame(&HostMsg::UploadCommit));
+    }
+
+    /// The largest `|f(sample)|` of a run.
+    fn peak(samples: &[Sample], f: impl Fn(&Sample) -> f32) -> f32 {
+        samples.iter().map(|s| f(s).abs()).fold(0.0, f32::max)
+    }
+
+    /// The paper motor with its rotor locked (an enormous viscous load).
+    fn locked_rotor() -> EmulatorConfig {
+        let mut plant = EmulatorConfig::paper();
+        plant.extra_load = Some(std::sync::Arc::new(|x| 1.0e4 * x.omega));
+        plant
+    }
+
+    /// A board on the paper motor whose flash holds nothing, its boot output unread.
+    fn empty_board() -> EmulatedBoard {
+        EmulatedBoard::new(
             EmulatorConfig::paper(),
             Wiring::default(),
             RamFlash::new(None),
         )
-        .unwrap();
+        .unwrap()
+    }
+
+    #[test]
+    fn upload_with_a_retried_chunk_commits_once_and_is_refused_while_running() {
+        let mut sim = empty_board();
         assert_eq!(
             replies(&mut sim),
             [BoardMsg::Warning(Warning::NoCoefficients)]
@@ -222,17 +252,8 @@ mod tests {
             ..identified()
         };
         let blob = crate::board::coeffs::encode(&co).unwrap();
-        let crc = control::blob::CRC32.checksum(&blob);
-        sim.receive(&frame(&HostMsg::UploadBegin {
-            total_len: blob.len() as u16,
-            crc,
-        }));
-        for (k, c) in blob.chunks(CHUNK_LEN).enumerate() {
-            sim.receive(&frame(&chunk(k as u16, c)));
-            // A lost ack: the host sends the same chunk again.
-            sim.receive(&frame(&chunk(k as u16, c)));
-        }
-        sim.receive(&frame(&HostMsg::UploadCommit));
+        // Each ack lost: the host sends every chunk again.
+        send_blob(&mut sim, &blob, 2);
         let r = replies(&mut sim);
         assert_eq!(r.last(), Some(&BoardMsg::Committed { seq: 1 }));
         assert!(!r.iter().any(|m| matches!(m, BoardMsg::Nack(_))), "{r:?}");
@@ -250,27 +271,14 @@ mod tests {
             matches!(r[2], BoardMsg::Sample(Sample { seq: 1, .. })),
             "{r:?}"
         );
-        sim.receive(&frame(&HostMsg::UploadBegin {
-            total_len: blob.len() as u16,
-            crc,
-        }));
-        sim.receive(&frame(&HostMsg::UploadCommit));
+        send_blob(&mut sim, &blob, 0);
         let r = replies(&mut sim);
         assert_eq!(r.last(), Some(&BoardMsg::Nack(Nack::Busy)));
     }
 
     /// Upload `co` through the board's own upload handler.
     fn upload(sim: &mut EmulatedBoard, co: &Coefficients) {
-        let blob = crate::board::coeffs::encode(co).unwrap();
-        let crc = control::blob::CRC32.checksum(&blob);
-        sim.receive(&frame(&HostMsg::UploadBegin {
-            total_len: blob.len() as u16,
-            crc,
-        }));
-        for (k, c) in blob.chunks(CHUNK_LEN).enumerate() {
-            sim.receive(&frame(&chunk(k as u16, c)));
-        }
-        sim.receive(&frame(&HostMsg::UploadCommit));
+        send_blob(sim, &crate::board::coeffs::encode(co).unwrap(), 1);
         let r = replies(sim);
         assert!(
             matches!(r.last(), Some(BoardMsg::Committed { .. })),
@@ -341,14 +349,7 @@ mod tests {
         let blob = crate::board::coeffs::encode(&identified()).unwrap();
         let mut bad = blob.clone();
         bad[20] ^= 0x40;
-        sim.receive(&frame(&HostMsg::UploadBegin {
-            total_len: bad.len() as u16,
-            crc: control::blob::CRC32.checksum(&bad),
-        }));
-        for (k, c) in bad.chunks(CHUNK_LEN).enumerate() {
-            sim.receive(&frame(&chunk(k as u16, c)));
-        }
-        sim.receive(&frame(&HostMsg::UploadCommit));
+        send_blob(&mut sim, &bad, 1);
         assert_eq!(
             replies(&mut sim).last(),
             Some(&BoardMsg::Nack(Nack::BadBlob))
@@ -392,7 +393,7 @@ mod tests {
         let (f, samples) = run_until_fault(&mut sim, 600);
         assert_eq!(f, None);
         assert_eq!(samples.len(), 500);
-        let peak = samples.iter().map(|s| s.u.abs()).fold(0.0, f32::max);
+        let peak = peak(&samples, |s| s.u);
         let by_current = 0.35 * co_default_r_i_max();
         assert!(peak > 1.0 && peak <= by_current + 1e-4, "peak {peak}");
     }
@@ -410,7 +411,7 @@ mod tests {
         sim.receive(&frame(&HostMsg::SetMode { mode: Mode::Speed }));
         let (f, samples) = run_until_fault(&mut sim, 150);
         assert_eq!(f, None);
-        let peak = samples.iter().map(|s| s.u.abs()).fold(0.0, f32::max);
+        let peak = peak(&samples, |s| s.u);
         assert!((peak - 3.0).abs() < 1e-6, "peak {peak}");
     }
 
@@ -447,8 +448,7 @@ mod tests {
     #[test]
     fn a_locked_rotor_is_held_at_the_current_limit_then_stops_as_a_stall() {
         // A locked rotor and a voltage ramp of 8 V/s: 44 A after 1.2 s without a limit.
-        let mut plant = EmulatorConfig::paper();
-        plant.extra_load = Some(std::sync::Arc::new(|x| 1.0e4 * x.omega));
+        let plant = locked_rotor();
         let mut co = identified();
         co.pi.u_max = 20.0;
         co.limits.i_max = 20.0;
@@ -461,7 +461,7 @@ mod tests {
         let (f, samples) = run_until_fault(&mut sim, 300);
         assert_eq!(f, Some(Fault::Stall));
         // Held at 0.8·i_max = 16 A, below the 20 A trip, for the stall time.
-        let peak = samples.iter().map(|s| s.i.abs()).fold(0.0, f32::max);
+        let peak = peak(&samples, |s| s.i);
         assert!(peak <= 16.5, "peak {peak} A");
         let last = samples.last().map_or(0.0, |s| s.i);
         assert!((last - 16.0).abs() < 1.0, "last {last} A");
@@ -479,8 +479,7 @@ mod tests {
         // period, before the 12 ms software limit (the widest allowed) can act. The blob
         // says R is ten times the winding's, so the current window lets 12 V through (as a
         // shorted winding would).
-        let mut plant = EmulatorConfig::paper();
-        plant.extra_load = Some(std::sync::Arc::new(|x| 1.0e4 * x.omega));
+        let plant = locked_rotor();
         let mut co = identified();
         co.limits.i_max = control::board::HW_TRIP_A;
         co.motor.r *= 10.0;
@@ -508,9 +507,7 @@ mod tests {
 
     #[test]
     fn a_blocked_rotor_is_a_stall_fault() {
-        let mut plant = EmulatorConfig::paper();
-        // A locked rotor: an enormous viscous load.
-        plant.extra_load = Some(std::sync::Arc::new(|x| 1.0e4 * x.omega));
+        let plant = locked_rotor();
         let mut co = identified();
         co.limits.i_max = control::board::HW_TRIP_A;
         let mut sim = sim_with(plant, Some(&co));
@@ -534,12 +531,7 @@ mod tests {
         // Two uploads (slot 0, then slot 1), then a double ECC error in slot 1's header, as
         // a commit cut by a power loss leaves it: the board boots on slot 0 instead of
         // hanging, and the next upload rewrites slot 1.
-        let mut slots = Slots::new(
-            RamFlash::new(None),
-            0,
-            super::super::emulated_flash::PAGE as u32,
-        )
-        .unwrap();
+        let mut slots = RamFlash::new(None).into_slots().unwrap();
         let old = identified();
         let mut new = identified();
         new.pi.kp = 0.125;
@@ -571,8 +563,7 @@ mod tests {
         // coefficients, warns, and allows identify and commissioning only.
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("flash.bin");
-        let page = super::super::emulated_flash::PAGE as u32;
-        let mut slots = Slots::new(RamFlash::new(Some(path.clone())), 0, page).unwrap();
+        let mut slots = RamFlash::new(Some(path.clone())).into_slots().unwrap();
         slots
             .store(&crate::board::coeffs::encode(&identified()).unwrap())
             .unwrap();
