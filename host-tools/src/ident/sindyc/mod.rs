@@ -41,6 +41,7 @@
 //!    equations and Pareto table.
 pub mod embedding;
 pub mod model_file;
+pub mod pieces;
 pub mod refine;
 pub mod rows;
 pub mod search;

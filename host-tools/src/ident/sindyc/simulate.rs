@@ -68,7 +68,7 @@ pub fn simulate_substeps(
         (Some(i), true) => i[0],
         _ => 0.0,
     };
-    let mut s = [log.theta[0], freerun::initial_omega(log), 0.0, i0];
+    let start = [log.theta[0], freerun::initial_omega(log), 0.0, i0];
     let zb = model.z_bound();
     let rhs = |s: &[f64; 4], u: f64| -> [f64; 4] {
         let p = TermInputs {
@@ -83,30 +83,21 @@ pub fn simulate_substeps(
     };
     let deps = state_dependencies(model, voltage);
     let kinks = sign_kinks(model, voltage);
-    let mut out = Prediction {
-        t: log.t.clone(),
-        theta: Vec::with_capacity(n),
-        omega: Vec::with_capacity(n),
-        i: voltage.then(|| Vec::with_capacity(n)),
-        z: Some(Vec::with_capacity(n)),
-    };
-    for k in 0..n {
-        out.theta.push(s[0]);
-        out.omega.push(s[1]);
-        if let Some(i) = &mut out.i {
-            i.push(s[3]);
-        }
-        if let Some(z) = &mut out.z {
-            z.push(s[2]);
-        }
-        if k + 1 == n {
-            break;
-        }
+    // The state after sample k from the one at k, and whether a step was split. With
+    // `increment`, the angle enters at -0 so that the angle's entry of the result is the
+    // increment exactly (`-0 + x = x`); a run whose steps do not depend on the angle
+    // gives the same other states either way.
+    let step = |k: usize, s: &[f64; 4], increment: bool| -> Result<([f64; 4], bool)> {
         let u = log.u[k];
         let dt = (log.t[k + 1] - log.t[k]) / sub as f64;
+        let mut r = *s;
+        if increment {
+            r[0] = -0.0;
+        }
+        let mut split = false;
         for _ in 0..sub {
             let mut splits = MAX_SPLITS;
-            s = advance(&rhs, &deps, &kinks, &s, u, dt, zb, &mut splits).ok_or_else(|| {
+            r = advance(&rhs, &deps, &kinks, &r, u, dt, zb, &mut splits).ok_or_else(|| {
                 anyhow!(
                     "{}: time step {} s before sample {} is too long for the SINDYc model, or \
                      the model's coefficients too large (its matrix exponential is out of \
@@ -116,10 +107,11 @@ pub fn simulate_substeps(
                     k + 2
                 )
             })?;
+            split |= splits < MAX_SPLITS;
         }
-        if !s.iter().all(|v| v.is_finite())
-            || s[1].abs() > limits.omega
-            || s[3].abs() > limits.current
+        if !r.iter().all(|v| v.is_finite())
+            || r[1].abs() > limits.omega
+            || r[3].abs() > limits.current
         {
             bail!(
                 "{}: the SINDYc model diverged in free run at t = {} s (sample {})",
@@ -128,8 +120,83 @@ pub fn simulate_substeps(
                 k + 2
             );
         }
-    }
-    Ok(out)
+        Ok((r, split))
+    };
+    let states = if deps[0] || sub > 1 || n < 2 * super::pieces::MIN_PIECE {
+        let mut states = Vec::with_capacity(n);
+        states.push(start);
+        for k in 0..n - 1 {
+            let (next, _) = step(k, &states[k], false)?;
+            states.push(next);
+        }
+        states
+    } else {
+        // In pieces, a step returns the angle's increment, and NaN in its place when the
+        // step was split (the halves' increments were added to the angle one after the
+        // other: the sum depends on the angle's rounding); the angles are then summed in
+        // order, a split step run again from its true angle.
+        let inc = |k: usize, s: &[f64; 4]| -> Result<[f64; 4]> {
+            let (mut r, split) = step(k, s, true)?;
+            if split {
+                r[0] = f64::NAN;
+            }
+            Ok(r)
+        };
+        let mut states = run_in_pieces(log, voltage, start, &inc)?;
+        for k in 1..n {
+            let prev = states[k - 1];
+            let d = states[k][0];
+            states[k][0] = if d.is_nan() {
+                step(k - 1, &prev, false)?.0[0]
+            } else {
+                prev[0] + d
+            };
+            if !states[k][0].is_finite() {
+                bail!(
+                    "{}: the SINDYc model diverged in free run at t = {} s (sample {})",
+                    crate::log::echo_path(&log.source),
+                    log.t[k],
+                    k + 1
+                );
+            }
+        }
+        states
+    };
+    Ok(Prediction {
+        t: log.t.clone(),
+        theta: states.iter().map(|s| s[0]).collect(),
+        omega: states.iter().map(|s| s[1]).collect(),
+        i: voltage.then(|| states.iter().map(|s| s[3]).collect()),
+        z: Some(states.iter().map(|s| s[2]).collect()),
+    })
+}
+
+/// The states of a free run whose steps do not depend on the angle (see [`simulate`]),
+/// computed in parallel pieces ([`super::pieces`]) when the log is long: the same states to
+/// the bit as one run from the start. A piece starts from the log's measured velocity
+/// (centred slope of the angle over ±5 samples, or its `omega` column) and current.
+fn run_in_pieces(
+    log: &MotorLog,
+    voltage: bool,
+    start: [f64; 4],
+    step: &(impl Fn(usize, &[f64; 4]) -> Result<[f64; 4]> + Sync),
+) -> Result<Vec<[f64; 4]>> {
+    let n = log.len();
+    let guess = |k: usize| {
+        let w = match &log.omega {
+            Some(w) => w[k],
+            None => {
+                let (a, b) = (k.saturating_sub(5), (k + 5).min(n - 1));
+                (log.theta[b] - log.theta[a]) / (log.t[b] - log.t[a])
+            }
+        };
+        let i = match (&log.i, voltage) {
+            (Some(i), true) => i[k],
+            _ => 0.0,
+        };
+        [0.0, w, 0.0, i]
+    };
+    super::pieces::run(n, start, step, &guess, 2 * rayon::current_num_threads())
 }
 
 /// Most halvings of one (sub-)step by [`advance`]: enough to resolve a start from rest
