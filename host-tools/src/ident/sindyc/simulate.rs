@@ -83,21 +83,32 @@ pub fn simulate_substeps(
     };
     let deps = state_dependencies(model, voltage);
     let kinks = sign_kinks(model, voltage);
-    // The state after sample k from the one at k, and whether a step was split. With
-    // `increment`, the angle enters at -0 so that the angle's entry of the result is the
-    // increment exactly (`-0 + x = x`); a run whose steps do not depend on the angle
-    // gives the same other states either way.
-    let step = |k: usize, s: &[f64; 4], increment: bool| -> Result<([f64; 4], bool)> {
+    // The state after sample k from the one at k. With `incs`, the angle enters at -0 and
+    // the increments of a halved step's parts but the last are pushed on `incs` (see
+    // `advance`; one sub-step a sample): the angle's entry of the result is the last part's
+    // increment, exactly (`-0 + x = x`). A run whose steps do not depend on the angle gives
+    // the same other states either way.
+    let step = |k: usize, s: &[f64; 4], mut incs: Option<&mut Vec<f64>>| -> Result<[f64; 4]> {
         let u = log.u[k];
         let dt = (log.t[k + 1] - log.t[k]) / sub as f64;
         let mut r = *s;
-        if increment {
+        if incs.is_some() {
             r[0] = -0.0;
         }
-        let mut split = false;
         for _ in 0..sub {
             let mut splits = MAX_SPLITS;
-            r = advance(&rhs, &deps, &kinks, &r, u, dt, zb, &mut splits).ok_or_else(|| {
+            r = advance(
+                &rhs,
+                &deps,
+                &kinks,
+                &r,
+                u,
+                dt,
+                zb,
+                &mut splits,
+                incs.as_deref_mut(),
+            )
+            .ok_or_else(|| {
                 anyhow!(
                     "{}: time step {} s before sample {} is too long for the SINDYc model, or \
                      the model's coefficients too large (its matrix exponential is out of \
@@ -107,7 +118,6 @@ pub fn simulate_substeps(
                     k + 2
                 )
             })?;
-            split |= splits < MAX_SPLITS;
         }
         if !r.iter().all(|v| v.is_finite())
             || r[1].abs() > limits.omega
@@ -120,38 +130,48 @@ pub fn simulate_substeps(
                 k + 2
             );
         }
-        Ok((r, split))
+        Ok(r)
     };
     let states = if deps[0] || sub > 1 || n < 2 * super::pieces::MIN_PIECE {
         let mut states = Vec::with_capacity(n);
         states.push(start);
         for k in 0..n - 1 {
-            let (next, _) = step(k, &states[k], false)?;
+            let next = step(k, &states[k], None)?;
             states.push(next);
         }
         states
     } else {
         // In pieces, a step returns the angle's increment, and NaN in its place when the
-        // step was split (the halves' increments were added to the angle one after the
-        // other: the sum depends on the angle's rounding); the angles are then summed in
-        // order, a split step run again from its true angle.
+        // step was halved: the increments of its parts, which are added to the angle one
+        // after the other (each sum rounded), are kept by sample (a re-run's after the
+        // guessed run's). The angles are then summed in order.
+        let parts = std::sync::Mutex::new(Vec::<(usize, Vec<f64>)>::new());
         let inc = |k: usize, s: &[f64; 4]| -> Result<[f64; 4]> {
-            let (mut r, split) = step(k, s, true)?;
-            if split {
+            let mut incs = Vec::new();
+            let mut r = step(k, s, Some(&mut incs))?;
+            if !incs.is_empty() {
+                incs.push(r[0]);
                 r[0] = f64::NAN;
+                parts
+                    .lock()
+                    .unwrap_or_else(std::sync::PoisonError::into_inner)
+                    .push((k, incs));
             }
             Ok(r)
         };
         let mut states = run_in_pieces(log, voltage, start, &inc)?;
+        let parts: std::collections::HashMap<usize, Vec<f64>> = parts
+            .into_inner()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .into_iter()
+            .collect();
         for k in 1..n {
-            let prev = states[k - 1];
-            let d = states[k][0];
-            states[k][0] = if d.is_nan() {
-                step(k - 1, &prev, false)?.0[0]
-            } else {
-                prev[0] + d
-            };
-            if !states[k][0].is_finite() {
+            let mut theta = states[k - 1][0];
+            match parts.get(&(k - 1)).filter(|_| states[k][0].is_nan()) {
+                Some(incs) => incs.iter().for_each(|d| theta += d),
+                None => theta += states[k][0],
+            }
+            if !theta.is_finite() {
                 bail!(
                     "{}: the SINDYc model diverged in free run at t = {} s (sample {})",
                     crate::log::echo_path(&log.source),
@@ -159,6 +179,7 @@ pub fn simulate_substeps(
                     k + 1
                 );
             }
+            states[k][0] = theta;
         }
         states
     };
@@ -243,6 +264,10 @@ fn sign_kinks(model: &SindyModel<f64>, voltage: bool) -> Vec<(usize, f64)> {
 /// as soon as the velocity leaves the kink. A step counts as crossing a kink of width `w`
 /// when the state moves by more than `w` and the range it covers reaches within
 /// [`KINK_REACH`]·`w` of zero. `z` is clamped to `±zb` after every step.
+/// With `incs` (a run whose steps do not depend on the angle, started at angle -0), the
+/// angle restarts at -0 after every halved step but the last, whose increment is pushed on
+/// `incs`: the returned angle is the last one's increment, so the angle a run from the true
+/// angle reaches is its angle plus each increment in turn.
 #[allow(clippy::too_many_arguments)]
 fn advance(
     rhs: &impl Fn(&[f64; 4], f64) -> [f64; 4],
@@ -253,6 +278,7 @@ fn advance(
     h: f64,
     zb: f64,
     splits: &mut usize,
+    mut incs: Option<&mut Vec<f64>>,
 ) -> Option<[f64; 4]> {
     let mut next = rosenbrock_step(rhs, deps, s, u, h)?;
     next[2] = next[2].clamp(-zb, zb);
@@ -264,8 +290,22 @@ fn advance(
         return Some(next);
     }
     *splits -= 1;
-    let mid = advance(rhs, deps, kinks, s, u, h / 2.0, zb, splits)?;
-    advance(rhs, deps, kinks, &mid, u, h / 2.0, zb, splits)
+    let mut mid = advance(
+        rhs,
+        deps,
+        kinks,
+        s,
+        u,
+        h / 2.0,
+        zb,
+        splits,
+        incs.as_deref_mut(),
+    )?;
+    if let Some(v) = incs.as_deref_mut() {
+        v.push(mid[0]);
+        mid[0] = -0.0;
+    }
+    advance(rhs, deps, kinks, &mid, u, h / 2.0, zb, splits, incs)
 }
 
 /// Which states `(x, ẋ, z, I)` the right-hand side depends on: `ẋ` always (`dx/dt = ẋ`),
