@@ -174,6 +174,7 @@ pub fn identify(
     opts: &SindycOptions,
 ) -> Result<SindycResult> {
     check_logs(fit_logs, val_logs, opts)?;
+    let _faer = SequentialFaer::new();
     let hidden = HiddenState::of_logs(fit_logs, opts)?;
     let mut lib = Library::with_effects(opts.plant, opts.a, 1.0, adds)?;
     // The Stribeck column the refinement may add (see `stribeck_start`); the structure
@@ -241,6 +242,26 @@ pub fn identify(
         validation_fit,
         z_correlation: hidden.z_correlation,
     })
+}
+
+/// faer's products and decompositions in identification are small (a few dozen columns,
+/// long sums of blocks): its thread team would spend more time waiting at its barriers than
+/// it saves, while the stages' own parallel loops keep the cores busy. Sets faer to one
+/// thread while it lives, and back to the previous setting when dropped.
+struct SequentialFaer(faer::Par);
+
+impl SequentialFaer {
+    fn new() -> Self {
+        let previous = faer::get_global_parallelism();
+        faer::set_global_parallelism(faer::Par::Seq);
+        SequentialFaer(previous)
+    }
+}
+
+impl Drop for SequentialFaer {
+    fn drop(&mut self) {
+        faer::set_global_parallelism(self.0);
+    }
 }
 
 /// Every log has the columns the plant needs and enough samples for the delay embedding
