@@ -247,20 +247,39 @@ pub fn identify(
 /// faer's products and decompositions in identification are small (a few dozen columns,
 /// long sums of blocks): its thread team would spend more time waiting at its barriers than
 /// it saves, while the stages' own parallel loops keep the cores busy. Sets faer to one
-/// thread while it lives, and back to the previous setting when dropped.
-struct SequentialFaer(faer::Par);
+/// thread while any identification of the process runs, and back to the setting before the
+/// first of them when the last ends.
+struct SequentialFaer;
+
+/// Identifications running, and faer's setting before the first of them.
+static SEQUENTIAL_FAER: std::sync::Mutex<(usize, Option<faer::Par>)> =
+    std::sync::Mutex::new((0, None));
 
 impl SequentialFaer {
     fn new() -> Self {
-        let previous = faer::get_global_parallelism();
-        faer::set_global_parallelism(faer::Par::Seq);
-        SequentialFaer(previous)
+        let mut g = SEQUENTIAL_FAER
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        if g.0 == 0 {
+            g.1 = Some(faer::get_global_parallelism());
+            faer::set_global_parallelism(faer::Par::Seq);
+        }
+        g.0 += 1;
+        SequentialFaer
     }
 }
 
 impl Drop for SequentialFaer {
     fn drop(&mut self) {
-        faer::set_global_parallelism(self.0);
+        let mut g = SEQUENTIAL_FAER
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        g.0 -= 1;
+        if g.0 == 0 {
+            if let Some(previous) = g.1.take() {
+                faer::set_global_parallelism(previous);
+            }
+        }
     }
 }
 
