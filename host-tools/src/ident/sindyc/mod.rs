@@ -41,6 +41,7 @@
 //!    equations and Pareto table.
 pub mod embedding;
 pub mod model_file;
+pub mod pieces;
 pub mod refine;
 pub mod rows;
 pub mod search;
@@ -173,6 +174,7 @@ pub fn identify(
     opts: &SindycOptions,
 ) -> Result<SindycResult> {
     check_logs(fit_logs, val_logs, opts)?;
+    let _faer = SequentialFaer::new();
     let hidden = HiddenState::of_logs(fit_logs, opts)?;
     let mut lib = Library::with_effects(opts.plant, opts.a, 1.0, adds)?;
     // The Stribeck column the refinement may add (see `stribeck_start`); the structure
@@ -240,6 +242,45 @@ pub fn identify(
         validation_fit,
         z_correlation: hidden.z_correlation,
     })
+}
+
+/// faer's products and decompositions in identification are small (a few dozen columns,
+/// long sums of blocks): its thread team would spend more time waiting at its barriers than
+/// it saves, while the stages' own parallel loops keep the cores busy. Sets faer to one
+/// thread while any identification of the process runs, and back to the setting before the
+/// first of them when the last ends.
+struct SequentialFaer;
+
+/// Identifications running, and faer's setting before the first of them.
+static SEQUENTIAL_FAER: std::sync::Mutex<(usize, Option<faer::Par>)> =
+    std::sync::Mutex::new((0, None));
+
+impl SequentialFaer {
+    fn new() -> Self {
+        let mut g = SEQUENTIAL_FAER
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        if g.0 == 0 {
+            g.1 = Some(faer::get_global_parallelism());
+            faer::set_global_parallelism(faer::Par::Seq);
+        }
+        g.0 += 1;
+        SequentialFaer
+    }
+}
+
+impl Drop for SequentialFaer {
+    fn drop(&mut self) {
+        let mut g = SEQUENTIAL_FAER
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        g.0 -= 1;
+        if g.0 == 0 {
+            if let Some(previous) = g.1.take() {
+                faer::set_global_parallelism(previous);
+            }
+        }
+    }
 }
 
 /// Every log has the columns the plant needs and enough samples for the delay embedding

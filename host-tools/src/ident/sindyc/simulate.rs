@@ -68,7 +68,7 @@ pub fn simulate_substeps(
         (Some(i), true) => i[0],
         _ => 0.0,
     };
-    let mut s = [log.theta[0], freerun::initial_omega(log), 0.0, i0];
+    let start = [log.theta[0], freerun::initial_omega(log), 0.0, i0];
     let zb = model.z_bound();
     let rhs = |s: &[f64; 4], u: f64| -> [f64; 4] {
         let p = TermInputs {
@@ -83,30 +83,32 @@ pub fn simulate_substeps(
     };
     let deps = state_dependencies(model, voltage);
     let kinks = sign_kinks(model, voltage);
-    let mut out = Prediction {
-        t: log.t.clone(),
-        theta: Vec::with_capacity(n),
-        omega: Vec::with_capacity(n),
-        i: voltage.then(|| Vec::with_capacity(n)),
-        z: Some(Vec::with_capacity(n)),
-    };
-    for k in 0..n {
-        out.theta.push(s[0]);
-        out.omega.push(s[1]);
-        if let Some(i) = &mut out.i {
-            i.push(s[3]);
-        }
-        if let Some(z) = &mut out.z {
-            z.push(s[2]);
-        }
-        if k + 1 == n {
-            break;
-        }
+    // The state after sample k from the one at k. With `incs`, the angle enters at -0 and
+    // the increments of a halved step's parts but the last are pushed on `incs` (see
+    // `advance`; one sub-step a sample): the angle's entry of the result is the last part's
+    // increment, exactly (`-0 + x = x`). A run whose steps do not depend on the angle gives
+    // the same other states either way.
+    let step = |k: usize, s: &[f64; 4], mut incs: Option<&mut Vec<f64>>| -> Result<[f64; 4]> {
         let u = log.u[k];
         let dt = (log.t[k + 1] - log.t[k]) / sub as f64;
+        let mut r = *s;
+        if incs.is_some() {
+            r[0] = -0.0;
+        }
         for _ in 0..sub {
             let mut splits = MAX_SPLITS;
-            s = advance(&rhs, &deps, &kinks, &s, u, dt, zb, &mut splits).ok_or_else(|| {
+            r = advance(
+                &rhs,
+                &deps,
+                &kinks,
+                &r,
+                u,
+                dt,
+                zb,
+                &mut splits,
+                incs.as_deref_mut(),
+            )
+            .ok_or_else(|| {
                 anyhow!(
                     "{}: time step {} s before sample {} is too long for the SINDYc model, or \
                      the model's coefficients too large (its matrix exponential is out of \
@@ -117,9 +119,9 @@ pub fn simulate_substeps(
                 )
             })?;
         }
-        if !s.iter().all(|v| v.is_finite())
-            || s[1].abs() > limits.omega
-            || s[3].abs() > limits.current
+        if !r.iter().all(|v| v.is_finite())
+            || r[1].abs() > limits.omega
+            || r[3].abs() > limits.current
         {
             bail!(
                 "{}: the SINDYc model diverged in free run at t = {} s (sample {})",
@@ -128,8 +130,94 @@ pub fn simulate_substeps(
                 k + 2
             );
         }
-    }
-    Ok(out)
+        Ok(r)
+    };
+    let states = if deps[0] || sub > 1 || n < 2 * super::pieces::MIN_PIECE {
+        let mut states = Vec::with_capacity(n);
+        states.push(start);
+        for k in 0..n - 1 {
+            let next = step(k, &states[k], None)?;
+            states.push(next);
+        }
+        states
+    } else {
+        // In pieces, a step returns the angle's increment, and NaN in its place when the
+        // step was halved: the increments of its parts, which are added to the angle one
+        // after the other (each sum rounded), are kept by sample (a re-run's after the
+        // guessed run's). The angles are then summed in order.
+        let parts = std::sync::Mutex::new(Vec::<(usize, Vec<f64>)>::new());
+        let inc = |k: usize, s: &[f64; 4]| -> Result<[f64; 4]> {
+            let mut incs = Vec::new();
+            let mut r = step(k, s, Some(&mut incs))?;
+            if !incs.is_empty() {
+                incs.push(r[0]);
+                r[0] = f64::NAN;
+                parts
+                    .lock()
+                    .unwrap_or_else(std::sync::PoisonError::into_inner)
+                    .push((k, incs));
+            }
+            Ok(r)
+        };
+        let mut states = run_in_pieces(log, voltage, start, &inc)?;
+        let parts: std::collections::HashMap<usize, Vec<f64>> = parts
+            .into_inner()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .into_iter()
+            .collect();
+        for k in 1..n {
+            let mut theta = states[k - 1][0];
+            match parts.get(&(k - 1)).filter(|_| states[k][0].is_nan()) {
+                Some(incs) => incs.iter().for_each(|d| theta += d),
+                None => theta += states[k][0],
+            }
+            if !theta.is_finite() {
+                bail!(
+                    "{}: the SINDYc model diverged in free run at t = {} s (sample {})",
+                    crate::log::echo_path(&log.source),
+                    log.t[k],
+                    k + 1
+                );
+            }
+            states[k][0] = theta;
+        }
+        states
+    };
+    Ok(Prediction {
+        t: log.t.clone(),
+        theta: states.iter().map(|s| s[0]).collect(),
+        omega: states.iter().map(|s| s[1]).collect(),
+        i: voltage.then(|| states.iter().map(|s| s[3]).collect()),
+        z: Some(states.iter().map(|s| s[2]).collect()),
+    })
+}
+
+/// The states of a free run whose steps do not depend on the angle (see [`simulate`]),
+/// computed in parallel pieces ([`super::pieces`]) when the log is long: the same states to
+/// the bit as one run from the start. A piece starts from the log's measured velocity
+/// (centred slope of the angle over ±5 samples, or its `omega` column) and current.
+fn run_in_pieces(
+    log: &MotorLog,
+    voltage: bool,
+    start: [f64; 4],
+    step: &(impl Fn(usize, &[f64; 4]) -> Result<[f64; 4]> + Sync),
+) -> Result<Vec<[f64; 4]>> {
+    let n = log.len();
+    let guess = |k: usize| {
+        let w = match &log.omega {
+            Some(w) => w[k],
+            None => {
+                let (a, b) = (k.saturating_sub(5), (k + 5).min(n - 1));
+                (log.theta[b] - log.theta[a]) / (log.t[b] - log.t[a])
+            }
+        };
+        let i = match (&log.i, voltage) {
+            (Some(i), true) => i[k],
+            _ => 0.0,
+        };
+        [0.0, w, 0.0, i]
+    };
+    super::pieces::run(n, start, step, &guess, 2 * rayon::current_num_threads())
 }
 
 /// Most halvings of one (sub-)step by [`advance`]: enough to resolve a start from rest
@@ -176,6 +264,10 @@ fn sign_kinks(model: &SindyModel<f64>, voltage: bool) -> Vec<(usize, f64)> {
 /// as soon as the velocity leaves the kink. A step counts as crossing a kink of width `w`
 /// when the state moves by more than `w` and the range it covers reaches within
 /// [`KINK_REACH`]·`w` of zero. `z` is clamped to `±zb` after every step.
+/// With `incs` (a run whose steps do not depend on the angle, started at angle -0), the
+/// angle restarts at -0 after every halved step but the last, whose increment is pushed on
+/// `incs`: the returned angle is the last one's increment, so the angle a run from the true
+/// angle reaches is its angle plus each increment in turn.
 #[allow(clippy::too_many_arguments)]
 fn advance(
     rhs: &impl Fn(&[f64; 4], f64) -> [f64; 4],
@@ -186,6 +278,7 @@ fn advance(
     h: f64,
     zb: f64,
     splits: &mut usize,
+    mut incs: Option<&mut Vec<f64>>,
 ) -> Option<[f64; 4]> {
     let mut next = rosenbrock_step(rhs, deps, s, u, h)?;
     next[2] = next[2].clamp(-zb, zb);
@@ -197,8 +290,22 @@ fn advance(
         return Some(next);
     }
     *splits -= 1;
-    let mid = advance(rhs, deps, kinks, s, u, h / 2.0, zb, splits)?;
-    advance(rhs, deps, kinks, &mid, u, h / 2.0, zb, splits)
+    let mut mid = advance(
+        rhs,
+        deps,
+        kinks,
+        s,
+        u,
+        h / 2.0,
+        zb,
+        splits,
+        incs.as_deref_mut(),
+    )?;
+    if let Some(v) = incs.as_deref_mut() {
+        v.push(mid[0]);
+        mid[0] = -0.0;
+    }
+    advance(rhs, deps, kinks, &mid, u, h / 2.0, zb, splits, incs)
 }
 
 /// Which states `(x, ẋ, z, I)` the right-hand side depends on: `ẋ` always (`dx/dt = ẋ`),
