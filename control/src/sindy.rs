@@ -97,6 +97,8 @@ pub enum Term {
     ISquared,
     /// I³ (magnetic saturation: the torque a falling K_t loses, to first order).
     ICubed,
+    /// |ẋ|·z (the bristle's relaxation in presliding friction, eq. 49).
+    AbsXdotZ,
 }
 
 /// What a term may depend on at one instant.
@@ -143,7 +145,7 @@ impl Term {
 
     /// Every term without a parameter (all but `SinTheta`/`CosTheta`): the paper's library,
     /// then the added terms.
-    pub const FIXED: [Term; 26] = {
+    pub const FIXED: [Term; 27] = {
         let added = [
             Term::One,
             Term::SgnXdot,
@@ -154,9 +156,10 @@ impl Term {
             Term::AbsISgnXdot,
             Term::ISquared,
             Term::ICubed,
+            Term::AbsXdotZ,
         ];
         let paper = Term::PAPER_LIBRARY;
-        let mut all = [Term::One; 26];
+        let mut all = [Term::One; 27];
         assert!(paper.len() + added.len() == all.len());
         let mut k = 0;
         while k < all.len() {
@@ -199,6 +202,7 @@ impl Term {
             Term::AbsISgnXdot => "|i|*sgn(xdot)",
             Term::ISquared => "i^2",
             Term::ICubed => "i^3",
+            Term::AbsXdotZ => "|xdot|*z",
             Term::SinTheta(_) | Term::CosTheta(_) => return None,
         })
     }
@@ -262,7 +266,9 @@ impl Term {
     /// `term = g(x, ẋ, I, u)·h(z)` (see [`Term::z_free_factor`]).
     pub fn z_part(self) -> ZPart {
         match self {
-            Term::Z | Term::ZXdot | Term::ZXdot2 | Term::ZU | Term::ZU2 => ZPart::Z,
+            Term::Z | Term::ZXdot | Term::ZXdot2 | Term::ZU | Term::ZU2 | Term::AbsXdotZ => {
+                ZPart::Z
+            }
             Term::Z2Xdot | Term::Z2U => ZPart::Z2,
             Term::AbsZZ => ZPart::AbsZZ,
             Term::AbsZZ2 => ZPart::AbsZZ2,
@@ -288,7 +294,7 @@ impl Term {
             Term::ZXdot2 => xd * xd,
             Term::U | Term::ZU | Term::Z2U => u,
             Term::ZU2 => u * u,
-            Term::AbsXdot => xd.abs(),
+            Term::AbsXdot | Term::AbsXdotZ => xd.abs(),
             Term::ISquared => i * i,
             Term::ICubed => i * i * i,
             _ => self.transcendental_factor(p, a, vs),
