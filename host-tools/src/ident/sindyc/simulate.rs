@@ -137,13 +137,22 @@ pub fn simulate_substeps(
 /// chatters about zero velocity cannot make a sample cost more than this many extra steps.
 const MAX_SPLITS: usize = 64;
 
+/// Largest change of a bristle state (`|ẋ|·z` in the model) in one step, as a fraction of
+/// its bound `z_max`: while the bristle turns over at a reversal its equation's slope in
+/// `ẋ` falls from `2/z_ss` to 0 and the rotor's presliding damping with it, so a step
+/// whose Jacobian is frozen at its start must see only a small part of the turn. A
+/// twentieth resolves the turnover's current within the sample's noise on the paper
+/// motor's voltage steps (about 40 steps of a reversal at most, within [`MAX_SPLITS`]).
+const BRISTLE_TURN: f64 = 0.05;
+
 /// Multiple of a sign-like term's width beyond which it is flat (`tanh(3) > 0.995`).
 const KINK_REACH: f64 = 3.0;
 
 /// The sign-like terms of a model as `(state, width)`: the state `(x, ẋ, z, I)` the term
 /// switches on and the width over which it does (`1/a` for `tanh(a·ẋ)` and `tanh(a·z)`,
 /// [`VELOCITY_EPS`] for the smooth signs of the velocity, the Stribeck velocity `vs`, and
-/// [`CURRENT_EPS`] for the smooth sign of the current).
+/// [`CURRENT_EPS`] for the smooth sign of the current). A bristle state (`|ẋ|·z`) adds the
+/// zero velocity and, as `(2, ∞)`, its own turnover ([`BRISTLE_TURN`]).
 fn sign_kinks(model: &SindyModel<f64>, voltage: bool) -> Vec<(usize, f64)> {
     let mut out: Vec<(usize, f64)> = Vec::new();
     let eqs = [&model.accel, &model.zdot];
@@ -152,6 +161,16 @@ fn sign_kinks(model: &SindyModel<f64>, voltage: bool) -> Vec<(usize, f64)> {
         .chain(voltage.then_some(&model.idot))
         .flat_map(|e| e.terms.iter().map(|(t, _)| *t));
     for t in terms {
+        if t == Term::AbsXdotZ {
+            // The bristle (`--add presliding`): `|ẋ|` switches at zero velocity, and the
+            // step's frozen Jacobian holds only while the bristle turns over a little.
+            for k in [(1, VELOCITY_EPS), (2, f64::INFINITY)] {
+                if !out.contains(&k) {
+                    out.push(k);
+                }
+            }
+            continue;
+        }
         let kink = match t {
             Term::TanhXdot => Some((1, 1.0 / model.a)),
             Term::TanhZ => Some((2, 1.0 / model.a)),
@@ -191,6 +210,9 @@ fn advance(
     next[2] = next[2].clamp(-zb, zb);
     let crosses = kinks.iter().any(|&(j, w)| {
         let (a, b) = (s[j], next[j]);
+        if j == 2 && w.is_infinite() {
+            return (b - a).abs() > BRISTLE_TURN * zb;
+        }
         (b - a).abs() > w && a.min(b) < KINK_REACH * w && a.max(b) > -KINK_REACH * w
     });
     if !crosses || *splits == 0 {
