@@ -41,6 +41,7 @@
 //!    equations and Pareto table.
 pub mod embedding;
 pub mod model_file;
+pub mod presliding;
 pub mod refine;
 pub mod rows;
 pub mod search;
@@ -56,6 +57,7 @@ pub use simulate::{
 };
 
 use crate::effect_spec::EffectSpec;
+use control::effects::EffectKind;
 use crate::ident::freerun::Prediction;
 use crate::ident::hankel::{Selection, DEFAULT_DELAYS, DEFAULT_ENERGY};
 use crate::ident::library::{Library, ACCEL};
@@ -227,6 +229,20 @@ pub fn identify(
         |m| search.score_model(m),
         &mut pareto,
     );
+    let (model, validation_fit) = if adds.iter().any(|a| a.kind == EffectKind::Presliding) {
+        let hall = crate::ident::sensor_chain::hall_resolution(&fit_logs[0]);
+        let m = presliding::fit(&model, hall, &res)?;
+        let fit = search.score_model(&m);
+        pareto.push(ParetoRow {
+            terms: m.accel.terms.len() + m.zdot.terms.len() + m.idot.terms.len(),
+            fit,
+            step: "the bristle in place of the sign (--add presliding), refined".into(),
+            accepted: true,
+        });
+        (m, fit.unwrap_or(f64::NAN))
+    } else {
+        (model, validation_fit)
+    };
     Ok(SindycResult {
         equations_text: equations_text(&model, opts.plant),
         pareto_text: pareto_text(&pareto),
