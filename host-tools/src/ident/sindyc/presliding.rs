@@ -22,15 +22,28 @@ use super::refine::{self, SimResiduals};
 use anyhow::{bail, Result};
 use control::sindy::{SindyModel, SparseEq, Term};
 
-/// Starts of the bristle's sliding deflection `z_ss` as fractions of the Hall step: the
-/// deflection is below what the sensor resolves (else it would be a visible spring, the
-/// emulator's geared-axis `presliding` effect), so the grid spans the three decades under it.
-const Z_SS_FRACTIONS: [f64; 3] = [1e-3, 1e-2, 1e-1];
+/// Starts of the bristle's sliding deflection `z_ss` as fractions of the Hall step, half a
+/// decade apart: the deflection is below what the sensor resolves (else it would be a
+/// visible spring, the emulator's geared-axis `presliding` effect), so the grid spans the
+/// three decades under it.
+const Z_SS_DECADES: (i32, i32) = (-6, -1);
 
-/// Starts of the bristle damping `d` [1/s] (the damping torque over the inertia): from a
-/// damping that stops the rotor in a tenth of a second (10 1/s) to one that holds it for
-/// a whole 12 ms sample per milliradian of turnover (1e6 1/s), a decade apart.
-const DAMPING_STARTS: [f64; 6] = [1e1, 1e2, 1e3, 1e4, 1e5, 1e6];
+/// Starts of the bristle damping `d` [1/s] (the damping torque over the inertia), half a
+/// decade apart: from a damping that stops the rotor in a tenth of a second (10 1/s) to one
+/// that holds it for a whole 12 ms sample per milliradian of turnover (1e6 1/s).
+const DAMPING_DECADES: (i32, i32) = (2, 12);
+
+/// `10^(k/2)` for the half-decades `k` of `range` (inclusive).
+fn half_decades(range: (i32, i32)) -> impl Iterator<Item = f64> {
+    (range.0..=range.1).map(|k| 10f64.powf(f64::from(k) / 2.0))
+}
+
+/// The cost the refinement minimises.
+fn cost(res: &SimResiduals, m: &SindyModel<f64>, weight: f64) -> Option<f64> {
+    let r = res.eval(m, weight).ok()?;
+    let c: f64 = r.iter().map(|v| v * v).sum();
+    c.is_finite().then_some(c)
+}
 
 /// The model with its friction sign carried by the bristle state: every sign-like velocity
 /// term of the acceleration equation (`tanh(a*xdot)`, `sgn(xdot)`) becomes the Coulomb term
@@ -79,8 +92,8 @@ pub fn with_bristle(m: &SindyModel<f64>, z_ss: f64, damping: f64) -> Result<Sind
     Ok(out)
 }
 
-/// The presliding model from a fitted SINDYc model `m`: the grid start ([`Z_SS_FRACTIONS`]
-/// of `hall` [rad] × [`DAMPING_STARTS`]) with the lowest free-run cost on the fitting runs
+/// The presliding model from a fitted SINDYc model `m`: the grid start ([`Z_SS_DECADES`]
+/// of `hall` [rad] × [`DAMPING_DECADES`]) with the lowest free-run cost on the fitting runs
 /// of `res`, refined by Levenberg–Marquardt on the same cost. Errors when `m` has no
 /// Coulomb term or every start diverges.
 pub fn fit(m: &SindyModel<f64>, hall: f64, res: &SimResiduals) -> Result<SindyModel<f64>> {
@@ -91,15 +104,14 @@ pub fn fit(m: &SindyModel<f64>, hall: f64, res: &SimResiduals) -> Result<SindyMo
     };
     let weight = res.current_weight(m)?;
     let mut best: Option<(f64, SindyModel<f64>)> = None;
-    for f in Z_SS_FRACTIONS {
-        for d in DAMPING_STARTS {
+    for f in half_decades(Z_SS_DECADES) {
+        for d in half_decades(DAMPING_DECADES) {
             let cand = with_bristle(m, f * hall, d)?;
-            let Ok(r) = res.eval(&cand, weight) else {
+            let Some(c) = cost(res, &cand, weight) else {
                 continue;
             };
-            let cost: f64 = r.iter().map(|v| v * v).sum();
-            if cost.is_finite() && best.as_ref().is_none_or(|(c, _)| cost < *c) {
-                best = Some((cost, cand));
+            if best.as_ref().is_none_or(|(b, _)| c < *b) {
+                best = Some((c, cand));
             }
         }
     }
