@@ -320,7 +320,14 @@ pub fn fit_model(req: &super::FitRequest) -> Result<crate::model::Model> {
         model.motor.kb = 0.0;
     }
     sm.j = model.motor.j;
-    model.effects = req.adds.iter().map(|s| s.to_effect()).collect();
+    // A `presliding` add is the bristle of the equations, not an effect with its own
+    // numbers.
+    model.effects = req
+        .adds
+        .iter()
+        .filter(|s| s.kind != EffectKind::Presliding)
+        .map(|s| s.to_effect())
+        .collect();
     model.sindy = Some(to_table(&sm, &res.hankel));
     for (prefix, eq, unit) in [
         ("accel", &sm.accel, "rad/s² per term unit"),
