@@ -15,6 +15,12 @@
 //! eq. 47 without the minus sign; its b-coefficients of damping terms are negative, so the
 //! sign here is the one that makes `I_c = F_f/K_t` of eq. 38 compensate rather than add.)
 //!
+//! **Bristle.** A model fitted with presliding carries the friction's sign in `z` itself, a
+//! bristle deflection normalised to its sliding value: `dz/dt = k·(ẋ − |ẋ|·z)` with
+//! `k = 1/z_ss` [1/rad] (`z` tends to `sgn ẋ` within `z_ss` of travel), and in `dẋ/dt` the
+//! Coulomb term `c·z` [rad/s²] and the bristle damping `d·(|ẋ|·z − ẋ)` [rad/s², d in 1/s].
+//! Only the term [`Term::AbsXdotZ`] is new; the evaluator is the same.
+//!
 //! **Observer.** `dz/dt` may be stiff and nonlinear in `z`: the state is advanced by backward
 //! Euler solved with a few damped Newton steps, clamped to the model's bound `|z| ≤ z_max`.
 //!
@@ -97,7 +103,7 @@ pub enum Term {
     ISquared,
     /// I³ (magnetic saturation: the torque a falling K_t loses, to first order).
     ICubed,
-    /// |ẋ|·z (the bristle's relaxation in presliding friction, eq. 49).
+    /// |ẋ|·z (the bristle's relaxation in presliding friction; see the module doc).
     AbsXdotZ,
 }
 

@@ -1,11 +1,11 @@
 //! `fit --model sindyc --add presliding`: the friction's sign carried by a bristle state
-//! instead of a sign function of the velocity (docs/equations.md, eqs. 49-50).
+//! instead of a sign function of the velocity (docs/decisions/0012-sindyc-bristle.md).
 //!
 //! With `w = z` the bristle deflection normalised by its sliding value `z_ss`,
 //!
 //! ```text
-//! dw/dt  = (ẋ − |ẋ|·w) / z_ss                                   (eq. 49)
-//! dẋ/dt  = … + c_C·w − d·(ẋ − |ẋ|·w)                            (eq. 50)
+//! dw/dt  = (ẋ − |ẋ|·w) / z_ss          [1/s]   (bristle)
+//! dẋ/dt  = … + c_C·w − d·(ẋ − |ẋ|·w)   [rad/s²] (friction)
 //! ```
 //!
 //! `c_C·w` is the Coulomb friction (in sliding `w = sgn ẋ`), and `d·z_ss·dw/dt` the
@@ -48,7 +48,7 @@ fn cost(res: &SimResiduals, m: &SindyModel<f64>, weight: f64) -> Option<f64> {
 /// The model with its friction sign carried by the bristle state: every sign-like velocity
 /// term of the acceleration equation (`tanh(a*xdot)`, `sgn(xdot)`) becomes the Coulomb term
 /// `z` with the same coefficient, the bristle damping `d` is added, and the `z` equation is
-/// eq. 49 with the deflection `z_ss` [rad]. The extracted `z` of the other equations is
+/// the bristle equation with the deflection `z_ss` [rad] (`damping` `d` in 1/s). The extracted `z` of the other equations is
 /// dropped (the bristle takes its place). Errors when the model has no Coulomb term.
 pub fn with_bristle(m: &SindyModel<f64>, z_ss: f64, damping: f64) -> Result<SindyModel<f64>> {
     let coulomb: f64 = m
@@ -149,7 +149,7 @@ mod tests {
         assert_eq!(b.z_max, 1.0);
         assert_eq!(b.idot, m.idot);
         for v in [-40.0, -2.0, 0.5, 30.0] {
-            // The sliding bristle: w = sgn(ẋ), where eq. 49 is at rest.
+            // The sliding bristle: w = sgn(ẋ), where the bristle equation is at rest.
             let w = f64::signum(v);
             let p = TermInputs {
                 xdot: v,
@@ -162,7 +162,10 @@ mod tests {
             let want = m.accel_rhs(&plain_p);
             let got = b.accel_rhs(&p);
             // tanh(100·v) is ±1 to 1e-40 at these speeds; the damping cancels exactly.
-            assert!((got - want).abs() <= 1e-9 * want.abs(), "{v}: {got} vs {want}");
+            assert!(
+                (got - want).abs() <= 1e-9 * want.abs(),
+                "{v}: {got} vs {want}"
+            );
         }
     }
 
