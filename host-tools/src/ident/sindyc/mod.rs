@@ -57,7 +57,6 @@ pub use simulate::{
 };
 
 use crate::effect_spec::EffectSpec;
-use control::effects::EffectKind;
 use crate::ident::freerun::Prediction;
 use crate::ident::hankel::{Selection, DEFAULT_DELAYS, DEFAULT_ENERGY};
 use crate::ident::library::{Library, ACCEL};
@@ -65,6 +64,7 @@ use crate::ident::stlsq::StlsqOptions;
 use crate::log::{MotorLog, Plant};
 use crate::numerics::weak_form;
 use anyhow::{anyhow, bail, Result};
+use control::effects::EffectKind;
 use control::sindy::{SindyModel, Term};
 use embedding::HiddenState;
 use refine::SimResiduals;
