@@ -42,6 +42,7 @@
 pub mod embedding;
 pub mod model_file;
 pub mod pieces;
+pub mod presliding;
 pub mod refine;
 pub mod rows;
 pub mod search;
@@ -64,6 +65,7 @@ use crate::ident::stlsq::StlsqOptions;
 use crate::log::{MotorLog, Plant};
 use crate::numerics::weak_form;
 use anyhow::{anyhow, bail, Result};
+use control::effects::EffectKind;
 use control::sindy::{SindyModel, Term};
 use embedding::HiddenState;
 use refine::SimResiduals;
@@ -229,6 +231,20 @@ pub fn identify(
         |m| search.score_model(m),
         &mut pareto,
     );
+    let (model, validation_fit) = if adds.iter().any(|a| a.kind == EffectKind::Presliding) {
+        let hall = crate::ident::sensor_chain::hall_resolution(&fit_logs[0]);
+        let m = presliding::fit(&model, hall, &res)?;
+        let fit = search.score_model(&m);
+        pareto.push(ParetoRow {
+            terms: m.accel.terms.len() + m.zdot.terms.len() + m.idot.terms.len(),
+            fit,
+            step: "the bristle in place of the sign (--add presliding), refined".into(),
+            accepted: true,
+        });
+        (m, fit.unwrap_or(f64::NAN))
+    } else {
+        (model, validation_fit)
+    };
     Ok(SindycResult {
         equations_text: equations_text(&model, opts.plant),
         pareto_text: pareto_text(&pareto),
@@ -345,7 +361,14 @@ pub fn fit_model(req: &super::FitRequest) -> Result<crate::model::Model> {
         model.motor.kb = 0.0;
     }
     sm.j = model.motor.j;
-    model.effects = req.adds.iter().map(|s| s.to_effect()).collect();
+    // A `presliding` add is the bristle of the equations, not an effect with its own
+    // numbers.
+    model.effects = req
+        .adds
+        .iter()
+        .filter(|s| s.kind != EffectKind::Presliding)
+        .map(|s| s.to_effect())
+        .collect();
     model.sindy = Some(to_table(&sm, &res.hankel));
     for (prefix, eq, unit) in [
         ("accel", &sm.accel, "rad/s² per term unit"),

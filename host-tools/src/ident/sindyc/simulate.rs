@@ -225,13 +225,26 @@ fn run_in_pieces(
 /// chatters about zero velocity cannot make a sample cost more than this many extra steps.
 const MAX_SPLITS: usize = 64;
 
+/// Largest change of a bristle state (`|ẋ|·z` in the model) in one step, as a fraction of
+/// its bound `z_max`: while the bristle turns over at a reversal its equation's slope in
+/// `ẋ` falls from `2/z_ss` to 0 and the rotor's presliding damping with it, so a step
+/// whose Jacobian is frozen at its start must see only a small part of the turn. A
+/// twentieth keeps a whole turnover within about 40 steps, inside [`MAX_SPLITS`];
+/// docs/performance-sindyc.md compares the result with sub-steps.
+const BRISTLE_TURN: f64 = 0.05;
+
+/// Distance of a bristle state from saturation, as a fraction of `z_max`, below which its
+/// damping is spent and a step may close it at once.
+const BRISTLE_GAP: f64 = 1e-4;
+
 /// Multiple of a sign-like term's width beyond which it is flat (`tanh(3) > 0.995`).
 const KINK_REACH: f64 = 3.0;
 
 /// The sign-like terms of a model as `(state, width)`: the state `(x, ẋ, z, I)` the term
 /// switches on and the width over which it does (`1/a` for `tanh(a·ẋ)` and `tanh(a·z)`,
 /// [`VELOCITY_EPS`] for the smooth signs of the velocity, the Stribeck velocity `vs`, and
-/// [`CURRENT_EPS`] for the smooth sign of the current).
+/// [`CURRENT_EPS`] for the smooth sign of the current). A bristle state (`|ẋ|·z`) adds the
+/// zero velocity and, as `(2, ∞)`, its own turnover ([`BRISTLE_TURN`]).
 fn sign_kinks(model: &SindyModel<f64>, voltage: bool) -> Vec<(usize, f64)> {
     let mut out: Vec<(usize, f64)> = Vec::new();
     let eqs = [&model.accel, &model.zdot];
@@ -240,6 +253,16 @@ fn sign_kinks(model: &SindyModel<f64>, voltage: bool) -> Vec<(usize, f64)> {
         .chain(voltage.then_some(&model.idot))
         .flat_map(|e| e.terms.iter().map(|(t, _)| *t));
     for t in terms {
+        if t == Term::AbsXdotZ {
+            // The bristle (`--add presliding`): `|ẋ|` switches at zero velocity, and the
+            // step's frozen Jacobian holds only while the bristle turns over a little.
+            for k in [(1, VELOCITY_EPS), (2, f64::INFINITY)] {
+                if !out.contains(&k) {
+                    out.push(k);
+                }
+            }
+            continue;
+        }
         let kink = match t {
             Term::TanhXdot => Some((1, 1.0 / model.a)),
             Term::TanhZ => Some((2, 1.0 / model.a)),
@@ -284,6 +307,13 @@ fn advance(
     next[2] = next[2].clamp(-zb, zb);
     let crosses = kinks.iter().any(|&(j, w)| {
         let (a, b) = (s[j], next[j]);
+        if j == 2 && w.is_infinite() {
+            // The turn, and its end: the bristle's damping is proportional to its distance
+            // from saturation, which a step must not close by more than half at once.
+            let (ga, gb) = (zb - a.abs(), zb - b.abs());
+            return (b - a).abs() > BRISTLE_TURN * zb
+                || (ga - gb).abs() > 0.5 * ga.max(gb) && ga.max(gb) > BRISTLE_GAP * zb;
+        }
         (b - a).abs() > w && a.min(b) < KINK_REACH * w && a.max(b) > -KINK_REACH * w
     });
     if !crosses || *splits == 0 {
@@ -701,6 +731,42 @@ mod tests {
         assert!(z.iter().all(|z| z.abs() <= 2.0 + 1e-12));
         assert!(z.iter().any(|z| z.abs() > 1.9));
         assert!(p.i.is_none());
+    }
+
+    #[test]
+    fn a_bristle_turns_over_at_a_reversal_within_its_bound() {
+        // dẋ/dt = −ẋ/τ + g·u + c·w − d·(ẋ − |ẋ|·w), dw/dt = (ẋ − |ẋ|·w)/z_ss: Coulomb
+        // friction carried by the bristle w, whose damping d (a time constant of 5 µs while
+        // it turns over) holds the rotor at the reversal. In sliding w = sgn ẋ and
+        // ẋ = τ·(g·u + c·w).
+        let (tau, g, c, d, zss) = (0.013, 1000.0, -250.0, 1e5, 1e-3);
+        let mut m = SindyModel::empty(100.0, 1.0, 1.0);
+        m.z_max = 1.0;
+        m.accel = SparseEq::from_slice(&[
+            (Term::Xdot, -1.0 / tau - d),
+            (Term::U, g),
+            (Term::Z, c),
+            (Term::AbsXdotZ, d),
+        ])
+        .unwrap();
+        m.zdot =
+            SparseEq::from_slice(&[(Term::Xdot, 1.0 / zss), (Term::AbsXdotZ, -1.0 / zss)]).unwrap();
+        let log = log_with_input(100, 0.012, |k| if k < 50 { 1.0 } else { -1.0 });
+        let p = simulate(&m, Plant::Torque, &log, Limits::default()).unwrap();
+        let z = p.z.as_ref().unwrap();
+        assert!(z.iter().all(|z| z.abs() <= 1.0));
+        let slide = tau * (g + c);
+        for (k, sign) in [(49, 1.0), (99, -1.0)] {
+            assert!((z[k] - sign).abs() < 1e-9, "w[{k}] = {}", z[k]);
+            let w = p.omega[k];
+            assert!((w - sign * slide).abs() < 1e-6 * slide, "ẋ[{k}] = {w}");
+        }
+        // The split steps agree with 32 sub-steps a sample (the convergence of the step,
+        // to a hundredth of the sliding speed).
+        let fine = simulate_substeps(&m, Plant::Torque, &log, Limits::default(), 32).unwrap();
+        for (a, b) in p.omega.iter().zip(&fine.omega) {
+            assert!((a - b).abs() < 1e-2 * slide, "{a} vs {b}");
+        }
     }
 
     #[test]
