@@ -30,18 +30,8 @@ pub struct Options {
     /// average, so a smaller decrease is not a significant improvement of the model, only
     /// a creep along directions the data does not determine. (Residuals of a time series
     /// are correlated, so the true variance per independent sample is larger: the rule is on
-    /// the cautious side; see [`Options::noise_correlated`].)
+    /// the cautious side.)
     pub noise_stop: bool,
-    /// With `noise_stop`, take the residual's correlation into account: stop when the
-    /// decrease is below `τ·σ̂²`, τ the residual's integrated autocorrelation time
-    /// ([`crate::numerics::statistics::correlation_time`], at least 1). Fitting one more
-    /// parameter to noise correlated over τ samples lowers `‖r‖²` by about `τ·σ²` when the
-    /// parameter's sensitivity varies slowly against τ: the noise's projection on it has
-    /// the variance of a mean of `m/τ` independent samples (the factor that widens the
-    /// standard errors, `sim_error::autocorrelation_factor`). Only for residuals that are
-    /// mostly noise: where a model error integrates into them (a free run's angle drift),
-    /// τ measures that drift, not the noise.
-    pub noise_correlated: bool,
 }
 
 impl Default for Options {
@@ -53,7 +43,6 @@ impl Default for Options {
             ftol: 1e-6,
             xtol: 1e-8,
             noise_stop: false,
-            noise_correlated: false,
         }
     }
 }
@@ -334,22 +323,15 @@ fn solve_with(
                 let cn = cost_of(&rn);
                 if cn.is_finite() && cn < cost {
                     let rel = (cost - cn) / cost.max(1e-300);
-                    // Half the decrease of ‖r‖² against half (τ·)σ̂² (cost = ½‖r‖²).
-                    let insignificant = opts.noise_stop && {
-                        let tau = if opts.noise_correlated {
-                            crate::numerics::statistics::correlation_time(&rn).max(1.0)
-                        } else {
-                            1.0
-                        };
-                        cost - cn < tau * cn / (m - n).max(1) as f64
-                    };
+                    // Half the decrease of ‖r‖² against half its variance (cost = ½‖r‖²).
+                    let insignificant = cost - cn < cn / (m - n).max(1) as f64;
                     x = xn;
                     r = rn;
                     cost = cn;
                     jac_at_x = false;
                     lambda = (lambda / 3.0).max(1e-12);
                     accepted = true;
-                    small_step = rel < opts.ftol || insignificant;
+                    small_step = rel < opts.ftol || (opts.noise_stop && insignificant);
                     break;
                 }
             }

@@ -688,11 +688,8 @@ pub fn refine_on(
                 .eval_with_jacobian(&model_at(x), free, roots.as_deref())?
                 .1)
         };
-        // Multiple-shooting residuals restart the angle every segment, so a model error
-        // does not integrate into them: their correlation is the noise's.
         let opts = nlsq::Options {
             noise_stop: true,
-            noise_correlated: res.segment.is_some(),
             ..opts
         };
         let problem = nlsq::WithJacobian {
