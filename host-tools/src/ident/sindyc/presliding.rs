@@ -1,5 +1,5 @@
 //! `fit --model sindyc --add presliding`: the friction's sign carried by a bristle state
-//! instead of a sign function of the velocity (docs/decisions/0012-sindyc-bristle.md).
+//! instead of a sign function of the velocity (docs/decisions/0015-sindyc-bristle.md).
 //!
 //! With `w = z` the bristle deflection normalised by its sliding value `z_ss`,
 //!
