@@ -15,7 +15,7 @@
 Both run in this one process, one after the other, so they see the same machine load; the
 ratio peer/ours is what counts.
 
-If the criterion benches of the building blocks ran (`cargo bench -p host-tools --bench
+If the criterion benches of the building blocks ran (`cargo bench -p motorid --bench
 ident`, which writes target/bench-data/ident_1e6.f64), their table follows (numpy Hankel
 SVD and library vs ours).
 

@@ -1,8 +1,8 @@
 //! `motorid fit` on emulated data from the plain paper motor (LuGre friction): the LuGre fit
 //! recovers the static friction curve, validates within a few points of the emulator's own
 //! model (scored by the same function), and the linear model is clearly worse.
+use e2e::motorid;
 use std::path::Path;
-use tests::motorid;
 
 fn run_ok(dir: &Path, args: &[&str]) -> String {
     let out = motorid(dir, args);

@@ -1,13 +1,13 @@
 //! MATLAB MAT-files as logs: the EMPS benchmark's `.mat` files (../shared/data/EMPS, read in
 //! place) give the same log as its CSV files, and `motorid fit` takes them with `--map`.
+use e2e::motorid;
 use motorid::log::{ColumnMap, MotorLog, Plant};
 use std::path::PathBuf;
-use tests::motorid;
 
-/// The EMPS folder ([`tests::shared_data`]: absent data skips with a printed reason, but
+/// The EMPS folder ([`e2e::shared_data`]: absent data skips with a printed reason, but
 /// fails under CI).
 fn emps_dir(test: &str) -> Option<PathBuf> {
-    Some(tests::shared_data(test)?.join("EMPS"))
+    Some(e2e::shared_data(test)?.join("EMPS"))
 }
 
 #[test]

@@ -1,7 +1,7 @@
 //! EMPS benchmark (../shared/data/EMPS): the authors' IDIM-LS model is reproduced, the
 //! friction terms they report are significant, the generic diagnosis finds Coulomb friction,
 //! and the generic CLI fits the data through `--map` and `--plant torque`.
-use tests::{motorid, shared_data};
+use e2e::{motorid, shared_data};
 use xtask::real_data::{emps, emps_loop};
 
 fn logs(test: &str) -> Option<(motorid::log::MotorLog, motorid::log::MotorLog)> {

@@ -1,6 +1,6 @@
 //! OmniRobot DC motors (../shared/data/OmniRobot_DC_motors): Coulomb + viscous friction beside
 //! the authors' b and T_0.
-use tests::shared_data;
+use e2e::shared_data;
 use xtask::real_data::omni_dc;
 use xtask::real_data::static_curve::Term;
 

@@ -1,7 +1,7 @@
 //! TRO2021 screw drives (../shared/data/TRO2021_screw_drives): the static friction curves and
 //! the Stribeck significance test against the authors' parameters (strbVelocity 6.4, 0, 0.688
 //! for drives 1, 2, 3).
-use tests::shared_data;
+use e2e::shared_data;
 use xtask::real_data::screw_drives;
 use xtask::real_data::static_curve::Term;
 

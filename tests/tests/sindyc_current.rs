@@ -3,11 +3,11 @@
 //! --add presliding --validate b.csv`, `compare`. The free-run fit of the current must come
 //! within 5 points of the emulator's own model scored by the same function on b and d, and
 //! `export` must refuse the model (its bristle runs on the host only) with one error line.
+use e2e::{motorid, stdout_of_success};
 use motorid::emulator::EmulatorConfig;
 use motorid::ident;
 use motorid::log::{ColumnMap, MotorLog, Plant};
 use std::path::Path;
-use tests::{motorid, stdout_of_success};
 
 /// How far below the true model's current fit SINDYc's may be [points]: the requirement
 /// itself, not a margin measured on our data. The true model is scored like the fit

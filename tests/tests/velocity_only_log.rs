@@ -1,7 +1,7 @@
 //! A log with a velocity but no angle column: `fit` integrates the angle, says so in a
 //! warning, and the model it finds scores on the full log like one fitted on the full log.
+use e2e::motorid;
 use std::path::Path;
-use tests::motorid;
 
 fn run(dir: &Path, args: &[&str]) -> std::process::Output {
     let out = motorid(dir, args);
