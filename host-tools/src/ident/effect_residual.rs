@@ -84,7 +84,7 @@ fn electrical(m: &mut Model, logs: &[MotorLog]) {
     let r = x[1];
     m.motor.r = r;
     // L stays as fitted: windows of 0.48 s barely resolve the electrical time constant L/R
-    // (about 1 ms), and keeping the fitted L validated better on simulated deadtime data.
+    // (about 1 ms), so their estimate of L is far noisier than the free-run fit's.
     // The L column stays in the regression so that it does not bias R, K_b and the effects.
     // K_t = K_b (SI units): the mechanical equation scales as a whole with K_t, so every
     // mechanical torque parameter scales with it and the motion stays the same.

@@ -9,8 +9,9 @@
 //! scheme of the emulator (`emulator::plant`), L-stable at any step and exact at equilibria
 //! (stiction). The unknown of a sub-step is the new velocity: the residual
 //! `J·(ω' − ω)/h − K_t·I'(ω') + F_f(ω') + loads(ω')` increases with ω', so Newton's method on
-//! its exact slope, kept in a bracket, finds it in two or three evaluations. (An exponential Rosenbrock scheme was tried first: it
-//! diverges at LuGre breakaway, where the bilinear |ω|·z term changes within a step.)
+//! its exact slope, kept in a bracket, finds it in two or three evaluations. An exponential
+//! Rosenbrock scheme would diverge at LuGre breakaway, where the bilinear |ω|·z term changes
+//! within a step.
 //!
 //! # Loads behind a coupling (`compliance`, `backlash`)
 //! Each such effect adds a load inertia `j2` with its own angle and speed (θ2, ω2), coupled to

@@ -245,6 +245,7 @@ impl HankelEmbedding {
     /// Write the singular-value spectrum as an SVG (log scale, selected components in red),
     /// atomically.
     pub fn spectrum_svg(&self, path: &Path) -> Result<()> {
+        use crate::report::svg::colour;
         use plotters::prelude::*;
         let mut svg = String::new();
         {
@@ -288,20 +289,20 @@ impl HankelEmbedding {
                 .draw_series(
                     pts(false)
                         .into_iter()
-                        .map(|p| Circle::new(p, 3, BLUE.filled())),
+                        .map(|p| Circle::new(p, 3, colour(0).filled())),
                 )
                 .map_err(|e| anyhow::anyhow!("{e}"))?
                 .label("high energy (dropped)")
-                .legend(|(x, y)| Circle::new((x, y), 3, BLUE.filled()));
+                .legend(|(x, y)| Circle::new((x, y), 3, colour(0).filled()));
             chart
                 .draw_series(
                     pts(true)
                         .into_iter()
-                        .map(|p| Circle::new(p, 3, RED.filled())),
+                        .map(|p| Circle::new(p, 3, colour(1).filled())),
                 )
                 .map_err(|e| anyhow::anyhow!("{e}"))?
                 .label("low energy (kept: hidden state)")
-                .legend(|(x, y)| Circle::new((x, y), 3, RED.filled()));
+                .legend(|(x, y)| Circle::new((x, y), 3, colour(1).filled()));
             chart
                 .configure_series_labels()
                 .background_style(WHITE.mix(0.8))
