@@ -242,7 +242,8 @@ impl HankelEmbedding {
         Ok(z)
     }
 
-    /// Write the singular-value spectrum as an SVG (log scale, selected components in red),
+    /// Write the singular-value spectrum as an SVG (log scale; the selected components in the
+    /// palette's second colour, the dropped ones in its first),
     /// atomically.
     pub fn spectrum_svg(&self, path: &Path) -> Result<()> {
         use crate::report::svg::colour;
@@ -424,6 +425,12 @@ mod tests {
         let p = dir.path().join("spectrum.svg");
         emb.spectrum_svg(&p).unwrap();
         let text = std::fs::read_to_string(&p).unwrap();
-        assert!(text.starts_with("<svg") && text.contains("#FF0000"));
+        // The selected components are drawn in the palette's second colour.
+        let c = crate::report::svg::colour(1);
+        let hex = format!("#{:02X}{:02X}{:02X}", c.0, c.1, c.2);
+        assert!(
+            text.starts_with("<svg") && text.contains(&hex),
+            "{hex} not drawn"
+        );
     }
 }
