@@ -88,7 +88,10 @@ pub fn shared_data(test: &str) -> Option<PathBuf> {
     if std::env::var_os("CI").is_some_and(|v| !v.is_empty()) {
         panic!("{reason}, and CI (environment variable CI is set) must have it");
     }
-    eprintln!("SKIPPED {reason}");
+    // Written to the process's stderr, not through `eprintln!`, which the test harness
+    // captures and shows only for a failing test: a skip must be seen when the test passes.
+    use std::io::Write;
+    let _ = writeln!(std::io::stderr(), "SKIPPED {reason}");
     None
 }
 
