@@ -24,8 +24,8 @@ use control::sindy::{SindyModel, SparseEq, Term};
 
 /// Starts of the bristle's sliding deflection `z_ss` as fractions of the Hall step, half a
 /// decade apart: the deflection is below what the sensor resolves (else it would be a
-/// visible spring, the emulator's geared-axis `presliding` effect), so the grid spans the
-/// three decades under it.
+/// visible spring, the emulator's geared-axis `presliding` effect), so the grid spans
+/// 10^-3 to 10^-0.5 of it.
 const Z_SS_DECADES: (i32, i32) = (-6, -1);
 
 /// Starts of the bristle damping `d` [1/s] (the damping torque over the inertia), half a
