@@ -290,17 +290,22 @@ fn substep_residual<D: RunScalar, const N: usize>(
 /// lane is the new velocity's: the residual's value and its exact slope in one evaluation).
 type Slope = DualVec<f64, 1>;
 
-/// One backward-Euler sub-step of length `h` (z exact), from state x with input u and heat
-/// state h_th. The new velocity is the root of [`substep_residual`] (increasing in it),
-/// found in `f64` by [`substep_velocity`] from `w_guess`; in dual numbers the new state then
-/// carries the implicit function's derivatives ([`RunScalar::on_root`]). `slope` holds the
-/// values `re` of `p` as one-lane dual numbers.
-/// The new velocity is taken from `roots` when it replays a tape.
-#[allow(clippy::too_many_arguments)]
+/// The numbers of a run's model in the three number types its sub-steps compute in: the
+/// run's own `p`, their values `re`, and those values as one-lane dual numbers `slope` (the
+/// Newton iteration's residual and slope).
+struct RunModel<'a, D> {
+    p: &'a RunParams<D>,
+    re: &'a RunParams<f64>,
+    slope: &'a RunParams<Slope>,
+}
+
+/// One backward-Euler sub-step of length `h` (z exact) of the model `m`, from state x with
+/// input u and heat state h_th. The new velocity is the root of [`substep_residual`]
+/// (increasing in it), found in `f64` by [`substep_velocity`] from `w_guess`; in dual
+/// numbers the new state then carries the implicit function's derivatives
+/// ([`RunScalar::on_root`]). The new velocity is taken from `roots` when it replays a tape.
 fn implicit_step<D: RunScalar, const N: usize>(
-    p: &RunParams<D>,
-    re: &RunParams<f64>,
-    slope: &RunParams<Slope>,
+    m: &RunModel<D>,
     x: &[D; N],
     u: f64,
     h_th: D,
@@ -312,12 +317,12 @@ fn implicit_step<D: RunScalar, const N: usize>(
         Some(w) => w,
         None => {
             let xr = x.map(|v| v.re());
-            let w = substep_velocity(re, slope, &xr, u, h_th.re(), h, w_guess);
+            let w = substep_velocity(m.re, m.slope, &xr, u, h_th.re(), h, w_guess);
             roots.record(w);
             w
         }
     };
-    let (g, s) = substep_residual(p, re, x, u, h_th, h, D::unknown(w));
+    let (g, s) = substep_residual(m.p, m.re, x, u, h_th, h, D::unknown(w));
     s.map(|v| D::on_root(v, g))
 }
 
@@ -764,6 +769,11 @@ impl<D: RunScalar> RangeRun<'_, D> {
         let mut h = heat_at(p, log, start);
         let mut w_prev = omega0;
         let slope = re.lift::<Slope>();
+        let model = RunModel {
+            p,
+            re,
+            slope: &slope,
+        };
         let mut out = Run {
             theta: Vec::with_capacity(n),
             omega: Vec::with_capacity(n),
@@ -802,7 +812,7 @@ impl<D: RunScalar> RangeRun<'_, D> {
                 let w = x[1].re();
                 let guess = w + (w - w_prev);
                 w_prev = w;
-                x = implicit_step(p, re, &slope, &x, u, h, dt, guess, roots);
+                x = implicit_step(&model, &x, u, h, dt, guess, roots);
                 for e in &p.effects {
                     h = e.heat_step(h, x[2], D::constant(dt));
                 }
