@@ -690,6 +690,7 @@ pub fn refine_on(
         };
         let opts = nlsq::Options {
             noise_stop: true,
+            gain_ratio_damping: true,
             ..opts
         };
         let problem = nlsq::WithJacobian {
