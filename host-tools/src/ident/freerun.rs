@@ -683,21 +683,41 @@ pub fn run_range<D: RunScalar>(
     substeps: usize,
     roots: &mut SubstepRoots,
 ) -> Result<Run<D>> {
-    run_range_from(p, re, log, start..end, substeps, None, roots)
+    let from = RunFrom {
+        substeps,
+        carried: None,
+        give_up: None,
+    };
+    let run = run_range_from(p, re, log, start..end, from, roots)?;
+    run.ok_or_else(|| anyhow::anyhow!("a free run without a check was given up"))
 }
 
-/// [`run_range`] over the samples `range`, from the measured angle at its start and, when `carried` is given, the other
-/// states from there (else from the measurement: the measured velocity and current, the
-/// bristles on the Stribeck curve).
+/// How a run of [`run_range_from`] goes.
+pub struct RunFrom<'a, D> {
+    /// Backward-Euler sub-steps per sample.
+    pub substeps: usize,
+    /// The states other than the angle at the start; `None`: the measured ones (velocity,
+    /// current, the bristles on the Stribeck curve).
+    pub carried: Option<Carried<D>>,
+    /// Sees the run so far after every sample; when it says so, the run stops there.
+    pub give_up: Option<&'a mut dyn FnMut(&Run<D>) -> bool>,
+}
+
+/// [`run_range`] over the samples `range`, from the measured angle at its start and the other
+/// states as `from` says; `None` when `from.give_up` stopped it.
 pub fn run_range_from<D: RunScalar>(
     p: &RunParams<D>,
     re: &RunParams<f64>,
     log: &MotorLog,
     range: std::ops::Range<usize>,
-    substeps: usize,
-    carried: Option<Carried<D>>,
+    from: RunFrom<D>,
     roots: &mut SubstepRoots,
-) -> Result<Run<D>> {
+) -> Result<Option<Run<D>>> {
+    let RunFrom {
+        substeps,
+        carried,
+        give_up,
+    } = from;
     let start = range.start;
     let end = range.end.min(log.len());
     if start >= end {
@@ -726,9 +746,9 @@ pub fn run_range_from<D: RunScalar>(
     };
     // The state array as long as this model's loads need, chosen once per run.
     match loads {
-        0 => run.states::<{ state_len(0) }>(c0, roots),
-        1 => run.states::<{ state_len(1) }>(c0, roots),
-        _ => run.states::<{ state_len(MAX_LOADS) }>(c0, roots),
+        0 => run.states::<{ state_len(0) }>(c0, roots, give_up),
+        1 => run.states::<{ state_len(1) }>(c0, roots, give_up),
+        _ => run.states::<{ state_len(MAX_LOADS) }>(c0, roots, give_up),
     }
 }
 
@@ -745,8 +765,14 @@ struct RangeRun<'a, D> {
 }
 
 impl<D: RunScalar> RangeRun<'_, D> {
-    /// The run from the states `c0` (and the measured angle), in states of length `N`.
-    fn states<const N: usize>(&self, c0: Carried<D>, roots: &mut SubstepRoots) -> Result<Run<D>> {
+    /// The run from the states `c0` (and the measured angle), in states of length `N`;
+    /// `None` when `give_up` stops it.
+    fn states<const N: usize>(
+        &self,
+        c0: Carried<D>,
+        roots: &mut SubstepRoots,
+        mut give_up: Option<&mut dyn FnMut(&Run<D>) -> bool>,
+    ) -> Result<Option<Run<D>>> {
         let RangeRun {
             p,
             re,
@@ -802,6 +828,9 @@ impl<D: RunScalar> RangeRun<'_, D> {
             if k + 1 == n {
                 break;
             }
+            if give_up.as_mut().is_some_and(|g| g(&out)) {
+                return Ok(None);
+            }
             let k = start + k;
             let u = log.u[k];
             if p.plant == Plant::Torque {
@@ -828,7 +857,7 @@ impl<D: RunScalar> RangeRun<'_, D> {
                 );
             }
         }
-        Ok(out)
+        Ok(Some(out))
     }
 }
 
