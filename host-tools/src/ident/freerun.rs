@@ -700,8 +700,11 @@ pub struct RunFrom<'a, D> {
     /// current, the bristles on the Stribeck curve).
     pub carried: Option<Carried<D>>,
     /// Sees the run so far after every sample; when it says so, the run stops there.
-    pub give_up: Option<&'a mut dyn FnMut(&Run<D>) -> bool>,
+    pub give_up: Option<GiveUp<'a, D>>,
 }
+
+/// A check of a run so far ([`RunFrom::give_up`]): `true` stops the run.
+pub type GiveUp<'a, D> = &'a mut dyn FnMut(&Run<D>) -> bool;
 
 /// [`run_range`] over the samples `range`, from the measured angle at its start and the other
 /// states as `from` says; `None` when `from.give_up` stopped it.
@@ -771,7 +774,7 @@ impl<D: RunScalar> RangeRun<'_, D> {
         &self,
         c0: Carried<D>,
         roots: &mut SubstepRoots,
-        mut give_up: Option<&mut dyn FnMut(&Run<D>) -> bool>,
+        mut give_up: Option<GiveUp<D>>,
     ) -> Result<Option<Run<D>>> {
         let RangeRun {
             p,

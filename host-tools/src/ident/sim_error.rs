@@ -303,11 +303,10 @@ impl<'a> Residuals<'a> {
                     upto = k;
                     partial * slack > bound()
                 };
-                let give_up: Option<&mut dyn FnMut(&freerun::Run<D>) -> bool> =
-                    match (self.segment, bound) {
-                        (None, Some(_)) => Some(&mut check),
-                        _ => None,
-                    };
+                let give_up: Option<freerun::GiveUp<D>> = match (self.segment, bound) {
+                    (None, Some(_)) => Some(&mut check),
+                    _ => None,
+                };
                 let from = freerun::RunFrom {
                     substeps: freerun::SUBSTEPS,
                     carried,
