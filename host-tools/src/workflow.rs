@@ -570,7 +570,11 @@ mod tests {
         assert_eq!(b.theta.last(), log.theta.last());
         assert_eq!(b.i.as_ref().map(Vec::len), Some(b.len()));
         let share = b.len() as f64 / log.len() as f64;
-        assert!((share - SELECT_FRACTION).abs() < 0.01, "{share}");
+        // The cut rounds to a whole sample: within half a sample of the fraction.
+        assert!(
+            (share - SELECT_FRACTION).abs() <= 0.5 / log.len() as f64 + 1e-12,
+            "{share}"
+        );
         assert!(b.source.to_string_lossy().contains("held out"));
         let mut short = log.clone();
         for v in [&mut short.t, &mut short.u, &mut short.theta] {
