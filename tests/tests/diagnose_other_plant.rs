@@ -281,7 +281,7 @@ fn check(name: &str, kind: SignalKind) {
 }
 
 #[test]
-#[ignore = "cogging is carried by theta, not named: its RMS torque (amp/√2, 7 mN·m) is below the relevance floor of 10 % of Coulomb friction although the harmonic-6 candidate is significant"]
+#[ignore = "cogging is carried by theta, not named: its RMS torque over the log (about 6 mN·m) is below the relevance floor of 10 % of Coulomb friction (8.5 mN·m) although the harmonic-6 candidate is significant"]
 fn cogging_on_a() {
     check("cogging", SignalKind::A);
 }
@@ -446,7 +446,7 @@ const TABLE_TAIL: &str = "\nHow to read it. On the voltage steps d a correct mod
      named on at least 2 of 3 seeds) and keep the cases that fall short `#[ignore]`d with \
      their cause. Causes seen here: the relevance floor (a finding's torque, its RMS over the \
      whole log, must reach 10 % of the Coulomb friction) turns down a significant Stribeck \
-     dip, which acts only at low speed, and a cogging of 10 mN·m (RMS 7 mN·m against a floor \
+     dip, which acts only at low speed, and a cogging of 10 mN·m (an RMS of about 6 mN·m against a floor \
      of 8.5); the cogging is then carried by `theta`, while the Stribeck dip leaves the model \
      adequate. A winding that warms by up to 5 K over a minute of the multisine raises R by up to 2 %: \
      the parameter check's refit is significant (p below 1e-5 in both equations) but removes \
