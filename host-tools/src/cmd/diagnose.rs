@@ -38,7 +38,7 @@ use std::path::PathBuf;
     Each finding's `spec` carries the estimated parameters and is accepted by \
     `motorid fit --add SPEC`. --json prints {\"adequate\": BOOL, \"judged\": BOOL, \"effects\": [{\"name\", \
     \"spec\", \"score\", \"explanation\"}, ...], \"unexplained\": [{\"variable\", \"share\", \
-    \"explanation\"}, ...], \"checks\": [...], \"refit\": [...]}, most important first; \
+    \"explanation\", \"shape\": {\"x\", \"y\", \"x_unit\", \"y_unit\", ...}}, ...], \"checks\": [...], \"refit\": [...]}, most important first; \
     score and share = fraction of the residual explained."
 )]
 pub struct Args {
@@ -74,6 +74,8 @@ struct JsonUnexplained<'a> {
     hz: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     spec: Option<&'a str>,
+    /// The residual's function of the variable, in units (x and y arrays).
+    shape: crate::report::shape::Drawn,
 }
 
 #[derive(serde::Serialize)]
@@ -156,6 +158,7 @@ pub fn run(args: Args) -> Result<()> {
                 p_value: u.p_value,
                 hz: u.hz,
                 spec: u.spec.as_deref(),
+                shape: crate::report::shape::drawn(u, &model, &log),
             })
             .collect();
         let refit: Vec<serde_json::Value> = d
@@ -179,13 +182,13 @@ pub fn run(args: Args) -> Result<()> {
         );
         return Ok(());
     }
-    print_text(&model, &args, &d);
+    print_text(&model, &log, &args, &d);
     Ok(())
 }
 
-fn print_text(model: &Model, args: &Args, d: &diagnose::Diagnosis) {
+fn print_text(model: &Model, log: &MotorLog, args: &Args, d: &diagnose::Diagnosis) {
     let v = &d.verdict;
-    print_verdict(model, args, d);
+    print_verdict(model, log, args, d);
     for l in &v.look_alikes {
         if l.both_found {
             println!(
@@ -209,7 +212,7 @@ fn print_text(model: &Model, args: &Args, d: &diagnose::Diagnosis) {
     }
 }
 
-fn print_verdict(model: &Model, args: &Args, d: &diagnose::Diagnosis) {
+fn print_verdict(model: &Model, log: &MotorLog, args: &Args, d: &diagnose::Diagnosis) {
     let v = &d.verdict;
     let failed: Vec<&diagnose::verdict::Check> = v.checks.iter().filter(|c| !c.passed).collect();
     if v.adequate {
@@ -277,6 +280,10 @@ fn print_verdict(model: &Model, args: &Args, d: &diagnose::Diagnosis) {
                 u.variable, u.share, u.p_value
             );
             println!("      {}", u.explanation);
+            let shape = crate::report::shape::drawn(u, model, log).summary();
+            if !shape.is_empty() {
+                println!("      {shape}");
+            }
         }
     }
 }
