@@ -15,6 +15,33 @@ fn fit_of(line: &str, key: &str) -> f64 {
         .unwrap()
 }
 
+/// Each round's selection line prints the statistic its keep test compares (the
+/// multiple-shooting residual sum of squares on the selection log), and a refit that was kept
+/// lowered it.
+fn check_selection_lines(text: &str) {
+    let lines: Vec<&str> = text
+        .lines()
+        .map(str::trim_start)
+        .filter(|l| l.starts_with("selection (signal b)"))
+        .collect();
+    assert!(!lines.is_empty(), "no selection line: {text}");
+    for l in &lines {
+        assert!(
+            l.contains("multiple-shooting RSS") && !l.contains("x fit"),
+            "{l}"
+        );
+        if l.contains("kept: explains it better") {
+            let change: f64 = l
+                .split("for the kept model (")
+                .nth(1)
+                .and_then(|r| r.split(" %)").next())
+                .and_then(|v| v.parse().ok())
+                .unwrap_or_else(|| panic!("no change against the kept model: {l}"));
+            assert!(change < 0.0, "kept, yet its RSS rose: {l}");
+        }
+    }
+}
+
 #[test]
 fn demo_finds_the_hidden_effect_and_the_error_falls() {
     let dir = tempfile::tempdir().unwrap();
@@ -39,6 +66,7 @@ fn demo_finds_the_hidden_effect_and_the_error_falls() {
         String::from_utf8_lossy(&out.stderr)
     );
     assert!(text.contains("position_load: FOUND"), "{text}");
+    check_selection_lines(&text);
     // The kept models, each scored on the test log no choice was made on.
     let steps: Vec<&str> = text
         .lines()

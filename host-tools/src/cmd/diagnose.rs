@@ -23,9 +23,10 @@ use std::path::PathBuf;
     check's statistic and p_value null). Judge a model on a multisine: on voltage steps even \
     a correct model is often not adequate (docs/limits.md). Then what is MISSING: every effect of the list that the model lacks adds its \
     regressors (searched over cogging harmonics, Stribeck velocities, thermal time constants...) \
-    and forward selection keeps an effect when it is significant (nested F-test p < 0.001 / \
-    number of candidate variants, Bonferroni, with an effective sample size for autocorrelated \
-    residuals, and a lower BIC) and relevant (it explains at least 2% of the residual). What \
+    and forward selection keeps an effect when it is significant (the cluster-robust Wald \
+    test of its columns beyond the model's, jackknifed, on disjoint windows clustered by held \
+    input: p < 0.001 / number of candidate variants, Bonferroni; and a lower BIC) and \
+    relevant (it explains at least 2% of the residual). What \
     no effect explains is ranked by the VARIABLE that carries it (theta, omega, acceleration, \
     current, time, reversal, frequency), each a smooth function tested the same way. The \
     model is ADEQUATE only when every check passes at the 1% family level and both lists are \
