@@ -94,6 +94,8 @@ fn demo_finds_the_hidden_effect_and_the_error_falls() {
     );
     let html = std::fs::read_to_string(dir.path().join("rep").join("index.html")).unwrap();
     assert!(html.contains("<svg") && html.contains("position_load"));
+    // The report's scores are named for the log they were taken on.
+    assert!(html.contains("Test fit after each step") && !html.contains("Validation fit"));
 }
 
 /// Physics outside the effect list (a fan's drag, quadratic in the speed): the loop says the

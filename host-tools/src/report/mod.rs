@@ -467,15 +467,15 @@ pub fn write_diagnose_report(
 pub struct Iteration {
     /// "LuGre", "LuGre + cogging", ...
     pub label: String,
-    /// Validation fits of this model.
+    /// Fits of this model on the test log (no choice was made on it).
     pub validation: Fits,
     /// The effect added after this iteration's diagnosis (its spec), if any.
     pub added: Option<String>,
 }
 
 /// `demo --report DIR`: the error falling over the iterations (before/after chart), the
-/// hidden effect and whether it was found, then the last diagnosis and the final model on the
-/// validation data.
+/// hidden effect and whether it was found, then the last diagnosis (its verdict and what
+/// carries the rest) and the final model on the test log.
 pub fn write_demo_report(
     dir: &Path,
     hidden: &[String],
@@ -493,7 +493,7 @@ pub fn write_demo_report(
         },
         verdict
     ));
-    page.heading("Validation fit after each step");
+    page.heading("Test fit after each step (a fresh log no choice was made on)");
     let rows: Vec<Vec<String>> = iterations
         .iter()
         .map(|it| {
@@ -521,7 +521,7 @@ pub fn write_demo_report(
     for e in &d.equations {
         equation_section(&mut page, e);
     }
-    page.heading("Final model on the validation data");
+    page.heading("Final model on the test log");
     prediction_charts(&mut page, model, log, pred);
     let b = velocity_error_breakdown(model, log, pred);
     region_section(&mut page, &b, "rad/s");
