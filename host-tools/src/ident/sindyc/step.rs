@@ -78,17 +78,18 @@ pub(super) fn sign_kinks(model: &SindyModel<f64>, voltage: bool) -> Vec<(usize, 
     out
 }
 
-/// A term of the model's right-hand side: its equation (1 `ẋ`, 2 `z`, 3 `I`), its
-/// coefficient, which states its z-free factor `g` depends on, and whether its factor `h(z)`
-/// is more than 1.
+/// A term of the model's right-hand side and its coefficient.
 #[derive(Debug, Clone, Copy)]
 struct Slot {
     term: Term,
     coef: f64,
-    eq: usize,
-    g_deps: [bool; 4],
-    has_z: bool,
 }
+
+/// Most terms of a model's right-hand side (three equations).
+const SLOTS: usize = 3 * control::sindy::MAX_TERMS;
+/// Terms of a model whose step's scratch is small (the structure search's and refinement's
+/// models have 5–16).
+const FEW_SLOTS: usize = 16;
 
 /// The states `(x, ẋ, z, I)` a term's z-free factor ([`Term::z_free_factor`]) depends on.
 fn factor_dependencies(t: Term) -> [bool; 4] {
@@ -133,13 +134,12 @@ pub(super) struct Slope {
 const PHI_KEEP: usize = 16;
 
 /// A `φ1(A)·b` computation: the scaled matrix and vector, and the result after each number
-/// of squarings (`g[k]` after `k`, for `k ≤ s`), so that a step with the same scaled inputs
-/// and fewer squarings takes its result from here. `s = usize::MAX` when nothing is kept.
+/// of squarings (`g[k]` after `k`), so that a step with the same scaled inputs and fewer
+/// squarings takes its result from here. `g` is empty when nothing is kept.
 pub(super) struct Phi {
     m1: M4,
     c: [f64; 4],
-    s: usize,
-    g: [[f64; 4]; PHI_KEEP],
+    g: heapless::Vec<[f64; 4], PHI_KEEP>,
 }
 
 impl Phi {
@@ -147,20 +147,28 @@ impl Phi {
         Phi {
             m1: [[0.0; 4]; 4],
             c: [0.0; 4],
-            s: usize::MAX,
-            g: [[0.0; 4]; PHI_KEEP],
+            g: heapless::Vec::new(),
         }
     }
 
-    fn kept(&self) -> bool {
-        self.s != usize::MAX
+    /// The result after `s` squarings when the scaled inputs are `m1` and `c` and it was
+    /// kept.
+    fn after(&self, m1: &M4, c: &[f64; 4], s: usize) -> Option<[f64; 4]> {
+        let same = |x: &[f64], y: &[f64]| x.iter().zip(y).all(|(x, y)| x.to_bits() == y.to_bits());
+        let g = self.g.get(s)?;
+        (same(m1.as_flattened(), self.m1.as_flattened()) && same(c, &self.c)).then_some(*g)
     }
 }
 
 /// What every step of one free run shares: the model's terms, the states its right-hand
 /// side depends on, the sign-like kinks a step must not jump, and the bound on `z`.
 pub(super) struct Stepper {
+    /// The terms, equation after equation (`ẋ`, `z`, `I`).
     slots: Vec<Slot>,
+    /// The slots of each equation (`ẋ`, `z`, `I`).
+    ranges: [std::ops::Range<usize>; 3],
+    /// For each state `(x, ẋ, z, I)`, the slots whose value depends on it.
+    lanes: [Vec<usize>; 4],
     a: f64,
     vs: f64,
     deps: [bool; 4],
@@ -175,17 +183,24 @@ pub(super) struct Stepper {
 impl Stepper {
     pub(super) fn new(model: &SindyModel<f64>, voltage: bool) -> Self {
         let mut slots = Vec::new();
-        let eqs = [(1, &model.accel), (2, &model.zdot)];
-        for (eq, e) in eqs.into_iter().chain(voltage.then_some((3, &model.idot))) {
-            for &(term, coef) in &e.terms {
-                slots.push(Slot {
-                    term,
-                    coef,
-                    eq,
-                    g_deps: factor_dependencies(term),
-                    has_z: term.has_z(),
-                });
+        let mut ranges = [0..0, 0..0, 0..0];
+        let mut lanes: [Vec<usize>; 4] = Default::default();
+        let eqs = [
+            Some(&model.accel),
+            Some(&model.zdot),
+            voltage.then_some(&model.idot),
+        ];
+        for (range, e) in ranges.iter_mut().zip(eqs) {
+            let start = slots.len();
+            for &(term, coef) in e.iter().flat_map(|e| &e.terms) {
+                let mut deps = factor_dependencies(term);
+                deps[2] = term.has_z();
+                for (lane, _) in lanes.iter_mut().zip(deps).filter(|(_, d)| *d) {
+                    lane.push(slots.len());
+                }
+                slots.push(Slot { term, coef });
             }
+            *range = start..slots.len();
         }
         let mut coef = [0.0; 12];
         let mut f = 1.0;
@@ -196,6 +211,8 @@ impl Stepper {
         let deps = state_dependencies(model, voltage);
         Stepper {
             slots,
+            ranges,
+            lanes,
             a: model.a,
             vs: model.vs,
             deps,
@@ -214,20 +231,37 @@ impl Stepper {
         self.deps[0]
     }
 
-    /// The equations' sums `[ẋ, f_ẋ, f_z, f_I]` from each term's value, in the order of
-    /// its equation's terms (as [`control::sindy::SparseEq::eval`] sums them).
-    fn sums(&self, xdot: f64, value: impl Fn(usize, &Slot) -> f64) -> [f64; 4] {
-        let mut f = [xdot, 0.0, 0.0, 0.0];
-        for (k, sl) in self.slots.iter().enumerate() {
-            f[sl.eq] += sl.coef * value(k, sl);
-        }
-        f
+    /// The right-hand side `[ẋ, f_ẋ, f_z, f_I]` from each term's value: each equation the
+    /// sum of its terms in order (as [`control::sindy::SparseEq::eval`] sums them).
+    fn sums(&self, xdot: f64, values: &[f64]) -> [f64; 4] {
+        let eq = |r: &std::ops::Range<usize>| {
+            self.slots[r.clone()]
+                .iter()
+                .zip(&values[r.clone()])
+                .fold(0.0, |acc, (sl, v)| acc + sl.coef * v)
+        };
+        [
+            xdot,
+            eq(&self.ranges[0]),
+            eq(&self.ranges[1]),
+            eq(&self.ranges[2]),
+        ]
     }
 
     /// `f(s)` and the Jacobian's difference quotients (forward differences: the Jacobian
     /// only shapes the step's stability and its O(h²) error, so 1e-7 relative accuracy is
-    /// plenty).
+    /// plenty). A perturbed state's lane re-evaluates only the factors that depend on it.
     pub(super) fn slope(&self, s: &[f64; 4], u: f64) -> Slope {
+        // Scratch on the stack, sized for the model (most have a few terms).
+        if self.slots.len() <= FEW_SLOTS {
+            self.slope_in::<FEW_SLOTS>(s, u)
+        } else {
+            self.slope_in::<SLOTS>(s, u)
+        }
+    }
+
+    /// [`Self::slope`] for at most `N` terms.
+    fn slope_in<const N: usize>(&self, s: &[f64; 4], u: f64) -> Slope {
         let (a, vs) = (self.a, self.vs);
         let inputs = |s: &[f64; 4]| TermInputs {
             x: s[0],
@@ -237,34 +271,30 @@ impl Stepper {
             u,
         };
         let p = inputs(s);
-        // Each term's factors g and h(z) and its value g·h.
-        let mut gh = [[0.0; 3]; 3 * control::sindy::MAX_TERMS];
-        for (v, sl) in gh.iter_mut().zip(&self.slots) {
-            let g = sl.term.z_free_factor(&p, a, vs);
-            let h = sl.term.z_part().eval(p.z, a);
-            *v = [g, h, g * h];
+        // Each term's factors g and h(z), and its value g·h.
+        let (mut g, mut h, mut v) = ([0.0; N], [0.0; N], [0.0; N]);
+        for (k, sl) in self.slots.iter().enumerate() {
+            g[k] = sl.term.z_free_factor(&p, a, vs);
+            h[k] = sl.term.z_part().eval(p.z, a);
+            v[k] = g[k] * h[k];
         }
-        let f0 = self.sums(s[1], |k, _| gh[k][2]);
+        let f0 = self.sums(s[1], &v);
         let mut q = [[0.0; 4]; 4];
         for j in (0..4).filter(|j| self.deps[*j]) {
             let d = 1e-7 * s[j].abs().max(1e-2);
             let mut sp = *s;
             sp[j] += d;
             let pp = inputs(&sp);
-            let fp = self.sums(sp[1], |k, sl| {
-                let [g, h, v] = gh[k];
-                if j == 2 {
-                    if sl.has_z {
-                        g * sl.term.z_part().eval(sp[2], a)
-                    } else {
-                        v
-                    }
-                } else if sl.g_deps[j] {
-                    sl.term.z_free_factor(&pp, a, vs) * h
+            let mut w = v;
+            for &k in &self.lanes[j] {
+                let t = self.slots[k].term;
+                w[k] = if j == 2 {
+                    g[k] * t.z_part().eval(sp[2], a)
                 } else {
-                    v
-                }
-            });
+                    t.z_free_factor(&pp, a, vs) * h[k]
+                };
+            }
+            let fp = self.sums(sp[1], &w);
             for i in 0..4 {
                 q[i][j] = (fp[i] - f0[i]) / d;
             }
@@ -320,12 +350,11 @@ impl Stepper {
             return Some(next);
         }
         *splits -= 1;
-        let longer = if phi.kept() {
-            Some(&phi)
-        } else {
-            known.map(|k| k.1)
+        let longer = match known {
+            Some((_, p)) if phi.g.is_empty() => p,
+            _ => &phi,
         };
-        let first = (slope, longer.unwrap_or(&phi));
+        let first = (slope, longer);
         let mut mid = self.advance(s, u, h / 2.0, splits, incs.as_deref_mut(), Some(first))?;
         if let Some(v) = incs.as_deref_mut() {
             v.push(mid[0]);
@@ -484,11 +513,8 @@ fn phi1_structured<const MASK: u8>(
     let s = s as usize;
     let m1 = a.map(|r| r.map(|v| v * scale));
     let c = b.map(|v| v * scale);
-    if let Some(p) = longer {
-        let same = |x: &[f64], y: &[f64]| x.iter().zip(y).all(|(x, y)| x.to_bits() == y.to_bits());
-        if p.kept() && s <= p.s && same(m1.as_flattened(), p.m1.as_flattened()) && same(&c, &p.c) {
-            return Some(p.g[s]);
-        }
+    if let Some(g) = longer.and_then(|p| p.after(&m1, &c, s)) {
+        return Some(g);
     }
     let m2 = mul_masked::<MASK>(&m1, &m1);
     let m3 = mul_masked::<MASK>(&m2, &m1);
@@ -524,37 +550,37 @@ fn phi1_structured<const MASK: u8>(
     add_masked(&mut p, &outer);
     let mut g = mul4v(&p, &c);
     let keep = s < PHI_KEEP;
+    phi.g.clear();
     if keep {
         phi.m1 = m1;
         phi.c = c;
-        phi.g[0] = g;
+        let _ = phi.g.push(g);
     }
-    if s == 0 {
-        phi.s = if keep { 0 } else { usize::MAX };
-        return Some(g);
-    }
-    let mut e = mul_masked::<MASK>(&m1, &p);
-    for (r, row) in e.iter_mut().enumerate() {
-        row[r] += 1.0;
-    }
-    for k in 0..s {
-        let eg = mul4v(&e, &g);
-        for (gi, v) in g.iter_mut().zip(eg) {
-            *gi += v;
+    if s > 0 {
+        let mut e = mul_masked::<MASK>(&m1, &p);
+        for (r, row) in e.iter_mut().enumerate() {
+            row[r] += 1.0;
         }
-        if keep {
-            phi.g[k + 1] = g;
-        }
-        if k + 1 < s {
-            e = square_masked::<MASK>(&e);
-            if !e.iter().flatten().all(|v| v.is_finite()) {
-                // A product with an infinite factor is not zero: the plain computation.
-                phi.s = usize::MAX;
-                return phi1_times(a, b);
+        for k in 0..s {
+            let eg = mul4v(&e, &g);
+            for (gi, v) in g.iter_mut().zip(eg) {
+                *gi += v;
+            }
+            if keep {
+                let _ = phi.g.push(g);
+            }
+            if k + 1 < s {
+                e = square_masked::<MASK>(&e);
             }
         }
+        // A non-finite entry stays so through every later squaring (its product with the
+        // diagonal is summed), so a finite last power means every product skipped was a
+        // finite one with a zero; otherwise the plain computation.
+        if !e.iter().flatten().all(|v| v.is_finite()) {
+            phi.g.clear();
+            return phi1_times(a, b);
+        }
     }
-    phi.s = if keep { s } else { usize::MAX };
     Some(g)
 }
 
@@ -781,7 +807,8 @@ mod tests {
 
     #[test]
     fn the_factors_depend_on_no_state_but_those_listed() {
-        let base = [0.3, -1.7, 0.4, 2.2];
+        // Near zero velocity and current, where the smooth signs are not saturated.
+        let base = [0.3, 0.004, 0.4, 0.002];
         for t in Term::FIXED
             .into_iter()
             .chain([Term::SinTheta(3), Term::CosTheta(2)])
