@@ -376,8 +376,8 @@ impl Stepper {
     ) -> Option<[f64; 4]> {
         let mut a = [[0.0; 4]; 4];
         for j in (0..4).filter(|j| self.deps[*j]) {
-            for i in 0..4 {
-                a[i][j] = slope.q[i][j] * h;
+            for (row, q) in a.iter_mut().zip(&slope.q) {
+                row[j] = q[j] * h;
             }
         }
         let b = slope.f0.map(|f| f * h);
@@ -475,9 +475,9 @@ fn square_masked<const MASK: u8>(e: &M4) -> M4 {
         for jj in 0..Columns::<MASK>::N {
             let j = Columns::<MASK>::IDX[jj];
             let mut sum = 0.0;
-            for k in 0..4 {
+            for (k, (eik, ek)) in e[i].iter().zip(e).enumerate() {
                 if Columns::<MASK>::has(k) || k == i {
-                    sum += e[i][k] * e[k][j];
+                    sum += eik * ek[j];
                 }
             }
             c[i][j] = sum;
