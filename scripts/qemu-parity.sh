@@ -4,8 +4,9 @@
 # recorded input trace qemu-parity/trace/closed_loop.qpt, run the same code on the host, and
 # compare the f32 outputs bit for bit. Then count the instructions each 12 ms period of the
 # board logic (limits, faults, telemetry and the control step) takes, per observer
-# (none / LuGre / SINDYc), from QEMU's per-instruction exec log; the SINDYc configuration in
-# experiment mode (signal a) is counted too, not held to the budget (13 sines a period).
+# (none / LuGre / SINDYc / LuGre with a 16-node speed table and saturation), from QEMU's
+# per-instruction exec log; the SINDYc configuration in experiment mode (signal a) is counted
+# too, not held to the budget (13 sines a period).
 #
 # Installs qemu-system-arm (Debian) and the thumbv7em-none-eabihf target when missing.
 # Builds in $CARGO_TARGET_DIR, by default <repo>/target/qemu (a separate directory, so that it

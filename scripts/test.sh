@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The project's test command (README "Quick start", second line; .ci/run calls it).
 # Installs what a fresh machine lacks, builds the firmware and prints its flash/RAM use,
-# runs rustfmt and clippy checks, every host test, and the QEMU parity run.
+# runs rustfmt and clippy checks, the commit messages' check, every host test, and the QEMU
+# parity run.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -63,6 +64,21 @@ cargo test --no-run --all-targets
 export MOTORID_BUILD_ARGS="-p motorid -p xtask --bin motorid --bin xtask --tests"
 # shellcheck disable=SC2086
 cargo build $MOTORID_BUILD_ARGS
+
+# Commit messages (`cargo xtask commits`, with the binary just built: `cargo run` would resolve
+# other features and compile the dependencies again). A clean checkout of main knows no branch
+# point, so the range starts after COMMITS_BASE, the last commit whose message broke the rule:
+# the history before it is left as it is, every commit since is held to the rule. COMMITS_RANGE
+# overrides it (a branch before its merge: `main..HEAD`).
+COMMITS_BASE=764c6ad6f37296bb529d393a5c014764f279a791
+commits_range=${COMMITS_RANGE:-$COMMITS_BASE..HEAD}
+commits_rc=0
+step "Commit messages: subject of at most 72 characters, blank line, body ($commits_range)"
+if ! git rev-parse -q --verify "${commits_range%%..*}^{commit}" >/dev/null 2>&1; then
+  echo "SKIPPED commit messages: ${commits_range%%..*} is not in this checkout (no git history, or a shallow clone)"
+else
+  "${CARGO_TARGET_DIR:-target}/debug/xtask" commits "$commits_range" || commits_rc=$?
+fi
 # Cargo runs test binaries one after another, and most are one long single-threaded fit: the
 # longest (fit_add_effects: position_load and cogging, about 3 min) runs beside all the others
 # so that both cores work.
@@ -89,6 +105,7 @@ if [ -n "$slow_bin" ]; then
 fi
 rm -f "$slow_log"
 [ "$tests_rc" = 0 ] || exit "$tests_rc"
+[ "$commits_rc" = 0 ] || { echo "error: commit messages in $commits_range break the rule" >&2; exit "$commits_rc"; }
 unset RUSTC_WORKSPACE_WRAPPER CLIPPY_ARGS MOTORID_BUILD_ARGS
 
 if [ -x scripts/qemu-parity.sh ]; then

@@ -967,6 +967,9 @@ pub fn store_coefficients<S: NorFlash>(
 
 #[cfg(test)]
 mod tests {
+    // Tolerances within a few float ε of the values compared (1e-15 to 1e-9 in f64, 1e-6
+    // in f32) are rounding of the same closed form computed another way; wider ones say
+    // why beside them.
     extern crate std;
     use super::*;
     use std::vec::Vec;
@@ -1005,6 +1008,7 @@ mod tests {
         assert_eq!(temperature_derating(25.0), 1.0);
         assert_eq!(temperature_derating(TEMP_DERATE_C), 1.0);
         let mid = 0.5 * (TEMP_DERATE_C + TEMP_MAX_C);
+        // 1e-6: f32 rounding of the linear ramp (an ulp of 0.5 is 6e-8).
         assert!((temperature_derating(mid) - 0.5).abs() < 1e-6);
         assert_eq!(temperature_derating(TEMP_MAX_C), 0.0);
         assert_eq!(temperature_derating(f32::NAN), 1.0);
@@ -1045,6 +1049,7 @@ mod tests {
         assert_eq!(b.control().current_limit(), full);
         let mid = 0.5 * (TEMP_DERATE_C + TEMP_MAX_C);
         b.tick(&at(mid), &mut |m| out.push(m));
+        // 1e-4 A: f32 rounding of a limit of tens of amperes (an ulp of 24 A is 2e-6 A).
         assert!((b.control().current_limit() - 0.5 * full).abs() < 1e-4);
         assert_eq!(b.fault(), None);
         assert_eq!(b.mode(), Mode::Speed);
@@ -1163,6 +1168,7 @@ mod tests {
         assert_eq!(reports.len(), 3);
         for t in &reports {
             assert_eq!(t.periods, crate::telemetry::WINDOW_PERIODS);
+            // 0.1 µs: f32 rounding of the window's running sum (an ulp near 10^6 µs is 0.06 µs).
             assert!((t.period_us - 12_010.0).abs() < 0.1, "{}", t.period_us);
             assert!((t.jitter_us - 10.0).abs() < 0.1, "{}", t.jitter_us);
             assert_eq!(t.step_cycles_max, 4321);
@@ -1196,6 +1202,7 @@ mod tests {
             b.tick(&at(25.0), &mut |m| out.push(m));
         }
         assert_eq!(b.speed_reference(), 0.0);
+        // 43: the new limit, 3 V/K_b = 42.1 rad/s, with room for rounding; the old one is 300.
         assert!(b.speed_limit() < 43.0, "{}", b.speed_limit());
     }
 
@@ -1248,6 +1255,7 @@ mod tests {
         assert_eq!(b.commission_current(), i_full);
         let v = (dead_time_drop(12.0) + i_full * co.motor.r)
             .min(COMMISSION_U_FRACTION * co.pi.u_max.min(MAX_DUTY * 12.0));
+        // 1e-6 V: the same f32 formula, evaluated in another order (an ulp of 2 V is 2.4e-7).
         assert!(
             (b.commission_volts() - v).abs() < 1e-6,
             "{}",
@@ -1261,6 +1269,7 @@ mod tests {
             },
             &mut |_| {},
         );
+        // 1e-5 A: f32 rounding of the derated current (amperes: an ulp is about 2e-7 A).
         assert!((b.commission_current() - 0.5 * i_full).abs() < 1e-5);
         assert!(b.commission_volts() < v);
     }

@@ -676,6 +676,9 @@ impl<F: Float> SindyObserver<F> {
 
 #[cfg(test)]
 mod tests {
+    // Tolerances within a few float ε of the values compared (1e-15 to 1e-9 in f64, 1e-6
+    // in f32) are rounding of the same closed form computed another way; wider ones say
+    // why beside them.
     use super::*;
     use proptest::prelude::*;
 
@@ -758,6 +761,8 @@ mod tests {
                 let mut lo = p;
                 lo.z -= h;
                 let fd = (t.eval(&hi, 3.0, 1.0) - t.eval(&lo, 3.0, 1.0)) / (2.0 * h);
+                // 1e-6: the central difference's h²·f'''/6 (1e-12) and rounding ε·|f|/h (1e-9) lie far
+                // below it; a wrong derivative is off by order 1.
                 assert!((fd - t.eval_dz(&p, 3.0)).abs() < 1e-6, "{t} at z={z}");
                 if !t.has_z() {
                     assert_eq!(t.eval_dz(&p, 3.0), 0.0);
@@ -822,6 +827,8 @@ mod tests {
         }
         let p = inputs(0.0, 1.0, obs.z, 0.0, 0.0);
         assert!(m.zdot_rhs(&p).abs() < 1e-9, "residual {}", m.zdot_rhs(&p));
+        // (0, 0.25): f = 0.5·tanh(10·1) − 2z − 5z³ is 0.5 at z = 0 and −0.08 at 0.25, so the
+        // fixed point lies between.
         assert!(obs.z > 0.0 && obs.z < 0.25);
     }
 

@@ -858,6 +858,9 @@ fn finite_or_flag<F: Float>(x: F, faults: &mut Faults) -> F {
 
 #[cfg(test)]
 mod tests {
+    // Tolerances within a few float ε of the values compared (1e-15 to 1e-9 in f64, 1e-6
+    // in f32) are rounding of the same closed form computed another way; wider ones say
+    // why beside them.
     extern crate std;
     use super::*;
     use crate::hall::hall_state_for_angle;
@@ -958,6 +961,8 @@ mod tests {
         ] {
             cfg.estimator = est;
             let (w, mean_err, faults) = closed_loop(&cfg, 40.0, 600);
+            // 2 % of 40 rad/s is 0.8 rad/s, one Hall step over the 0.12 s window: the estimator's
+            // resolution.
             assert!(
                 mean_err < 0.02 * 40.0,
                 "{est:?}: ω = {w}, mean |err| {mean_err}"
@@ -982,12 +987,14 @@ mod tests {
         // V_c = R·F_f/K_t (dI_c/dt ≈ 0).
         let p = LugreParams::<f64>::paper();
         let want = p.steady_friction(out.omega);
+        // 1 %: in steady motion z sits at its steady value up to the ripple of ω̂.
         assert!(
             (out.friction - want).abs() < 0.01 * want,
             "{} vs {want}",
             out.friction
         );
         let m = MotorParams::<f64>::paper();
+        // 0.05 V of V_c ≈ 0.44 V: room for the L·dI_c/dt term the steady formula leaves out.
         assert!((out.v_comp - m.r * out.friction / m.kt).abs() < 0.05);
         // With compensation off, v_comp is 0 but friction is still reported.
         let mut off = cfg.clone();
@@ -1025,6 +1032,7 @@ mod tests {
             last
         };
         let full = run(1.0);
+        // V_c ≈ R·F_f/K_t ≈ 0.44 V at 40 rad/s: above 0.1 V, compensation is on.
         assert!(full.v_comp.abs() > 0.1, "{}", full.v_comp);
         for g in [0.0, 0.25, 0.5, 0.75] {
             let o = run(g);
@@ -1042,6 +1050,7 @@ mod tests {
     fn observer_follows_reference_and_resolution_is_one_step_per_window() {
         let step = hall::step_angle::<f64>(11);
         let r = estimator_resolution(&EstimatorConfig::paper(), step, 0.012);
+        // 1e-12: rounding of one division; 1e-3: 0.793 written to three digits.
         assert!(
             (r - step / 0.12).abs() < 1e-12 && (r - 0.793).abs() < 1e-3,
             "{r}"
@@ -1078,6 +1087,8 @@ mod tests {
         let m = MotorParams::<f64>::paper();
         let p = LugreParams::<f64>::paper();
         let level = m.r * (p.s_max() + p.alpha2 * 10.0) / m.kt;
+        // Between 0.8 and 1.5 of the steady level at the reference's peak (0.34 V), with room for
+        // L·dI_c/dt and ω̂'s resolution; the σ1·ż pulses would be about 4 V, twelve times it.
         assert!(vc_max < 1.5 * level, "max |V_c| {vc_max} vs {level}");
         assert!(vc_max > 0.8 * level, "max |V_c| {vc_max} vs {level}");
         assert!(agree > moving * 9 / 10, "{agree} of {moving}");
@@ -1244,6 +1255,8 @@ mod tests {
             i = u / r_true;
             assert!(i <= i_limit * (1.0 + 1e-12), "{i}");
         }
+        // 40 steps of a gain-½ approach leave 2^-40 of the gap: a window that stops short of the
+        // limit fails 0.999.
         assert!(i > 0.999 * i_limit, "{i}");
         // A falling back-EMF under a positive current moves the upper edge down by as much.
         let m = MeasuredCurrent {
@@ -1296,13 +1309,16 @@ mod tests {
     #[test]
     fn edge_queue_holds_a_period_at_the_rated_speed() {
         let per_period = RATED_EDGE_RATE * crate::CONTROL_PERIOD_S;
+        // 373 and 47 as the docs write them, to the unit and to the half.
         assert!(
             (RATED_SPEED_RAD_S - 373.0).abs() < 1.0,
             "{RATED_SPEED_RAD_S}"
         );
         assert!((per_period - 47.0).abs() < 0.5, "{per_period}");
         assert!(MAX_EDGES as f32 >= 1.5 * per_period, "{MAX_EDGES}");
+        // A period and a half of edges, rounded up by at most two.
         assert!((MAX_EDGES as f32) < 1.5 * per_period + 2.0, "{MAX_EDGES}");
+        // f32 rounding of the two formulas (ulps of 3e-5 near 373, 1e-4 near 1026 rad/s).
         assert!((rated_speed(RATED_POLE_PAIRS) - RATED_SPEED_RAD_S).abs() < 1e-3);
         assert!((rated_speed(4) - RATED_SPEED_RAD_S * 11.0 / 4.0).abs() < 1e-2);
     }
@@ -1337,6 +1353,8 @@ mod tests {
         assert_eq!(out.steps, 4_500_000);
         let want = 30.0 * hall::step_angle::<f64>(11) / 0.012;
         let rel = (out.omega as f64 - want).abs() / want;
+        // 2e-6: a few f32 ε (1.2e-7) over the estimate's operations; an estimate from the f32 angle
+        // would be 1e-3 off (0.25 of 238 rad/s).
         assert!(rel < 2e-6, "ω = {} vs {want}: {rel:e}", out.omega);
     }
 

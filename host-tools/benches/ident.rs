@@ -22,8 +22,9 @@ use faer::Mat;
 use motorid::ident::hankel::{HankelEmbedding, Selection, DEFAULT_DELAYS};
 use motorid::ident::library::{Library, Signals};
 use motorid::ident::sindyc::{weak_rows, weak_rows_generic};
-use motorid::ident::stlsq::{Normal, StlsqOptions};
+use motorid::ident::stlsq::StlsqOptions;
 use motorid::log::Plant;
+use motorid::numerics::least_squares::NormalEquations;
 use std::hint::black_box;
 use std::path::PathBuf;
 
@@ -172,7 +173,7 @@ fn benches(c: &mut Criterion) {
     g.bench_function("sindyc_weak_regression", |b| {
         b.iter(|| {
             let (a, y, _) = weak_rows(&lib, &d.t, &sig);
-            let ne = Normal::new(a.as_ref(), y.as_ref());
+            let ne = NormalEquations::new(a.as_ref(), y.as_ref());
             let opts = StlsqOptions::default();
             black_box((0..3).map(|k| ne.stlsq(k, &opts)).collect::<Vec<_>>())
         })
@@ -182,7 +183,7 @@ fn benches(c: &mut Criterion) {
     g.bench_function("sindyc_weak_regression_generic", |b| {
         b.iter(|| {
             let (a, y, _) = weak_rows_generic(&lib, &d.t, &sig);
-            let ne = Normal::new(a.as_ref(), y.as_ref());
+            let ne = NormalEquations::new(a.as_ref(), y.as_ref());
             let opts = StlsqOptions::default();
             black_box((0..3).map(|k| ne.stlsq(k, &opts)).collect::<Vec<_>>())
         })

@@ -94,6 +94,11 @@ pub extern "C" fn qp_begin_sindyc_a() {
 }
 #[no_mangle]
 #[inline(never)]
+pub extern "C" fn qp_begin_lugre_table() {
+    unsafe { core::arch::asm!("mov {0}, #6", out(reg) _, options(nomem, nostack)) }
+}
+#[no_mangle]
+#[inline(never)]
 pub extern "C" fn qp_end() {
     unsafe { core::arch::asm!("mov {0}, #4", out(reg) _, options(nomem, nostack)) }
 }
@@ -139,11 +144,12 @@ fn main() -> ! {
     let addr = |f: extern "C" fn()| (f as usize) & !1;
     let _ = writeln!(
         line,
-        "markers {:#x} {:#x} {:#x} {:#x} {:#x}",
+        "markers {:#x} {:#x} {:#x} {:#x} {:#x} {:#x}",
         addr(qp_begin_none),
         addr(qp_begin_lugre),
         addr(qp_begin_sindyc),
         addr(qp_begin_sindyc_a),
+        addr(qp_begin_lugre_table),
         addr(qp_end)
     );
     flush(&mut line);
@@ -153,8 +159,7 @@ fn main() -> ! {
     };
     let done = run_trace(
         &trace,
-        crate::LUGRE,
-        crate::SINDYC,
+        &crate::BLOBS,
         |obs, k, outs| {
             let _ = write!(line2, "out {} {}", obs.name(), k);
             for v in outs {
@@ -168,6 +173,7 @@ fn main() -> ! {
             (Observer::Lugre, true) => qp_begin_lugre(),
             (Observer::Sindyc, true) => qp_begin_sindyc(),
             (Observer::SindycSignalA, true) => qp_begin_sindyc_a(),
+            (Observer::LugreTable, true) => qp_begin_lugre_table(),
             (_, false) => qp_end(),
         },
     );

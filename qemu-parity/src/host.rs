@@ -1,6 +1,6 @@
 //! Host side of the parity check: run the same trace, compare with QEMU's output, count
 //! instructions per step from QEMU's `-d exec` log.
-use qemu_parity::{run_trace, Observer, Trace, N_OUTPUTS};
+use qemu_parity::{run_trace, Blobs, Observer, Trace, N_OUTPUTS};
 use std::collections::BTreeMap;
 use std::io::{BufRead, Write};
 use std::process::ExitCode;
@@ -14,11 +14,10 @@ usage: qemu-parity                      print the host run (same lines as the QE
                                         instructions per control step, per observer, from
                                         QEMU's `-d exec,nochain -singlestep` log on stdin";
 
-pub fn main(trace: &[u8], lugre: &[u8], sindyc: &[u8]) -> ExitCode {
+pub fn main(trace: &[u8], blobs: &Blobs<'_>) -> ExitCode {
     let inputs = Inputs {
         trace,
-        lugre,
-        sindyc,
+        blobs: *blobs,
     };
     let args: Vec<String> = std::env::args().skip(1).collect();
     let result = match args.first().map(String::as_str) {
@@ -48,8 +47,7 @@ pub fn main(trace: &[u8], lugre: &[u8], sindyc: &[u8]) -> ExitCode {
 /// The embedded trace and blobs.
 pub struct Inputs<'a> {
     trace: &'a [u8],
-    lugre: &'a [u8],
-    sindyc: &'a [u8],
+    blobs: Blobs<'a>,
 }
 
 type Outputs = BTreeMap<(String, usize), [u32; N_OUTPUTS]>;
@@ -64,8 +62,7 @@ fn host_outputs(inp: &Inputs) -> Result<(Outputs, usize), String> {
     let mut outs = Outputs::new();
     run_trace(
         &trace,
-        inp.lugre,
-        inp.sindyc,
+        &inp.blobs,
         |obs, k, o| {
             outs.insert((obs.name().to_string(), k), *o);
         },
@@ -108,7 +105,10 @@ pub fn ulp_distance(a: u32, b: u32) -> u64 {
 }
 
 /// What a QEMU run printed: outputs, the `done` step count, the marker addresses.
-type QemuRun = (Outputs, Option<usize>, Option<[u64; 5]>);
+type QemuRun = (Outputs, Option<usize>, Option<[u64; MARKERS]>);
+
+/// Marker addresses a QEMU run prints: one begin marker per observer, then the end marker.
+const MARKERS: usize = Observer::ALL.len() + 1;
 
 fn read_qemu(path: &str) -> Result<QemuRun, String> {
     let text = std::fs::read_to_string(path).map_err(|e| format!("{path}: {e}"))?;
@@ -133,7 +133,7 @@ fn read_qemu(path: &str) -> Result<QemuRun, String> {
             }
             Some("done") => done = f.next().and_then(|s| s.parse().ok()),
             Some("markers") => {
-                let mut m = [0u64; 5];
+                let mut m = [0u64; MARKERS];
                 for v in m.iter_mut() {
                     let s = f.next().ok_or_else(bad)?;
                     *v = u64::from_str_radix(s.trim_start_matches("0x"), 16).map_err(|_| bad())?;
@@ -208,18 +208,19 @@ fn count(qemu_out: &str) -> Result<(), String> {
     let stdin = std::io::stdin();
     // Per observer: number of steps counted, sum, min, max of instructions between a begin
     // marker's first instruction and the end marker's first instruction.
-    let mut stats: [(u64, u64, u64, u64); 4] = [(0, 0, u64::MAX, 0); 4];
+    let mut stats = [(0u64, 0u64, u64::MAX, 0u64); Observer::ALL.len()];
     let mut current: Option<(usize, u64)> = None;
     let mut lines = 0u64;
     for line in stdin.lock().lines() {
         let line = line.map_err(|e| format!("reading the exec log: {e}"))?;
         let Some(pc) = exec_pc(&line) else { continue };
         lines += 1;
-        if let Some(obs) = m[..4].iter().position(|&a| a == pc) {
+        let end = m[MARKERS - 1];
+        if let Some(obs) = m[..MARKERS - 1].iter().position(|&a| a == pc) {
             current = Some((obs, 0));
             continue;
         }
-        if pc == m[4] {
+        if pc == end {
             if let Some((obs, n)) = current.take() {
                 let s = &mut stats[obs];
                 s.0 += 1;

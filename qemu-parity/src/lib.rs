@@ -1,4 +1,4 @@
-//! Shared by the bare-metal (QEMU) and the host run: the recorded input trace, the three
+//! Shared by the bare-metal (QEMU) and the host run: the recorded input trace, the five
 //! observer configurations, and one pass of the board's logic over the trace: every period
 //! is one `control::board::Board::tick` in speed mode (fault and limit checks, telemetry,
 //! stall and link supervision, and the control step), the period the firmware runs.
@@ -14,7 +14,8 @@
 //!   flags u8 (bit 0 edge overflow, bit 1 voltage override), 0 u8, now_ticks u32, i_meas f32,
 //!   v_bus f32, omega_ref f32, v_override f32, then per edge: ticks u32, state u8, 3 zeros.
 //! * The configurations are the coefficient blobs `motorid export --edge-timing 0.1` wrote for
-//!   the two models (`trace/lugre.bin`, `trace/sindyc.bin`), decoded with
+//!   the models (`trace/lugre.bin`, `trace/sindyc.bin`, and `trace/lugre-table.bin`: the
+//!   LuGre model with a 16-node speed table and saturation added by hand), decoded with
 //!   `control::blob::decode` and turned into a step configuration with
 //!   `Coefficients::step_config`, as the firmware does; "none" is the default coefficients.
 #![no_std]
@@ -46,15 +47,19 @@ pub enum Observer {
     /// The SINDYc configuration in experiment mode: the paper's signal a, open loop, with
     /// the observer following the measured speed.
     SindycSignalA,
+    /// LuGre observer with a 16-node lookup table over the speed and magnetic saturation
+    /// compensated (`trace/lugre-table.toml`): the largest effect evaluation a step does.
+    LugreTable,
 }
 
 impl Observer {
     /// All configurations, in report order.
-    pub const ALL: [Observer; 4] = [
+    pub const ALL: [Observer; 5] = [
         Observer::None,
         Observer::Lugre,
         Observer::Sindyc,
         Observer::SindycSignalA,
+        Observer::LugreTable,
     ];
 
     /// Whether the instruction budget applies: to the speed-mode configurations. Signal a
@@ -71,6 +76,7 @@ impl Observer {
             Observer::Lugre => "lugre",
             Observer::Sindyc => "sindyc",
             Observer::SindycSignalA => "sindyc-a",
+            Observer::LugreTable => "lugre+table",
         }
     }
 }
@@ -157,16 +163,22 @@ impl<'a> Trace<'a> {
     }
 }
 
-/// The coefficients of one observer configuration; `None` when a blob does not decode.
-pub fn coefficients(
-    obs: Observer,
-    lugre: &[u8],
-    sindyc: &[u8],
-) -> Result<Coefficients, blob::BlobError> {
+/// The coefficient blobs of the configurations (`motorid export`).
+#[derive(Debug, Clone, Copy)]
+pub struct Blobs<'a> {
+    pub lugre: &'a [u8],
+    pub sindyc: &'a [u8],
+    /// LuGre with a 16-node speed table and saturation.
+    pub lugre_table: &'a [u8],
+}
+
+/// The coefficients of one observer configuration; an error when a blob does not decode.
+pub fn coefficients(obs: Observer, blobs: &Blobs<'_>) -> Result<Coefficients, blob::BlobError> {
     let mut co = match obs {
         Observer::None => Coefficients::default(),
-        Observer::Lugre => blob::decode(lugre)?,
-        Observer::Sindyc | Observer::SindycSignalA => blob::decode(sindyc)?,
+        Observer::Lugre => blob::decode(blobs.lugre)?,
+        Observer::Sindyc | Observer::SindycSignalA => blob::decode(blobs.sindyc)?,
+        Observer::LugreTable => blob::decode(blobs.lugre_table)?,
     };
     // The traced run is a speed run, which needs identified motor constants (the traced
     // blobs are of format version 3, read as not identified).
@@ -214,13 +226,12 @@ pub fn measurements(inp: StepInputs<f32>, last_v: f32) -> Measurements {
 /// reaches the board as a `SetSpeed` message before each period, outside the marks.
 pub fn run_trace(
     trace: &Trace<'_>,
-    lugre_blob: &[u8],
-    sindyc_blob: &[u8],
+    blobs: &Blobs<'_>,
     mut emit: impl FnMut(Observer, usize, &[u32; N_OUTPUTS]),
     mut mark: impl FnMut(Observer, bool),
 ) -> Result<(), blob::BlobError> {
     for obs in Observer::ALL {
-        let co = coefficients(obs, lugre_blob, sindyc_blob)?;
+        let co = coefficients(obs, blobs)?;
         let mut board = Board::new(Some((co, 1)), "qemu-parity", V_BUS);
         board.set_hardware_stop(true, false);
         if obs == Observer::SindycSignalA {

@@ -7,7 +7,8 @@
 //! * Built for the host, it runs the same code on the same trace and compares (`compare`), or
 //!   counts instructions per period of the board logic from QEMU's `-d exec` log (`count`).
 //!
-//! Printed lines (both runs): `markers <begin_none> <begin_lugre> <begin_sindyc> <end>`
+//! Printed lines (both runs): `markers <begin_none> <begin_lugre> <begin_sindyc>
+//! <begin_sindyc_a> <begin_lugre_table> <end>`
 //! (code addresses of the step markers), `out <observer> <step> <word>...` (the step's
 //! outputs v_cmd, theta, omega, friction, v_comp, z as f32 bits, then the fault bits),
 //! `done <steps>`.
@@ -20,6 +21,15 @@ static TRACE: &[u8] = include_bytes!("../trace/closed_loop.qpt");
 static LUGRE: &[u8] = include_bytes!("../trace/lugre.bin");
 /// The SINDYc model's coefficient blob (`motorid export`).
 static SINDYC: &[u8] = include_bytes!("../trace/sindyc.bin");
+/// The LuGre model with a 16-node speed table and saturation (`motorid export`).
+static LUGRE_TABLE: &[u8] = include_bytes!("../trace/lugre-table.bin");
+
+/// The configurations' blobs.
+static BLOBS: qemu_parity::Blobs<'static> = qemu_parity::Blobs {
+    lugre: LUGRE,
+    sindyc: SINDYC,
+    lugre_table: LUGRE_TABLE,
+};
 
 #[cfg(target_os = "none")]
 mod bare;
@@ -29,5 +39,5 @@ mod host;
 
 #[cfg(not(target_os = "none"))]
 fn main() -> std::process::ExitCode {
-    host::main(TRACE, LUGRE, SINDYC)
+    host::main(TRACE, &BLOBS)
 }

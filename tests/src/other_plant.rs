@@ -41,7 +41,62 @@ pub enum Extra {
     SawtoothLoad {
         amp: f64,
     },
+    /// Cogging of a slotted stator: the first two harmonics of the slot count `slots`,
+    /// `a1·sin(N·θ + p1) + a2·sin(2N·θ + p2)` [N·m], each with its own phase.
+    SlotCogging {
+        slots: u16,
+        a1: f64,
+        p1: f64,
+        a2: f64,
+        p2: f64,
+    },
+    /// Inverter dead time: the bridge loses `vd` [V] against the current's direction, its
+    /// sign passing linearly through zero across the ripple band `±band` [A].
+    DeadTime {
+        vd: f64,
+        band: f64,
+    },
+    /// Winding heating: temperature rise ΔT [K] over ambient with `C·dΔT/dt = I²·R(ΔT) −
+    /// ΔT/r_th` (heat capacity `c_th` [J/K], thermal resistance `r_th` [K/W]) and copper's
+    /// `R(ΔT) = R·(1 + 0.00393·ΔT)`. The winding starts at ambient.
+    Heating {
+        r_th: f64,
+        c_th: f64,
+    },
+    /// The current sensor reads `i0` [A] more than flows.
+    SensorOffset {
+        i0: f64,
+    },
+    /// A constant load torque `t0` [N·m] against positive rotation.
+    ConstantLoad {
+        t0: f64,
+    },
+    /// An unbalanced load under gravity, once per revolution, with a second harmonic:
+    /// `a1·sin(θ + p1) + a2·sin(2θ + p2)` [N·m].
+    Unbalance {
+        a1: f64,
+        p1: f64,
+        a2: f64,
+        p2: f64,
+    },
+    /// A gear between the rotor and a load of reflected inertia `j_load` [kg·m²] (part of
+    /// the plant's `j`) that also carries half of the plant's Coulomb and viscous friction;
+    /// the tooth contact loses `mu·|T|` of the torque `T` it transmits, against the motion.
+    GearFriction {
+        mu: f64,
+        j_load: f64,
+    },
+    /// Static friction above Coulomb falling with speed on a Lorentzian curve,
+    /// `fs/(1 + (ω/vs)²)` [N·m] against the motion; at rest the contact holds up to
+    /// `fc + fs`.
+    Breakaway {
+        fs: f64,
+        vs: f64,
+    },
 }
+
+/// Relative rise of copper's resistance per kelvin (at 20 °C).
+const COPPER_ALPHA: f64 = 0.00393;
 
 /// The plant's constants (SI).
 #[derive(Debug, Clone, Copy)]
@@ -89,9 +144,9 @@ impl OtherPlant {
         }
     }
 
-    /// Derivative of the state [θ, ω, I, θ2, ω2] at time `t` with voltage `v`.
-    fn deriv(&self, t: f64, x: &[f64; 5], v: f64) -> [f64; 5] {
-        let [_, w, i, _, w2] = *x;
+    /// Derivative of the state [θ, ω, I, θ2, ω2, ΔT] at time `t` with voltage `v`.
+    fn deriv(&self, t: f64, x: &[f64; 6], v: f64) -> [f64; 6] {
+        let [_, w, i, _, w2, heat] = *x;
         let fc = match self.extra {
             Extra::CreepingCoulomb { per_minute } => self.fc * (1.0 + per_minute * t / 60.0),
             _ => self.fc,
@@ -130,32 +185,82 @@ impl OtherPlant {
                 let tau = 2.0 * std::f64::consts::PI;
                 amp * (x[0].rem_euclid(tau) / std::f64::consts::PI - 1.0)
             }
+            Extra::SlotCogging {
+                slots,
+                a1,
+                p1,
+                a2,
+                p2,
+            } => {
+                let n = f64::from(slots);
+                a1 * (n * x[0] + p1).sin() + a2 * (2.0 * n * x[0] + p2).sin()
+            }
+            Extra::ConstantLoad { t0 } => t0,
+            Extra::Unbalance { a1, p1, a2, p2 } => {
+                a1 * (x[0] + p1).sin() + a2 * (2.0 * x[0] + p2).sin()
+            }
             _ => 0.0,
         };
         let drive = self.kt_at(i) * i - load;
+        // What the contact can hold at rest: more than Coulomb where static friction
+        // exceeds it, or where the gear's teeth are pressed by the drive.
+        let hold = match self.extra {
+            Extra::Breakaway { fs, .. } => fc + fs,
+            Extra::GearFriction { mu, .. } => fc + mu * drive.abs(),
+            _ => fc,
+        };
         let friction = if w.abs() < self.v_eps {
-            (drive - coupling + self.j * w / 1e-3).clamp(-fc, fc)
+            (drive - coupling + self.j * w / 1e-3).clamp(-hold, hold)
         } else {
             let (dfc, db) = match self.extra {
                 Extra::Directional { dfc, db } => (dfc, db),
                 _ => (0.0, 0.0),
             };
-            (fc + dfc * w.signum()) * w.signum() + (self.b + db * w.signum()) * w
+            let sliding = (fc + dfc * w.signum()) * w.signum() + (self.b + db * w.signum()) * w;
+            match self.extra {
+                Extra::Breakaway { fs, vs } => sliding + fs / (1.0 + (w / vs).powi(2)) * w.signum(),
+                Extra::GearFriction { mu, j_load } => {
+                    sliding
+                        + mu * self.gear_torque(drive, sliding, j_load, mu, w).abs() * w.signum()
+                }
+                _ => sliding,
+            }
+        };
+        let (r, v_loss) = match self.extra {
+            Extra::Heating { .. } => (self.r * (1.0 + COPPER_ALPHA * heat), 0.0),
+            Extra::DeadTime { vd, band } => (self.r, vd * (i / band).clamp(-1.0, 1.0)),
+            _ => (self.r, 0.0),
+        };
+        let heating = match self.extra {
+            Extra::Heating { r_th, c_th } => (i * i * r - heat / r_th) / c_th,
+            _ => 0.0,
         };
         [
             w,
             (drive - friction - coupling) / self.j,
-            (v - self.r * i - self.kt * w) / self.l,
+            (v - v_loss - r * i - self.kt * w) / self.l,
             w2,
             load_acc,
+            heating,
         ]
+    }
+
+    /// Torque the gear transmits to its load while sliding: the rotor (inertia `j − j_load`)
+    /// and the load (`j_load`) share one acceleration; the rotor takes the drive less half
+    /// the plant's friction `sliding`, the load the other half and the tooth loss
+    /// `mu·|T|·sgn(ω)`. Solved for `T`, whose sign is that of the numerator (the
+    /// denominator stays positive for `mu < 1`).
+    fn gear_torque(&self, drive: f64, sliding: f64, j_load: f64, mu: f64, w: f64) -> f64 {
+        let q = j_load / (self.j - j_load);
+        let num = q * (drive - 0.5 * sliding) + 0.5 * sliding;
+        num / (1.0 + q - mu * num.signum() * w.signum())
     }
 
     /// Run the plant on `u` (volts held over each period `ts`) and sample it like the board.
     pub fn run(&self, u: &[f64], ts: f64, seed: u64) -> MotorLog {
         let sub = 240; // 50 µs steps: RK4 stable for L/R ≈ 1.3 ms and an 80 Hz contact.
         let h = ts / sub as f64;
-        let mut x = [0.0f64; 5];
+        let mut x = [0.0f64; 6];
         let mut rng = Lcg(seed.wrapping_mul(6364136223846793005).wrapping_add(1));
         let mut log = MotorLog {
             source: PathBuf::from("other_plant.csv"),
@@ -168,14 +273,18 @@ impl OtherPlant {
             log.t.push(t);
             log.u.push(v);
             log.theta.push((x[0] / self.hall).floor() * self.hall);
-            i_meas.push(x[2] + self.current_noise * rng.gauss());
+            let mut read = x[2] + self.current_noise * rng.gauss();
+            if let Extra::SensorOffset { i0 } = self.extra {
+                read += i0;
+            }
+            i_meas.push(read);
             for s in 0..sub {
                 let tt = t + s as f64 * h;
                 let k1 = self.deriv(tt, &x, v);
                 let k2 = self.deriv(tt + h / 2.0, &add(&x, &k1, h / 2.0), v);
                 let k3 = self.deriv(tt + h / 2.0, &add(&x, &k2, h / 2.0), v);
                 let k4 = self.deriv(tt + h, &add(&x, &k3, h), v);
-                for j in 0..5 {
+                for j in 0..6 {
                     x[j] += h / 6.0 * (k1[j] + 2.0 * k2[j] + 2.0 * k3[j] + k4[j]);
                 }
                 if !matches!(self.extra, Extra::Coupling { .. } | Extra::Gap { .. }) {
@@ -192,9 +301,9 @@ impl OtherPlant {
     }
 }
 
-fn add(x: &[f64; 5], d: &[f64; 5], h: f64) -> [f64; 5] {
+fn add(x: &[f64; 6], d: &[f64; 6], h: f64) -> [f64; 6] {
     let mut y = *x;
-    for j in 0..5 {
+    for j in 0..6 {
         y[j] += h * d[j];
     }
     y

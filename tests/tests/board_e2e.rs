@@ -388,6 +388,8 @@ fn assert_experiment_turns_the_motor(d: &Path, port: &str, what: &str) {
     let (_, rows, _) = read_log(&d.join("e.csv"));
     let top = rows.iter().map(|r| r[4]).fold(f64::MIN, f64::max);
     let bottom = rows.iter().map(|r| r[4]).fold(f64::MAX, f64::min);
+    // 5 rad/s: six Hall steps in the velocity's 10-sample window (one step reads 0.8 rad/s),
+    // so no quantisation at standstill, and above the Stribeck velocity (3.7 rad/s): sliding.
     assert!(top > 5.0 && bottom < -5.0, "{what}: speed {bottom}..{top}");
 }
 

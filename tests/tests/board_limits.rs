@@ -160,6 +160,8 @@ fn a_step_from_standstill_holds_the_current_limit_and_reaches_the_speed() {
             .all(|x| x.faults.contains(Faults::CURRENT_LIMIT)));
         let w = mean_speed(&p[250..]);
         let no_load = 20.0 / f64::from(co.motor.kb);
+        // 0.9: friction near the no-load speed (α0 + α2·ω ≈ 0.5 N·m) draws about 7 A, whose
+        // R·I drop takes about 8 % off it.
         assert!(
             w > 0.9 * no_load && w < no_load,
             "20 V, i_max {i_max}: {w} rad/s"
@@ -391,7 +393,9 @@ fn a_speed_run_without_its_own_setspeed_does_not_reuse_the_last_one() {
 }
 
 /// Periods that ended with the current beyond `i_max` (the current then stayed beyond
-/// it for a whole period: the winding's L/R is 1.4 ms).
+/// it for a whole period: the winding's L/R is 1.4 ms). The over-current check reads the
+/// current once a period, so the period in which it crosses `i_max` can end beyond it
+/// before the next period's check turns the bridge off: one such period, never two.
 fn beyond_trip(p: &[Period], i_max: f64) -> usize {
     p.iter().filter(|x| x.end_i > i_max).count()
 }
@@ -429,6 +433,7 @@ fn wrong_motor_constants_in_the_blob_do_not_lift_the_current_limit() {
         let peak = peak_current(&p);
         let over = beyond_trip(&p, i_max);
         eprintln!("{what}: peak {peak:.2} A (limit {lim} A), fault {fault:?}, {over} periods beyond i_max");
+        // One period: the over-current check's delay (`beyond_trip`).
         assert!(over <= 1, "{what}: {over} periods beyond i_max");
         if fault.is_none() {
             assert!(peak <= allowed, "{what}: peak {peak} A of {allowed} A");
@@ -443,6 +448,7 @@ fn wrong_motor_constants_in_the_blob_do_not_lift_the_current_limit() {
         let peak = peak_current(&p);
         let over = beyond_trip(&p, i_max);
         eprintln!("{what}, 20 V: peak {peak:.2} A, fault {fault:?}, {over} periods beyond i_max");
+        // One period: the over-current check's delay (`beyond_trip`).
         assert!(over <= 1, "{what}, 20 V: {over} periods beyond i_max");
         if fault.is_none() {
             assert!(
@@ -584,6 +590,7 @@ fn a_load_step_at_speed_holds_the_current_limit() {
         let peak = peak_current(&p);
         let over = beyond_trip(&p, f64::from(co.limits.i_max));
         eprintln!("load {torque} N·m: peak {peak:.2} A (limit {lim} A), fault {fault:?}, {over} periods beyond i_max");
+        // One period: the over-current check's delay (`beyond_trip`).
         assert!(over <= 1, "{torque} N·m: {over} periods beyond i_max");
         if jam {
             // A jam within one period cannot be held by a 12 ms loop: a fault stops it.
@@ -688,6 +695,7 @@ fn the_speed_limit_follows_the_measured_bus_voltage() {
     assert_eq!(reply, BoardMsg::Nack(control::frame::Nack::OutOfRange));
     emu.handle(&HostMsg::Identify);
     let id: BoardMsg = control::frame::decode_frame(&emu.take_output()).unwrap();
+    // 0.1 rad/s: the rounding room of the board's limit above.
     assert!(
         matches!(id, BoardMsg::Identity { speed_max, .. } if (speed_max - low).abs() < 0.1),
         "{id:?}"
@@ -918,6 +926,8 @@ fn an_inverted_current_sense_without_commissioning_stops_near_the_current_limit(
         "inverted sense: fault {fault:?} after {stop} periods, peak {peak:.2} A, limit {lim:.1} A"
     );
     assert_eq!(fault, Some(Fault::CurrentSense), "peak {peak} A");
+    // The sign is wrong from the first period the current flows: flagged by the second
+    // period, then CURRENT_SENSE_PERIODS (3) in a row to the fault.
     assert!(stop <= 5, "flagged first in period {first}");
     assert!(peak <= lim + margin(&co), "peak {peak} A, limit {lim} A");
     // After the fault the bridge is off: the current decays to nothing.

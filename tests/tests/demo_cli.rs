@@ -15,6 +15,33 @@ fn fit_of(line: &str, key: &str) -> f64 {
         .unwrap()
 }
 
+/// Each round's selection line prints the statistic its keep test compares (the
+/// multiple-shooting residual sum of squares on the selection log), and a refit that was kept
+/// lowered it.
+fn check_selection_lines(text: &str) {
+    let lines: Vec<&str> = text
+        .lines()
+        .map(str::trim_start)
+        .filter(|l| l.starts_with("selection (signal b)"))
+        .collect();
+    assert!(!lines.is_empty(), "no selection line: {text}");
+    for l in &lines {
+        assert!(
+            l.contains("multiple-shooting RSS") && !l.contains("x fit"),
+            "{l}"
+        );
+        if l.contains("kept: explains it better") {
+            let change: f64 = l
+                .split("for the kept model (")
+                .nth(1)
+                .and_then(|r| r.split(" %)").next())
+                .and_then(|v| v.parse().ok())
+                .unwrap_or_else(|| panic!("no change against the kept model: {l}"));
+            assert!(change < 0.0, "kept, yet its RSS rose: {l}");
+        }
+    }
+}
+
 #[test]
 fn demo_finds_the_hidden_effect_and_the_error_falls() {
     let dir = tempfile::tempdir().unwrap();
@@ -39,6 +66,7 @@ fn demo_finds_the_hidden_effect_and_the_error_falls() {
         String::from_utf8_lossy(&out.stderr)
     );
     assert!(text.contains("position_load: FOUND"), "{text}");
+    check_selection_lines(&text);
     // The kept models, each scored on the test log no choice was made on.
     let steps: Vec<&str> = text
         .lines()
@@ -66,4 +94,62 @@ fn demo_finds_the_hidden_effect_and_the_error_falls() {
     );
     let html = std::fs::read_to_string(dir.path().join("rep").join("index.html")).unwrap();
     assert!(html.contains("<svg") && html.contains("position_load"));
+    // The report's scores are named for the log they were taken on.
+    assert!(html.contains("Test fit after each step") && !html.contains("Validation fit"));
+}
+
+/// Physics outside the effect list (a fan's drag, quadratic in the speed): the loop says the
+/// LuGre model is not adequate and which variable carries the rest, adds a table over it,
+/// and the test fits rise.
+#[test]
+fn demo_hides_unnamed_physics_and_a_table_takes_it_in() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = motorid(
+        dir.path(),
+        &[
+            "demo",
+            "--unnamed",
+            "fan",
+            "--duration",
+            "30",
+            "--quiet",
+            "--report",
+            "rep",
+        ],
+    );
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "demo failed: {text}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    // Step 0's diagnosis: not adequate, carried by the speed, and the table it offers.
+    let verdict = text
+        .lines()
+        .find(|l| {
+            l.trim_start()
+                .starts_with("diagnose (fitting signals a, d)")
+        })
+        .unwrap_or_else(|| panic!("no diagnosis line: {text}"));
+    assert!(
+        verdict.contains("NOT adequate, carried by omega")
+            && verdict.contains("add table:var=omega"),
+        "{verdict}"
+    );
+    assert!(text.contains("carried by omega: FOUND"), "{text}");
+    check_selection_lines(&text);
+    let steps: Vec<&str> = text
+        .lines()
+        .filter(|l| l.starts_with("step ") && !l.contains("(not kept)"))
+        .collect();
+    assert!(steps.len() >= 2, "{text}");
+    assert!(steps[1].contains("table(omega)"), "{text}");
+    // The error on the test log falls once the table is in: angle and current.
+    let (first, last) = (steps[0], steps[steps.len() - 1]);
+    for key in ["x", "i"] {
+        assert!(
+            fit_of(last, key) > fit_of(first, key),
+            "test {key} fit did not improve: {first} -> {last}"
+        );
+    }
 }

@@ -75,6 +75,8 @@ fn lugre_compensation_cuts_low_speed_error_on_sine_true_parameters() {
     let (none, lugre) = (run("none"), run("lugre"));
     let low = |v: &serde_json::Value| v["rms_low"].as_f64().unwrap();
     let all = |v: &serde_json::Value| v["rms"].as_f64().unwrap();
+    // A quarter of a 10 rad/s sine lies below v0 = 3.7 rad/s (about 400 of 1667 samples):
+    // under 100 the low-speed selection is broken.
     assert!(none["low_speed_samples"].as_u64().unwrap() > 100);
     // At least a 25 % cut at low speed, and no loss overall.
     assert!(
@@ -117,8 +119,9 @@ fn trace_out_records_every_step() {
     let b = std::fs::read(d.join("t.qpt")).unwrap();
     assert_eq!(&b[..4], b"QPT2");
     let steps = u32::from_le_bytes(b[4..8].try_into().unwrap());
-    assert_eq!(steps, 1667); // 20 s at 12 ms
-                             // Walk the records: each is 24 bytes plus 8 per Hall edge; the motor turns, so edges exist.
+    // 20 s at 12 ms.
+    assert_eq!(steps, 1667);
+    // Walk the records: each is 24 bytes plus 8 per Hall edge.
     let (mut at, mut edges) = (8usize, 0usize);
     for _ in 0..steps {
         let n = b[at + 1] as usize;
@@ -126,5 +129,7 @@ fn trace_out_records_every_step() {
         at += 24 + 8 * n;
     }
     assert_eq!(at, b.len());
+    // The followed sine turns the rotor through about 1300 Hall steps; under 100 the trace
+    // lost its edges.
     assert!(edges > 100, "{edges} Hall edges");
 }

@@ -2,7 +2,8 @@
 //! (`e2e::other_plant`): a load torque shaped like a sawtooth over each revolution, which no
 //! named effect matches (position_load is its first harmonic only). The table's node torques
 //! are estimated with the model (the spec as `diagnose` offers it), written to MODEL.toml, and the free-run fit on a held-out log
-//! (another excitation and seed) rises; `compare`, `diagnose` and `export` take the model.
+//! (another excitation and seed) rises; `compare` and `diagnose` take the model, and it
+//! exports to the board's blob, which `inspect` decodes with the table.
 use e2e::motorid;
 use e2e::other_plant::{Extra, OtherPlant};
 use motorid::emulator::{signal, SignalKind};
@@ -88,19 +89,10 @@ fn a_theta_table_raises_the_held_out_fit_of_a_sawtooth_load() {
         "{}",
         String::from_utf8_lossy(&diag.stderr)
     );
-    let export = motorid(d, &["export", "table.toml", "-o", "coeffs.bin"]);
-    if export.status.success() {
-        let v: Value =
-            serde_json::from_str(&run_ok(d, &["inspect", "coeffs.bin", "--json"])).unwrap();
-        assert!(v.to_string().contains("Table"), "{v}");
-    } else {
-        let err = String::from_utf8_lossy(&export.stderr);
-        assert!(
-            err.starts_with("error:") && err.lines().count() == 1,
-            "{err}"
-        );
-        assert!(!d.join("coeffs.bin").exists());
-    }
+    // The board takes the table: it exports, and `inspect` decodes it with its nodes.
+    run_ok(d, &["export", "table.toml", "-o", "coeffs.bin"]);
+    let v: Value = serde_json::from_str(&run_ok(d, &["inspect", "coeffs.bin", "--json"])).unwrap();
+    assert!(v.to_string().contains("Table"), "{v}");
 }
 
 #[test]
@@ -146,5 +138,36 @@ fn simulate_refuses_a_table_without_node_torques() {
         out.status.success(),
         "{}",
         String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+/// The blob whose step cost `scripts/qemu-parity.sh` counts (LuGre, a 16-node speed table and
+/// saturation) is what `motorid export` writes for its model, byte for byte.
+#[test]
+fn the_counted_table_blob_is_the_export_of_its_model() {
+    let dir = tempfile::tempdir().unwrap();
+    let trace = e2e::root().join("qemu-parity").join("trace");
+    let model = trace.join("lugre-table.toml");
+    let args = [
+        "export",
+        model.to_str().unwrap(),
+        "--edge-timing",
+        "0.1",
+        "-o",
+        "blob.bin",
+    ];
+    run_ok(dir.path(), &args);
+    let ours = std::fs::read(dir.path().join("blob.bin")).unwrap();
+    let counted = std::fs::read(trace.join("lugre-table.bin")).unwrap();
+    assert!(
+        ours == counted,
+        "qemu-parity/trace/lugre-table.bin is stale"
+    );
+    let v: Value =
+        serde_json::from_str(&run_ok(dir.path(), &["inspect", "blob.bin", "--json"])).unwrap();
+    let effects = v["coefficients"]["effects"].to_string();
+    assert!(
+        effects.contains("\"bins\":16") && effects.contains("Saturation"),
+        "{effects}"
     );
 }

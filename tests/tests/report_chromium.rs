@@ -63,6 +63,8 @@ fn report_renders_in_chromium() {
     let dom = String::from_utf8_lossy(&out.stdout);
     let svgs = dom.matches("<svg").count();
     let tables = dom.matches("<table").count();
+    // The page as written holds 16 plots and 2 tables for such a log: fewer than half the
+    // plots, or a table missing, after rendering means chromium did not render it.
     assert!(svgs >= 8, "only {svgs} svg elements after rendering");
     assert!(tables >= 2, "only {tables} tables after rendering");
     assert!(dom.contains("cogging"), "the finding is not on the page");

@@ -66,6 +66,8 @@ fn fit_add_saturation_recovers_k_and_exports_it() {
     let json = ok(motorid(d, &["inspect", "c.bin", "--json"]));
     let v: serde_json::Value = serde_json::from_str(&json).unwrap();
     let e = &v["coefficients"]["effects"][0]["Saturation"]["k"];
+    // The blob holds f32 (relative rounding 6e-8): 1e-6 relative passes that and no other
+    // value; the absolute 1e-9 for a k of 0.
     assert!(
         (e.as_f64().unwrap() - k).abs() < 1e-6 * k.abs().max(1e-9) + 1e-9,
         "{e}"

@@ -176,6 +176,9 @@ pub fn decode_blob(bytes: &[u8]) -> Result<Coefficients> {
 
 #[cfg(test)]
 mod tests {
+    // Tolerances within a few float ε of the values compared (1e-15 to 1e-9 in f64, 1e-6
+    // in f32) are rounding of the same closed form computed another way; wider ones say
+    // why beside them.
     use super::*;
     use control::commission::{CommissionError, CommissionOutcome};
     use control::frame::{decode_frame, encode_frame, Excitation, Fault, Nack, Sample, CHUNK_LEN};
@@ -395,6 +398,7 @@ mod tests {
         assert_eq!(samples.len(), 500);
         let peak = peak(&samples, |s| s.u);
         let by_current = 0.35 * co_default_r_i_max();
+        // Above 1 V: the signal was played (its size is 2.27 V); 1e-4 V: f32 rounding of the window.
         assert!(peak > 1.0 && peak <= by_current + 1e-4, "peak {peak}");
     }
 
@@ -406,12 +410,14 @@ mod tests {
         // The speed limit is the no-load speed at u_max (42 rad/s): friction keeps the motor
         // below it, and the loop at its voltage limit.
         let top = emu.board().speed_limit();
+        // 1e-3 rad/s: f32 rounding of 42 rad/s (an ulp is 4e-6).
         assert!((top - 3.0 / co.motor.kb).abs() < 1e-3, "{top}");
         emu.receive(&frame(&HostMsg::SetSpeed { omega_ref: top }));
         emu.receive(&frame(&HostMsg::SetMode { mode: Mode::Speed }));
         let (f, samples) = run_until_fault(&mut emu, 150);
         assert_eq!(f, None);
         let peak = peak(&samples, |s| s.u);
+        // 1e-6 V: the f32 u_max of 3 V (an ulp is 2.4e-7).
         assert!((peak - 3.0).abs() < 1e-6, "peak {peak}");
     }
 

@@ -165,6 +165,7 @@ mod tests {
             friction.push(f64::from(out.friction));
         }
         let revs = theta.last().unwrap() / std::f64::consts::TAU;
+        // 2000 Hall steps fed are 30.3 revolutions: above 25 the angle followed them.
         assert!(revs > 25.0, "{revs} revolutions");
 
         // The fit's side: library columns on the logged angle, friction −J·Σ b_k·θ_k (eq. 47).
@@ -183,6 +184,8 @@ mod tests {
         lib.column(Term::SinTheta(3), &s, &mut cs);
         for k in 0..n {
             let fit = -3.0e-4 * (f64::from(b_x) * cx[k] + f64::from(b_sin) * cs[k]);
+            // 1e-4: the board's f32 against the host's f64 (ε 1.2e-7, over the terms' sums and the
+            // observer's state); near a zero crossing, 1e-6 absolute.
             assert!(
                 (friction[k] - fit).abs() <= 1e-4 * fit.abs().max(1e-2),
                 "sample {k}, θ = {}: board {} vs fit {fit}",

@@ -267,6 +267,8 @@ pub fn run_loop(
     let mut fit = fit_on_bar(bar);
     let mut iterations = Vec::new();
     let mut scored: Result<()> = Ok(());
+    // The selection statistic of the model a refit is tested against.
+    let mut kept_rss: Option<f64> = None;
     let mut on_round = |r: &workflow::Round| {
         let sc = match ident::score(&r.model, test_log) {
             Ok(sc) => sc,
@@ -275,7 +277,10 @@ pub fn run_loop(
                 return;
             }
         };
-        say_round(say, iterations.len(), r, &sc);
+        say_round(say, iterations.len(), r, &sc, kept_rss);
+        if r.kept {
+            kept_rss = Some(r.selection_rss);
+        }
         iterations.push(Iteration {
             label: if r.kept {
                 label(&r.adds)
@@ -426,9 +431,17 @@ impl DemoLogs {
     }
 }
 
-/// The lines of one round: its test fit, the keep-or-not test on the selection log, and
-/// what the diagnosis names next (or its verdict on the final model).
-fn say_round(say: &mut dyn FnMut(&str), step: usize, r: &workflow::Round, sc: &ident::Scores) {
+/// The lines of one round: its test fit, the keep-or-not test on the selection log (the
+/// statistic it compares: the multiple-shooting RSS of this model and of the kept model
+/// `base_rss` it extends), and what the diagnosis names next (or its verdict on the final
+/// model).
+fn say_round(
+    say: &mut dyn FnMut(&str),
+    step: usize,
+    r: &workflow::Round,
+    sc: &ident::Scores,
+    base_rss: Option<f64>,
+) {
     say(&format!(
         "step {step}{}: {:<32} test fit (fresh signal b): x {:6.2} %, xdot {:6.2} %, i {}",
         if r.kept { "" } else { " (not kept)" },
@@ -441,11 +454,17 @@ fn say_round(say: &mut dyn FnMut(&str), step: usize, r: &workflow::Round, sc: &i
             .unwrap_or_else(|| "-".into())
     ));
     say(&format!(
-        "        selection (signal b): x fit {:.2} %{}",
-        r.selection_fit,
+        "        selection (signal b): multiple-shooting RSS {:.4e}{}",
+        r.selection_rss,
         r.selection_test
             .map(|t| format!(
-                "; {} (F = {:.1}, p {}, level {:.0} %)",
+                "{}; {} (F = {:.1}, p {}, level {:.0} %)",
+                base_rss
+                    .map(|b| format!(
+                        " against {b:.4e} for the kept model ({:+.1} %)",
+                        100.0 * (r.selection_rss / b - 1.0)
+                    ))
+                    .unwrap_or_default(),
                 if r.kept {
                     "kept: explains it better beyond noise"
                 } else {

@@ -23,9 +23,10 @@ use std::path::PathBuf;
     check's statistic and p_value null). Judge a model on a multisine: on voltage steps even \
     a correct model is often not adequate (docs/limits.md). Then what is MISSING: every effect of the list that the model lacks adds its \
     regressors (searched over cogging harmonics, Stribeck velocities, thermal time constants...) \
-    and forward selection keeps an effect when it is significant (nested F-test p < 0.001 / \
-    number of candidate variants, Bonferroni, with an effective sample size for autocorrelated \
-    residuals, and a lower BIC) and relevant (it explains at least 2% of the residual). What \
+    and forward selection keeps an effect when it is significant (the cluster-robust Wald \
+    test of its columns beyond the model's, jackknifed, on disjoint windows clustered by held \
+    input: p < 0.001 / number of candidate variants, Bonferroni; and a lower BIC) and \
+    relevant (it explains at least 2% of the residual). What \
     no effect explains is ranked by the VARIABLE that carries it (theta, omega, acceleration, \
     current, time, reversal, frequency), each a smooth function tested the same way. The \
     model is ADEQUATE only when every check passes at the 1% family level and both lists are \
@@ -38,7 +39,7 @@ use std::path::PathBuf;
     Each finding's `spec` carries the estimated parameters and is accepted by \
     `motorid fit --add SPEC`. --json prints {\"adequate\": BOOL, \"judged\": BOOL, \"effects\": [{\"name\", \
     \"spec\", \"score\", \"explanation\"}, ...], \"unexplained\": [{\"variable\", \"share\", \
-    \"explanation\"}, ...], \"checks\": [...], \"refit\": [...]}, most important first; \
+    \"explanation\", \"shape\": {\"x\", \"y\", \"x_unit\", \"y_unit\", ...}}, ...], \"checks\": [...], \"refit\": [...]}, most important first; \
     score and share = fraction of the residual explained."
 )]
 pub struct Args {
@@ -74,6 +75,8 @@ struct JsonUnexplained<'a> {
     hz: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     spec: Option<&'a str>,
+    /// The residual's function of the variable, in units (x and y arrays).
+    shape: crate::report::shape::Drawn,
 }
 
 #[derive(serde::Serialize)]
@@ -156,6 +159,7 @@ pub fn run(args: Args) -> Result<()> {
                 p_value: u.p_value,
                 hz: u.hz,
                 spec: u.spec.as_deref(),
+                shape: crate::report::shape::drawn(u, &model, &log),
             })
             .collect();
         let refit: Vec<serde_json::Value> = d
@@ -179,13 +183,13 @@ pub fn run(args: Args) -> Result<()> {
         );
         return Ok(());
     }
-    print_text(&model, &args, &d);
+    print_text(&model, &log, &args, &d);
     Ok(())
 }
 
-fn print_text(model: &Model, args: &Args, d: &diagnose::Diagnosis) {
+fn print_text(model: &Model, log: &MotorLog, args: &Args, d: &diagnose::Diagnosis) {
     let v = &d.verdict;
-    print_verdict(model, args, d);
+    print_verdict(model, log, args, d);
     for l in &v.look_alikes {
         if l.both_found {
             println!(
@@ -209,7 +213,7 @@ fn print_text(model: &Model, args: &Args, d: &diagnose::Diagnosis) {
     }
 }
 
-fn print_verdict(model: &Model, args: &Args, d: &diagnose::Diagnosis) {
+fn print_verdict(model: &Model, log: &MotorLog, args: &Args, d: &diagnose::Diagnosis) {
     let v = &d.verdict;
     let failed: Vec<&diagnose::verdict::Check> = v.checks.iter().filter(|c| !c.passed).collect();
     if v.adequate {
@@ -277,6 +281,10 @@ fn print_verdict(model: &Model, args: &Args, d: &diagnose::Diagnosis) {
                 u.variable, u.share, u.p_value
             );
             println!("      {}", u.explanation);
+            let shape = crate::report::shape::drawn(u, model, log).summary();
+            if !shape.is_empty() {
+                println!("      {shape}");
+            }
         }
     }
 }

@@ -51,7 +51,10 @@ pub struct Args {
     /// Recorded in MODEL.toml ([data.bounds]). Repeatable.
     #[arg(long = "bound", value_name = "KEY=LO..HI")]
     pub bound: Vec<String>,
-    /// A log to validate on (not fitted); its fit percentages are printed. Repeatable.
+    /// A log not fitted on; its fit percentages are printed. Repeatable. With --add (lugre,
+    /// linear) or --model sindyc the fit chooses among candidate models on it: it is then
+    /// printed as a selection log, and its scores are no validation (keep another log for
+    /// that, scored with `motorid compare`).
     #[arg(long = "validate", value_name = "VAL.csv")]
     pub validate: Vec<PathBuf>,
     /// What the input u is: voltage (u in volts, current i measured) or torque (u is a

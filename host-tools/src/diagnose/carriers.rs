@@ -43,8 +43,10 @@ pub struct Carrier {
     pub p_value: f64,
     /// Which physics leaves this signature, in words.
     pub explanation: String,
-    /// The fitted function at its knots: (value of the variable, residual per unit of ∫φ).
-    pub shape: Vec<(f64, f64)>,
+    /// Which equation's residual it carries.
+    pub equation: super::candidates::Equation,
+    /// The fitted function of the variable ([`Shape`]).
+    pub shape: Shape,
     /// Centre of the band [Hz] (`frequency` only).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub hz: Option<f64>,
@@ -52,6 +54,104 @@ pub struct Carrier {
     /// I (`table:var=V,bins=N`, N the carrier's own basis size), for `fit --add`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub spec: Option<String>,
+}
+
+/// The fitted function of a carrier's variable, in the units of its equation's residual per
+/// unit of the window's integral (volts for both equations of a voltage plant, the input's
+/// unit for a torque plant): where the residual is large or small along the variable.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct Shape {
+    /// Values of the variable: the knots of its hats, points over one revolution for the
+    /// angle's Fourier series, the band's frequencies [Hz] for `frequency`.
+    pub x: Vec<f64>,
+    /// The function at `x` (for `frequency`: the amplitude of each sinusoid of the band; for
+    /// `reversal`: the part that acts in the direction of motion).
+    pub y: Vec<f64>,
+    /// For `time`: the part of the function that acts in the direction of motion, at `x`
+    /// (`y` is then the part that does not).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub y_signed: Option<Vec<f64>>,
+}
+
+/// Points at which the angle's Fourier series is drawn over one revolution.
+const SHAPE_POINTS: usize = 97;
+
+/// The basis a variable's function was fitted on, to evaluate its coefficients.
+enum Basis {
+    /// Hats on these knots (one coefficient per knot).
+    Hats(Vec<f64>),
+    /// Hats on these knots, plain and signed by the direction of motion (`time`).
+    PlainAndSigned(Vec<f64>),
+    /// Sine and cosine of each harmonic of the angle, `ANGLE_HARMONICS` of them.
+    Fourier,
+    /// Sine and cosine at the band's frequencies around this centre [Hz].
+    Band(f64),
+}
+
+impl Basis {
+    /// The function of coefficients `beta` on this basis. Knots beyond any finite value (the
+    /// time since a reversal before the first one) are left out.
+    fn shape(&self, beta: &[f64]) -> Shape {
+        let drawable = |x: f64| x.is_finite() && x.abs() < 1e299;
+        match self {
+            Basis::Hats(k) if k.len() == beta.len() => {
+                let (x, y) = k
+                    .iter()
+                    .zip(beta)
+                    .filter(|(x, _)| drawable(**x))
+                    .map(|(x, y)| (*x, *y))
+                    .unzip();
+                Shape {
+                    x,
+                    y,
+                    y_signed: None,
+                }
+            }
+            Basis::PlainAndSigned(k) if 2 * k.len() == beta.len() => {
+                let m = k.len();
+                Shape {
+                    x: k.clone(),
+                    y: beta[..m].to_vec(),
+                    y_signed: Some(beta[m..].to_vec()),
+                }
+            }
+            Basis::Fourier if beta.len() == 2 * ANGLE_HARMONICS => {
+                let x: Vec<f64> = (0..SHAPE_POINTS)
+                    .map(|k| std::f64::consts::TAU * k as f64 / (SHAPE_POINTS - 1) as f64)
+                    .collect();
+                let y = x
+                    .iter()
+                    .map(|&a| {
+                        beta.chunks(2)
+                            .enumerate()
+                            .map(|(h, sc)| {
+                                let kf = (h + 1) as f64;
+                                sc[0] * (kf * a).sin() + sc[1] * (kf * a).cos()
+                            })
+                            .sum()
+                    })
+                    .collect();
+                Shape {
+                    x,
+                    y,
+                    y_signed: None,
+                }
+            }
+            Basis::Band(f0) if beta.len() == 2 * band_frequencies(*f0).len() => Shape {
+                x: band_frequencies(*f0),
+                y: beta.chunks(2).map(|sc| sc[0].hypot(sc[1])).collect(),
+                y_signed: None,
+            },
+            _ => Shape::default(),
+        }
+    }
+}
+
+/// The frequencies [Hz] of the band of sinusoids around `f0`.
+fn band_frequencies(f0: f64) -> Vec<f64> {
+    (-2..=2)
+        .map(|j| f0 * (1.0 + BAND * j as f64 / 2.0))
+        .collect()
 }
 
 /// The `table` spec a carrier of the torque equation offers: over θ when its basis is the
@@ -309,6 +409,8 @@ struct Finding {
     knots: Vec<f64>,
     /// Centre of the frequency band [Hz], for the frequency's test.
     hz: Option<f64>,
+    /// The basis of the test's coefficients, for the shape.
+    basis: Basis,
 }
 
 /// Rank the variables that carry the residual's structure; `level` is the per-test level.
@@ -345,10 +447,11 @@ impl Carried {
             self.untested.push(f.variable);
         } else if t.p_value < level && t.share >= min_share {
             let spec = table_spec(f.variable, &f.knots, rows.label, s);
-            let shape = if f.knots.len() == t.beta.len() {
-                f.knots.into_iter().zip(t.beta).collect()
+            let shape = f.basis.shape(&t.beta);
+            let equation = if rows.label == super::candidates::Equation::Electrical.label() {
+                super::candidates::Equation::Electrical
             } else {
-                vec![]
+                super::candidates::Equation::Mechanical
             };
             let mut explanation = explanation(f.variable, t.share, f.hz, rows.label);
             if let Some(spec) = &spec {
@@ -361,6 +464,7 @@ impl Carried {
                 share: t.share,
                 p_value: t.p_value,
                 explanation,
+                equation,
                 shape,
                 hz: f.hz,
                 spec,
@@ -390,12 +494,14 @@ fn angle_finding(s: &Signals, rows: &Rows, mask: &[bool]) -> Option<Finding> {
             tested: test_columns(rows, &cols, false),
             knots: vec![],
             hz: None,
+            basis: Basis::Fourier,
         });
     }
     let knots = quantile_knots(&s.theta, mask, KNOTS);
     (knots.len() >= 3).then(|| Finding {
         variable: "theta",
         tested: test_columns(rows, &hats(&s.theta, &knots), true),
+        basis: Basis::Hats(knots.clone()),
         knots,
         hz: None,
     })
@@ -425,6 +531,11 @@ fn hat_findings(s: &Signals, rows: &Rows, mask: &[bool], sgn: &[f64]) -> Vec<Fin
             found.push(Finding {
                 variable,
                 tested: test_columns(rows, &cols, true),
+                basis: if signed {
+                    Basis::PlainAndSigned(knots.clone())
+                } else {
+                    Basis::Hats(knots.clone())
+                },
                 knots: if signed { vec![] } else { knots },
                 hz: None,
             });
@@ -448,6 +559,7 @@ fn reversal_finding(s: &Signals, rows: &Rows, mask: &[bool], sgn: &[f64]) -> Opt
     Some(Finding {
         variable: "reversal",
         tested: test_columns(rows, &cols, false),
+        basis: Basis::Hats(knots.clone()),
         knots,
         hz: None,
     })
@@ -466,8 +578,7 @@ fn frequency_finding(s: &Signals, rows: &Rows) -> Option<Finding> {
     let centres = band_centres(s, rows.wf);
     for &f0 in &centres {
         let mut cols = Vec::new();
-        for j in -2..=2 {
-            let f = f0 * (1.0 + BAND * j as f64 / 2.0);
+        for f in band_frequencies(f0) {
             let w = 2.0 * std::f64::consts::PI * f;
             cols.push(s.t.iter().map(|t| (w * t).sin()).collect());
             cols.push(s.t.iter().map(|t| (w * t).cos()).collect());
@@ -491,6 +602,7 @@ fn frequency_finding(s: &Signals, rows: &Rows) -> Option<Finding> {
         variable: "frequency",
         tested,
         knots: vec![],
+        basis: hz.map_or(Basis::Hats(vec![]), Basis::Band),
         hz,
     })
 }
@@ -564,6 +676,35 @@ mod tests {
         // One revolution's Fourier series (no knots): the periodic table, no range.
         let rev = table_spec("theta", &[], torque, &s).unwrap();
         assert_eq!(rev, "table:var=theta,bins=12");
+    }
+
+    #[test]
+    fn shapes_evaluate_their_basis() {
+        // sin θ / 2 + cos 2θ: 1 at θ = 0, smallest (−1.5) at 3π/2.
+        let mut beta = vec![0.0; 2 * ANGLE_HARMONICS];
+        beta[0] = 0.5;
+        beta[3] = 1.0;
+        let s = Basis::Fourier.shape(&beta);
+        let (k, _) =
+            s.y.iter()
+                .enumerate()
+                .min_by(|a, b| a.1.total_cmp(b.1))
+                .unwrap();
+        assert!(
+            (s.x[k] - 1.5 * std::f64::consts::PI).abs() < 1e-9,
+            "{}",
+            s.x[k]
+        );
+        assert!((s.y[0] - 1.0).abs() < 1e-12 && (s.y[k] + 1.5).abs() < 1e-12);
+        // A band: each sinusoid's amplitude at its frequency.
+        let s = Basis::Band(10.0).shape(&[3.0, 4.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
+        assert_eq!(s.x.len(), 5);
+        assert!((s.x[2] - 10.0).abs() < 1e-12 && (s.y[0] - 5.0).abs() < 1e-12);
+        // Hats: the coefficients at their knots, the never-reached knot left out.
+        let s = Basis::Hats(vec![0.0, 1.0, 1e300]).shape(&[1.0, 2.0, 3.0]);
+        assert_eq!((s.x, s.y), (vec![0.0, 1.0], vec![1.0, 2.0]));
+        let s = Basis::PlainAndSigned(vec![0.0, 1.0]).shape(&[1.0, 2.0, 3.0, 4.0]);
+        assert_eq!(s.y_signed, Some(vec![3.0, 4.0]));
     }
 
     #[test]

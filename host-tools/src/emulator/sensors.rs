@@ -202,10 +202,14 @@ pub fn sensor_chain(theta: &[f64], pole_pairs: u16, ts: f64) -> (Vec<f64>, Vec<f
 
 #[cfg(test)]
 mod tests {
+    // Tolerances within a few float ε of the values compared (1e-15 to 1e-9 in f64, 1e-6
+    // in f32) are rounding of the same closed form computed another way; wider ones say
+    // why beside them.
     use super::*;
 
     #[test]
     fn resolution_is_the_papers() {
+        // 1e-4: 0.0952 is the paper's figure, to four digits.
         assert!((hall_resolution(11) - 0.0952).abs() < 1e-4);
     }
 
@@ -257,6 +261,7 @@ mod tests {
         th.extend(vec![step; 20]);
         let w = estimate_velocity(&th, PAPER_WINDOW as usize, 0.012);
         assert!((w[25] - step / 0.12).abs() < 1e-12);
+        // 0.01: 0.79 is the paper's figure, to two digits.
         assert!((step / 0.12 - 0.79).abs() < 0.01);
         assert_eq!(w[35], 0.0);
     }

@@ -282,6 +282,8 @@ mod tests {
                 SignalKind::Ramp => RAMP_END,
             };
             assert!(max <= want + 1e-9, "{kind:?}: max {max} > {want}");
+            // Half the bound: over its default duration each signal comes near it; a wrong scale
+            // falls far below.
             assert!(max > 0.5 * want, "{kind:?}: max {max} far below {want}");
             assert!(u.iter().any(|x| *x < 0.0) && u.iter().any(|x| *x > 0.0));
             let n = (kind.default_duration() / SAMPLE_PERIOD).round() as usize;
@@ -333,6 +335,8 @@ mod tests {
             .map(|f| power(*f))
             .sum();
         let outband: f64 = [3.0, 5.0, 10.0, 20.0].iter().map(|f| power(*f)).sum();
+        // 1 % (20 dB): the multisine has no lines out of band, only the finite record's leakage
+        // reaches these bins.
         assert!(outband < 0.01 * inband, "out {outband} vs in {inband}");
     }
 }

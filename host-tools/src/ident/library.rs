@@ -30,9 +30,9 @@
 //!
 //! With `--plant torque` there is no current: terms containing `I` are left out and there is
 //! no current equation.
-use super::stlsq::Normal;
 use crate::effect_spec::EffectSpec;
 use crate::log::Plant;
+use crate::numerics::least_squares::NormalEquations;
 use anyhow::Result;
 use control::effects::EffectKind;
 use control::sindy::{Term, TermInputs};
@@ -266,7 +266,7 @@ impl Library {
     /// The normal equations of the library against pointwise `targets`, accumulated over
     /// blocks of rows: `Θ` (`N × p`) is never held in memory, so 10^6 samples cost one pass
     /// through the cache instead of a 136 MB matrix.
-    pub fn normal(&self, s: &Signals, targets: &[&[f64]]) -> Normal {
+    pub fn normal(&self, s: &Signals, targets: &[&[f64]]) -> NormalEquations {
         /// Rows per block: 4096 × 17 f64 = 0.5 MB, about an L2 cache.
         const BLOCK: usize = 4096;
         let (n, p, t) = (s.len(), self.len(), targets.len());
@@ -306,7 +306,7 @@ impl Library {
                 start = end;
             }
         }
-        Normal::from_products(p, t, |i, j| gtt[(i, j)], |i, k| gty[(i, k)], yy)
+        NormalEquations::from_products(p, t, |i, j| gtt[(i, j)], |i, k| gty[(i, k)], yy)
     }
 }
 
@@ -380,7 +380,7 @@ mod tests {
             .collect();
         let blockwise = lib.normal(&s, &[&y]);
         let th = lib.matrix(&s);
-        let full = Normal::new(th.as_ref(), Mat::from_fn(n, 1, |r, _| y[r]).as_ref());
+        let full = NormalEquations::new(th.as_ref(), Mat::from_fn(n, 1, |r, _| y[r]).as_ref());
         let sup = vec![true; lib.len()];
         let (a, b) = (blockwise.solve(0, &sup), full.solve(0, &sup));
         for j in 0..lib.len() {

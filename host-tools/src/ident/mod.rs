@@ -46,7 +46,8 @@ pub struct FitRequest<'a> {
     pub kind: ModelKind,
     /// Logs to fit on (at least one).
     pub logs: &'a [MotorLog],
-    /// Logs to report validation fits on (not fitted).
+    /// Logs not fitted on: validation logs, or selection logs where the fit chooses among
+    /// candidate models on them (the guard of added effects, SINDYc's thresholding).
     pub validate: &'a [MotorLog],
     /// Effects to add to the model's structure (`fit --add`).
     pub adds: &'a [EffectSpec],
@@ -69,8 +70,9 @@ pub struct FitReport {
 /// The scores of the fitted model on one log, as the summary prints them.
 #[derive(Debug, Clone)]
 pub struct LogScores {
-    /// `fit` (a fitted log) or `validation`.
-    pub role: &'static str,
+    /// `fit` (a fitted log), `validation`, or `selection log (chose among N candidates)`
+    /// where the fit chose among candidate models on it.
+    pub role: String,
     /// The log's path.
     pub file: String,
     /// The scores, or why the model could not be scored on this log.
@@ -187,12 +189,24 @@ pub fn fit(req: &FitRequest) -> Result<FitReport> {
     };
     // The guard's other candidates (effects at zero, weak-form re-estimates of the motor
     // constants and effects) would not hold what --fix and --bound assert.
+    let mut validate_role = String::from("validation");
     if !req.adds.is_empty()
         && !req.validate.is_empty()
         && req.kind != ModelKind::Sindyc
         && req.constraints.is_empty()
     {
-        model = guard_added_effects(req, model)?;
+        let (guarded, candidates) = guard_added_effects(req, model)?;
+        model = guarded;
+        validate_role = format!("selection log (chose among {candidates} candidates)");
+    } else if req.kind == ModelKind::Sindyc && !req.validate.is_empty() {
+        validate_role = "selection log (chose the SINDYc terms on it)".to_string();
+    }
+    if validate_role != "validation" {
+        model.data.method = format!(
+            "{}; the --validate logs are a {validate_role}, so their scores are no \
+             validation",
+            model.data.method
+        );
     }
     model.data.files = req
         .logs
@@ -214,7 +228,7 @@ pub fn fit(req: &FitRequest) -> Result<FitReport> {
     }
     model.data.units = declared_units(req.logs.iter().chain(req.validate));
     relabel_units(&mut model, req.logs);
-    let scores = score_logs(&model, req);
+    let scores = score_logs_as(&model, req, &validate_role);
     let summary_text = summary_of(&model, &scores);
     Ok(FitReport {
         model,
@@ -379,9 +393,9 @@ pub fn validation_score(model: &Model, validate: &[MotorLog]) -> f64 {
 /// base structure fitted afresh, and that base structure itself (keeping the added effects
 /// in the structure at zero magnitude, so the model still names them). The validation logs
 /// decide ([`validation_score`]).
-fn guard_added_effects(req: &FitRequest, with: Model) -> Result<Model> {
+fn guard_added_effects(req: &FitRequest, with: Model) -> Result<(Model, usize)> {
     progress::report(
-        "checking the added effects on the validation logs",
+        "choosing among candidates on the --validate logs (selection)",
         0,
         f64::NAN,
     );
@@ -404,6 +418,7 @@ fn guard_added_effects(req: &FitRequest, with: Model) -> Result<Model> {
             .map(|m| validation_score(m, req.validate))
             .collect()
     };
+    let count = candidates.len();
     let score_with = scores[0];
     let mut choice = GuardChoice {
         best: (score_with, with.clone(), false),
@@ -425,7 +440,7 @@ fn guard_added_effects(req: &FitRequest, with: Model) -> Result<Model> {
         tracing::debug!("guard: base fitted afresh {:.2}", scores[4]);
         choice.offer_zeroed(scores[4], base);
     }
-    Ok(choice.into_model(score_with))
+    Ok((choice.into_model(score_with), count))
 }
 
 /// The guard's running choice among its candidates, by validation score [%].
@@ -572,7 +587,8 @@ fn base_with_added_effects_at_zero(mut base: Model, with: &Model) -> Model {
 fn mark_set_to_zero(model: &mut Model, score_with: f64) {
     model.data.method = format!(
         "{}; the added effects were set to zero: with their estimated magnitudes the \
-         validation fit was worse ({score_with:.1} %)",
+         fit on the --validate logs, which chose among the candidates, was worse \
+         ({score_with:.1} %)",
         model.data.method
     );
     let effects = model.effects.clone();
@@ -585,7 +601,7 @@ fn mark_set_to_zero(model: &mut Model, score_with: f64) {
         }
         if key != "harmonic" {
             p.std_err = None;
-            p.note = "magnitude set to zero: the validation data did not support it".into();
+            p.note = "magnitude set to zero: the selection data did not support it".into();
         }
     }
 }
@@ -598,14 +614,20 @@ pub fn summary(model: &Model, req: &FitRequest) -> Result<String> {
 /// Score a fitted model on the request's logs (fitted, then validation).
 /// Every log's free run is independent: they run in parallel.
 pub fn score_logs(model: &Model, req: &FitRequest) -> Vec<LogScores> {
+    score_logs_as(model, req, "validation")
+}
+
+/// [`score_logs`] with the role the `--validate` logs played: `validation`, or a selection
+/// log when the fit chose among candidate models on them.
+fn score_logs_as(model: &Model, req: &FitRequest, validate_role: &str) -> Vec<LogScores> {
     use rayon::prelude::*;
-    let logs: Vec<(&'static str, &MotorLog)> = [("fit", req.logs), ("validation", req.validate)]
+    let logs: Vec<(&str, &MotorLog)> = [("fit", req.logs), (validate_role, req.validate)]
         .into_iter()
         .flat_map(|(role, logs)| logs.iter().map(move |l| (role, l)))
         .collect();
     logs.par_iter()
         .map(|&(role, log)| LogScores {
-            role,
+            role: role.to_string(),
             file: log.source.display().to_string(),
             scores: score(model, log).map_err(|e| format!("{e:#}")),
         })

@@ -4,7 +4,8 @@
 //! support stops changing.
 //!
 //! # Choices
-//! - **Normal equations with Cholesky**, not QR on the tall library. The `(p+t) × (p+t)`
+//! - **Normal equations with Cholesky** ([`NormalEquations`], the numerics' home for them;
+//!   this module adds the thresholding), not QR on the tall library. The `(p+t) × (p+t)`
 //!   Gram matrix `[Θ Y]ᵀ[Θ Y]` is formed once with faer's matrix product (one pass over the
 //!   data); after that every fit — each STLSQ iteration, each target, each candidate of the
 //!   one-by-one thresholding in `sindyc` — is a `p × p` solve that costs microseconds. QR on
@@ -20,7 +21,7 @@
 //!   `‖θ_j ξ_j‖` is below `threshold·‖y‖`. (With unit-norm columns the contribution is the
 //!   normalised coefficient, so this is pysindy's `normalize_columns=True` threshold
 //!   divided by `‖y‖`.)
-use crate::numerics::least_squares::solve_spd;
+use crate::numerics::least_squares::NormalEquations;
 use faer::{Mat, MatRef};
 
 /// STLSQ settings.
@@ -42,156 +43,14 @@ impl Default for StlsqOptions {
     }
 }
 
-/// The normal equations of a library `Θ` (`N × p`) and targets `Y` (`N × t`), column-normalised.
-#[derive(Debug, Clone)]
-pub struct Normal {
-    p: usize,
-    t: usize,
-    /// Normalised Gram matrix `D⁻¹ΘᵀΘD⁻¹`, row-major `p × p` (zero rows for zero columns).
-    g: Vec<f64>,
-    /// Normalised right-hand sides `D⁻¹Θᵀy`, one per target.
-    b: Vec<Vec<f64>>,
-    /// `yᵀy` per target.
-    yy: Vec<f64>,
-    /// Column norms `D` (0 for a zero column).
-    d: Vec<f64>,
-}
-
-impl Normal {
-    /// Build from a library matrix and a target matrix with the same number of rows.
-    pub fn new(theta: MatRef<'_, f64>, y: MatRef<'_, f64>) -> Normal {
-        assert_eq!(
-            theta.nrows(),
-            y.nrows(),
-            "library and targets differ in length"
-        );
-        let p = theta.ncols();
-        let t = y.ncols();
-        let gtt: Mat<f64> = theta.transpose() * theta;
-        let gty: Mat<f64> = theta.transpose() * y;
-        let yy: Vec<f64> = (0..t).map(|k| y.col(k).squared_norm_l2()).collect();
-        Self::from_products(p, t, |i, j| gtt[(i, j)], |i, k| gty[(i, k)], yy)
-    }
-
-    /// Build from the products directly: `gtt(i, j) = θ_iᵀθ_j`, `gty(i, k) = θ_iᵀy_k`,
-    /// `yy[k] = y_kᵀy_k` (for callers that accumulate them themselves).
-    pub fn from_products(
-        p: usize,
-        t: usize,
-        gtt: impl Fn(usize, usize) -> f64,
-        gty: impl Fn(usize, usize) -> f64,
-        yy: Vec<f64>,
-    ) -> Normal {
-        let d: Vec<f64> = (0..p)
-            .map(|i| {
-                let v = gtt(i, i);
-                if v.is_finite() && v > 0.0 {
-                    v.sqrt()
-                } else {
-                    0.0
-                }
-            })
-            .collect();
-        let mut g = vec![0.0; p * p];
-        for i in 0..p {
-            for j in 0..p {
-                if d[i] > 0.0 && d[j] > 0.0 {
-                    g[i * p + j] = gtt(i, j) / (d[i] * d[j]);
-                }
-            }
-        }
-        let b = (0..t)
-            .map(|k| {
-                (0..p)
-                    .map(|i| if d[i] > 0.0 { gty(i, k) / d[i] } else { 0.0 })
-                    .collect()
-            })
-            .collect();
-        Normal { p, t, g, b, yy, d }
-    }
-
-    /// Number of library terms.
-    pub fn terms(&self) -> usize {
-        self.p
-    }
-
-    /// Number of targets.
-    pub fn targets(&self) -> usize {
-        self.t
-    }
-
-    /// Norm of each library column.
-    pub fn column_norms(&self) -> &[f64] {
-        &self.d
-    }
-
-    /// `‖y_k‖`.
-    pub fn target_norm(&self, k: usize) -> f64 {
-        self.yy[k].max(0.0).sqrt()
-    }
-
-    /// Which columns are usable (non-zero).
-    pub fn usable(&self) -> Vec<bool> {
-        self.d.iter().map(|&d| d > 0.0).collect()
-    }
-
-    /// Least squares for target `k` on `support` (unusable columns are ignored).
-    /// Returns the normalised coefficients (`‖θ_j ξ_j‖` up to sign; 0 outside the support).
-    pub fn solve_normalised(&self, k: usize, support: &[bool]) -> Vec<f64> {
-        let idx: Vec<usize> = (0..self.p)
-            .filter(|&j| support[j] && self.d[j] > 0.0)
-            .collect();
-        let mut out = vec![0.0; self.p];
-        if idx.is_empty() {
-            return out;
-        }
-        let q = idx.len();
-        let a = Mat::<f64>::from_fn(q, q, |r, c| self.g[idx[r] * self.p + idx[c]]);
-        let rhs = Mat::<f64>::from_fn(q, 1, |r, _| self.b[k][idx[r]]);
-        let sol = solve_spd(a.as_ref(), rhs.as_ref());
-        for (r, &j) in idx.iter().enumerate() {
-            out[j] = sol[r];
-        }
-        out
-    }
-
-    /// Least squares for target `k` on `support`, coefficients in the library's units.
-    pub fn solve(&self, k: usize, support: &[bool]) -> Vec<f64> {
-        self.denormalise(&self.solve_normalised(k, support))
-    }
-
-    /// Normalised coefficients to the library's units.
-    pub fn denormalise(&self, xn: &[f64]) -> Vec<f64> {
-        xn.iter()
-            .zip(&self.d)
-            .map(|(x, d)| if *d > 0.0 { x / d } else { 0.0 })
-            .collect()
-    }
-
-    /// Squared residual `‖y_k − Θξ‖²` of normalised coefficients, from the normal equations.
-    pub fn residual2(&self, k: usize, xn: &[f64]) -> f64 {
-        let p = self.p;
-        let mut quad = 0.0;
-        let mut lin = 0.0;
-        for i in 0..p {
-            if xn[i] == 0.0 {
-                continue;
-            }
-            lin += xn[i] * self.b[k][i];
-            for j in 0..p {
-                quad += xn[i] * self.g[i * p + j] * xn[j];
-            }
-        }
-        (self.yy[k] - 2.0 * lin + quad).max(0.0)
-    }
-
+impl NormalEquations {
     /// STLSQ for target `k` starting from `support` (pass `usable()` for all terms).
     /// Returns the normalised coefficients at the fixed point.
     pub fn stlsq_normalised(&self, k: usize, support: &[bool], opts: &StlsqOptions) -> Vec<f64> {
         let cut = opts.threshold * self.target_norm(k);
         let mut sup: Vec<bool> = support
             .iter()
-            .zip(&self.d)
+            .zip(self.column_norms())
             .map(|(s, d)| *s && *d > 0.0)
             .collect();
         let mut xn = self.solve_normalised(k, &sup);
@@ -219,7 +78,7 @@ impl Normal {
 /// STLSQ on every target of `Y` against library `Θ`: coefficients `p × t` (column `k` is
 /// target `k`), in the library's units.
 pub fn stlsq(theta: MatRef<'_, f64>, y: MatRef<'_, f64>, opts: &StlsqOptions) -> Mat<f64> {
-    let ne = Normal::new(theta, y);
+    let ne = NormalEquations::new(theta, y);
     let mut xi = Mat::<f64>::zeros(theta.ncols(), y.ncols());
     for k in 0..y.ncols() {
         let c = ne.stlsq(k, opts);
@@ -338,7 +197,7 @@ mod tests {
         let y = Mat::from_fn(th.nrows(), 1, |i, _| {
             th[(i, 0)] - 0.2 * th[(i, 5)] + rng.random_range(-1.0..1.0)
         });
-        let ne = Normal::new(th.as_ref(), y.as_ref());
+        let ne = NormalEquations::new(th.as_ref(), y.as_ref());
         let ours = ne.solve(0, &[true; 9]);
         let qr = th.qr().solve_lstsq(&y);
         for j in 0..9 {

@@ -600,6 +600,9 @@ pub(crate) fn white_noise(n: usize, seed: u64) -> Vec<f64> {
 
 #[cfg(test)]
 mod tests {
+    // Tolerances within a few float ε of the values compared (1e-15 to 1e-9 in f64, 1e-6
+    // in f32) are rounding of the same closed form computed another way; wider ones say
+    // why beside them.
     use super::*;
     use crate::numerics::least_squares::lstsq;
 
@@ -615,11 +618,14 @@ mod tests {
         let base = lstsq(&[], &e);
         let with = lstsq(&[&x], &e);
         let t = f_test(base.rss, with.rss, 1, 0, n as f64);
+        // 1e-3: a pure-noise column is flagged at that level once in a thousand draws.
         assert!(t.p_value > 1e-3, "noise flagged: {t:?}");
         let y: Vec<f64> = (0..n).map(|k| e[k] + 0.3 * x[k]).collect();
         let base = lstsq(&[], &y);
         let with = lstsq(&[&x], &y);
         let t = f_test(base.rss, with.rss, 1, 0, n as f64);
+        // 0.3·x on unit noise explains 0.09/1.09 = 8 % of the variance: F ≈ 180 on 2000
+        // samples, p far below 1e-10; 5 % leaves room for the draw.
         assert!(
             t.p_value < 1e-10 && t.explained > 0.05 && t.delta_bic < 0.0,
             "{t:?}"
@@ -652,6 +658,8 @@ mod tests {
                     < 0.05
             })
             .count();
+        // 2 to 22 of 200 at the 5 % level: the binomial count (mean 10) falls outside with
+        // probability 6e-4.
         assert!((2..=22).contains(&rejected), "{rejected} of 200 rejected");
         let e = noise(n, 1);
         let u: Vec<f64> = (0..n).map(|k| e[k] + 2.0 * z[k]).collect();
@@ -683,6 +691,8 @@ mod tests {
                 robust_wald_test(&u, &[zc], &cluster).unwrap().p_value < 0.05
             })
             .count();
+        // At most 14 of 100 at the 5 % level: the binomial count (mean 5) exceeds it with
+        // probability 1.4e-4.
         assert!(rejected <= 14, "{rejected} of 100 rejected");
     }
 
@@ -710,6 +720,8 @@ mod tests {
                 robust_wald_test(&u, &z, &cluster).unwrap().p_value < 0.05
             })
             .count();
+        // At most 13 of 100 at the 5 % level: the binomial count (mean 5) exceeds it with
+        // probability 5e-4.
         assert!(rejected <= 13, "{rejected} of 100 rejected");
     }
 
@@ -746,6 +758,8 @@ mod tests {
                 robust_wald_test(&u, &z, &cluster).unwrap().p_value < 0.05
             })
             .count();
+        // At most 22 of 200 at the 5 % level: the binomial count (mean 10) exceeds it with
+        // probability 2e-4.
         assert!(rejected <= 22, "{rejected} of 200 rejected");
         let e = noise(n, 5);
         let u: Vec<f64> = (0..n)
@@ -879,6 +893,8 @@ mod tests {
     #[test]
     fn effective_n_shrinks_with_autocorrelation() {
         let e = noise(5000, 4);
+        // White noise: n_eff ≈ n = 5000; AR(0.9): n·(1 − ρ)/(1 + ρ) = 263, the bounds below a
+        // factor of two either way for the estimate's spread.
         assert!(effective_n(&e) > 4000.0);
         let mut ar = vec![0.0; 5000];
         for k in 1..5000 {
@@ -893,6 +909,8 @@ mod tests {
         let e = noise(4000, 5);
         let u = noise(4000, 6);
         let w = whiteness(&e, &u, 25);
+        // 0.1: white noise leaves 1 % of lags outside the 99 % band; 3 or more of 25 happen with
+        // probability 2e-3.
         assert!(w.acf_outside < 0.1 && w.xcf_outside < 0.1, "{w:?}");
         let coloured: Vec<f64> = (0..4000).map(|k| e[k] + 0.5 * u[k]).collect();
         let w = whiteness(&coloured, &u, 25);
@@ -908,6 +926,7 @@ mod tests {
         // With rss1 = d2 the statistic is rss0 − rss1 per added column.
         let p =
             |f: f64, q: usize, d2: f64| f_test(d2 + q as f64 * f, d2, q, 0, d2 + q as f64).p_value;
+        // 1e-4: the tables' quantiles are given to five digits.
         assert!((p(4.9646, 1, 10.0) - 0.05).abs() < 1e-4);
         assert!((p(5.3903, 2, 30.0) - 0.01).abs() < 1e-4);
         assert!((p(2.0860f64.powi(2), 1, 20.0) - 0.05).abs() < 1e-4);

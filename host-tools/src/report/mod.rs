@@ -4,6 +4,7 @@
 //!
 //! Entry points: [`write_compare_report`], [`write_diagnose_report`], [`write_demo_report`].
 pub mod html;
+pub mod shape;
 pub mod svg;
 
 use crate::diagnose::regions::{self, Breakdown, RegionInputs};
@@ -285,7 +286,149 @@ fn findings_section(page: &mut Page, d: &Diagnosis) {
     );
 }
 
-/// `diagnose --report DIR`: the findings, every candidate's test, the equation residuals with
+/// A p-value for a table: NaN (the test could not decide) as "cannot decide".
+fn p_text(p: f64) -> String {
+    if p.is_nan() {
+        "cannot decide".into()
+    } else {
+        format!("{p:.1e}")
+    }
+}
+
+/// The verdict on the model as given: every check with its p-value and share, the refitted
+/// constants, the look-alikes with the experiment that separates them, and one chart per
+/// variable that carries unexplained structure (its fitted function, in units).
+fn verdict_section(page: &mut Page, model: &Model, log: &MotorLog, d: &Diagnosis) {
+    let v = &d.verdict;
+    page.heading("Verdict on the model as given");
+    page.paragraph(&if v.adequate {
+        format!(
+            "Adequate: every check passes at the {:.0}% family level, no effect of the list is \
+             missing and no variable carries structure.",
+            100.0 * v.level
+        )
+    } else if !v.judged {
+        format!(
+            "Not adequate: some check cannot decide on this log (the {:.0}% family level, {:.1e} \
+             per test).",
+            100.0 * v.level,
+            v.level_per_test
+        )
+    } else {
+        format!(
+            "Not adequate at the {:.0}% family level ({:.1e} per test, Bonferroni over the checks \
+             and variables).",
+            100.0 * v.level,
+            v.level_per_test
+        )
+    });
+    let rows: Vec<Vec<String>> = v
+        .checks
+        .iter()
+        .map(|c| {
+            vec![
+                c.name.to_string(),
+                if c.passed { "passed" } else { "FAILED" }.to_string(),
+                p_text(c.p_value),
+                format!("{:.1}", 100.0 * c.share),
+                c.detail.clone(),
+            ]
+        })
+        .collect();
+    page.table(
+        &[
+            "check",
+            "result",
+            "p-value",
+            "share of residual %",
+            "detail",
+        ],
+        &rows,
+    );
+    if !v.refit.is_empty() {
+        page.paragraph(
+            "The parameters are off: a refit of the same structure gives these constants (refit \
+             the model first, then diagnose again).",
+        );
+        let rows: Vec<Vec<String>> = v
+            .refit
+            .iter()
+            .map(|(n, x, u)| vec![n.clone(), format!("{x:.4e}"), u.clone()])
+            .collect();
+        page.table(&["constant", "refitted value", "unit"], &rows);
+    }
+    if !v.look_alikes.is_empty() {
+        page.paragraph("Look-alikes: explanations this log supports about equally.");
+        let rows: Vec<Vec<String>> = v
+            .look_alikes
+            .iter()
+            .map(|l| {
+                vec![
+                    format!(
+                        "{} ({:.0}%) / {} ({:.0}%)",
+                        l.names[0],
+                        100.0 * l.shares[0],
+                        l.names[1],
+                        100.0 * l.shares[1]
+                    ),
+                    if l.both_found {
+                        "both found"
+                    } else {
+                        "about equal"
+                    }
+                    .to_string(),
+                    l.experiment.clone(),
+                ]
+            })
+            .collect();
+        page.table(
+            &[
+                "pair (share alone)",
+                "status",
+                "experiment that tells them apart",
+            ],
+            &rows,
+        );
+    }
+    if v.unexplained.is_empty() {
+        return;
+    }
+    page.heading("What carries the rest");
+    page.paragraph(
+        "Structure no effect of the list explains, by the variable that carries it: the smooth \
+         function of that variable fitted to the residual, in the unit of the equation's \
+         residual (a torque for the torque equation, with the model's K_t/R where it is written \
+         in volts).",
+    );
+    for c in &v.unexplained {
+        let dr = shape::drawn(c, model, log);
+        page.paragraph(&format!(
+            "{} (p {}, share {:.1}%): {}",
+            c.variable,
+            p_text(c.p_value),
+            100.0 * c.share,
+            c.explanation
+        ));
+        if dr.x.len() < 2 {
+            page.paragraph(&format!("({}: no shape to draw)", c.variable));
+            continue;
+        }
+        let (xt, yt) = dr.axis_titles();
+        page.chart(svg::line_chart(
+            &format!(
+                "What carries the rest: {} ({} residual)",
+                c.variable,
+                c.equation.label()
+            ),
+            &xt,
+            &yt,
+            &dr.series(),
+        ));
+    }
+}
+
+/// `diagnose --report DIR`: the verdict on the model as given (its checks, refit,
+/// look-alikes and the shape of what carries the rest), the findings, every candidate's test, the equation residuals with
 /// their whiteness and input cross-correlation, and (given a prediction) measured vs
 /// predicted with the error by region.
 pub fn write_diagnose_report(
@@ -300,6 +443,7 @@ pub fn write_diagnose_report(
         model.kind.name(),
         crate::log::echo_path(&log.source)
     ));
+    verdict_section(&mut page, model, log, d);
     page.heading("Missing effects");
     findings_section(&mut page, d);
     for e in &d.equations {
@@ -323,15 +467,15 @@ pub fn write_diagnose_report(
 pub struct Iteration {
     /// "LuGre", "LuGre + cogging", ...
     pub label: String,
-    /// Validation fits of this model.
+    /// Fits of this model on the test log (no choice was made on it).
     pub validation: Fits,
     /// The effect added after this iteration's diagnosis (its spec), if any.
     pub added: Option<String>,
 }
 
 /// `demo --report DIR`: the error falling over the iterations (before/after chart), the
-/// hidden effect and whether it was found, then the last diagnosis and the final model on the
-/// validation data.
+/// hidden effect and whether it was found, then the last diagnosis (its verdict and what
+/// carries the rest) and the final model on the test log.
 pub fn write_demo_report(
     dir: &Path,
     hidden: &[String],
@@ -349,7 +493,7 @@ pub fn write_demo_report(
         },
         verdict
     ));
-    page.heading("Validation fit after each step");
+    page.heading("Test fit after each step (a fresh log no choice was made on)");
     let rows: Vec<Vec<String>> = iterations
         .iter()
         .map(|it| {
@@ -372,11 +516,12 @@ pub fn write_demo_report(
     ));
     let (model, log, d, pred) = last;
     page.heading("Last diagnosis");
+    verdict_section(&mut page, model, log, d);
     findings_section(&mut page, d);
     for e in &d.equations {
         equation_section(&mut page, e);
     }
-    page.heading("Final model on the validation data");
+    page.heading("Final model on the test log");
     prediction_charts(&mut page, model, log, pred);
     let b = velocity_error_breakdown(model, log, pred);
     region_section(&mut page, &b, "rad/s");

@@ -1,7 +1,8 @@
 //! `cargo xtask commits [RANGE]`: check the commit messages of a branch against the project's
 //! rule: a subject of at most [`MAX_SUBJECT`] characters, a blank line, then a body that says
 //! why. Merge commits are not checked. Before merging a branch: `cargo xtask commits
-//! main..HEAD`.
+//! main..HEAD`. `scripts/test.sh` (and so CI) checks every commit after the last one that
+//! broke the rule (its `COMMITS_BASE`).
 use anyhow::{bail, Context, Result};
 use std::process::Command;
 

@@ -47,6 +47,7 @@ pub mod refine;
 pub mod rows;
 pub mod search;
 pub mod simulate;
+pub mod step;
 
 pub use crate::numerics::differentiation::{centred_velocity, velocity_half, VELOCITY_HALF_S};
 pub use embedding::correlation;

@@ -5,8 +5,8 @@
 //! are stacked into one set of normal equations per state equation.
 use super::embedding::HiddenState;
 use crate::ident::library::{Library, Signals, ACCEL, IDOT, ZDOT};
-use crate::ident::stlsq::Normal;
 use crate::log::{MotorLog, Plant};
+use crate::numerics::least_squares::NormalEquations;
 use crate::numerics::weak_form;
 use anyhow::{bail, Result};
 use faer::Mat;
@@ -24,7 +24,7 @@ pub fn normal_equations(
     logs: &[MotorLog],
     hidden: &HiddenState,
     plant: Plant,
-) -> Result<Vec<Normal>> {
+) -> Result<Vec<NormalEquations>> {
     let voltage = plant == Plant::Voltage;
     let mut blocks = Vec::new();
     for ((log, xdot), z) in logs.iter().zip(&hidden.xdot).zip(&hidden.z) {
@@ -57,14 +57,17 @@ pub fn normal_equations(
         r0 += ba.nrows();
     }
     let mut nes = vec![
-        Normal::new(a.as_ref(), y.as_ref().subcols(ACCEL, 1)),
-        Normal::new(a.as_ref(), y.as_ref().subcols(ZDOT, 1)),
+        NormalEquations::new(a.as_ref(), y.as_ref().subcols(ACCEL, 1)),
+        NormalEquations::new(a.as_ref(), y.as_ref().subcols(ZDOT, 1)),
     ];
     if voltage {
         let mut ad = Mat::<f64>::zeros(rows, lib.len() + 1);
         ad.as_mut().subcols_mut(0, lib.len()).copy_from(&a);
         ad.as_mut().subcols_mut(lib.len(), 1).copy_from(&d);
-        nes.push(Normal::new(ad.as_ref(), y.as_ref().subcols(IDOT, 1)));
+        nes.push(NormalEquations::new(
+            ad.as_ref(),
+            y.as_ref().subcols(IDOT, 1),
+        ));
     }
     Ok(nes)
 }
@@ -86,7 +89,7 @@ pub fn held_current_normal(
     lib: &Library,
     logs: &[MotorLog],
     hidden: &HiddenState,
-) -> Option<Normal> {
+) -> Option<NormalEquations> {
     let n: usize = logs
         .iter()
         .map(|l| l.len().saturating_sub(2 * super::velocity_half(l)))
@@ -378,7 +381,7 @@ mod tests {
             u: &u,
         };
         let (a, y, _) = weak_rows(&lib, &t, &s);
-        let ne = Normal::new(a.as_ref(), y.as_ref().subcols(ACCEL, 1));
+        let ne = NormalEquations::new(a.as_ref(), y.as_ref().subcols(ACCEL, 1));
         let terms = lib.terms();
         let sup: Vec<bool> = terms
             .iter()

@@ -7,8 +7,9 @@ use super::simulate::{bounded_segments, evaluation_budget, validation_fit, Limit
 use super::{ParetoRow, SindycOptions};
 use crate::ident::library::{Library, ACCEL, EQUATION_NAMES, IDOT, ZDOT};
 use crate::ident::sensor_chain;
-use crate::ident::stlsq::{Normal, StlsqOptions};
+use crate::ident::stlsq::StlsqOptions;
 use crate::log::{MotorLog, Plant};
+use crate::numerics::least_squares::NormalEquations;
 use control::sindy::{SindyModel, SparseEq, Term, MAX_TERMS};
 
 /// Multipliers of the base STLSQ threshold tried for the starting model.
@@ -35,11 +36,11 @@ pub struct Search<'a> {
     lib: &'a Library,
     /// Normal equations per equation. The current equation is fitted in its inverse form
     /// `u = L·dI/dt + Σ c_k·θ_k` (see [`super::rows::normal_equations`]); its last column is `dI/dt`.
-    nes: Vec<Normal>,
+    nes: Vec<NormalEquations>,
     /// The current equation's pointwise rows over the held voltage
     /// ([`super::rows::held_current_normal`]), which give its coefficients once the weak
     /// form has chosen its terms.
-    held: Option<Normal>,
+    held: Option<NormalEquations>,
     /// Sample period (for the fallback inductance).
     dt: f64,
     plant: Plant,
@@ -60,8 +61,8 @@ impl<'a> Search<'a> {
     /// its largest magnitude in the fitting data (the observer's bound).
     pub fn new(
         lib: &'a Library,
-        nes: Vec<Normal>,
-        held: Option<Normal>,
+        nes: Vec<NormalEquations>,
+        held: Option<NormalEquations>,
         fit_logs: &'a [MotorLog],
         val: &[MotorLog],
         hidden: &HiddenState,

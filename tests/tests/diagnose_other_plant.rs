@@ -1,0 +1,458 @@
+//! The named effects hidden in a plant our emulator did not make (`e2e::other_plant`: RK4,
+//! Karnopp stick-slip friction, its own noise, and each effect written its own way), judged
+//! by `motorid diagnose --json` as a user runs it: the plant's log as a CSV, and as
+//! MODEL.toml the plant's own constants without the hidden physics.
+//!
+//! What the product promises, asserted per effect: the model is never called adequate while
+//! an effect is hidden, and the effect's name is reported (a finding, or one of a look-alike
+//! pair) on at least 2 of 3 seeds. Not 3 of 3: the findings are tests at a stated level
+//! whose power at a real effect's size is below 1, so a miss on one seed is what a sound
+//! test does now and then; a miss on two of three is a defect. The verdict itself is a union
+//! of checks (residual whiteness, the input, the parameters, findings, carriers) and is held
+//! to every seed. What fails today is `#[ignore]`d with its reason;
+//! `cargo test --release -p e2e --test diagnose_other_plant -- --ignored write_table`
+//! regenerates docs/other-plant.md, the table of every case.
+use control::effects::Effect;
+use control::motor::MotorParams;
+use e2e::other_plant::{Extra, OtherPlant};
+use motorid::emulator::{signal, SignalKind};
+use motorid::log::Plant;
+use motorid::model::{Model, ModelKind};
+use serde_json::Value;
+
+const TS: f64 = 0.012;
+const SECONDS: f64 = 60.0;
+const SEEDS: [u64; 3] = [1, 2, 3];
+/// Seeds of 3 on which the name must be reported (see the file's doc).
+const NAMED_AT_LEAST: usize = 2;
+
+/// One hidden effect: the plant's physics, whether the given model keeps the plant's
+/// viscous friction, and the signals it is judged on.
+struct Case {
+    extra: Extra,
+    viscous_in_model: bool,
+    signals: &'static [SignalKind],
+}
+
+/// The multisine a for all; the voltage steps d (braking from speed, held voltages) where
+/// the effect shows in braking, at rest or in heat.
+const A: &[SignalKind] = &[SignalKind::A];
+const AD: &[SignalKind] = &[SignalKind::A, SignalKind::D];
+
+/// The cases, with the sizes a real motor of this plant's class (R 0.22 Ω, K_t 0.071 N·m/A,
+/// J 3.1e-4 kg·m², Coulomb 0.085 N·m; rated torque about 0.4 N·m, a 24 V bridge) shows.
+fn case(name: &str) -> Case {
+    let (extra, viscous_in_model, signals) = match name {
+        // A slotted motor's cogging is 1-5 % of its rated torque: 10 mN·m (2.5 %) at the
+        // slot frequency of a 6-slot stator, its second harmonic 4 mN·m.
+        "cogging" => (
+            Extra::SlotCogging {
+                slots: 6,
+                a1: 0.010,
+                p1: 0.7,
+                a2: 0.004,
+                p2: 2.1,
+            },
+            true,
+            A,
+        ),
+        // 0.5 µs dead time per edge at 20 kHz on a 24 V bus loses 24·0.5e-6·20e3 = 0.24 V;
+        // the sign of the current passes through zero across the PWM ripple, ±0.3 A.
+        "deadtime" => (
+            Extra::DeadTime {
+                vd: 0.24,
+                band: 0.3,
+            },
+            true,
+            AD,
+        ),
+        // A small motor's winding: about 16 g of copper (6 J/K) and 10 K/W to still air
+        // without a heatsink (a one-minute time constant); copper's 0.393 %/K.
+        "thermal" => (
+            Extra::Heating {
+                r_th: 10.0,
+                c_th: 6.0,
+            },
+            true,
+            AD,
+        ),
+        // Three counts of a 12-bit ADC on a 3 mΩ shunt with gain 9 (29 mA a count) left by
+        // an offset calibration done cold.
+        "current_offset" => (Extra::SensorOffset { i0: 0.09 }, true, AD),
+        // A constant load of a quarter of the Coulomb friction: a spring's preload, a
+        // vertical axis not quite balanced.
+        "offset" => (Extra::ConstantLoad { t0: 0.02 }, true, AD),
+        // 50 g out of balance at 4 cm under gravity (0.0196 N·m) and a second harmonic of a
+        // quarter of it from the mount's eccentricity.
+        "position_load" => (
+            Extra::Unbalance {
+                a1: 0.0196,
+                p1: 1.1,
+                a2: 0.005,
+                p2: -0.4,
+            },
+            true,
+            A,
+        ),
+        // A two-stage planetary gearhead passes 75 % of the torque it transmits (catalogue
+        // efficiencies of 70-80 %); the gearhead and its load are two thirds of the inertia.
+        "load_friction" => (
+            Extra::GearFriction {
+                mu: 0.25,
+                j_load: 2.0e-4,
+            },
+            true,
+            AD,
+        ),
+        // Static friction 30 % above Coulomb (lubricated contacts: 1.1-1.5 times), falling
+        // by half at 2.5 rad/s.
+        "stribeck" => (Extra::Breakaway { fs: 0.025, vs: 2.5 }, true, AD),
+        // The plant's own viscous friction (1.5e-3 N·m·s/rad), left out of the model.
+        "viscous" => (Extra::None, false, A),
+        _ => unreachable!("no case {name}"),
+    };
+    Case {
+        extra,
+        viscous_in_model,
+        signals,
+    }
+}
+
+/// Every hidden effect, in the order of the table.
+const NAMES: [&str; 9] = [
+    "cogging",
+    "deadtime",
+    "thermal",
+    "current_offset",
+    "offset",
+    "position_load",
+    "load_friction",
+    "stribeck",
+    "viscous",
+];
+
+/// What `diagnose --json` said on one log.
+struct Outcome {
+    signal: SignalKind,
+    seed: u64,
+    adequate: bool,
+    /// Findings: name and share of the residual.
+    effects: Vec<(String, f64)>,
+    /// Look-alike pairs (findings or carriers).
+    look_alikes: Vec<[String; 2]>,
+    /// Carriers: variable and share.
+    carriers: Vec<(String, f64)>,
+    /// Checks that failed in either equation, by name ("cannot judge" when a check could not
+    /// decide).
+    failed: Vec<String>,
+    /// Constants the parameter check refitted, by name.
+    refit: Vec<String>,
+}
+
+impl Outcome {
+    /// Not adequate because something decided so: a finding, a carrier or a check that
+    /// decided (not only checks that cannot judge this log).
+    fn claims(&self) -> bool {
+        !self.effects.is_empty()
+            || !self.carriers.is_empty()
+            || self.failed.iter().any(|f| !f.ends_with("(cannot judge)"))
+    }
+
+    /// The effect `name` is reported: a finding, or one of a look-alike pair. Viscous
+    /// friction is part of every model `diagnose` reads (a model without it states b = 0),
+    /// so it is never a missing effect: it is reported by the parameter check's refit.
+    fn names(&self, name: &str) -> bool {
+        self.effects.iter().any(|(n, _)| n == name)
+            || self.look_alikes.iter().any(|l| l.iter().any(|n| n == name))
+            || (name == "viscous" && self.refit.iter().any(|n| n.contains(name)))
+    }
+}
+
+/// MODEL.toml of the plant's own constants: Coulomb friction as an effect, viscous friction
+/// where asked, the rigid inertia, and the plant's Hall step.
+fn given_model(p: &OtherPlant, viscous: bool) -> Model {
+    let mut m = Model::new(ModelKind::Linear, Plant::Voltage, TS);
+    m.motor = MotorParams {
+        r: p.r,
+        l: p.l,
+        kt: p.kt,
+        kb: p.kt,
+        j: p.j,
+    };
+    m.viscous = if viscous { p.b } else { 0.0 };
+    m.effects = vec![Effect::Coulomb { fc: p.fc }];
+    m.sensor.hall_resolution_rad = p.hall;
+    m
+}
+
+/// Run the plant on `kind` with `seed`, write its log and the given model, and read what
+/// `motorid diagnose --json` says.
+fn diagnose(c: &Case, kind: SignalKind, seed: u64) -> Outcome {
+    let p = OtherPlant::new(c.extra);
+    let log = p.run(&signal(kind, SECONDS, seed), TS, seed);
+    let dir = tempfile::tempdir().unwrap();
+    log.write(&dir.path().join("log.csv")).unwrap();
+    given_model(&p, c.viscous_in_model)
+        .save(&dir.path().join("model.toml"))
+        .unwrap();
+    let out = e2e::stdout_of_success(e2e::motorid(
+        dir.path(),
+        &["diagnose", "model.toml", "log.csv", "--json"],
+    ));
+    let v: Value = serde_json::from_str(out.trim()).expect("one JSON object");
+    let list = |key: &str| v[key].as_array().cloned().unwrap_or_default();
+    let pair = |e: &Value, a: &str, b: &str| {
+        (
+            e[a].as_str().unwrap_or("?").to_string(),
+            e[b].as_f64().unwrap_or(f64::NAN),
+        )
+    };
+    Outcome {
+        signal: kind,
+        seed,
+        adequate: v["adequate"].as_bool().expect("adequate"),
+        effects: list("effects")
+            .iter()
+            .map(|e| pair(e, "name", "score"))
+            .collect(),
+        look_alikes: list("look_alikes")
+            .iter()
+            .map(|l| {
+                let n = |k: usize| l["names"][k].as_str().unwrap_or("?").to_string();
+                [n(0), n(1)]
+            })
+            .collect(),
+        carriers: list("unexplained")
+            .iter()
+            .map(|u| pair(u, "variable", "share"))
+            .collect(),
+        failed: list("checks")
+            .iter()
+            .filter(|c| c["passed"] == false)
+            .map(|c| {
+                let name = c["name"].as_str().unwrap_or("?");
+                if c["p_value"].is_null() {
+                    format!("{name} (cannot judge)")
+                } else {
+                    name.to_string()
+                }
+            })
+            .fold(Vec::new(), |mut v: Vec<String>, c| {
+                if !v.contains(&c) {
+                    v.push(c);
+                }
+                v
+            }),
+        refit: list("refit")
+            .iter()
+            .map(|r| r["name"].as_str().unwrap_or("?").to_string())
+            .collect(),
+    }
+}
+
+fn describe(o: &Outcome) -> String {
+    format!(
+        "{} seed {}: adequate {} effects {:?} look-alikes {:?} carriers {:?} failed {:?} \
+         refit {:?}",
+        o.signal.name(),
+        o.seed,
+        o.adequate,
+        o.effects,
+        o.look_alikes,
+        o.carriers,
+        o.failed,
+        o.refit
+    )
+}
+
+/// The promise on one effect and one signal: never adequate, named on at least 2 of 3 seeds.
+fn check(name: &str, kind: SignalKind) {
+    let c = case(name);
+    assert!(c.signals.contains(&kind));
+    let runs: Vec<Outcome> = SEEDS.iter().map(|&s| diagnose(&c, kind, s)).collect();
+    let all: Vec<String> = runs.iter().map(describe).collect();
+    let all = all.join("\n");
+    assert!(
+        runs.iter().all(|o| !o.adequate),
+        "{name} hidden, called adequate:\n{all}"
+    );
+    let named = runs.iter().filter(|o| o.names(name)).count();
+    assert!(named >= NAMED_AT_LEAST, "{name} named on {named}/3:\n{all}");
+}
+
+#[test]
+#[ignore = "cogging is carried by theta, not named: its RMS torque over the log (about 6 mN·m) is below the relevance floor of 10 % of Coulomb friction (8.5 mN·m) although the harmonic-6 candidate is significant"]
+fn cogging_on_a() {
+    check("cogging", SignalKind::A);
+}
+
+#[test]
+fn deadtime_on_a() {
+    check("deadtime", SignalKind::A);
+}
+
+#[test]
+#[ignore = "named on 1/3: on voltage steps the cluster-robust entry test has few held inputs and the parameter check takes the loss as a resistance"]
+fn deadtime_on_d() {
+    check("deadtime", SignalKind::D);
+}
+
+#[test]
+#[ignore = "called adequate: +1-2 % of resistance on the multisine, the thermal candidate misses the Bonferroni level and the parameter check needs half the residual"]
+fn thermal_on_a() {
+    check("thermal", SignalKind::A);
+}
+
+#[test]
+fn thermal_on_d() {
+    check("thermal", SignalKind::D);
+}
+
+#[test]
+fn current_offset_on_a() {
+    check("current_offset", SignalKind::A);
+}
+
+#[test]
+fn current_offset_on_d() {
+    check("current_offset", SignalKind::D);
+}
+
+#[test]
+fn offset_on_a() {
+    check("offset", SignalKind::A);
+}
+
+#[test]
+fn offset_on_d() {
+    check("offset", SignalKind::D);
+}
+
+#[test]
+fn position_load_on_a() {
+    check("position_load", SignalKind::A);
+}
+
+#[test]
+#[ignore = "not named: tooth friction on the mostly inertial transmitted torque shows as an inertia error (the parameter check refits J 17-20 % higher)"]
+fn load_friction_on_a() {
+    check("load_friction", SignalKind::A);
+}
+
+#[test]
+#[ignore = "named on 1/3: on voltage steps the cluster-robust entry test has few held inputs"]
+fn load_friction_on_d() {
+    check("load_friction", SignalKind::D);
+}
+
+#[test]
+#[ignore = "called adequate: the Stribeck candidate is significant (p < 1e-9) but its whole-log RMS torque is below the relevance floor, and nothing else flags it"]
+fn stribeck_on_a() {
+    check("stribeck", SignalKind::A);
+}
+
+#[test]
+#[ignore = "not named: only the checks that cannot judge voltage steps fail"]
+fn stribeck_on_d() {
+    check("stribeck", SignalKind::D);
+}
+
+#[test]
+#[ignore = "the parameter check fails but its refit lists the inertia only, not the viscous coefficient"]
+fn viscous_on_a() {
+    check("viscous", SignalKind::A);
+}
+
+/// Regenerates docs/other-plant.md: every case, signal and seed, and a summary per effect.
+#[test]
+#[ignore = "writes docs/other-plant.md (about 45 diagnoses)"]
+fn write_table() {
+    use std::fmt::Write;
+    let mut md = String::from(TABLE_HEAD);
+    let mut summary = String::from(SUMMARY_HEAD);
+    for name in NAMES {
+        let c = case(name);
+        for &kind in c.signals {
+            let runs: Vec<Outcome> = SEEDS.iter().map(|&s| diagnose(&c, kind, s)).collect();
+            for o in &runs {
+                let pct = |v: &[(String, f64)]| {
+                    v.iter()
+                        .map(|(n, s)| format!("{n} ({:.0} %)", 100.0 * s))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                };
+                let pairs: Vec<String> = o
+                    .look_alikes
+                    .iter()
+                    .map(|l| format!("{} ~ {}", l[0], l[1]))
+                    .collect();
+                let _ = writeln!(
+                    md,
+                    "| {name} | {} | {} | {} | {} | {} | {} | {} | {} |",
+                    kind.name(),
+                    o.seed,
+                    o.adequate,
+                    pct(&o.effects),
+                    pairs.join(", "),
+                    pct(&o.carriers),
+                    o.failed.join(", "),
+                    o.refit.join(", ")
+                );
+            }
+            let named = runs.iter().filter(|o| o.names(name)).count();
+            let flagged = runs.iter().filter(|o| !o.adequate).count();
+            let claimed = runs.iter().filter(|o| !o.adequate && o.claims()).count();
+            let _ = writeln!(
+                summary,
+                "| {name} | {} | {named}/3 | {flagged}/3 | {claimed}/3 |",
+                kind.name()
+            );
+        }
+    }
+    md.push_str(&summary);
+    md.push_str(TABLE_TAIL);
+    let path = e2e::root().join("docs").join("other-plant.md");
+    std::fs::write(&path, md).unwrap();
+    eprintln!("wrote {}", path.display());
+}
+
+const TABLE_HEAD: &str = "# Nine named effects hidden in a plant our equations did not make\n\n\
+     Generated by `cargo test --release -p e2e --test diagnose_other_plant -- --ignored \
+     write_table`. The plant is `tests/src/other_plant.rs` (RK4 on a 50 µs grid, Karnopp \
+     stick-slip friction, its own noise), each effect written there its own way and sized as \
+     a real motor of its class shows it (the reasons are beside each case in \
+     `tests/tests/diagnose_other_plant.rs`); 60 s at 12 ms of the multisine a, and of the \
+     voltage steps d where the effect shows in braking, at rest or in heat. The model given to \
+     `motorid diagnose --json` is MODEL.toml with the plant's own constants, Coulomb and \
+     viscous friction, without the hidden effect (for `viscous`: without viscous friction). \
+     Effects and carriers: name (share of the residual); look-alikes: the pairs `diagnose` \
+     reports as explaining about the same.\n\n\
+     | effect hidden | signal | seed | adequate | effects | look-alikes | carried by | failed checks | refitted |\n\
+     |---|---|---|---|---|---|---|---|---|\n";
+
+const SUMMARY_HEAD: &str = "\n## Summary\n\n\
+     Named: the hidden effect is a finding or one of a look-alike pair (viscous friction, \
+     which every model `diagnose` reads states, even as b = 0: a refitted viscous \
+     coefficient). Not adequate: the verdict did not say the model explains the data; by a \
+     claim: with a finding, a carrier or a failed check that decided, not only checks that \
+     cannot judge the log.\n\n\
+     | effect hidden | signal | named | not adequate | by a claim |\n|---|---|---|---|---|\n";
+
+const TABLE_TAIL: &str = "\nHow to read it. On the voltage steps d a correct model is itself \
+     mostly not adequate because the whiteness and carrier checks cannot judge held steps \
+     (docs/diagnose-verdict.md): there \"not adequate\" counts only with a finding, a \
+     carrier or a failed check that decided. The tests in \
+     `tests/tests/diagnose_other_plant.rs` hold each effect to the promise (never adequate, \
+     named on at least 2 of 3 seeds) and keep the cases that fall short `#[ignore]`d with \
+     their cause. Causes seen here: the relevance floor (a finding's torque, its RMS over the \
+     whole log, must reach 10 % of the Coulomb friction) turns down a significant Stribeck \
+     dip, which acts only at low speed, and a cogging of 10 mN·m (an RMS of about 6 mN·m against a floor \
+     of 8.5); the cogging is then carried by `theta`, while the Stribeck dip leaves the model \
+     adequate. A winding that warms by up to 5 K over a minute of the multisine raises R by up to 2 %: \
+     the parameter check's refit is significant (p below 1e-5 in both equations) but removes \
+     less than half of the residual, so the check passes, and the thermal candidate misses the \
+     Bonferroni level. Gear tooth friction \
+     proportional to a transmitted torque that is mostly inertial looks like a larger inertia \
+     (the refit raises J by 17-20 %). On steps, the cluster-robust entry test has some 30 \
+     held inputs and names dead time or load friction on one seed of three. A model without \
+     viscous friction fails the parameter check, whose refit shows only the inertia.\n";
