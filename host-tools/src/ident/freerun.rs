@@ -786,6 +786,7 @@ impl<D: RunScalar> RangeRun<'_, D> {
             substeps,
         } = *self;
         debug_assert!(state_len(loads) <= N);
+        clear_upper_vector_state();
         let offset = effects::total_sensor_offset(&p.effects);
         let omega0 = c0.omega.re();
         let theta0 = D::constant(log.theta[start]);
@@ -862,6 +863,27 @@ impl<D: RunScalar> RangeRun<'_, D> {
         }
         Ok(Some(out))
     }
+}
+
+/// Marks the upper halves of the AVX vector registers clean (`vzeroupper`), on CPUs that
+/// have them. A run calls libm's `exp` millions of times, which glibc runs in VEX-encoded
+/// (AVX) code between this crate's SSE code: while a thread's upper register state is dirty,
+/// every such switch pays a state transition (docs/decisions/0022). Rayon's worker threads
+/// were seen to carry a dirty state; this clears it at the start of every run. The upper
+/// halves hold no value across a call (they are caller-saved), so no result changes.
+fn clear_upper_vector_state() {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx") {
+        // SAFETY: the CPU has AVX (checked just above), which is all `vzeroupper` needs.
+        unsafe { zero_upper() }
+    }
+}
+
+/// `vzeroupper`.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+unsafe fn zero_upper() {
+    std::arch::x86_64::_mm256_zeroupper();
 }
 
 #[cfg(test)]
