@@ -290,17 +290,22 @@ fn substep_residual<D: RunScalar, const N: usize>(
 /// lane is the new velocity's: the residual's value and its exact slope in one evaluation).
 type Slope = DualVec<f64, 1>;
 
-/// One backward-Euler sub-step of length `h` (z exact), from state x with input u and heat
-/// state h_th. The new velocity is the root of [`substep_residual`] (increasing in it),
-/// found in `f64` by [`substep_velocity`] from `w_guess`; in dual numbers the new state then
-/// carries the implicit function's derivatives ([`RunScalar::on_root`]). `slope` holds the
-/// values `re` of `p` as one-lane dual numbers.
-/// The new velocity is taken from `roots` when it replays a tape.
-#[allow(clippy::too_many_arguments)]
+/// The numbers of a run's model in the three number types its sub-steps compute in: the
+/// run's own `p`, their values `re`, and those values as one-lane dual numbers `slope` (the
+/// Newton iteration's residual and slope).
+struct RunModel<'a, D> {
+    p: &'a RunParams<D>,
+    re: &'a RunParams<f64>,
+    slope: &'a RunParams<Slope>,
+}
+
+/// One backward-Euler sub-step of length `h` (z exact) of the model `m`, from state x with
+/// input u and heat state h_th. The new velocity is the root of [`substep_residual`]
+/// (increasing in it), found in `f64` by [`substep_velocity`] from `w_guess`; in dual
+/// numbers the new state then carries the implicit function's derivatives
+/// ([`RunScalar::on_root`]). The new velocity is taken from `roots` when it replays a tape.
 fn implicit_step<D: RunScalar, const N: usize>(
-    p: &RunParams<D>,
-    re: &RunParams<f64>,
-    slope: &RunParams<Slope>,
+    m: &RunModel<D>,
     x: &[D; N],
     u: f64,
     h_th: D,
@@ -312,12 +317,12 @@ fn implicit_step<D: RunScalar, const N: usize>(
         Some(w) => w,
         None => {
             let xr = x.map(|v| v.re());
-            let w = substep_velocity(re, slope, &xr, u, h_th.re(), h, w_guess);
+            let w = substep_velocity(m.re, m.slope, &xr, u, h_th.re(), h, w_guess);
             roots.record(w);
             w
         }
     };
-    let (g, s) = substep_residual(p, re, x, u, h_th, h, D::unknown(w));
+    let (g, s) = substep_residual(m.p, m.re, x, u, h_th, h, D::unknown(w));
     s.map(|v| D::on_root(v, g))
 }
 
@@ -678,21 +683,44 @@ pub fn run_range<D: RunScalar>(
     substeps: usize,
     roots: &mut SubstepRoots,
 ) -> Result<Run<D>> {
-    run_range_from(p, re, log, start..end, substeps, None, roots)
+    let from = RunFrom {
+        substeps,
+        carried: None,
+        give_up: None,
+    };
+    let run = run_range_from(p, re, log, start..end, from, roots)?;
+    run.ok_or_else(|| anyhow::anyhow!("a free run without a check was given up"))
 }
 
-/// [`run_range`] over the samples `range`, from the measured angle at its start and, when `carried` is given, the other
-/// states from there (else from the measurement: the measured velocity and current, the
-/// bristles on the Stribeck curve).
+/// How a run of [`run_range_from`] goes.
+pub struct RunFrom<'a, D> {
+    /// Backward-Euler sub-steps per sample.
+    pub substeps: usize,
+    /// The states other than the angle at the start; `None`: the measured ones (velocity,
+    /// current, the bristles on the Stribeck curve).
+    pub carried: Option<Carried<D>>,
+    /// Sees the run so far after every sample; when it says so, the run stops there.
+    pub give_up: Option<GiveUp<'a, D>>,
+}
+
+/// A check of a run so far ([`RunFrom::give_up`]): `true` stops the run.
+pub type GiveUp<'a, D> = &'a mut dyn FnMut(&Run<D>) -> bool;
+
+/// [`run_range`] over the samples `range`, from the measured angle at its start and the other
+/// states as `from` says; `None` when `from.give_up` stopped it.
 pub fn run_range_from<D: RunScalar>(
     p: &RunParams<D>,
     re: &RunParams<f64>,
     log: &MotorLog,
     range: std::ops::Range<usize>,
-    substeps: usize,
-    carried: Option<Carried<D>>,
+    from: RunFrom<D>,
     roots: &mut SubstepRoots,
-) -> Result<Run<D>> {
+) -> Result<Option<Run<D>>> {
+    let RunFrom {
+        substeps,
+        carried,
+        give_up,
+    } = from;
     let start = range.start;
     let end = range.end.min(log.len());
     if start >= end {
@@ -721,9 +749,9 @@ pub fn run_range_from<D: RunScalar>(
     };
     // The state array as long as this model's loads need, chosen once per run.
     match loads {
-        0 => run.states::<{ state_len(0) }>(c0, roots),
-        1 => run.states::<{ state_len(1) }>(c0, roots),
-        _ => run.states::<{ state_len(MAX_LOADS) }>(c0, roots),
+        0 => run.states::<{ state_len(0) }>(c0, roots, give_up),
+        1 => run.states::<{ state_len(1) }>(c0, roots, give_up),
+        _ => run.states::<{ state_len(MAX_LOADS) }>(c0, roots, give_up),
     }
 }
 
@@ -740,8 +768,14 @@ struct RangeRun<'a, D> {
 }
 
 impl<D: RunScalar> RangeRun<'_, D> {
-    /// The run from the states `c0` (and the measured angle), in states of length `N`.
-    fn states<const N: usize>(&self, c0: Carried<D>, roots: &mut SubstepRoots) -> Result<Run<D>> {
+    /// The run from the states `c0` (and the measured angle), in states of length `N`;
+    /// `None` when `give_up` stops it.
+    fn states<const N: usize>(
+        &self,
+        c0: Carried<D>,
+        roots: &mut SubstepRoots,
+        mut give_up: Option<GiveUp<D>>,
+    ) -> Result<Option<Run<D>>> {
         let RangeRun {
             p,
             re,
@@ -752,6 +786,7 @@ impl<D: RunScalar> RangeRun<'_, D> {
             substeps,
         } = *self;
         debug_assert!(state_len(loads) <= N);
+        clear_upper_vector_state();
         let offset = effects::total_sensor_offset(&p.effects);
         let omega0 = c0.omega.re();
         let theta0 = D::constant(log.theta[start]);
@@ -764,6 +799,11 @@ impl<D: RunScalar> RangeRun<'_, D> {
         let mut h = heat_at(p, log, start);
         let mut w_prev = omega0;
         let slope = re.lift::<Slope>();
+        let model = RunModel {
+            p,
+            re,
+            slope: &slope,
+        };
         let mut out = Run {
             theta: Vec::with_capacity(n),
             omega: Vec::with_capacity(n),
@@ -792,6 +832,9 @@ impl<D: RunScalar> RangeRun<'_, D> {
             if k + 1 == n {
                 break;
             }
+            if give_up.as_mut().is_some_and(|g| g(&out)) {
+                return Ok(None);
+            }
             let k = start + k;
             let u = log.u[k];
             if p.plant == Plant::Torque {
@@ -802,7 +845,7 @@ impl<D: RunScalar> RangeRun<'_, D> {
                 let w = x[1].re();
                 let guess = w + (w - w_prev);
                 w_prev = w;
-                x = implicit_step(p, re, &slope, &x, u, h, dt, guess, roots);
+                x = implicit_step(&model, &x, u, h, dt, guess, roots);
                 for e in &p.effects {
                     h = e.heat_step(h, x[2], D::constant(dt));
                 }
@@ -818,8 +861,29 @@ impl<D: RunScalar> RangeRun<'_, D> {
                 );
             }
         }
-        Ok(out)
+        Ok(Some(out))
     }
+}
+
+/// Marks the upper halves of the AVX vector registers clean (`vzeroupper`), on CPUs that
+/// have them. A run calls libm's `exp` millions of times, which glibc runs in VEX-encoded
+/// (AVX) code between this crate's SSE code: while a thread's upper register state is dirty,
+/// every such switch pays a state transition (docs/decisions/0022). Rayon's worker threads
+/// were seen to carry a dirty state; this clears it at the start of every run. The upper
+/// halves hold no value across a call (they are caller-saved), so no result changes.
+fn clear_upper_vector_state() {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx") {
+        // SAFETY: the CPU has AVX (checked just above), which is all `vzeroupper` needs.
+        unsafe { zero_upper() }
+    }
+}
+
+/// `vzeroupper`.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+unsafe fn zero_upper() {
+    std::arch::x86_64::_mm256_zeroupper();
 }
 
 #[cfg(test)]

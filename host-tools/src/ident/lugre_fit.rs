@@ -22,7 +22,6 @@ use crate::log::{MotorLog, Plant};
 use crate::model::{LugreParams, Model, ModelKind};
 use anyhow::{bail, Result};
 use control::effects::{smooth_sign, VELOCITY_EPS};
-use rayon::prelude::*;
 
 /// Shortest run of constant input used as a steady-state point [s]: about 1 s (80 samples
 /// at 12 ms).
@@ -440,22 +439,32 @@ fn start_dynamics(
                 s1s.into_iter().map(move |s1| (s0, s1))
             })
             .collect();
-        // The starts' free runs are independent: on rayon's threads.
-        let costs: Vec<f64> = starts
-            .par_iter()
-            .map(|&(s0, s1)| {
-                let mut trial = sim_error::scale_effect_magnitudes(m, 0.0);
-                if let Some(l) = trial.lugre.as_mut() {
-                    l.sigma0 = s0;
-                    l.sigma1 = s1;
-                }
-                sim_error::cost(&res, &trial)
-            })
-            .collect();
-        for (&(s0, s1), &c) in starts.iter().zip(&costs) {
-            let best = if s0 < 30.0 { &mut best_soft } else { &mut best };
+        let trial = |k: usize| {
+            let mut trial = sim_error::scale_effect_magnitudes(m, 0.0);
+            if let Some(l) = trial.lugre.as_mut() {
+                (l.sigma0, l.sigma1) = starts[k];
+            }
+            trial
+        };
+        // The starts' free runs side by side on rayon's threads, each given up once it
+        // cannot be the one taken: the stiff starts above the lowest stiff cost; then the
+        // soft starts above the lowest soft cost or the ratio of the stiff one they must
+        // beat. The lowest costs are the full runs' (`sim_error::lowest_costs`).
+        let (soft, stiff): (Vec<usize>, Vec<usize>) =
+            (0..starts.len()).partition(|&k| starts[k].0 < 30.0);
+        let in_order = |v: &[usize]| (0..v.len()).collect::<Vec<usize>>();
+        let stiff_costs =
+            sim_error::lowest_costs(&res, &in_order(&stiff), f64::INFINITY, |k| trial(stiff[k]));
+        for (&k, &c) in stiff.iter().zip(&stiff_costs) {
             if c < best.0 {
-                *best = (c, s0, s1);
+                best = (c, starts[k].0, starts[k].1);
+            }
+        }
+        let bound = SOFT_START_RATIO * best.0;
+        let soft_costs = sim_error::lowest_costs(&res, &in_order(&soft), bound, |k| trial(soft[k]));
+        for (&k, &c) in soft.iter().zip(&soft_costs) {
+            if c < best_soft.0 {
+                best_soft = (c, starts[k].0, starts[k].1);
             }
         }
         // A soft start only when it is clearly better: with stiff bristles in the data a

@@ -171,7 +171,22 @@ pub fn fit(req: &FitRequest) -> Result<FitReport> {
              (or linear) --add table:..."
         );
     }
-    let mut model = fit_kind(req)?;
+    let mut model = if req.adds.is_empty() || req.kind == ModelKind::Sindyc {
+        fit_kind(req)?
+    } else {
+        // The base structure is one start of the refinement with the added effects (and a
+        // candidate of their guard): fitted from the beginning on a thread of its own, side
+        // by side with the weak-form start's estimates and bristle grid, instead of after
+        // them; the refinement takes it from [`BASE_FITS`].
+        std::thread::scope(|scope| {
+            let base = scope.spawn(|| base_structure_fit(req).map(drop));
+            let model = fit_kind(req);
+            if let Err(panic) = base.join() {
+                std::panic::resume_unwind(panic);
+            }
+            model
+        })?
+    };
     // The guard's other candidates (effects at zero, weak-form re-estimates of the motor
     // constants and effects) would not hold what --fix and --bound assert.
     let mut validate_role = String::from("validation");
@@ -261,37 +276,49 @@ fn fit_kind(req: &FitRequest) -> Result<Model> {
     }
 }
 
-/// Base structures (no added effects) fitted in this process, by [`fit_fingerprint`]: the
-/// guard of added effects refits the base structure, and the demo's loop fits it in its
-/// first round and again in every later round's guard. The fit is deterministic (the
-/// parallel Jacobian gives the same iterates), so the stored model is the one a refit gives.
-static BASE_FITS: std::sync::Mutex<Vec<(u64, Model)>> = std::sync::Mutex::new(Vec::new());
+/// Base structures (no added effects) fitted in this process, by [`fit_fingerprint`]: a fit
+/// with added effects starts from the base structure, its guard scores it, and the demo's
+/// loop fits it in its first round and again in every later round's guard. The fit is
+/// deterministic (the parallel Jacobian gives the same iterates), so the stored model is the
+/// one a refit gives. A slot is filled once: a caller that finds it being filled by another
+/// thread waits for that fit; `None` in it is a fit that failed.
+static BASE_FITS: std::sync::Mutex<Vec<(u64, BaseFitSlot)>> = std::sync::Mutex::new(Vec::new());
+
+/// A base fit of [`BASE_FITS`], filled by the first caller.
+type BaseFitSlot = std::sync::Arc<std::sync::OnceLock<Option<Model>>>;
 
 /// Most base fits kept (a model is a few kilobytes).
 const BASE_FITS_KEPT: usize = 4;
 
-/// `fit(req)`, taken from [`BASE_FITS`] when the same base structure was fitted on the same
-/// logs before; requests with added effects are fitted every time.
+/// `fit(req)`, taken from [`BASE_FITS`] when the same base structure was fitted (or is being
+/// fitted) on the same logs in this process; requests with added effects are fitted every
+/// time. A fit that failed is fitted again for its error.
 fn base_fit_memo(req: &FitRequest, fit: fn(&FitRequest) -> Result<Model>) -> Result<Model> {
     if !req.adds.is_empty() {
         return fit(req);
     }
     let key = fit_fingerprint(req);
-    let stored = BASE_FITS
-        .lock()
-        .ok()
-        .and_then(|fits| fits.iter().find(|(k, _)| *k == key).map(|(_, m)| m.clone()));
-    if let Some(m) = stored {
-        return Ok(m);
-    }
-    let m = fit(req)?;
-    if let Ok(mut fits) = BASE_FITS.lock() {
+    let slot: Option<BaseFitSlot> = BASE_FITS.lock().ok().map(|mut fits| {
+        if let Some((_, s)) = fits.iter().find(|(k, _)| *k == key) {
+            return s.clone();
+        }
         if fits.len() >= BASE_FITS_KEPT {
             fits.remove(0);
         }
-        fits.push((key, m.clone()));
+        let s = BaseFitSlot::default();
+        fits.push((key, s.clone()));
+        s
+    });
+    let Some(slot) = slot else {
+        return fit(req);
+    };
+    let mut error = None;
+    let stored = slot.get_or_init(|| fit(req).map_err(|e| error = Some(e)).ok());
+    match (stored, error) {
+        (Some(m), _) => Ok(m.clone()),
+        (None, Some(e)) => Err(e),
+        (None, None) => fit(req),
     }
-    Ok(m)
 }
 
 /// A hash of what a base fit depends on: model kind, plant, and every log's source, metadata
@@ -372,34 +399,48 @@ fn guard_added_effects(req: &FitRequest, with: Model) -> Result<(Model, usize)> 
         0,
         f64::NAN,
     );
-    let score_with = validation_score(&with, req.validate);
+    let zeroed = sim_error::scale_effect_magnitudes(&with, 0.0);
+    let weak_with = weak_form_candidate(&with, &with, req.logs);
+    // The base structure (the fit's start, kept in the process).
+    let from_base = base_structure_fit(req).ok().map(|base| {
+        let cand = weak_form_candidate(&base, &with, req.logs);
+        (cand, base_with_added_effects_at_zero(base, &with))
+    });
+    // The candidates' validation runs are independent: scored side by side.
+    let mut candidates = vec![&with, &zeroed, &weak_with];
+    if let Some((cand, base)) = &from_base {
+        candidates.extend([cand, base]);
+    }
+    let scores: Vec<f64> = {
+        use rayon::prelude::*;
+        candidates
+            .par_iter()
+            .map(|m| validation_score(m, req.validate))
+            .collect()
+    };
+    let count = candidates.len();
+    let score_with = scores[0];
     let mut choice = GuardChoice {
         best: (score_with, with.clone(), false),
         weak_form: None,
     };
-    let zeroed = sim_error::scale_effect_magnitudes(&with, 0.0);
-    let s = validation_score(&zeroed, req.validate);
     tracing::debug!(
-        "guard: with {score_with:.2} ({:?}), zeroed {s:.2}",
-        with.effects
+        "guard: with {score_with:.2} ({:?}), zeroed {:.2}",
+        with.effects,
+        scores[1]
     );
-    choice.offer_zeroed(s, zeroed);
-    let cand = weak_form_candidate(&with, &with, req.logs);
-    choice.offer_weak_form(validation_score(&cand, req.validate), cand);
-    let mut candidates = 3;
-    progress::report("the base structure fitted afresh", 0, f64::NAN);
-    if let Ok(base) = base_structure_fit(req) {
-        candidates += 2;
-        let cand = weak_form_candidate(&base, &with, req.logs);
-        let s = validation_score(&cand, req.validate);
-        tracing::debug!("guard: with {score_with:.2}, residual estimate on the base fit {s:.2}");
-        choice.offer_weak_form(s, cand);
-        let base = base_with_added_effects_at_zero(base, &with);
-        let s = validation_score(&base, req.validate);
-        tracing::debug!("guard: base fitted afresh {s:.2}");
-        choice.offer_zeroed(s, base);
+    choice.offer_zeroed(scores[1], zeroed);
+    choice.offer_weak_form(scores[2], weak_with);
+    if let Some((cand, base)) = from_base {
+        tracing::debug!(
+            "guard: with {score_with:.2}, residual estimate on the base fit {:.2}",
+            scores[3]
+        );
+        choice.offer_weak_form(scores[3], cand);
+        tracing::debug!("guard: base fitted afresh {:.2}", scores[4]);
+        choice.offer_zeroed(scores[4], base);
     }
-    Ok((choice.into_model(score_with), candidates))
+    Ok((choice.into_model(score_with), count))
 }
 
 /// The guard's running choice among its candidates, by validation score [%].

@@ -83,6 +83,9 @@ pub struct Residuals<'a> {
     /// Multiple shooting: segment length [samples], each segment simulated from the state
     /// its log's [`Restart`] takes at its start; `None`: one free run per log.
     segment: Option<usize>,
+    /// Samples between the checks of a free run against a bound ([`Self::cost_below`]):
+    /// [`SEGMENT_S`], as often as multiple shooting checks.
+    free_run_check: usize,
 }
 
 /// Segment length of the multiple-shooting residual [s]. A free run's angle drifts by the
@@ -109,18 +112,19 @@ impl<'a> Residuals<'a> {
                 }
             })
             .collect();
+        let dt = logs.first().map(|l| l.sample_period()).unwrap_or(0.012);
         Residuals {
             targets,
             window,
             segment: None,
+            free_run_check: ((SEGMENT_S / dt.max(1e-6)).round() as usize).max(4 * window.max(1)),
         }
     }
 
     /// Multiple-shooting residuals: segments of [`SEGMENT_S`] seconds.
     pub fn segmented(logs: &'a [MotorLog], window: usize) -> Residuals<'a> {
         let mut r = Residuals::new(logs, window);
-        let dt = logs.first().map(|l| l.sample_period()).unwrap_or(0.012);
-        r.segment = Some(((SEGMENT_S / dt.max(1e-6)).round() as usize).max(4 * window.max(1)));
+        r.segment = Some(r.free_run_check);
         r
     }
 
@@ -130,29 +134,23 @@ impl<'a> Residuals<'a> {
             return self.eval_sindyc(model);
         }
         let p = RunParams::<f64>::of(model);
-        let r = self.residuals(&p, &p, &mut SubstepRoots::Solve, &mut |_| false)?;
+        let r = self.residuals(&p, &p, &mut SubstepRoots::Solve, None)?;
         Ok(r.unwrap_or_default())
     }
 
-    /// `Σ r²` of a (non-SINDYc) model, or `None` as soon as the residuals of the segments
-    /// run so far sum to more than `bound()` (read after every segment; it may fall while
-    /// the run goes on): the rest of the run is then not simulated. The sum is the one
-    /// [`cost`] gives, term by term in the same order, so a model that is not given up
-    /// costs the same to the bit, and one given up costs more than a bound it was given.
+    /// `Σ r²` of a (non-SINDYc) model, or `None` as soon as the residuals run so far are
+    /// known to sum to more than `bound()` (read after every segment, and every
+    /// [`SEGMENT_S`] of a free run; it may fall while the run goes on): the rest of the run
+    /// is then not simulated. The sum is the one [`cost`] gives, term by term in the same
+    /// order, so a model that is not given up costs the same to the bit, and one given up
+    /// costs more than a bound it was given.
     pub fn cost_below(&self, model: &Model, bound: &dyn Fn() -> f64) -> Result<Option<f64>> {
         if model.kind == ModelKind::Sindyc {
             return Ok(Some(self.eval_sindyc(model)?.iter().map(|v| v * v).sum()));
         }
         let p = RunParams::<f64>::of(model);
-        let mut total = 0.0;
-        let mut checked = 0;
-        let mut above = |r: &[f64]| {
-            total = r[checked..].iter().fold(total, |acc, v| acc + v * v);
-            checked = r.len();
-            total > bound()
-        };
-        let r = self.residuals(&p, &p, &mut SubstepRoots::Solve, &mut above)?;
-        Ok(r.map(|_| total))
+        let r = self.residuals(&p, &p, &mut SubstepRoots::Solve, Some(bound))?;
+        Ok(r.map(|r| r.iter().fold(0.0, |acc, v| acc + v * v)))
     }
 
     /// [`Self::eval`] of a (non-SINDYc) model, with the tape of its sub-steps' roots for
@@ -161,13 +159,13 @@ impl<'a> Residuals<'a> {
         let p = RunParams::<f64>::of(model);
         let samples: usize = self.targets.iter().map(|t| t.log.len()).sum();
         let mut tape = Vec::with_capacity(samples * freerun::SUBSTEPS);
-        let r = self.residuals(&p, &p, &mut SubstepRoots::Record(&mut tape), &mut |_| false)?;
+        let r = self.residuals(&p, &p, &mut SubstepRoots::Record(&mut tape), None)?;
         Ok((r.unwrap_or_default(), tape))
     }
 
-    /// [`Self::eval_recording`], or `None` as soon as the residuals of the segments run so
-    /// far have `Σ r²` above `bound` (the rest of the run is then not simulated): a trial
-    /// point that cannot be accepted against a cost of `bound / 2`.
+    /// [`Self::eval_recording`], or `None` as soon as the residuals run so far are known to
+    /// have `Σ r²` above `bound` (as [`Self::cost_below`]; the rest of the run is then not
+    /// simulated): a trial point that cannot be accepted against a cost of `bound / 2`.
     pub fn eval_recording_below(
         &self,
         model: &Model,
@@ -176,14 +174,8 @@ impl<'a> Residuals<'a> {
         let p = RunParams::<f64>::of(model);
         let samples: usize = self.targets.iter().map(|t| t.log.len()).sum();
         let mut tape = Vec::with_capacity(samples * freerun::SUBSTEPS);
-        let mut total = 0.0;
-        let mut checked = 0;
-        let mut above = |r: &[f64]| {
-            total = r[checked..].iter().fold(total, |acc, v| acc + v * v);
-            checked = r.len();
-            total > bound
-        };
-        let r = self.residuals(&p, &p, &mut SubstepRoots::Record(&mut tape), &mut above)?;
+        let roots = &mut SubstepRoots::Record(&mut tape);
+        let r = self.residuals(&p, &p, roots, Some(&|| bound))?;
         Ok(r.map(|r| (r, tape)))
     }
 
@@ -204,7 +196,7 @@ impl<'a> Residuals<'a> {
             None => SubstepRoots::Solve,
         };
         if free.is_empty() {
-            let r = self.residuals(&re, &re, &mut tape(), &mut |_| false)?;
+            let r = self.residuals(&re, &re, &mut tape(), None)?;
             return Ok((r.unwrap_or_default(), Vec::new()));
         }
         let chunks: Vec<&[Free]> = free.chunks(PARAM_LANES).collect();
@@ -215,7 +207,7 @@ impl<'a> Residuals<'a> {
                 for (lane, fr) in chunk.iter().enumerate() {
                     seed(&mut p, &fr.slot, lane);
                 }
-                let r = self.residuals(&p, &re, &mut tape(), &mut |_| false)?;
+                let r = self.residuals(&p, &re, &mut tape(), None)?;
                 Ok(r.unwrap_or_default())
             })
             .collect();
@@ -235,17 +227,26 @@ impl<'a> Residuals<'a> {
 
     /// The residuals of the model `p` (values `re`) in its number type: per log (or per
     /// segment), the velocity through the firmware's estimator, the current, the angle; the
-    /// sub-steps' roots of all its runs in one tape. After each segment `give_up` sees the
-    /// residuals so far: when it says so, the rest is not simulated and the answer is `None`.
+    /// sub-steps' roots of all its runs in one tape. With a `bound`, the run stops (the
+    /// answer is `None`) once `Σ r²` of the residuals so far is above `bound()`: checked after
+    /// each segment and, within a free run, every [`SEGMENT_S`] seconds of samples on the
+    /// current and angle residuals run so far (part of the sum, so a lower bound of it).
     fn residuals<D: RunScalar>(
         &self,
         p: &RunParams<D>,
         re: &RunParams<f64>,
         roots: &mut SubstepRoots,
-        give_up: &mut dyn FnMut(&[D]) -> bool,
+        bound: Option<&dyn Fn() -> f64>,
     ) -> Result<Option<Vec<D>>> {
         let c = D::constant;
         let mut r = Vec::new();
+        // Σ r² of `r`, in its order.
+        let mut total = 0.0;
+        let terms: usize = self
+            .targets
+            .iter()
+            .map(|t| t.log.len() * (2 + usize::from(t.log.i.is_some())))
+            .sum();
         for tg in &self.targets {
             let n = tg.log.len();
             if n == 0 {
@@ -272,17 +273,51 @@ impl<'a> Residuals<'a> {
                     }
                     _ => None,
                 };
-                let run = freerun::run_range_from(
-                    p,
-                    re,
-                    tg.log,
-                    a..e,
-                    freerun::SUBSTEPS,
+                // Within a free run, every `SEGMENT_S` of samples: the sum so far and the
+                // new samples' current and angle terms against the bound. Those terms are
+                // the ones of the full sum, added in another order: rounding makes them at
+                // most `terms·ε` relative apart, so a partial sum above the bound by more
+                // is above it in the full sum too.
+                let every = self.free_run_check;
+                let slack = 1.0 - 2.0 * terms as f64 * f64::EPSILON;
+                let (mut partial, mut upto) = (total, 0);
+                let mut check = |run: &freerun::Run<D>| {
+                    let k = run.theta.len();
+                    let Some(bound) = bound else { return false };
+                    if k < upto + every {
+                        return false;
+                    }
+                    let sq = |v: D| v.re() * v.re();
+                    if let (Some(im), Some(ip)) = (&tg.log.i, &run.i) {
+                        partial = im[s + upto..s + k]
+                            .iter()
+                            .zip(&ip[upto..k])
+                            .fold(partial, |acc, (a, b)| acc + sq((*b - c(*a)) / c(tg.s_i)));
+                    }
+                    partial = run.theta[upto..k]
+                        .iter()
+                        .zip(&tg.log.theta[s + upto..s + k])
+                        .fold(partial, |acc, (a, b)| {
+                            acc + sq(c(ANGLE_WEIGHT) * (*a - c(*b)) / c(tg.s_theta))
+                        });
+                    upto = k;
+                    partial * slack > bound()
+                };
+                let give_up: Option<freerun::GiveUp<D>> = match (self.segment, bound) {
+                    (None, Some(_)) => Some(&mut check),
+                    _ => None,
+                };
+                let from = freerun::RunFrom {
+                    substeps: freerun::SUBSTEPS,
                     carried,
-                    roots,
-                )?;
+                    give_up,
+                };
+                let Some(run) = freerun::run_range_from(p, re, tg.log, a..e, from, roots)? else {
+                    return Ok(None);
+                };
                 let w = sensor_chain::velocity_estimate(&tg.log.t[a..e], &run.theta, self.window);
                 let off = s - a;
+                let before = r.len();
                 r.extend(
                     w[off..]
                         .iter()
@@ -305,8 +340,13 @@ impl<'a> Residuals<'a> {
                 );
                 prev = Some((a, run));
                 s = e;
-                if give_up(&r) {
-                    return Ok(None);
+                if let Some(bound) = bound {
+                    total = r[before..]
+                        .iter()
+                        .fold(total, |acc, v| acc + v.re() * v.re());
+                    if total > bound() {
+                        return Ok(None);
+                    }
                 }
             }
         }
@@ -690,6 +730,7 @@ pub fn refine_on(
         };
         let opts = nlsq::Options {
             noise_stop: true,
+            gain_ratio_damping: true,
             ..opts
         };
         let problem = nlsq::WithJacobian {
@@ -980,15 +1021,26 @@ mod tests {
         assert!(costs.iter().all(|c| c.is_infinite()), "{costs:?}");
         let costs = lowest_costs(&seg, &[0, 1, 2, 3, 4, 5, 6, 7], lowest, at);
         assert_eq!((costs[first], costs[7]), (lowest, lowest));
-        // The free run of one log is one segment: nothing to give up before its end.
+        // A free run is checked within its run, on part of its sum: a model is given up
+        // there only above its bound, and kept at a bound equal to its full cost.
         let free = Residuals::new(&logs, 10);
         let m = at(0);
         let c = free.cost_below(&m, &|| 0.0).unwrap();
         assert_eq!(c, None);
+        let full = cost(&free, &m);
+        assert_eq!(free.cost_below(&m, &|| f64::INFINITY).unwrap(), Some(full));
+        assert_eq!(free.cost_below(&m, &|| full).unwrap(), Some(full));
+        // The free runs' lowest cost is the full runs', also with the runs given up within.
+        let free_full: Vec<f64> = (0..factors.len()).map(|k| cost(&free, &at(k))).collect();
+        let free_lowest = free_full.iter().copied().fold(f64::INFINITY, f64::min);
+        let costs = lowest_costs(&free, &[0, 1, 2, 3, 4, 5, 6, 7], f64::INFINITY, at);
         assert_eq!(
-            free.cost_below(&m, &|| f64::INFINITY).unwrap(),
-            Some(cost(&free, &m))
+            costs.iter().copied().fold(f64::INFINITY, f64::min),
+            free_lowest
         );
+        for (c, f) in costs.iter().zip(&free_full) {
+            assert!(c == f || c.is_infinite(), "{c} vs {f}");
+        }
     }
 
     #[test]
