@@ -6,8 +6,8 @@ use super::candidates::{self, Equation, Signals, Units, Variant};
 use super::forward_select::{select, Selection};
 use super::{
     min_torque, modelled_drive, presliding_candidates, presliding_pass, row_scale, select_rows,
-    signals_of, viscous_of, weak_torque, EqData, EquationResidual, Finding, Judged, Options,
-    Structure, Tested,
+    signals_of, viscous_of, weak_torque, Column, EqData, EquationResidual, Finding, Judged,
+    Options, Structure, Tested,
 };
 use crate::effect_spec::EffectSpec;
 use crate::log::{MotorLog, Plant};
@@ -89,7 +89,9 @@ pub(super) fn base_equations(f: &Forms, st: &Structure) -> (EqData, EqData) {
         eq: Equation::Electrical,
         y: wf.integral(&s.u),
         base_cols: vec![],
+        base_names: vec![],
         base_sample: vec![],
+        sample_names: vec![],
         min_torque: 0.0,
         coulomb_col: None,
         cand: vec![],
@@ -103,6 +105,11 @@ pub(super) fn base_equations(f: &Forms, st: &Structure) -> (EqData, EqData) {
         // the input's steps, which the winding has settled from by then).
         elec.base_cols.push(wf.second_derivative(&s.theta));
         elec.base_cols.push(wf.derivative(&s.theta));
+        elec.base_names = vec![
+            Column::new("R", "Ω", false),
+            Column::new("L·K_b/R (quasi-static)", "H·V·s/(Ω·rad)", false),
+            Column::new("K_b", "V·s/rad", false),
+        ];
     }
     // Mechanical equation. Voltage plant: the current is eliminated with the electrical
     // equation (L·İ ≈ 0 at this sample rate), `K_t·I = (K_t/R)·(V − K_b·ω − losses)`, so the
@@ -112,7 +119,9 @@ pub(super) fn base_equations(f: &Forms, st: &Structure) -> (EqData, EqData) {
         eq: Equation::Mechanical,
         y: vec![],
         base_cols: vec![wf_m.second_derivative(&s.theta_torque)],
+        base_names: vec![Column::new("J", "kg·m²", true)],
         base_sample: vec![],
+        sample_names: vec![],
         min_torque: min_torque(st, s),
         coulomb_col: None,
         cand: vec![],
@@ -122,12 +131,18 @@ pub(super) fn base_equations(f: &Forms, st: &Structure) -> (EqData, EqData) {
         if matches!(e, Effect::Coulomb { fc } if *fc <= 0.0) {
             mech.coulomb_col = Some(mech.base_cols.len());
         }
-        for (eq, col) in candidates::present_columns(e, s) {
+        let cols = candidates::present_columns(e, s);
+        let of = cols.len();
+        for (k, (eq, col)) in cols.into_iter().enumerate() {
+            let name = Column::of_effect(e, eq, k, of);
             if eq == Equation::Mechanical {
                 mech.base_cols.push(weak_torque(wf_m, s, &col));
+                mech.base_names.push(name);
             } else {
                 elec.base_cols.push(wf.integral(&col));
+                elec.base_names.push(name.clone());
                 mech.base_sample.push(col);
+                mech.sample_names.push(name);
             }
         }
     }
@@ -137,6 +152,8 @@ pub(super) fn base_equations(f: &Forms, st: &Structure) -> (EqData, EqData) {
         && (st.has(EffectKind::Presliding) || st.has(EffectKind::Stribeck))
     {
         mech.base_cols.push(wf_m.integral(&s.stick_column()));
+        mech.base_names
+            .push(Column::new("friction at standstill", "N·m", true));
     }
     (elec, mech)
 }
@@ -235,6 +252,15 @@ pub(super) fn electrical_pass(
         }) {
             if v.0.kind != EffectKind::CurrentOffset {
                 mech.base_sample.extend(v.0.columns.iter().cloned());
+                let of = v.0.columns.len();
+                mech.sample_names.extend((0..of).map(|k| {
+                    let name = if of > 1 {
+                        format!("{} [{}]", v.0.kind.name(), k + 1)
+                    } else {
+                        v.0.kind.name().to_string()
+                    };
+                    Column::new(name, "V", false)
+                }));
             }
         }
     }
@@ -248,7 +274,9 @@ pub(super) fn electrical_pass(
         base: out.base_resid.clone(),
         after: out.final_resid.clone(),
         beta: out.base_beta.clone(),
-        p: elec.base_cols.len(),
+        cols: elec.base_cols.clone(),
+        names: elec.base_names.clone(),
+        approx: vec![1],
         input: f.wf.integral(&f.s.u),
     });
     acc.findings.extend(out.findings);
@@ -275,10 +303,13 @@ fn complete_torque_equation(
         units.mech_scale = st.kt / units.r;
         // The winding's L·dI/dt over each interval: its increments, exactly.
         mech.base_cols.push(wf_m.derivative(s.i.as_ref().unwrap()));
+        mech.base_names.push(Column::new("L", "H", false));
         for col in std::mem::take(&mut mech.base_sample) {
             // Current offsets do not reach the torque equation written in volts.
             mech.base_cols.push(wf_m.integral(&col));
         }
+        mech.base_names
+            .extend(std::mem::take(&mut mech.sample_names));
     } else {
         mech.y = wf_m.integral_zoh(&s.raw_u);
         units.mech_scale = 1.0;
@@ -289,11 +320,14 @@ fn complete_torque_equation(
     let (lf_col, lf_torque) = s.load_friction_intervals(kb, units.r);
     if st.has(EffectKind::LoadFriction) {
         mech.base_cols.push(wf_m.integral_zoh(&lf_col));
+        mech.base_names
+            .push(Column::new("load_friction", "N·m per N·m", false));
     }
     // A model's saturation likewise per interval (its I³ weighs the step transients).
     if st.has(EffectKind::Saturation) && f.voltage {
         mech.base_cols
             .push(wf_m.integral_zoh(&s.saturation_intervals(units.r)));
+        mech.base_names.push(Column::new("saturation", "V", false));
     }
     for (v, cols) in mech.cand.iter_mut() {
         if v.kind == EffectKind::LoadFriction {
@@ -414,7 +448,9 @@ pub(super) fn mechanical_pass(
         base: out.base_resid.clone(),
         after: out.final_resid.clone(),
         beta: out.base_beta.clone(),
-        p: mech.base_cols.len(),
+        cols: mech.base_cols.clone(),
+        names: mech.base_names.clone(),
+        approx: vec![],
     });
     if !pre.cand.is_empty() {
         let data = presliding_pass(&mech, &out.findings, all_rows, pre.cand, &f.wf_m, &f.s);

@@ -447,7 +447,9 @@ mod tests {
             eq: Equation::Mechanical,
             y,
             base_cols: vec![a],
+            base_names: vec![],
             base_sample: vec![],
+            sample_names: vec![],
             min_torque: 0.0,
             coulomb_col: None,
             cand: vec![

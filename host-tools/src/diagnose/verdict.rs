@@ -237,9 +237,40 @@ pub fn input_check(resid: &[f64], input: &[f64], cluster: &[usize], level: f64) 
     }
 }
 
-/// The parameter check: the model's residual with its own numbers (`given`) against the
-/// refit of the same structure (`refit`, `p` coefficients) on the same rows.
-pub fn parameter_check(given: &[f64], refit: &[f64], p: usize, level: f64) -> Check {
+/// Clusters of the parameter check: runs of at least `block` consecutive rows, never split
+/// inside a held input (`hold`, [`hold_clusters`]). Neighbouring weak-form windows share
+/// samples, and the residual of a correct model stays correlated over its correlation time
+/// (the angle's rounding error and the model's own approximations vary slowly), so each
+/// cluster must span that time for the cluster-robust variance to hold its level.
+pub fn block_clusters(hold: &[usize], block: usize) -> Vec<usize> {
+    let block = block.max(1);
+    let mut id = 0;
+    let mut start = 0;
+    (0..hold.len())
+        .map(|r| {
+            if r > 0 && r - start >= block && hold[r] != hold[r - 1] {
+                id += 1;
+                start = r;
+            }
+            id
+        })
+        .collect()
+}
+
+/// The parameter check: does the model's own residual `given` still hold a part that the
+/// columns of its structure (`cols`, the refit's regressors on the same rows) explain? Under
+/// the model's own parameters that residual is noise, and its projection on the columns
+/// is zero in expectation; a wrong parameter leaves `X·Δβ` in it. The test is the jackknifed
+/// cluster-robust Wald test ([`statistics::robust_wald_test_capped`]) of `given` on `cols`,
+/// clustered by [`block_clusters`] over the rows' correlation time (`hold`: the held input
+/// of each row). `refit` is the residual of the refit, for the share it removes.
+pub fn parameter_check(
+    given: &[f64],
+    refit: &[f64],
+    (cols, nuisance): (&[Vec<f64>], &[Vec<f64>]),
+    hold: &[usize],
+    level: f64,
+) -> Check {
     let rss_g: f64 = given.iter().map(|v| v * v).sum();
     let rss_r: f64 = refit.iter().map(|v| v * v).sum();
     if !(rss_g.is_finite() && rss_r.is_finite()) {
@@ -252,30 +283,87 @@ pub fn parameter_check(given: &[f64], refit: &[f64], p: usize, level: f64) -> Ch
             detail: "the model's own equations give a non-finite residual on this log (a zero or non-finite constant): refit first".to_string(),
         };
     }
-    let n_eff = statistics::effective_n(refit);
-    let t = statistics::f_test(rss_g, rss_r, p.max(1), 0, n_eff);
-    let share = t.explained;
-    let passed = !(t.p_value < level && share >= REFIT_SHARE);
+    let share = if rss_g > 0.0 {
+        ((rss_g - rss_r) / rss_g).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let block = statistics::correlation_time(refit).ceil() as usize;
+    let cluster = block_clusters(hold, block.max(2));
+    let null: Vec<&[f64]> = nuisance.iter().map(|c| c.as_slice()).collect();
+    let (test, _) = statistics::robust_test_beyond(
+        given,
+        &null,
+        cols,
+        &cluster,
+        statistics::CLUSTER_LEVERAGE_CAP,
+    );
+    let Some(t) = test else {
+        let mut c = cannot_judge("parameters", given.len());
+        c.share = share;
+        return c;
+    };
+    let passed = t.p_value >= level;
     Check {
         name: "parameters",
-        statistic: t.f,
+        statistic: t.t2,
         p_value: t.p_value,
         share,
         passed,
         detail: if passed {
             format!(
-                "the model's own parameters are as good as a refit of its structure (a refit removes {:.0}% of its equation error, p = {:.1e})",
+                "the model's own parameters are as good as a refit of its structure (a refit removes {:.0}% of its equation error; robust T² = {:.1}, p = {:.1e} on {} clusters)",
                 100.0 * share,
-                t.p_value
+                t.t2,
+                t.p_value,
+                t.clusters
             )
         } else {
             format!(
-                "the model's parameters are off: a refit of the same structure removes {:.0}% of its equation error (p = {:.1e}); refit first (`motorid fit`), then diagnose again",
+                "the model's parameters are off: a refit of the same structure removes {:.0}% of its equation error (robust T² = {:.1}, p = {:.1e} on {} clusters, level {:.1e}); refit first (`motorid fit`), then diagnose again",
                 100.0 * share,
-                t.p_value
+                t.t2,
+                t.p_value,
+                t.clusters,
+                level
             )
         },
     }
+}
+
+/// Which of the columns `cols` moved in the refit: for each, the same robust test of the
+/// given residual on that column alone, beyond all the others and the `nuisance` columns,
+/// at `level` divided by the number of columns (Bonferroni within the check). A parameter
+/// the data cannot tell from the others (its column nearly spanned by them) does not move.
+pub fn moved_columns(
+    given: &[f64],
+    refit: &[f64],
+    (cols, nuisance): (&[Vec<f64>], &[Vec<f64>]),
+    hold: &[usize],
+    level: f64,
+) -> Vec<bool> {
+    let block = statistics::correlation_time(refit).ceil() as usize;
+    let cluster = block_clusters(hold, block.max(2));
+    let each = level / cols.len().max(1) as f64;
+    (0..cols.len())
+        .map(|k| {
+            let null: Vec<&[f64]> = cols
+                .iter()
+                .enumerate()
+                .filter(|(m, _)| *m != k)
+                .map(|(_, c)| c.as_slice())
+                .chain(nuisance.iter().map(|c| c.as_slice()))
+                .collect();
+            let (t, _) = statistics::robust_test_beyond(
+                given,
+                &null,
+                std::slice::from_ref(&cols[k]),
+                &cluster,
+                statistics::CLUSTER_LEVERAGE_CAP,
+            );
+            t.is_some_and(|t| t.p_value < each)
+        })
+        .collect()
 }
 
 /// The model's own load torque [N·m] at each sample, evaluated on the measured motion: its
@@ -485,19 +573,36 @@ mod tests {
     #[test]
     fn a_non_finite_residual_fails_the_parameter_check() {
         let refit = noise(100, 9);
+        let cols = vec![noise(100, 10)];
+        let hold: Vec<usize> = (0..100).collect();
         let mut given = refit.clone();
         given[3] = f64::NAN;
-        assert!(!parameter_check(&given, &refit, 4, 0.01).passed);
+        let check = |g: &[f64]| parameter_check(g, &refit, (&cols, &[]), &hold, 0.01).passed;
+        assert!(!check(&given));
         given[3] = f64::INFINITY;
-        assert!(!parameter_check(&given, &refit, 4, 0.01).passed);
+        assert!(!check(&given));
     }
 
     #[test]
-    fn parameters_are_off_only_when_a_refit_removes_most_of_the_error() {
+    fn parameters_are_off_when_the_columns_explain_the_given_residual() {
+        // The given residual is the refit's plus the columns times a parameter error.
         let refit = noise(500, 5);
-        let near: Vec<f64> = refit.iter().map(|v| v * 1.05).collect();
-        assert!(parameter_check(&near, &refit, 4, 0.01).passed);
-        let far: Vec<f64> = refit.iter().map(|v| v * 3.0).collect();
-        assert!(!parameter_check(&far, &refit, 4, 0.01).passed);
+        let cols = vec![noise(500, 6), noise(500, 8)];
+        let hold: Vec<usize> = (0..500).collect();
+        let with =
+            |d: f64| -> Vec<f64> { refit.iter().zip(&cols[0]).map(|(e, x)| e + d * x).collect() };
+        let rejected =
+            |d: f64| !parameter_check(&with(d), &refit, (&cols, &[]), &hold, 0.01).passed;
+        assert!(!rejected(0.0));
+        assert!(rejected(0.5));
+        // A column that stands for the equation's own approximation is free.
+        let free = parameter_check(&with(0.5), &refit, (&cols[1..], &cols[..1]), &hold, 0.01);
+        assert!(free.passed, "{free:?}");
+    }
+
+    #[test]
+    fn clusters_span_a_block_and_never_split_a_hold() {
+        assert_eq!(block_clusters(&[0, 1, 2, 3, 4], 2), vec![0, 0, 1, 1, 2]);
+        assert_eq!(block_clusters(&[0, 0, 0, 1, 2], 2), vec![0, 0, 0, 1, 1]);
     }
 }
