@@ -232,7 +232,7 @@ pub(super) fn electrical_pass(
     f: &Forms,
     elec: &EqData,
     mech: &mut EqData,
-    given: Option<Vec<f64>>,
+    (given, instruments): (Option<Vec<f64>>, Option<Vec<Vec<f64>>>),
     opts: &Options,
     alpha_per_test: f64,
     units: &mut Units,
@@ -275,6 +275,7 @@ pub(super) fn electrical_pass(
         after: out.final_resid.clone(),
         beta: out.base_beta.clone(),
         cols: elec.base_cols.clone(),
+        instruments,
         names: elec.base_names.clone(),
         approx: vec![1],
         input: f.wf.integral(&f.s.u),
@@ -403,13 +404,17 @@ pub(super) fn mechanical_pass(
     st: &Structure,
     mut mech: EqData,
     pre: PreslidingTest,
-    (kb, given): (f64, Option<Vec<f64>>),
+    (kb, given, inst): (f64, Option<Vec<f64>>, Option<(Forms, EqData)>),
     opts: &Options,
     alpha_per_test: f64,
     units: &mut Units,
     acc: &mut Outcome,
 ) {
     complete_torque_equation(f, st, &mut mech, kb, units);
+    let instruments = inst.map(|(fs, mut im)| {
+        complete_torque_equation(&fs, st, &mut im, kb, &mut units.clone());
+        im.base_cols
+    });
     let mut all_rows = (mech.y.clone(), mech.base_cols.clone());
     all_rows.1.extend(pre.nuisance);
     let keep = moving_windows(f);
@@ -439,6 +444,8 @@ pub(super) fn mechanical_pass(
             None => x,
         }
     };
+    let instruments = instruments
+        .map(|z: Vec<Vec<f64>>| z.iter().map(|c| scaled(select_rows(c, &keep))).collect());
     acc.judged.push(Judged {
         eq: Equation::Mechanical,
         scale: scale.clone(),
@@ -449,6 +456,7 @@ pub(super) fn mechanical_pass(
         after: out.final_resid.clone(),
         beta: out.base_beta.clone(),
         cols: mech.base_cols.clone(),
+        instruments,
         names: mech.base_names.clone(),
         approx: vec![],
     });
