@@ -708,7 +708,8 @@ fn merge_carriers(unexplained: &mut Vec<carriers::Carrier>, found: Vec<carriers:
 }
 
 /// The refitted value of every parameter that moved significantly (name, value, unit), from
-/// one equation's base coefficients ([`verdict::moved_columns`] at the check's level). A
+/// one equation's base coefficients ([`verdict::moved_columns`] at the check's level); all
+/// of them when none moved alone (the error is shared among correlated parameters). A
 /// torque term of a voltage plant's torque equation, written in volts, is its coefficient
 /// times `K_t/R`, with R the refitted one when the voltage equation gave it.
 fn refitted_constants(
@@ -720,13 +721,17 @@ fn refitted_constants(
 ) -> Vec<(String, f64, String)> {
     let m = st.motor.unwrap_or(MotorParams::paper());
     let (idx, tested, nuisance) = tested_columns(j);
-    let moved = verdict::moved_columns(given, &j.base, (&tested, &nuisance), cluster, level);
+    let mut moved = verdict::moved_columns(given, &j.base, (&tested, &nuisance), cluster, level);
+    // The parameters moved together, none alone: the whole refit.
+    if !moved.contains(&true) {
+        moved.iter_mut().for_each(|m| *m = true);
+    }
     let r = r_refit.filter(|r| *r > 0.0).unwrap_or(m.r);
     let voltage = st.plant == Plant::Voltage;
     let scale = if voltage && r > 0.0 { m.kt / r } else { 1.0 };
     idx.iter()
         .zip(&moved)
-        .filter(|(_, moved)| **moved)
+        .filter(|(&k, moved)| **moved && j.cols[k].iter().any(|v| *v != 0.0))
         .filter_map(|(&k, _)| {
             let (b, col) = (j.beta.get(k)?, j.names.get(k)?);
             let (value, unit) = match (col.torque, voltage) {

@@ -3,9 +3,11 @@
 //! `diagnose` judges MODEL.toml exactly as it is before it looks for missing physics:
 //! 1. **Parameter check.** The model's own equations, with its own numbers, are written as
 //!    weak-form residuals on the same windows as the structure's refit ([`given_residuals`]).
-//!    When refitting the same structure removes at least [`REFIT_SHARE`] of that residual's
-//!    sum of squares with an F-test p below the level, the parameters are off: the finding
-//!    lists the refitted values and the advice to refit first.
+//!    When that residual is significantly explained by the structure's columns (instruments
+//!    from the model's own noise-free run, the robust test of [`parameter_check`]) and the
+//!    refit removes a relevant share of it, the parameters are off: the finding lists every
+//!    parameter that moved ([`moved_columns`]) with its refitted value, and the advice to
+//!    refit first.
 //! 2. **Whiteness** of the structure's residual: the Breusch–Godfrey regression of the
 //!    residual on its own past values, on every other weak-form window, so that no two
 //!    windows share a sample and a correct model's residual is independent; tested with the
@@ -42,13 +44,6 @@ use serde::Serialize;
 /// Family-wise level of the adequacy checks: 1 %, the level of the 99 % bands of MATLAB's
 /// `resid`. A correct model is called inadequate at most this often.
 pub const ADEQUACY_ALPHA: f64 = 0.01;
-
-/// Share of the model's own equation residual that a refit of its structure must remove before
-/// `diagnose` says the parameters are off: one half. Then the parameters, not missing physics,
-/// cause most of the error, and any effect found on top of them would be judged against a
-/// wrong baseline. (A fit that minimises the free-run error lands at a slightly different
-/// optimum than the equation-error refit; that difference is a few percent of the residual.)
-pub const REFIT_SHARE: f64 = 0.5;
 
 /// Past disjoint windows used by the whiteness and input tests: 4 (about 0.8 s at the default
 /// window, longer than the mechanical time constant of a small motor).
@@ -258,12 +253,16 @@ pub fn block_clusters(hold: &[usize], block: usize) -> Vec<usize> {
 }
 
 /// The parameter check: does the model's own residual `given` still hold a part that the
-/// columns of its structure (`cols`, the refit's regressors on the same rows) explain? Under
-/// the model's own parameters that residual is noise, and its projection on the columns
-/// is zero in expectation; a wrong parameter leaves `X·Δβ` in it. The test is the jackknifed
-/// cluster-robust Wald test ([`statistics::robust_wald_test_capped`]) of `given` on `cols`,
-/// clustered by [`block_clusters`] over the rows' correlation time (`hold`: the held input
-/// of each row). `refit` is the residual of the refit, for the share it removes.
+/// columns of its structure explain? With the model's own parameters that residual is noise
+/// and uncorrelated with any column free of that noise; a wrong parameter leaves `X·Δβ` in
+/// it. `cols` are those columns as instruments (computed on the model's own noise-free run
+/// where there is one, so that they do not share the angle's rounding error with `given`),
+/// `nuisance` columns that stand for the equation's own approximation and are left free.
+/// The test is the jackknifed cluster-robust Wald test of `given` on `cols` beyond
+/// `nuisance` ([`statistics::robust_test_beyond`]), clustered by [`block_clusters`] over the
+/// correlation time of the refit's residual `refit` (`hold`: the held input of each row).
+/// The parameters are off when the test rejects at `level` and the refit removes at least
+/// [`super::MIN_EXPLAINED`] of the error, the relevance rule of the findings (decision 0002).
 pub fn parameter_check(
     given: &[f64],
     refit: &[f64],
@@ -303,7 +302,9 @@ pub fn parameter_check(
         c.share = share;
         return c;
     };
-    let passed = t.p_value >= level;
+    // Significant and relevant, as a finding (decision 0002): the refit must also remove
+    // the share of the error an effect must explain to be reported.
+    let passed = t.p_value >= level || share < super::MIN_EXPLAINED;
     Check {
         name: "parameters",
         statistic: t.t2,
