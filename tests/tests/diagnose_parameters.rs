@@ -1,6 +1,6 @@
 //! The parameter check of `diagnose` on the built-in emulator: a model whose own numbers are
 //! off (inertia +10 %, Coulomb friction doubled, resistance +39 %) is told to refit, with the
-//! refitted value of the parameter that moved. (A correct model staying adequate on 20 seeds
+//! refitted value of the parameter that moved, and a hidden saturation is not adequate. (A correct model staying adequate on 20 seeds
 //! is `diagnose_verdict::a_correct_model_is_adequate`.)
 use control::effects::Effect;
 use motorid::diagnose::{diagnose, Diagnosis, Options, Structure};
@@ -92,5 +92,23 @@ fn a_wrong_resistance_is_refitted() {
     for seed in [1, 2] {
         let d = diagnose_changed(seed, |st| st.motor.as_mut().unwrap().r *= 1.39);
         told_to_refit(&d, "R", truth, 0.02);
+    }
+}
+
+/// A torque constant that falls with the current (saturation, 8 % down at the signal's peak
+/// current) hidden from the model: no effect of the list names it on this signal, and the
+/// constant K_t that the model keeps is a parameter error the check must report.
+#[test]
+fn a_hidden_saturation_is_not_adequate() {
+    for seed in 1..=3 {
+        let mut cfg = EmulatorConfig::paper();
+        cfg.seed = seed;
+        cfg.effects = vec![Effect::Saturation { k: 2e-3 }];
+        let log = simulate_signal(&cfg, SignalKind::A, 60.0).unwrap().log;
+        let mut st = Structure::from_model(&cfg.truth_model());
+        st.effects
+            .retain(|e| !matches!(e, Effect::Saturation { .. }));
+        let d = diagnose(&log, &st, &Options::default());
+        assert!(!d.verdict.adequate, "seed {seed}: {}", summary(&d));
     }
 }

@@ -2,8 +2,8 @@
 //! (`tests::other_plant`): a correct model is adequate on the multisine a (at most one false
 //! alarm in 20 seeds), a model with wrong parameters is told to refit, and physics outside
 //! the effect list (a compliant coupling, a gap, creeping friction) is never "adequate" and
-//! names the variable that carries it. (A falling torque constant shows only on voltage
-//! steps, where the log cannot judge a model: see docs/diagnose-verdict.md.)
+//! names the variable that carries it. (A falling torque constant is not named; the
+//! parameter check tells the model to refit: see docs/diagnose-verdict.md.)
 use control::effects::Effect;
 use motorid::diagnose::{diagnose, Diagnosis, Options, Structure};
 use motorid::emulator::{signal, SignalKind};
@@ -370,7 +370,11 @@ fn write_false_alarm_rows(md: &mut String) {
 }
 
 const VERDICT_LIMITS: &str =
-    "\nLimits seen here: a correct model's residual is far noisier in the windows of a slip \
+    "\nThe parameter check tests the model's own residual on the columns of its structure \
+     computed on the model's noise-free run on the same input (decision 0012): the rigid \
+     model of a plant with a coupling or a gap, and a constant K_t where it falls with the \
+     current, are told to refit as well. \
+     Limits seen here: a correct model's residual is far noisier in the windows of a slip \
      or an input step than at rest, and over one held voltage step the rotor turns at a \
      steady speed whose Hall rounding error beats slowly with the 12 ms sampling, one error \
      shared by every window of the hold. The checks, the carriers and the findings' entry \
@@ -387,9 +391,9 @@ const VERDICT_LIMITS: &str =
      logs, and not adequate on the rest, where the acceleration carries the drift. Judge a \
      model on a multisine. On the low-speed signal c the torque equation keeps too few \
      windows or held inputs for its tests (most windows touch a standstill or a reversal): \
-     mostly \"Cannot judge\". A torque constant that falls 3 % by 10 A goes unseen on the \
-     fitting signal a, whose current rarely leaves that range; on steps the log cannot \
-     judge it. A compliant coupling is named `compliance` with its load inertia and natural \
+     mostly \"Cannot judge\". A torque constant that falls 3 % by 10 A is not named on the \
+     fitting signal a, whose current rarely leaves that range, but the parameter check \
+     tells the model with a constant K_t to refit. A compliant coupling is named `compliance` with its load inertia and natural \
      frequency. A gap is named `backlash` with its load inertia and gap: the load coasts \
      across the gap whenever the rotor slows down and is caught again, which a soft \
      coupling (`compliance` near 1 to 2 Hz) imitates less well; where both explain about \
