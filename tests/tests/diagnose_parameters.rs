@@ -1,7 +1,8 @@
 //! The parameter check of `diagnose` on the built-in emulator: a model whose own numbers are
 //! off (inertia +10 %, Coulomb friction doubled, resistance +39 %) is told to refit, with the
-//! refitted value of the parameter that moved, and a hidden saturation is not adequate. (A correct model staying adequate on 20 seeds
-//! is `diagnose_verdict::a_correct_model_is_adequate`.)
+//! refitted value of the parameter that moved, and a hidden saturation is not adequate. (A
+//! correct model staying adequate on 20 seeds is
+//! `diagnose_verdict::a_correct_model_is_adequate`.)
 use control::effects::Effect;
 use motorid::diagnose::{diagnose, Diagnosis, Options, Structure};
 use motorid::emulator::{simulate_signal, EmulatorConfig, SignalKind};

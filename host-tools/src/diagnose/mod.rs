@@ -367,7 +367,7 @@ fn simulated_log(log: &MotorLog, st: &Structure) -> Option<MotorLog> {
     let mut cfg = crate::emulator::EmulatorConfig::paper();
     cfg.motor = m;
     let mut law = control::lugre::LugreParams::friction_law(&st.effects);
-    if !(law.sigma0 > 0.0) {
+    if law.sigma0.is_nan() || law.sigma0 <= 0.0 {
         let step = log
             .meta_f64("hall_resolution_rad")
             .filter(|h| *h > 0.0)
