@@ -9,7 +9,7 @@ cd "$(dirname "$0")/.."
 cargo build --release --bin motorid
 if [ "${1:-}" = "--blocks" ]; then
     shift
-    cargo bench -p host-tools --bench ident
+    cargo bench -p motorid --bench ident
 fi
 VENV=target/bench-venv
 if ! "$VENV/bin/python" -c "import numpy, pysindy" 2>/dev/null; then

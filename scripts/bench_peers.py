@@ -5,8 +5,8 @@
    (`motorid simulate`, chunks of 1,000 s with successive seeds joined end to end, the
    time and the angle made continuous), 10^6 samples; larger sizes repeat it. Written once
    to target/bench-data/sindyc_a_<n>.csv.
-2. Ours: wall time of the release binary `motorid fit --model sindyc -o MODEL.toml
-   DATA.csv`, from the CSV to the model file, for every size (default 10^5 and 10^6;
+2. Ours: wall and CPU time (user + sys) of the release binary `motorid fit --model sindyc
+   -q -o MODEL.toml DATA.csv`, from the CSV to the model file, for every size (default 10^5 and 10^6;
    `--sizes 1e5,1e6,1e7` adds 10^7): time per sample shows whether it is linear in n.
 3. Peer: pysindy 2.x STLSQ (normalize_columns=True) fitted on the paper's 17-term library
    of the same 10^6 samples (x = theta, xdot = centred slope of theta over +-5 samples as
@@ -15,7 +15,7 @@
 Both run in this one process, one after the other, so they see the same machine load; the
 ratio peer/ours is what counts.
 
-If the criterion benches of the building blocks ran (`cargo bench -p host-tools --bench
+If the criterion benches of the building blocks ran (`cargo bench -p motorid --bench
 ident`, which writes target/bench-data/ident_1e6.f64), their table follows (numpy Hankel
 SVD and library vs ours).
 
@@ -24,6 +24,7 @@ builds the release binary.
 """
 import json
 import os
+import resource
 import subprocess
 import sys
 import time
@@ -120,15 +121,22 @@ def sized_log(n):
     return path
 
 
+def children_cpu():
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
+
+
 def time_ours(path):
+    """Wall and CPU (user + sys) seconds of one `motorid fit --model sindyc`."""
     out = os.path.join(DATA_DIR, "bench_model.toml")
+    c0 = children_cpu()
     t0 = time.perf_counter()
-    r = subprocess.run([MOTORID, "fit", "--model", "sindyc", "-o", out, path],
+    r = subprocess.run([MOTORID, "fit", "--model", "sindyc", "-q", "-o", out, path],
                        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     dt = time.perf_counter() - t0
     if r.returncode != 0:
         sys.exit(f"error: motorid fit failed on {path}: {r.stderr.strip()}")
-    return dt
+    return dt, children_cpu() - c0
 
 
 def centred_velocity(t, theta, half=5):
@@ -171,9 +179,11 @@ def time_pysindy(path):
     theta_lib = library(theta, v, z, i, u)
     y = np.column_stack([np.gradient(v, TS), np.gradient(z, TS), np.gradient(i, TS)])
     opt = ps.STLSQ(threshold=0.002, normalize_columns=True, max_iter=20)
+    c0 = time.process_time()
     t0 = time.perf_counter()
     opt.fit(theta_lib, y)
-    return time.perf_counter() - t0, getattr(ps, "__version__", "?")
+    dt = time.perf_counter() - t0
+    return dt, time.process_time() - c0, getattr(ps, "__version__", "?")
 
 
 def building_blocks():
@@ -207,25 +217,31 @@ def main():
         sys.exit(f"error: {MOTORID} is missing; run `cargo build --release --bin motorid` first")
     sizes = [int(float(s)) for s in arg("--sizes", "1e5,1e6").split(",")]
     paths = {n: sized_log(n) for n in sorted(set(sizes + [PEER_N]))}
-    res = {"cores": os.cpu_count(), "ours_s": {}}
+    res = {"cores": os.cpu_count(), "ours_s": {}, "ours_cpu_s": {}}
+    res["load_average_before"] = os.getloadavg()[0]
     # Peer and ours on the 10^6 samples back to back, then the other sizes.
-    t_peer, version = time_pysindy(paths[PEER_N])
+    t_peer, cpu_peer, version = time_pysindy(paths[PEER_N])
     res["pysindy_stlsq_s"] = t_peer
+    res["pysindy_stlsq_cpu_s"] = cpu_peer
     res["pysindy_version"] = version
     for n in [PEER_N] + [s for s in sizes if s != PEER_N]:
-        res["ours_s"][n] = time_ours(paths[n])
+        res["ours_s"][n], res["ours_cpu_s"][n] = time_ours(paths[n])
+    res["load_average_after"] = os.getloadavg()[0]
     res["ratio_peer_over_ours"] = t_peer / res["ours_s"][PEER_N]
     if "--json" in sys.argv:
         print(json.dumps(res, indent=1))
         return
-    print(f"signal a at 12 ms, {os.cpu_count()} cores, pysindy {version}\n")
-    print("| samples | motorid fit --model sindyc (CSV -> MODEL.toml) | per sample | pysindy STLSQ fit alone | ratio (peer/ours) |")
-    print("|---|---|---|---|---|")
+    print(f"signal a at 12 ms, {os.cpu_count()} cores, pysindy {version}, load average "
+          f"{res['load_average_before']:.1f} before, {res['load_average_after']:.1f} after "
+          "(the ratio is only meaningful on free cores)\n")
+    print("| samples | motorid fit --model sindyc (CSV -> MODEL.toml) | CPU (user + sys) | per sample | pysindy STLSQ fit alone | its CPU | ratio (peer/ours) |")
+    print("|---|---|---|---|---|---|---|")
     for n in sorted(res["ours_s"]):
-        t = res["ours_s"][n]
+        t, c = res["ours_s"][n], res["ours_cpu_s"][n]
         peer = f"{t_peer:.2f} s" if n == PEER_N else "-"
+        peer_cpu = f"{cpu_peer:.2f} s" if n == PEER_N else "-"
         ratio = f"{t_peer / t:.1f}x" if n == PEER_N else "-"
-        print(f"| {n:.0e} | {t:.2f} s | {t / n * 1e6:.2f} us | {peer} | {ratio} |")
+        print(f"| {n:.0e} | {t:.2f} s | {c:.2f} s | {t / n * 1e6:.2f} us | {peer} | {peer_cpu} | {ratio} |")
     blocks = building_blocks()
     if blocks:
         print("\n| building block, 10^6 samples | motorid | peer | peer time | ratio (peer/ours) |")

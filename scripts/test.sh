@@ -35,7 +35,7 @@ if [ -x scripts/firmware-size.sh ]; then bash scripts/firmware-size.sh; fi
 # which no other build here turns on: type-check it so that it cannot rot. `check` does no
 # code generation, so probe-rs and its USB stack cost about 1.5 CPU-minutes, not a build.
 step "Checking that motorid compiles with --features probe (motorid flash)"
-cargo check -q -p host-tools --features probe --lib
+cargo check -q -p motorid --features probe --lib
 
 step "Formatting"
 cargo fmt --all -- --check
@@ -60,14 +60,14 @@ cargo test --no-run --all-targets
 # the same `cargo build $MOTORID_BUILD_ARGS` (it inherits these variables, the clippy wrapper
 # included) and finds them fresh. `--tests` makes cargo resolve features with the dev-dependencies, as the
 # workspace `cargo test` does; bare `--bin` targets would compile faer & co. a second time.
-export MOTORID_BUILD_ARGS="-p host-tools -p xtask --bin motorid --bin xtask --tests"
+export MOTORID_BUILD_ARGS="-p motorid -p xtask --bin motorid --bin xtask --tests"
 # shellcheck disable=SC2086
 cargo build $MOTORID_BUILD_ARGS
 # Cargo runs test binaries one after another, and most are one long single-threaded fit: the
 # longest (fit_add_effects: position_load and cogging, about 3 min) runs beside all the others
 # so that both cores work.
 slow_test=the_loop_adds_position_load_and_cogging_and_closes_half_the_gap
-# (The same arguments as the build above, so nothing is rebuilt: `-p tests` alone would resolve
+# (The same arguments as the build above, so nothing is rebuilt: `-p e2e` alone would resolve
 # other features and compile the dependencies again.)
 slow_bin=$(cargo test --no-run --all-targets --message-format=json 2>/dev/null \
   | sed -n 's/.*"executable":"\([^"]*\/fit_add_effects-[^"]*\)".*/\1/p' | tail -1)

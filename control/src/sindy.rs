@@ -15,6 +15,12 @@
 //! eq. 47 without the minus sign; its b-coefficients of damping terms are negative, so the
 //! sign here is the one that makes `I_c = F_f/K_t` of eq. 38 compensate rather than add.)
 //!
+//! **Bristle.** A model fitted with presliding carries the friction's sign in `z` itself, a
+//! bristle deflection normalised to its sliding value: `dz/dt = k·(ẋ − |ẋ|·z)` with
+//! `k = 1/z_ss` [1/rad] (`z` tends to `sgn ẋ` within `z_ss` of travel), and in `dẋ/dt` the
+//! Coulomb term `c·z` [rad/s²] and the bristle damping `d·(|ẋ|·z − ẋ)` [rad/s², d in 1/s].
+//! Only the term [`Term::AbsXdotZ`] is new; the evaluator is the same.
+//!
 //! **Observer.** `dz/dt` may be stiff and nonlinear in `z`: the state is advanced by backward
 //! Euler solved with a few damped Newton steps, clamped to the model's bound `|z| ≤ z_max`.
 //!
@@ -97,6 +103,8 @@ pub enum Term {
     ISquared,
     /// I³ (magnetic saturation: the torque a falling K_t loses, to first order).
     ICubed,
+    /// |ẋ|·z (the bristle's relaxation in presliding friction; see the module doc).
+    AbsXdotZ,
 }
 
 /// What a term may depend on at one instant.
@@ -143,7 +151,7 @@ impl Term {
 
     /// Every term without a parameter (all but `SinTheta`/`CosTheta`): the paper's library,
     /// then the added terms.
-    pub const FIXED: [Term; 26] = {
+    pub const FIXED: [Term; 27] = {
         let added = [
             Term::One,
             Term::SgnXdot,
@@ -154,9 +162,10 @@ impl Term {
             Term::AbsISgnXdot,
             Term::ISquared,
             Term::ICubed,
+            Term::AbsXdotZ,
         ];
         let paper = Term::PAPER_LIBRARY;
-        let mut all = [Term::One; 26];
+        let mut all = [Term::One; 27];
         assert!(paper.len() + added.len() == all.len());
         let mut k = 0;
         while k < all.len() {
@@ -199,6 +208,7 @@ impl Term {
             Term::AbsISgnXdot => "|i|*sgn(xdot)",
             Term::ISquared => "i^2",
             Term::ICubed => "i^3",
+            Term::AbsXdotZ => "|xdot|*z",
             Term::SinTheta(_) | Term::CosTheta(_) => return None,
         })
     }
@@ -262,7 +272,9 @@ impl Term {
     /// `term = g(x, ẋ, I, u)·h(z)` (see [`Term::z_free_factor`]).
     pub fn z_part(self) -> ZPart {
         match self {
-            Term::Z | Term::ZXdot | Term::ZXdot2 | Term::ZU | Term::ZU2 => ZPart::Z,
+            Term::Z | Term::ZXdot | Term::ZXdot2 | Term::ZU | Term::ZU2 | Term::AbsXdotZ => {
+                ZPart::Z
+            }
             Term::Z2Xdot | Term::Z2U => ZPart::Z2,
             Term::AbsZZ => ZPart::AbsZZ,
             Term::AbsZZ2 => ZPart::AbsZZ2,
@@ -288,7 +300,7 @@ impl Term {
             Term::ZXdot2 => xd * xd,
             Term::U | Term::ZU | Term::Z2U => u,
             Term::ZU2 => u * u,
-            Term::AbsXdot => xd.abs(),
+            Term::AbsXdot | Term::AbsXdotZ => xd.abs(),
             Term::ISquared => i * i,
             Term::ICubed => i * i * i,
             _ => self.transcendental_factor(p, a, vs),

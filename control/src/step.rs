@@ -11,8 +11,8 @@
 //!    ([`crate::sindy::TermInputs::x`]).
 //! 3. Current: the measured current corrected by `current_offset` effects.
 //! 4. Friction F_f: the observer (none / LuGre / SINDYc), driven by the speed reference
-//!    ([`observer_velocity`]: reference-based compensation; the LuGre torque without its
-//!    σ1·ż pulse, see [`LugreObserver::step_compensation`]), plus the torque of every torque
+//!    (reference-based compensation, its reasons where the step calls the observer; the LuGre
+//!    torque without its σ1·ż pulse, see [`LugreObserver::step_compensation`]), plus the torque of every torque
 //!    effect of the configuration.
 //! 5. Compensation `V_c = L·dI_c/dt + R·I_c`, `I_c = F_f/K_t` (R scaled by the heat state of
 //!    a `thermal` effect), plus the voltage lost to `deadtime`.
@@ -279,25 +279,6 @@ pub fn estimator_resolution<F: Float>(cfg: &EstimatorConfig<F>, step: F, dt: F) 
     } else {
         F::zero()
     }
-}
-
-/// The velocity the friction observer integrates: the speed reference ω_ref.
-///
-/// This is reference-based (feed-forward) friction compensation, a deliberate departure
-/// from the paper, which fed its observer the measured velocity (feedback compensation).
-/// The paper's moving-average estimate lags by half its 120 ms window (≈ 60 ms) and resolves
-/// only one Hall step per window, 0.79 rad/s ([`estimator_resolution`]): near a reversal it
-/// reports the old direction or zero, so an observer driven by it switches the friction sign
-/// late and then compensates the wrong way. ω_ref has neither lag nor quantisation, and the PI
-/// keeps ω near ω_ref, so it is the best available predictor of the velocity friction acts
-/// at. Measured on the emulated paper motor with its true LuGre parameters (`motorid
-/// emulate`, sine reference, low-speed RMS error; none: 1.51 rad/s): observer on ω_ref
-/// 0.66 rad/s; on ω_ref moved toward ω̂ by at most the estimator's resolution 0.89 rad/s.
-/// Because ω_ref is exact there is nothing to fade near zero speed: at ω_ref = 0 the LuGre
-/// state holds (ż = 0) and the compensation keeps its last value, below static friction.
-/// `omega_est` is kept in the signature for the measured-velocity (paper) variant.
-pub fn observer_velocity<F: Float>(_omega_est: F, omega_ref: F, _v_res: F) -> F {
-    omega_ref
 }
 
 /// The voltage window [V] that keeps the winding current within a limit: `[emf − r_i,
@@ -666,7 +647,21 @@ impl<F: Float> ControlStep<F> {
         faults: &mut Faults,
     ) -> (F, F) {
         let dt = self.dt;
-        let v_obs = observer_velocity(pos.omega, omega_ref, self.v_res);
+        // The velocity the friction observer integrates: the speed reference ω_ref.
+        //
+        // This is reference-based (feed-forward) friction compensation, a deliberate departure
+        // from the paper, which fed its observer the measured velocity (feedback compensation).
+        // The paper's moving-average estimate lags by half its 120 ms window (≈ 60 ms) and resolves
+        // only one Hall step per window, 0.79 rad/s ([`estimator_resolution`]): near a reversal it
+        // reports the old direction or zero, so an observer driven by it switches the friction sign
+        // late and then compensates the wrong way. ω_ref has neither lag nor quantisation, and the PI
+        // keeps ω near ω_ref, so it is the best available predictor of the velocity friction acts
+        // at. Measured on the emulated paper motor with its true LuGre parameters (`motorid
+        // emulate`, sine reference, low-speed RMS error; none: 1.51 rad/s): observer on ω_ref
+        // 0.66 rad/s; on ω_ref moved toward ω̂ by at most the estimator's resolution 0.89 rad/s.
+        // Because ω_ref is exact there is nothing to fade near zero speed: at ω_ref = 0 the LuGre
+        // state holds (ż = 0) and the compensation keeps its last value, below static friction.
+        let v_obs = omega_ref;
         let (f_obs, z) = match &mut self.observer {
             Observer::None => (F::zero(), F::zero()),
             Observer::Lugre(o) => (o.step_compensation(v_obs, dt), o.z),
@@ -1056,7 +1051,6 @@ mod tests {
             timeout_s: 0.1,
         };
         assert!((estimator_resolution(&et, step, 0.012) - step / 0.1).abs() < 1e-12);
-        assert_eq!(observer_velocity(-3.0, 2.5, r), 2.5);
     }
 
     #[test]

@@ -12,7 +12,7 @@
 //! How the compensation differs from a literal reading of the paper (both in `control`, so
 //! the firmware runs the same): the observer integrates the speed reference ω_ref instead of
 //! the measured velocity (reference-based feed-forward compensation,
-//! `control::step::observer_velocity`: the 10-sample moving average lags ≈ 60 ms and flips
+//! `control::step`, where it calls the observer: the 10-sample moving average lags ≈ 60 ms and flips
 //! the friction sign late at every reversal), and the LuGre compensation torque is
 //! `σ0·z + α2·v` without the σ1·ż term, whose one-sample pulse at every reversal is ≈ 15× the
 //! Coulomb friction at a 12 ms step (`control::lugre::LugreObserver::step_compensation`).

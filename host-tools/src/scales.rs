@@ -27,8 +27,8 @@ fn q99_abs(x: impl Iterator<Item = f64>) -> Option<f64> {
     if a.is_empty() {
         return None;
     }
-    a.sort_by(f64::total_cmp);
-    let q = a[((a.len() - 1) as f64 * 0.99) as usize];
+    let k = ((a.len() - 1) as f64 * 0.99) as usize;
+    let q = *a.select_nth_unstable_by(k, f64::total_cmp).1;
     (q > 0.0).then_some(q)
 }
 

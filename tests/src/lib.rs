@@ -13,16 +13,17 @@ pub fn root() -> PathBuf {
 }
 
 /// Folder of the `motorid` and `xtask` binaries, both built once (one nested `cargo build`)
-/// with the same (optimised) profile as the tests.
+/// in the dev profile, which this workspace optimises (`opt-level = 2`, dependencies at 3),
+/// whatever profile the tests themselves were built in.
 ///
 /// `MOTORID_BUILD_ARGS` (space-separated) replaces the default target selection
 /// `--bin motorid --bin xtask` of that nested `cargo build`. scripts/test.sh sets it to
-/// `-p host-tools -p xtask --bin motorid --bin xtask --tests` after the workspace-wide `cargo
+/// `-p motorid -p xtask --bin motorid --bin xtask --tests` after the workspace-wide `cargo
 /// test` build: with resolver 2 the dev-dependencies' features (proptest, criterion:
 /// `either/use_std`, `getrandom/std`, `zerocopy/derive`, ...) are unified only when a test
 /// target is part of the build, so bare `--bin` targets would compile rand, rayon, faer and
 /// their dependents a second time (about 3 minutes on 2 cores). The default suits `cargo test
-/// -p tests ...`, which resolves without dev-dependencies too.
+/// -p e2e ...`, which resolves without dev-dependencies too.
 fn bin_dir() -> &'static Path {
     static DIR: OnceLock<PathBuf> = OnceLock::new();
     DIR.get_or_init(|| {
@@ -87,7 +88,10 @@ pub fn shared_data(test: &str) -> Option<PathBuf> {
     if std::env::var_os("CI").is_some_and(|v| !v.is_empty()) {
         panic!("{reason}, and CI (environment variable CI is set) must have it");
     }
-    eprintln!("SKIPPED {reason}");
+    // Written to the process's stderr, not through `eprintln!`, which the test harness
+    // captures and shows only for a failing test: a skip must be seen when the test passes.
+    use std::io::Write;
+    let _ = writeln!(std::io::stderr(), "SKIPPED {reason}");
     None
 }
 

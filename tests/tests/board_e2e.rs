@@ -1,10 +1,10 @@
 //! End to end over a real serial device node: `motorid board --pty` (the firmware's control
 //! step and protocol handler on the emulated motor, behind a pseudo-terminal), then
 //! `motorid upload` and `motorid record` against the device it printed.
+use e2e::{motorid, motorid_bin, PAPER_LUGRE_MODEL};
 use std::io::{BufRead, BufReader};
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
-use tests::{motorid, motorid_bin, PAPER_LUGRE_MODEL};
 
 /// The emulated board, killed when dropped.
 struct Board {

@@ -8,7 +8,7 @@ use control::frame::{BoardMsg, Excitation, Fault, HostMsg, Mode};
 use control::lugre::LugreParams;
 use control::step::{Faults, MEASURED_CURRENT_GAIN};
 use motorid::board::emulated_board::EmulatedBoard;
-use motorid::board::emulated_flash::{RamFlash, PAGE};
+use motorid::board::emulated_flash::RamFlash;
 use motorid::board::hw::Wiring;
 use motorid::emulator::EmulatorConfig;
 
@@ -28,16 +28,16 @@ fn paper_coefficients(u_max: f32, i_max: f32) -> Coefficients {
 
 /// The emulated paper motor on a board whose flash holds `co`.
 fn board_with(co: &Coefficients) -> EmulatedBoard {
-    let mut slots = control::slots::Slots::new(RamFlash::new(None), 0, PAGE as u32).unwrap();
+    let mut slots = RamFlash::new(None).into_slots().unwrap();
     slots
         .store(&motorid::board::coeffs::encode(co).unwrap())
         .unwrap();
-    let sim = EmulatedBoard::new(
+    let emu = EmulatedBoard::new(
         EmulatorConfig::paper(),
         Wiring::default(),
         slots.into_inner(),
     );
-    sim.unwrap()
+    emu.unwrap()
 }
 
 /// What one period showed: the true peak current [A] within it, the true speed at its end
@@ -52,24 +52,24 @@ struct Period {
 }
 
 /// Runs `n` periods with a heartbeat now and then; returns each period and the first fault.
-fn run(sim: &mut EmulatedBoard, n: usize) -> (Vec<Period>, Option<Fault>) {
+fn run(emu: &mut EmulatedBoard, n: usize) -> (Vec<Period>, Option<Fault>) {
     let mut periods = Vec::new();
     let mut fault = None;
     for k in 0..n {
         if k % 50 == 0 {
-            sim.handle(&HostMsg::Heartbeat);
+            emu.handle(&HostMsg::Heartbeat);
         }
-        sim.tick();
-        let out = *sim.board().last_step_outputs();
+        emu.tick();
+        let out = *emu.board().last_step_outputs();
         periods.push(Period {
-            peak_i: sim.hardware().peak_current(),
-            end_i: sim.hardware().plant().truth().i.abs(),
-            omega: sim.hardware().plant().truth().omega,
+            peak_i: emu.hardware().peak_current(),
+            end_i: emu.hardware().plant().truth().i.abs(),
+            omega: emu.hardware().plant().truth().omega,
             faults: out.faults,
             u: out.v_cmd,
         });
-        fault = fault.or(sim.board().fault());
-        let _ = sim.take_output();
+        fault = fault.or(emu.board().fault());
+        let _ = emu.take_output();
     }
     (periods, fault)
 }
@@ -105,10 +105,10 @@ fn a_step_from_standstill_holds_the_current_limit_and_reaches_the_speed() {
     for i_max in [30.0, 10.0] {
         let co = paper_coefficients(24.0, i_max);
         let lim = i_limit(&co);
-        let mut sim = board_with(&co);
-        sim.handle(&HostMsg::SetSpeed { omega_ref: 200.0 });
-        sim.handle(&HostMsg::SetMode { mode: Mode::Speed });
-        let (p, fault) = run(&mut sim, 300);
+        let mut emu = board_with(&co);
+        emu.handle(&HostMsg::SetSpeed { omega_ref: 200.0 });
+        emu.handle(&HostMsg::SetMode { mode: Mode::Speed });
+        let (p, fault) = run(&mut emu, 300);
         assert_eq!(fault, None, "speed, i_max {i_max}");
         let peak = peak_current(&p);
         assert!(
@@ -138,12 +138,12 @@ fn a_step_from_standstill_holds_the_current_limit_and_reaches_the_speed() {
             assert!(p.iter().any(|x| x.faults.contains(Faults::CURRENT_LIMIT)));
         }
 
-        let mut sim = board_with(&co);
-        sim.handle(&HostMsg::StartExperiment {
+        let mut emu = board_with(&co);
+        emu.handle(&HostMsg::StartExperiment {
             signal: Excitation::Steady { volts: 20.0 },
             duration_s: 4.0,
         });
-        let (p, fault) = run(&mut sim, 300);
+        let (p, fault) = run(&mut emu, 300);
         assert_eq!(fault, None, "20 V, i_max {i_max}");
         let peak = peak_current(&p);
         // The measured-current window lets the current rise by half its distance to the
@@ -175,19 +175,19 @@ fn the_speed_reference_ramps_at_half_the_limit_torque_and_reverses_within_the_li
     // 0.5·K_t·8 A/J = 950 rad/s²: 11.4 rad/s per period; 1 rad/s² (0.1 %) for K_t written
     // here to four digits.
     assert!((accel - 0.5 * 0.07126 * 8.0 / 3e-4).abs() < 1.0, "{accel}");
-    let mut sim = board_with(&co);
-    sim.handle(&HostMsg::SetSpeed { omega_ref: 200.0 });
-    sim.handle(&HostMsg::SetMode { mode: Mode::Speed });
+    let mut emu = board_with(&co);
+    emu.handle(&HostMsg::SetSpeed { omega_ref: 200.0 });
+    emu.handle(&HostMsg::SetMode { mode: Mode::Speed });
     let mut refs = vec![0.0f32];
     let mut periods = Vec::new();
     for k in 0..600 {
         if k == 300 {
-            sim.handle(&HostMsg::SetSpeed { omega_ref: -200.0 });
+            emu.handle(&HostMsg::SetSpeed { omega_ref: -200.0 });
         }
-        let (p, fault) = run(&mut sim, 1);
+        let (p, fault) = run(&mut emu, 1);
         assert_eq!(fault, None, "period {k}");
         periods.extend(p);
-        refs.push(sim.board().speed_reference());
+        refs.push(emu.board().speed_reference());
     }
     // 1e-5 relative: f32 rounding of a reference near 200 rad/s (one ulp is 1.5e-5 rad/s,
     // 1.3e-6 of a step).
@@ -220,9 +220,9 @@ fn the_speed_reference_ramps_at_half_the_limit_torque_and_reverses_within_the_li
 
 #[test]
 fn speed_references_beyond_the_speed_limit_are_refused() {
-    let nack = |sim: &mut EmulatedBoard, w: f32| {
-        sim.handle(&HostMsg::SetSpeed { omega_ref: w });
-        let out = sim.take_output();
+    let nack = |emu: &mut EmulatedBoard, w: f32| {
+        emu.handle(&HostMsg::SetSpeed { omega_ref: w });
+        let out = emu.take_output();
         let msgs: Vec<BoardMsg> = out
             .split_inclusive(|&b| b == 0)
             .map(|f| control::frame::decode_frame(f).unwrap())
@@ -234,21 +234,21 @@ fn speed_references_beyond_the_speed_limit_are_refused() {
     for (u_max, pole_pairs, want) in [(12.0, 11, 12.0 / 0.07126), (24.0, 50, 82.1)] {
         let mut co = paper_coefficients(u_max, 30.0);
         co.pole_pairs = pole_pairs;
-        let mut sim = board_with(&co);
-        let _ = sim.take_output();
-        let limit = sim.board().speed_limit();
+        let mut emu = board_with(&co);
+        let _ = emu.take_output();
+        let limit = emu.board().speed_limit();
         // 0.1 rad/s: `want` is written here with K_b to four digits and 82.1 rounded.
         assert!((limit - want).abs() < 0.1, "{limit} vs {want}");
-        sim.handle(&HostMsg::Identify);
-        let id: BoardMsg = control::frame::decode_frame(&sim.take_output()).unwrap();
+        emu.handle(&HostMsg::Identify);
+        let id: BoardMsg = control::frame::decode_frame(&emu.take_output()).unwrap();
         assert!(
             matches!(id, BoardMsg::Identity { speed_max, .. } if speed_max == limit),
             "{id:?}"
         );
         use control::frame::Nack;
-        assert_eq!(nack(&mut sim, 0.95 * limit), [BoardMsg::Ack]);
+        assert_eq!(nack(&mut emu, 0.95 * limit), [BoardMsg::Ack]);
         for w in [1.01 * limit, -1.01 * limit, f32::NAN, f32::INFINITY] {
-            assert_eq!(nack(&mut sim, w), [BoardMsg::Nack(Nack::OutOfRange)], "{w}");
+            assert_eq!(nack(&mut emu, w), [BoardMsg::Nack(Nack::OutOfRange)], "{w}");
         }
     }
 }
@@ -267,12 +267,12 @@ fn no_experiment_signal_exceeds_its_current_limit() {
             (Excitation::C, 0.5),
             (Excitation::D, 10.0),
         ] {
-            let mut sim = board_with(&co);
-            sim.handle(&HostMsg::StartExperiment {
+            let mut emu = board_with(&co);
+            emu.handle(&HostMsg::StartExperiment {
                 signal,
                 duration_s: 40.0,
             });
-            let (p, fault) = run(&mut sim, 3300);
+            let (p, fault) = run(&mut emu, 3300);
             let what = format!("{signal:?} at u_max {u_max} V, i_max {i_max} A");
             assert_eq!(fault, None, "{what}");
             // The signal itself stays inside the current window: a-c are never held at its
@@ -303,10 +303,10 @@ fn no_experiment_signal_exceeds_its_current_limit() {
 }
 
 /// Runs speed mode to `w` [rad/s] for `n` periods from where the board is now.
-fn speed_run(sim: &mut EmulatedBoard, w: f32, n: usize) -> (Vec<Period>, Option<Fault>) {
-    sim.handle(&HostMsg::SetSpeed { omega_ref: w });
-    sim.handle(&HostMsg::SetMode { mode: Mode::Speed });
-    run(sim, n)
+fn speed_run(emu: &mut EmulatedBoard, w: f32, n: usize) -> (Vec<Period>, Option<Fault>) {
+    emu.handle(&HostMsg::SetSpeed { omega_ref: w });
+    emu.handle(&HostMsg::SetMode { mode: Mode::Speed });
+    run(emu, n)
 }
 
 #[test]
@@ -339,15 +339,15 @@ fn a_run_started_while_the_rotor_turns_holds_the_current_limit() {
         }),
     ];
     for (what, start) in starts {
-        let mut sim = board_with(&co);
-        let (_, fault) = speed_run(&mut sim, 200.0, 250);
+        let mut emu = board_with(&co);
+        let (_, fault) = speed_run(&mut emu, 200.0, 250);
         assert_eq!(fault, None, "{what}");
-        sim.handle(&HostMsg::Stop);
-        let (coast, _) = run(&mut sim, 1);
+        emu.handle(&HostMsg::Stop);
+        let (coast, _) = run(&mut emu, 1);
         // Still turning fast: friction takes far less than 50 rad/s in one 12 ms period.
         assert!(coast[0].omega > 150.0, "{what}: {}", coast[0].omega);
-        start(&mut sim);
-        let (p, fault) = run(&mut sim, 150);
+        start(&mut emu);
+        let (p, fault) = run(&mut emu, 150);
         let peak = peak_current(&p);
         eprintln!("{what}: peak {peak:.2} A after a start at 200 rad/s");
         assert_eq!(fault, None, "{what}: peak {peak} A");
@@ -362,32 +362,32 @@ fn a_run_started_while_the_rotor_turns_holds_the_current_limit() {
 #[test]
 fn a_speed_run_without_its_own_setspeed_does_not_reuse_the_last_one() {
     let co = paper_coefficients(24.0, 30.0);
-    let mut sim = board_with(&co);
-    let (_, fault) = speed_run(&mut sim, 150.0, 200);
+    let mut emu = board_with(&co);
+    let (_, fault) = speed_run(&mut emu, 150.0, 200);
     assert_eq!(fault, None);
-    sim.handle(&HostMsg::Stop);
+    emu.handle(&HostMsg::Stop);
     // An experiment does not see the old target: its reference follows the measured speed.
-    sim.handle(&HostMsg::StartExperiment {
+    emu.handle(&HostMsg::StartExperiment {
         signal: Excitation::Steady { volts: 0.0 },
         duration_s: 1.0,
     });
-    run(&mut sim, 100);
-    let w = sim.board().control().omega();
+    run(&mut emu, 100);
+    let w = emu.board().control().omega();
     // The reference is the estimate, copied each period: 1e-3 rad/s absorbs f32 rounding.
     assert!(
-        (sim.board().speed_reference() - w).abs() < 1e-3,
+        (emu.board().speed_reference() - w).abs() < 1e-3,
         "reference {} vs ω̂ {w}",
-        sim.board().speed_reference()
+        emu.board().speed_reference()
     );
     // A new speed run starts at the speed the rotor has and is asked for zero.
-    sim.handle(&HostMsg::SetMode { mode: Mode::Speed });
-    let (p, fault) = run(&mut sim, 400);
+    emu.handle(&HostMsg::SetMode { mode: Mode::Speed });
+    let (p, fault) = run(&mut emu, 400);
     assert_eq!(fault, None);
     let w = mean_speed(&p[350..]);
     // At rest within 2 rad/s: below the 0.79 rad/s estimate resolution the loop cannot
     // tell a creep from a standstill, and the mean of the true speed sees a few of those.
     assert!(w.abs() < 2.0, "{w} rad/s");
-    assert_eq!(sim.board().speed_reference(), 0.0);
+    assert_eq!(emu.board().speed_reference(), 0.0);
 }
 
 /// Periods that ended with the current beyond `i_max` (the current then stayed beyond
@@ -419,10 +419,10 @@ fn wrong_motor_constants_in_the_blob_do_not_lift_the_current_limit() {
         let mut co = base.clone();
         change(&mut co);
         let allowed = lim + margin(&base);
-        let mut sim = board_with(&co);
-        let (mut p, mut fault) = speed_run(&mut sim, 100.0, 250);
+        let mut emu = board_with(&co);
+        let (mut p, mut fault) = speed_run(&mut emu, 100.0, 250);
         if fault.is_none() {
-            let (q, f) = speed_run(&mut sim, -100.0, 300);
+            let (q, f) = speed_run(&mut emu, -100.0, 300);
             p.extend(q);
             fault = f;
         }
@@ -434,12 +434,12 @@ fn wrong_motor_constants_in_the_blob_do_not_lift_the_current_limit() {
             assert!(peak <= allowed, "{what}: peak {peak} A of {allowed} A");
         }
         // The open-loop 20 V step, held by the window alone.
-        let mut sim = board_with(&co);
-        sim.handle(&HostMsg::StartExperiment {
+        let mut emu = board_with(&co);
+        emu.handle(&HostMsg::StartExperiment {
             signal: Excitation::Steady { volts: 20.0 },
             duration_s: 2.0,
         });
-        let (p, fault) = run(&mut sim, 150);
+        let (p, fault) = run(&mut emu, 150);
         let peak = peak_current(&p);
         let over = beyond_trip(&p, i_max);
         eprintln!("{what}, 20 V: peak {peak:.2} A, fault {fault:?}, {over} periods beyond i_max");
@@ -480,10 +480,10 @@ fn wrong_motor_constants_never_run_the_rotor_away() {
         // True speed [rad/s] per estimated speed: the estimate counts the blob's pole pairs.
         let scale = f64::from(co.pole_pairs) / pp_true;
         let bound = 1.5 * 100.0 * scale.max(1.0);
-        let mut sim = board_with(&co);
+        let mut emu = board_with(&co);
         let mut fault = None;
         for w in [100.0f32, -100.0] {
-            let (p, f) = speed_run(&mut sim, w, 400);
+            let (p, f) = speed_run(&mut emu, w, 400);
             let top = p.iter().map(|x| x.omega.abs()).fold(0.0, f64::max);
             let end = mean_speed(&p[350..]) / scale;
             let mismatched = p
@@ -531,12 +531,12 @@ fn a_model_back_emf_far_below_the_motors_stops_at_the_first_braking_period() {
     co.motor.kb *= 0.4;
     let i_max = f64::from(co.limits.i_max);
     let plant = EmulatorConfig::paper().with_extra_load(|x| if x.t > 0.5 { -0.8 } else { 0.0 });
-    let mut slots = control::slots::Slots::new(RamFlash::new(None), 0, PAGE as u32).unwrap();
+    let mut slots = RamFlash::new(None).into_slots().unwrap();
     slots
         .store(&motorid::board::coeffs::encode(&co).unwrap())
         .unwrap();
-    let mut sim = EmulatedBoard::new(plant, Wiring::default(), slots.into_inner()).unwrap();
-    let (p, fault) = speed_run(&mut sim, 20.0, 400);
+    let mut emu = EmulatedBoard::new(plant, Wiring::default(), slots.into_inner()).unwrap();
+    let (p, fault) = speed_run(&mut emu, 20.0, 400);
     let over = beyond_trip(&p, i_max);
     let peak = peak_current(&p);
     let both = p.iter().position(|x| {
@@ -575,12 +575,12 @@ fn a_load_step_at_speed_holds_the_current_limit() {
             };
             on * torque * (x.omega / 5.0).clamp(-1.0, 1.0)
         });
-        let mut slots = control::slots::Slots::new(RamFlash::new(None), 0, PAGE as u32).unwrap();
+        let mut slots = RamFlash::new(None).into_slots().unwrap();
         slots
             .store(&motorid::board::coeffs::encode(&co).unwrap())
             .unwrap();
-        let mut sim = EmulatedBoard::new(plant, Wiring::default(), slots.into_inner()).unwrap();
-        let (p, fault) = speed_run(&mut sim, 150.0, 300);
+        let mut emu = EmulatedBoard::new(plant, Wiring::default(), slots.into_inner()).unwrap();
+        let (p, fault) = speed_run(&mut emu, 150.0, 300);
         let peak = peak_current(&p);
         let over = beyond_trip(&p, f64::from(co.limits.i_max));
         eprintln!("load {torque} N·m: peak {peak:.2} A (limit {lim} A), fault {fault:?}, {over} periods beyond i_max");
@@ -613,25 +613,25 @@ fn a_load_that_drives_the_motor_past_the_speed_limit_is_an_over_speed_fault() {
     co.motor.r = 2.0;
     let mut plant = EmulatorConfig::paper().with_extra_load(|x| if x.t > 1.5 { -1.1 } else { 0.0 });
     plant.motor.r = 2.0;
-    let mut slots = control::slots::Slots::new(RamFlash::new(None), 0, PAGE as u32).unwrap();
+    let mut slots = RamFlash::new(None).into_slots().unwrap();
     slots
         .store(&motorid::board::coeffs::encode(&co).unwrap())
         .unwrap();
-    let mut sim = EmulatedBoard::new(plant, Wiring::default(), slots.into_inner()).unwrap();
-    let w_max = f64::from(sim.board().speed_limit());
-    sim.handle(&HostMsg::SetSpeed { omega_ref: 200.0 });
-    sim.handle(&HostMsg::SetMode { mode: Mode::Speed });
+    let mut emu = EmulatedBoard::new(plant, Wiring::default(), slots.into_inner()).unwrap();
+    let w_max = f64::from(emu.board().speed_limit());
+    emu.handle(&HostMsg::SetSpeed { omega_ref: 200.0 });
+    emu.handle(&HostMsg::SetMode { mode: Mode::Speed });
     // Up to the fault: the true top speed, the estimate's and the peak current.
     let (mut top, mut top_est, mut peak, mut fault) = (0.0f64, 0.0f32, 0.0f64, None);
     for k in 0..400 {
         if k % 50 == 0 {
-            sim.handle(&HostMsg::Heartbeat);
+            emu.handle(&HostMsg::Heartbeat);
         }
-        sim.tick();
-        top = top.max(sim.hardware().plant().truth().omega);
-        top_est = top_est.max(sim.board().last_step_outputs().omega);
-        peak = peak.max(sim.hardware().peak_current());
-        fault = sim.board().fault();
+        emu.tick();
+        top = top.max(emu.hardware().plant().truth().omega);
+        top_est = top_est.max(emu.board().last_step_outputs().omega);
+        peak = peak.max(emu.hardware().peak_current());
+        fault = emu.board().fault();
         if fault.is_some() {
             break;
         }
@@ -649,31 +649,31 @@ fn the_speed_limit_follows_the_measured_bus_voltage() {
     // sagging to 14 V lowers it to 187 rad/s: the running reference comes down to it, a
     // SetSpeed beyond it is refused and the board reports it.
     let co = paper_coefficients(24.0, 30.0);
-    let mut sim = board_with(&co);
-    let nominal = sim.board().speed_limit();
+    let mut emu = board_with(&co);
+    let nominal = emu.board().speed_limit();
     // The board evaluates the same f32 formula (MAX_DUTY·V_bus/K_b): 0.1 rad/s leaves
     // room for the order of its rounding only. Likewise for the low limit below.
     assert!(
         (nominal - 0.95 * 22.2 / co.motor.kb).abs() < 0.1,
         "{nominal}"
     );
-    let (p, fault) = speed_run(&mut sim, 250.0, 150);
+    let (p, fault) = speed_run(&mut emu, 250.0, 150);
     assert_eq!(fault, None);
     // 2 % of the reference, as in the step test.
     assert!((mean_speed(&p[120..]) - 250.0).abs() < 5.0);
-    sim.hardware_mut().set_bus_voltage(14.0);
-    let (p, fault) = run(&mut sim, 150);
+    emu.hardware_mut().set_bus_voltage(14.0);
+    let (p, fault) = run(&mut emu, 150);
     assert_eq!(fault, None);
     let low = 0.95 * 14.0 / co.motor.kb;
     assert!(
-        (sim.board().speed_limit() - low).abs() < 0.1,
+        (emu.board().speed_limit() - low).abs() < 0.1,
         "{}",
-        sim.board().speed_limit()
+        emu.board().speed_limit()
     );
     assert!(
-        sim.board().speed_reference() <= low,
+        emu.board().speed_reference() <= low,
         "{}",
-        sim.board().speed_reference()
+        emu.board().speed_reference()
     );
     let w = mean_speed(&p[120..]);
     // At its voltage limit the loop holds the speed friction leaves below the no-load one
@@ -683,11 +683,11 @@ fn the_speed_limit_follows_the_measured_bus_voltage() {
         w <= f64::from(low) + 2.0 && w > 0.85 * f64::from(low),
         "{w} rad/s"
     );
-    sim.handle(&HostMsg::SetSpeed { omega_ref: 200.0 });
-    let reply: BoardMsg = control::frame::decode_frame(&sim.take_output()).unwrap();
+    emu.handle(&HostMsg::SetSpeed { omega_ref: 200.0 });
+    let reply: BoardMsg = control::frame::decode_frame(&emu.take_output()).unwrap();
     assert_eq!(reply, BoardMsg::Nack(control::frame::Nack::OutOfRange));
-    sim.handle(&HostMsg::Identify);
-    let id: BoardMsg = control::frame::decode_frame(&sim.take_output()).unwrap();
+    emu.handle(&HostMsg::Identify);
+    let id: BoardMsg = control::frame::decode_frame(&emu.take_output()).unwrap();
     assert!(
         matches!(id, BoardMsg::Identity { speed_max, .. } if (speed_max - low).abs() < 0.1),
         "{id:?}"
@@ -695,8 +695,8 @@ fn the_speed_limit_follows_the_measured_bus_voltage() {
 }
 
 /// The board's replies since the last call.
-fn replies(sim: &mut EmulatedBoard) -> Vec<BoardMsg> {
-    sim.take_output()
+fn replies(emu: &mut EmulatedBoard) -> Vec<BoardMsg> {
+    emu.take_output()
         .split_inclusive(|&b| b == 0)
         .map(|f| control::frame::decode_frame(f).unwrap())
         .collect()
@@ -707,17 +707,17 @@ fn without_an_armed_hardware_stop_only_commissioning_runs() {
     use control::frame::{Nack, Warning};
     let co = paper_coefficients(24.0, 30.0);
     for run_without in [false, true] {
-        let mut sim = board_with(&co);
-        sim.set_hardware_stop(false, run_without);
+        let mut emu = board_with(&co);
+        emu.set_hardware_stop(false, run_without);
         assert_eq!(
-            replies(&mut sim),
+            replies(&mut emu),
             [BoardMsg::Warning(Warning::NoHardwareStop)]
         );
         // Every later Identify reports it, not only the boot warning.
-        sim.handle(&HostMsg::Identify);
+        emu.handle(&HostMsg::Identify);
         assert!(
             matches!(
-                replies(&mut sim)[..],
+                replies(&mut emu)[..],
                 [BoardMsg::Identity {
                     hw_stop_armed: false,
                     ..
@@ -730,19 +730,19 @@ fn without_an_armed_hardware_stop_only_commissioning_runs() {
         } else {
             BoardMsg::Nack(Nack::NoHardwareStop)
         };
-        sim.handle(&HostMsg::StartExperiment {
+        emu.handle(&HostMsg::StartExperiment {
             signal: Excitation::A,
             duration_s: 1.0,
         });
-        assert_eq!(replies(&mut sim), std::slice::from_ref(&want), "experiment");
-        sim.handle(&HostMsg::Stop);
-        replies(&mut sim);
-        sim.handle(&HostMsg::SetMode { mode: Mode::Speed });
-        assert_eq!(replies(&mut sim), [want], "speed");
-        sim.handle(&HostMsg::Stop);
-        replies(&mut sim);
-        sim.handle(&HostMsg::Commission);
-        assert_eq!(replies(&mut sim), [BoardMsg::Ack], "commissioning");
+        assert_eq!(replies(&mut emu), std::slice::from_ref(&want), "experiment");
+        emu.handle(&HostMsg::Stop);
+        replies(&mut emu);
+        emu.handle(&HostMsg::SetMode { mode: Mode::Speed });
+        assert_eq!(replies(&mut emu), [want], "speed");
+        emu.handle(&HostMsg::Stop);
+        replies(&mut emu);
+        emu.handle(&HostMsg::Commission);
+        assert_eq!(replies(&mut emu), [BoardMsg::Ack], "commissioning");
     }
 }
 
@@ -755,14 +755,14 @@ fn dead_time_drop() -> f64 {
 }
 
 /// Runs commissioning to its end (at most `n` periods); returns the true peak current [A].
-fn commission(sim: &mut EmulatedBoard, n: usize) -> f64 {
-    replies(sim);
-    sim.handle(&HostMsg::Commission);
+fn commission(emu: &mut EmulatedBoard, n: usize) -> f64 {
+    replies(emu);
+    emu.handle(&HostMsg::Commission);
     let mut peak = 0.0f64;
     for _ in 0..n {
-        sim.tick();
-        peak = peak.max(sim.hardware().peak_current());
-        if sim.board().mode() == Mode::Idle {
+        emu.tick();
+        peak = peak.max(emu.hardware().peak_current());
+        if emu.board().mode() == Mode::Idle {
             break;
         }
     }
@@ -781,10 +781,10 @@ fn commissioning_holds_its_current_on_a_winding_far_below_the_blobs_r() {
         plant.effects.push(Effect::Deadtime {
             vd: dead_time_drop(),
         });
-        let mut sim = EmulatedBoard::new(plant, Wiring::default(), RamFlash::new(None)).unwrap();
-        let i_comm = f64::from(sim.board().commission_current());
-        let peak = commission(&mut sim, 600);
-        let co = sim.coefficients().clone();
+        let mut emu = EmulatedBoard::new(plant, Wiring::default(), RamFlash::new(None)).unwrap();
+        let i_comm = f64::from(emu.board().commission_current());
+        let peak = commission(&mut emu, 600);
+        let co = emu.coefficients().clone();
         let r = f64::from(co.motor.r);
         eprintln!("{r_true} Ω winding: commissioning peak {peak:.2} A (its limit {i_comm:.1} A), R {r:.4} Ω");
         assert!(co.commission.is_some(), "{r_true} Ω: commissioning failed");
@@ -807,16 +807,16 @@ fn a_current_sense_that_sees_no_current_fails_commissioning_and_keeps_the_blob()
     for noise in [0.0, 0.05] {
         let mut plant = EmulatorConfig::paper();
         plant.current_noise = noise;
-        let mut slots = control::slots::Slots::new(RamFlash::new(None), 0, PAGE as u32).unwrap();
+        let mut slots = RamFlash::new(None).into_slots().unwrap();
         slots
             .store(&motorid::board::coeffs::encode(&co).unwrap())
             .unwrap();
-        let mut sim = EmulatedBoard::new(plant, Wiring::default(), slots.into_inner()).unwrap();
-        sim.hardware_mut().set_current_sense_gain(0.0);
-        let seq = sim.coeff_seq();
-        let peak = commission(&mut sim, 600);
-        sim.handle(&HostMsg::ReadCommission);
-        let out = replies(&mut sim);
+        let mut emu = EmulatedBoard::new(plant, Wiring::default(), slots.into_inner()).unwrap();
+        emu.hardware_mut().set_current_sense_gain(0.0);
+        let seq = emu.coeff_seq();
+        let peak = commission(&mut emu, 600);
+        emu.handle(&HostMsg::ReadCommission);
+        let out = replies(&mut emu);
         eprintln!("dead sense, noise {noise} A: {out:?}, peak {peak:.2} A");
         assert!(
             out.iter().any(|m| matches!(
@@ -828,8 +828,8 @@ fn a_current_sense_that_sees_no_current_fails_commissioning_and_keeps_the_blob()
             )),
             "noise {noise}: {out:?}"
         );
-        assert_eq!(sim.coeff_seq(), seq, "noise {noise}: stored");
-        assert_eq!(sim.coefficients(), &co, "noise {noise}");
+        assert_eq!(emu.coeff_seq(), seq, "noise {noise}: stored");
+        assert_eq!(emu.coefficients(), &co, "noise {noise}");
     }
 }
 
@@ -844,26 +844,26 @@ fn commissioning_measures_r_and_its_default_motor_allows_no_speed_mode() {
         vd: dead_time_drop(),
     });
     let r_true = plant.motor.r;
-    let mut sim = EmulatedBoard::new(plant, Wiring::default(), RamFlash::new(None)).unwrap();
-    replies(&mut sim);
-    sim.handle(&HostMsg::Commission);
+    let mut emu = EmulatedBoard::new(plant, Wiring::default(), RamFlash::new(None)).unwrap();
+    replies(&mut emu);
+    emu.handle(&HostMsg::Commission);
     for _ in 0..600 {
-        sim.tick();
-        if sim.coeff_seq() != 0 {
+        emu.tick();
+        if emu.coeff_seq() != 0 {
             break;
         }
     }
-    assert_ne!(sim.coeff_seq(), 0, "commissioning did not store");
-    let co = sim.coefficients().clone();
+    assert_ne!(emu.coeff_seq(), 0, "commissioning did not store");
+    let co = emu.coefficients().clone();
     assert!(!co.motor_identified);
     let r = f64::from(co.motor.r);
     eprintln!("commissioning measured R = {r:.4} Ω (true {r_true:.4} Ω)");
     // 10 %, as above.
     assert!((r - r_true).abs() < 0.1 * r_true, "R {r} vs {r_true}");
-    replies(&mut sim);
-    sim.handle(&HostMsg::Identify);
+    replies(&mut emu);
+    emu.handle(&HostMsg::Identify);
     assert!(matches!(
-        replies(&mut sim)[..],
+        replies(&mut emu)[..],
         [BoardMsg::Identity {
             motor_identified: false,
             ..
@@ -871,18 +871,18 @@ fn commissioning_measures_r_and_its_default_motor_allows_no_speed_mode() {
     ));
     // Speed mode is refused on the default constants; a sized experiment runs, and its
     // current window uses the measured R.
-    sim.handle(&HostMsg::SetSpeed { omega_ref: 50.0 });
-    sim.handle(&HostMsg::SetMode { mode: Mode::Speed });
+    emu.handle(&HostMsg::SetSpeed { omega_ref: 50.0 });
+    emu.handle(&HostMsg::SetMode { mode: Mode::Speed });
     assert_eq!(
-        replies(&mut sim),
+        replies(&mut emu),
         [BoardMsg::Ack, BoardMsg::Nack(Nack::MotorNotIdentified)]
     );
-    sim.handle(&HostMsg::StartExperiment {
+    emu.handle(&HostMsg::StartExperiment {
         signal: Excitation::Steady { volts: 10.0 },
         duration_s: 1.0,
     });
-    assert_eq!(replies(&mut sim), [BoardMsg::Ack]);
-    let (p, fault) = run(&mut sim, 80);
+    assert_eq!(replies(&mut emu), [BoardMsg::Ack]);
+    let (p, fault) = run(&mut emu, 80);
     assert_eq!(fault, None);
     let lim = i_limit(&co);
     let peak = peak_current(&p);
@@ -897,7 +897,7 @@ fn an_inverted_current_sense_without_commissioning_stops_near_the_current_limit(
     // model's window alone and stops with a current-sense fault within a few periods: the
     // true current never goes much beyond the standing limit, let alone the trip.
     let co = paper_coefficients(24.0, 10.0);
-    let mut slots = control::slots::Slots::new(RamFlash::new(None), 0, PAGE as u32).unwrap();
+    let mut slots = RamFlash::new(None).into_slots().unwrap();
     slots
         .store(&motorid::board::coeffs::encode(&co).unwrap())
         .unwrap();
@@ -905,8 +905,8 @@ fn an_inverted_current_sense_without_commissioning_stops_near_the_current_limit(
         current_inverted: true,
         ..Wiring::default()
     };
-    let mut sim = EmulatedBoard::new(EmulatorConfig::paper(), wiring, slots.into_inner()).unwrap();
-    let (p, fault) = speed_run(&mut sim, 100.0, 20);
+    let mut emu = EmulatedBoard::new(EmulatorConfig::paper(), wiring, slots.into_inner()).unwrap();
+    let (p, fault) = speed_run(&mut emu, 100.0, 20);
     let peak = peak_current(&p);
     let lim = i_limit(&co);
     let first = p
@@ -926,16 +926,16 @@ fn an_inverted_current_sense_without_commissioning_stops_near_the_current_limit(
 
     // An open-loop experiment from rest (a steady 10 V, far above the 1.7 V that drive the
     // limit at standstill) goes through the same window: the same stop.
-    let mut slots = control::slots::Slots::new(RamFlash::new(None), 0, PAGE as u32).unwrap();
+    let mut slots = RamFlash::new(None).into_slots().unwrap();
     slots
         .store(&motorid::board::coeffs::encode(&co).unwrap())
         .unwrap();
-    let mut sim = EmulatedBoard::new(EmulatorConfig::paper(), wiring, slots.into_inner()).unwrap();
-    sim.handle(&HostMsg::StartExperiment {
+    let mut emu = EmulatedBoard::new(EmulatorConfig::paper(), wiring, slots.into_inner()).unwrap();
+    emu.handle(&HostMsg::StartExperiment {
         signal: Excitation::Steady { volts: 10.0 },
         duration_s: 1.0,
     });
-    let (p, fault) = run(&mut sim, 20);
+    let (p, fault) = run(&mut emu, 20);
     let peak = peak_current(&p);
     eprintln!("inverted sense, steady 10 V: fault {fault:?}, peak {peak:.2} A");
     assert_eq!(fault, Some(Fault::CurrentSense), "peak {peak} A");
@@ -945,20 +945,20 @@ fn an_inverted_current_sense_without_commissioning_stops_near_the_current_limit(
 #[test]
 fn a_speed_asked_during_an_experiment_is_dropped_when_it_ends() {
     let co = paper_coefficients(24.0, 30.0);
-    let mut sim = board_with(&co);
-    sim.handle(&HostMsg::StartExperiment {
+    let mut emu = board_with(&co);
+    emu.handle(&HostMsg::StartExperiment {
         signal: Excitation::Steady { volts: 0.0 },
         duration_s: 0.24,
     });
-    sim.handle(&HostMsg::SetSpeed { omega_ref: 150.0 });
-    let (_, fault) = run(&mut sim, 40);
+    emu.handle(&HostMsg::SetSpeed { omega_ref: 150.0 });
+    let (_, fault) = run(&mut emu, 40);
     assert_eq!(fault, None);
     // The experiment ended by its duration; a speed run now starts from a zero target.
-    sim.handle(&HostMsg::SetMode { mode: Mode::Speed });
-    let (p, fault) = run(&mut sim, 100);
+    emu.handle(&HostMsg::SetMode { mode: Mode::Speed });
+    let (p, fault) = run(&mut emu, 100);
     assert_eq!(fault, None);
     let top = p.iter().map(|x| x.omega.abs()).fold(0.0, f64::max);
     // The 150 rad/s target would show at once; 2 rad/s is a creep from the zero target.
     assert!(top < 2.0, "{top} rad/s");
-    assert_eq!(sim.board().speed_reference(), 0.0);
+    assert_eq!(emu.board().speed_reference(), 0.0);
 }

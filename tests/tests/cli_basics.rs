@@ -1,5 +1,5 @@
 //! The command line as a user first meets it.
-use tests::motorid;
+use e2e::motorid;
 
 #[test]
 fn every_subcommand_has_help() {

@@ -1,6 +1,6 @@
 //! `motorid compare --json` prints exactly the documented object, and the fit percentages
 //! behave (the true model scores higher than a detuned one).
-use tests::motorid;
+use e2e::motorid;
 
 #[test]
 fn json_has_exactly_the_documented_shape() {

@@ -1,6 +1,6 @@
 //! `motorid demo` as a user runs it: the hidden effect is named and found, the validation
 //! error falls, and the report is written.
-use tests::motorid;
+use e2e::motorid;
 
 /// The fit percentage after `key` (`x`, `xdot`, `i`) on a demo step line.
 fn fit_of(line: &str, key: &str) -> f64 {

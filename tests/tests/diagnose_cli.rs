@@ -1,6 +1,6 @@
 //! The whole loop through the command line: simulate, fit, diagnose --json, fit --add
 //! the printed spec, compare --report.
-use tests::motorid;
+use e2e::motorid;
 
 fn ok(out: &std::process::Output) -> String {
     assert!(

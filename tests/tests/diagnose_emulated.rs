@@ -4,6 +4,13 @@
 //!
 //! The model structure is the emulator's own LuGre friction (the paper's values): what a
 //! perfect LuGre fit would have. Signals are 60 s of the paper's fitting signal `a`.
+//!
+//! Tolerances on a size: `diagnose` estimates it with the model's parameters held as given,
+//! as the start `fit --add` refits every parameter from, so a size is asked to within 20-30 %
+//! (a start of the right size, not a fit). That is far outside the estimates' own scatter:
+//! over seeds 1-8 each lands within 2 % of the truth, the current offset 4-7 % high, and the
+//! Stribeck level within 14 % over seeds 1-24. A parameter chosen from a grid (the presliding
+//! stiffness, the cogging harmonic) is asked to within one step of its grid.
 use control::effects::{Effect, EffectKind};
 use motorid::diagnose::{diagnose, Diagnosis, Options, Structure};
 use motorid::effect_spec::EffectSpec;
@@ -45,6 +52,7 @@ fn correct_model_gets_no_finding() {
     }
 }
 
+/// `spec` hidden, found first, with its `key` within `tol` of `truth` (tolerances: module doc).
 fn ranked_first(spec: &str, key: &str, truth: f64, tol: f64) {
     let kind = EffectSpec::parse(spec).unwrap().kind;
     let d = run(&hidden(&[spec], 1));
@@ -175,6 +183,9 @@ fn linear_model_lacks_coulomb() {
             .first()
             .unwrap_or_else(|| panic!("seed {seed}: nothing found"));
         assert_eq!(top.name, "coulomb", "seed {seed}: {:?}", names(&d));
+        // The model lacks the Stribeck excess too, which a one-term Coulomb estimate takes up
+        // in part: anything from half the Coulomb level to twice Coulomb plus Stribeck is the
+        // right size (seeds 1-8: 0.0806-0.0815 N·m).
         let fc = EffectSpec::parse(&top.spec).unwrap().get("fc");
         assert!(
             fc > 0.5 * p.alpha0 && fc < 2.0 * (p.alpha0 + p.alpha1),
@@ -288,7 +299,9 @@ fn top_spec(d: &Diagnosis, name: &str, what: &str) -> EffectSpec {
 /// Presliding as a geared axis shows it at the rotor (the `presliding` spec's defaults,
 /// σ0 = 0.4 N·m/rad: a breakaway deflection of 2.6 Hall steps). A static friction model (the
 /// paper's Coulomb, Stribeck and viscous friction, no bristle state) is told it lacks
-/// presliding, with a stiffness within a factor 2.
+/// presliding, with a stiffness within a factor 2: one step of the deflection grid
+/// (`PRESLIDING_DEFLECTION_GRID`, 2, 4 and 8 Hall steps), which puts the true 2.6 steps at
+/// 2 steps (σ0 = 0.51).
 #[test]
 fn visible_presliding_is_ranked_first_against_static_friction() {
     let p = control::lugre::LugreParams::<f64>::paper();
@@ -312,7 +325,7 @@ fn visible_presliding_is_ranked_first_against_static_friction() {
 /// N·m) is too small to matter on signal a: without it, Stribeck explains 1.8 % of the torque
 /// residual (p = 0.01, seed 1) and nothing is named. Here the base law has no Stribeck and the
 /// `stribeck` spec's default (0.04 N·m, falling off at 5 rad/s) is hidden on top: named first,
-/// its size within 30 %.
+/// its size within 30 % (module doc).
 #[test]
 fn stribeck_is_ranked_first_against_lugre_without_it() {
     let p = control::lugre::LugreParams::<f64>::paper();
@@ -333,7 +346,8 @@ fn stribeck_is_ranked_first_against_lugre_without_it() {
     }
 }
 
-/// Viscous friction missing from the paper's LuGre model: named first, b within 30 %.
+/// Viscous friction missing from the paper's LuGre model: named first, b within 30 % (module
+/// doc; seeds 1-8 land within 1 %).
 #[test]
 fn viscous_is_ranked_first_against_lugre_without_it() {
     let p = control::lugre::LugreParams::<f64>::paper();
@@ -359,7 +373,8 @@ fn viscous_is_ranked_first_against_lugre_without_it() {
 /// Steps down that keep the direction (about a quarter of the steps) brake away from any
 /// reversal, where `diagnose`'s braking column lives. There the hidden effect is named first
 /// and its size estimated, and a correct model gets no load friction.
-/// Size: the default μ (0.2, see effect_spec.rs). Length: 180 s. The braking windows are
+/// Size: the default μ (0.2, see effect_spec.rs), asked within 40 %: a start for `fit --add`
+/// (module doc) read from the noisiest windows of the log. Length: 180 s. The braking windows are
 /// also the noisiest (each step puts the Hall angle's rounding error into them), and the
 /// entry test counts each held step as one cluster of evidence: 60 s (about 33 steps kept)
 /// give T² ≈ 10 (p ≈ 0.003, seed 1), below the findings' level; 180 s give p < 1e-8.

@@ -1,16 +1,16 @@
 //! How often `diagnose` calls a correct model inadequate, per signal and plant: the paper's
 //! signals a–d, 60 s each, seeds 1..=N, on the built-in emulator and on the independent plant
-//! (`tests::false_alarms`). Prints one line per false alarm (failed checks, findings,
+//! (`e2e::false_alarms`). Prints one line per false alarm (failed checks, findings,
 //! carriers) and a count per case. A log on which an equation has too few usable windows, with
 //! nothing else found, is "cannot judge" (counted apart: no structure is claimed).
 //!
-//! `cargo test --release -p tests --test diagnose_false_alarm_scan -- --ignored --nocapture`
+//! `cargo test --release -p e2e --test diagnose_false_alarm_scan -- --ignored --nocapture`
 //! Environment: `SEEDS` (20), `SIGS` (`abcd`), `PLANTS` (`eo`: emulator, other plant),
 //! `STEADY=1` (`Options::steady_angle`), and for the other plant `HALL` (its angle step in
 //! rad; 1e-7 for an almost perfect sensor) and `INOISE` (its current noise in A).
+use e2e::false_alarms::{cannot_judge, correct_model, Maker};
 use motorid::diagnose::{Diagnosis, Options};
 use motorid::emulator::SignalKind;
-use tests::false_alarms::{cannot_judge, correct_model, Maker};
 
 fn env<T: std::str::FromStr>(name: &str) -> Option<T> {
     std::env::var(name).ok().and_then(|s| s.parse().ok())

@@ -1,7 +1,7 @@
 //! `motorid emulate`: the compensation experiment on the emulated board.
-use tests::motorid;
+use e2e::motorid;
 
-const LUGRE: &str = tests::PAPER_LUGRE_MODEL;
+const LUGRE: &str = e2e::PAPER_LUGRE_MODEL;
 
 fn json(out: &std::process::Output) -> serde_json::Value {
     assert!(

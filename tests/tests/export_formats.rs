@@ -1,8 +1,8 @@
 //! `motorid export --format json|c-header`: the coefficients for firmware not written in
 //! Rust read back into the very numbers of the blob, and the C header compiles.
 use control::blob::{self, Coefficients};
+use e2e::{motorid, PAPER_LUGRE_MODEL};
 use std::path::Path;
-use tests::{motorid, PAPER_LUGRE_MODEL};
 
 fn model() -> String {
     format!(

@@ -1,7 +1,7 @@
 //! `motorid export` → `motorid inspect`: the blob round-trips the model, and damaged blobs
 //! are refused with one `error:` line naming the file.
+use e2e::{motorid, PAPER_LUGRE_MODEL};
 use std::path::Path;
-use tests::{motorid, PAPER_LUGRE_MODEL};
 
 /// The paper's LuGre motor with two effects.
 fn model() -> String {

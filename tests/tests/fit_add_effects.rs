@@ -19,7 +19,7 @@
 //!
 //! The look-alike pairs the first round reported are printed beside each row; a row passes
 //! only when the hidden effect itself was added.
-//! Prints the table of before / after / truth fits (`cargo test -p tests --test
+//! Prints the table of before / after / truth fits (`cargo test -p e2e --test
 //! fit_add_effects -- --nocapture`; the ignored full table takes `FIT_ADD_EFFECTS=cogging,deadtime`
 //! to run only some rows, and `FIT_ADD_EFFECTS_SEED=2` another draw of the emulator).
 use control::effects::EffectKind;
@@ -167,7 +167,7 @@ fn case(effect: EffectKind) -> Row {
 }
 
 #[test]
-#[ignore = "slow: about 5 min on 2 cores in release (20 fits); run with `cargo test --release -p tests \
+#[ignore = "slow: about 5 min on 2 cores in release (20 fits); run with `cargo test --release -p e2e \
             --test fit_add_effects -- --ignored --nocapture`"]
 fn the_loop_adds_each_effect_and_closes_half_the_gap_to_the_truth() {
     // Presliding only moves σ0/σ1 of the LuGre law, and viscous only α2: the base LuGre

@@ -5,9 +5,9 @@
 //!
 //! `compare` scores each model on the fresh log; neither fit saw it (no `--validate`, so no
 //! choice was made on it either).
+use e2e::{motorid, stdout_of_success as ok};
 use motorid::model::Model;
 use std::path::Path;
-use tests::{motorid, stdout_of_success as ok};
 
 /// Simulate `signal` for 90 s with `effect` into `name`.
 fn simulate(d: &Path, signal: &str, seed: &str, effect: &str, name: &str) {

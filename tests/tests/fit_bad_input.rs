@@ -1,7 +1,7 @@
 //! Bad input to `fit` and `compare`: one `error:` line naming the file and the line or field,
 //! a non-zero exit, and no output file.
+use e2e::motorid;
 use std::path::Path;
-use tests::motorid;
 
 fn fails_with(dir: &Path, args: &[&str], want: &[&str]) {
     let out = motorid(dir, args);

@@ -1,9 +1,9 @@
 //! `fit --fix KEY=VALUE` and `--bound KEY=LO..HI`: a known parameter is held or kept in its
 //! range, the model file says so, and a key the fit does not have or an empty range is one
 //! clear error. The standard errors carry the residual's autocorrelation.
+use e2e::motorid;
 use serde_json::Value;
 use std::path::Path;
-use tests::motorid;
 
 fn ok(dir: &Path, args: &[&str]) -> String {
     let out = motorid(dir, args);

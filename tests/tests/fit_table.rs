@@ -1,13 +1,13 @@
 //! `fit --add table:var=theta,bins=N` on data from a plant our emulator did not make
-//! (`tests::other_plant`): a load torque shaped like a sawtooth over each revolution, which no
+//! (`e2e::other_plant`): a load torque shaped like a sawtooth over each revolution, which no
 //! named effect matches (position_load is its first harmonic only). The table's node torques
 //! are estimated with the model (the spec as `diagnose` offers it), written to MODEL.toml, and the free-run fit on a held-out log
 //! (another excitation and seed) rises; `compare`, `diagnose` and `export` take the model.
+use e2e::motorid;
+use e2e::other_plant::{Extra, OtherPlant};
 use motorid::emulator::{signal, SignalKind};
 use serde_json::Value;
 use std::path::Path;
-use tests::motorid;
-use tests::other_plant::{Extra, OtherPlant};
 
 const TS: f64 = 0.012;
 /// Sawtooth load amplitude [N·m], about the plant's Coulomb friction.

@@ -1,12 +1,12 @@
 //! Hostile input: numbers that would size allocations and loops, NaN/inf/absurd
 //! parameters, outputs that are inputs, malformed flags. Every case must fail within a time
 //! cap with one `error:` line naming the file or flag, and leave the directory as it was.
+use e2e::{motorid_bin, PAPER_LUGRE_MODEL};
 use std::collections::BTreeMap;
 use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
-use tests::{motorid_bin, PAPER_LUGRE_MODEL};
 
 /// Kill the child after this long: a hostile input must not make a command run away.
 const TIME_CAP: Duration = Duration::from_secs(20);

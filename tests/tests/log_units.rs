@@ -1,9 +1,9 @@
 //! Logs in other units and delimiters, as a user brings them: the same data with `t` in ms,
 //! `theta` in degrees and `;` between fields fits to the same model as the SI file, `fit
 //! --json` prints one JSON object, and numbers that do not fit the units draw a `warning:`.
+use e2e::motorid;
 use serde_json::Value;
 use std::path::Path;
-use tests::motorid;
 
 /// A decimal number written by the emulator (no exponent) times 1000, exactly, as text:
 /// `0.036` → `36`, `1.5` → `1500`, `-0.0125` → `-12.5`.

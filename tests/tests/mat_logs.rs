@@ -1,26 +1,13 @@
 //! MATLAB MAT-files as logs: the EMPS benchmark's `.mat` files (../shared/data/EMPS, read in
 //! place) give the same log as its CSV files, and `motorid fit` takes them with `--map`.
+use e2e::motorid;
 use motorid::log::{ColumnMap, MotorLog, Plant};
 use std::path::PathBuf;
-use tests::motorid;
 
-/// The EMPS folder; absent data skips the test with a printed reason, but fails under CI.
+/// The EMPS folder ([`e2e::shared_data`]: absent data skips with a printed reason, but
+/// fails under CI).
 fn emps_dir(test: &str) -> Option<PathBuf> {
-    let d = tests::root()
-        .join("..")
-        .join("shared")
-        .join("data")
-        .join("EMPS");
-    if d.join("DATA_EMPS.mat").is_file() {
-        return Some(d);
-    }
-    assert!(
-        std::env::var_os("CI").is_none(),
-        "{test}: {} is missing under CI",
-        d.join("DATA_EMPS.mat").display()
-    );
-    eprintln!("SKIPPED {test}: {} is not present", d.display());
-    None
+    Some(e2e::shared_data(test)?.join("EMPS"))
 }
 
 #[test]

@@ -1,5 +1,5 @@
 //! `cargo xtask real-data`: writes the figures and the markdown tables of docs/real-data.md.
-use tests::{shared_data, xtask};
+use e2e::{shared_data, xtask};
 
 #[test]
 fn real_data_writes_figures_and_tables() {

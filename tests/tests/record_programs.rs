@@ -2,10 +2,10 @@
 //! programs `fit --model lugre` asks for, played as board runs with voltages relative to the
 //! board's u_max, in one log with a continuous clock; amplitudes above the ratings refused;
 //! a run the board ends early is an error that writes no log.
+use e2e::{motorid, motorid_bin, PAPER_LUGRE_MODEL};
 use std::io::{BufRead, BufReader};
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
-use tests::{motorid, motorid_bin, PAPER_LUGRE_MODEL};
 
 /// The emulated board, killed when dropped.
 struct Board {

@@ -1,6 +1,6 @@
 //! A torque constant that falls with current (`saturation`), through the user's commands:
 //! simulate it on voltage steps, fit it with `fit --add saturation`, take it to the board.
-use tests::{motorid, stdout_of_success as ok};
+use e2e::{motorid, stdout_of_success as ok};
 
 #[test]
 fn fit_add_saturation_recovers_k_and_exports_it() {

@@ -5,9 +5,9 @@
 //! rotary axis in degrees) gives the same findings: the same effects in the same order, the
 //! same Coulomb level (the input, in volts, is not rescaled) and a refit Coulomb friction
 //! that agrees.
+use e2e::{motorid, shared_data};
 use serde_json::Value;
 use std::path::Path;
-use tests::{motorid, shared_data};
 
 /// The EMPS log's columns: time [s], input `vir` [V], motor position `qm` [m].
 struct Emps {

@@ -1,7 +1,7 @@
 //! `motorid simulate` as a user runs it: motor logs, `--truth`, `--help`, bad input.
+use e2e::motorid;
 use motorid::log::{ColumnMap, MotorLog, Plant};
 use std::path::Path;
-use tests::motorid;
 
 fn read(path: &Path) -> MotorLog {
     MotorLog::read(path, &ColumnMap::default(), Plant::Voltage).unwrap()

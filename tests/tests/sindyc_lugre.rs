@@ -3,8 +3,8 @@
 //! The validation fit on the velocity must be within a few points of what the emulator's
 //! true states score against the same measurement, and above the linear model's; the
 //! returned model never diverges, not even on the other signals (c, d).
+use e2e::motorid;
 use std::path::Path;
-use tests::motorid;
 
 fn run(dir: &Path, args: &[&str]) -> String {
     let out = motorid(dir, args);

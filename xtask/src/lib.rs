@@ -1,6 +1,6 @@
 //! Project automation beside the product: the commands that regenerate the result pages of
-//! `docs/` and the code that reads the measured data sets. `motorid` (the `host-tools`
-//! package) stays the generic tool; everything here depends on it, never the other way.
+//! `docs/` and the code that reads the measured data sets. `motorid` (the package in
+//! `host-tools/`) stays the generic tool; everything here depends on it, never the other way.
 //!
 //! | module | what it is |
 //! |---|---|

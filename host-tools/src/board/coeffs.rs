@@ -7,7 +7,7 @@ use control::blob::{self, Coefficients, Estimator, PiGains};
 use control::effects::Effect;
 use control::lugre::LugreParams;
 use control::motor::MotorParams;
-use control::sindy::{SindyModel, SparseEq};
+use control::sindy::{SindyModel, SparseEq, Term};
 
 /// Loop settings `motorid export` writes next to the model (the blob carries them so that the
 /// board and its emulator run the same loop).
@@ -140,6 +140,17 @@ pub fn board_check(model: &Model) -> Result<()> {
                     crate::validate::show(*k)
                 );
             }
+        }
+        if let Some((name, _)) = eqs
+            .iter()
+            .find(|(_, eq)| eq.terms.iter().any(|(t, _)| *t == Term::AbsXdotZ))
+        {
+            bail!(
+                "field 'sindy.{name}': the presliding bristle (term |xdot|*z, from fit --add \
+                 presliding) runs on the host only: the board would compensate the bristle's \
+                 damping from its Hall-step velocity estimate, a negative damping of the speed \
+                 loop at every reversal; fit without --add presliding for the board"
+            );
         }
         for (name, v) in [("sindy.a", sm.a), ("sindy.vs", sm.vs), ("sindy.j", sm.j)] {
             if big(v) {

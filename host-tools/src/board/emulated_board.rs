@@ -44,8 +44,7 @@ impl EmulatedBoard {
     /// without compensation, with a warning, as the firmware does); the motor is connected
     /// as `wiring` says.
     pub fn new(plant: EmulatorConfig, wiring: Wiring, flash: RamFlash) -> Result<EmulatedBoard> {
-        let mut slots = Slots::new(flash, 0, super::emulated_flash::PAGE as u32)
-            .map_err(|e| anyhow!("emulated flash geometry: {e:?}"))?;
+        let mut slots = flash.into_slots()?;
         let loaded = slots
             .load()
             .map_err(|e| anyhow!("emulated flash read: {e:?}"))?;
@@ -59,7 +58,7 @@ impl EmulatedBoard {
         );
         // The emulated stop arms at once; the board learns it as from the firmware's boot.
         board.set_hardware_stop(true, false);
-        let mut sim = EmulatedBoard {
+        let mut emu = EmulatedBoard {
             hw: Hardware::new(plant, wiring)?,
             board,
             slots,
@@ -68,9 +67,9 @@ impl EmulatedBoard {
             out: Vec::new(),
         };
         if none {
-            put(&mut sim.out, BoardMsg::Warning(Warning::NoCoefficients));
+            put(&mut emu.out, BoardMsg::Warning(Warning::NoCoefficients));
         }
-        Ok(sim)
+        Ok(emu)
     }
 
     /// The loaded coefficients.
@@ -186,8 +185,8 @@ mod tests {
         encode_frame(msg, &mut buf).unwrap().to_vec()
     }
 
-    fn replies(sim: &mut EmulatedBoard) -> Vec<BoardMsg> {
-        sim.take_output()
+    fn replies(emu: &mut EmulatedBoard) -> Vec<BoardMsg> {
+        emu.take_output()
             .split_inclusive(|&b| b == 0)
             .map(|f| decode_frame::<BoardMsg>(f).unwrap())
             .collect()
@@ -204,16 +203,47 @@ mod tests {
         m
     }
 
-    #[test]
-    fn upload_with_a_retried_chunk_commits_once_and_is_refused_while_running() {
-        let mut sim = EmulatedBoard::new(
+    /// Sends `blob` through the upload handler (begin, each chunk `sends` times, commit).
+    fn send_blob(emu: &mut EmulatedBoard, blob: &[u8], sends: usize) {
+        emu.receive(&frame(&HostMsg::UploadBegin {
+            total_len: blob.len() as u16,
+            crc: control::blob::CRC32.checksum(blob),
+        }));
+        for (k, c) in blob.chunks(CHUNK_LEN).enumerate() {
+            for _ in 0..sends {
+                emu.receive(&frame(&chunk(k as u16, c)));
+            }
+        }
+        emu.receive(&frame(&HostMsg::UploadCommit));
+    }
+
+    /// The largest `|f(sample)|` of a run.
+    fn peak(samples: &[Sample], f: impl Fn(&Sample) -> f32) -> f32 {
+        samples.iter().map(|s| f(s).abs()).fold(0.0, f32::max)
+    }
+
+    /// The paper motor with its rotor locked (an enormous viscous load).
+    fn locked_rotor() -> EmulatorConfig {
+        let mut plant = EmulatorConfig::paper();
+        plant.extra_load = Some(std::sync::Arc::new(|x| 1.0e4 * x.omega));
+        plant
+    }
+
+    /// A board on the paper motor whose flash holds nothing, its boot output unread.
+    fn empty_board() -> EmulatedBoard {
+        EmulatedBoard::new(
             EmulatorConfig::paper(),
             Wiring::default(),
             RamFlash::new(None),
         )
-        .unwrap();
+        .unwrap()
+    }
+
+    #[test]
+    fn upload_with_a_retried_chunk_commits_once_and_is_refused_while_running() {
+        let mut emu = empty_board();
         assert_eq!(
-            replies(&mut sim),
+            replies(&mut emu),
             [BoardMsg::Warning(Warning::NoCoefficients)]
         );
         let co = Coefficients {
@@ -222,56 +252,34 @@ mod tests {
             ..identified()
         };
         let blob = crate::board::coeffs::encode(&co).unwrap();
-        let crc = control::blob::CRC32.checksum(&blob);
-        sim.receive(&frame(&HostMsg::UploadBegin {
-            total_len: blob.len() as u16,
-            crc,
-        }));
-        for (k, c) in blob.chunks(CHUNK_LEN).enumerate() {
-            sim.receive(&frame(&chunk(k as u16, c)));
-            // A lost ack: the host sends the same chunk again.
-            sim.receive(&frame(&chunk(k as u16, c)));
-        }
-        sim.receive(&frame(&HostMsg::UploadCommit));
-        let r = replies(&mut sim);
+        // Each ack lost: the host sends every chunk again.
+        send_blob(&mut emu, &blob, 2);
+        let r = replies(&mut emu);
         assert_eq!(r.last(), Some(&BoardMsg::Committed { seq: 1 }));
         assert!(!r.iter().any(|m| matches!(m, BoardMsg::Nack(_))), "{r:?}");
-        assert_eq!(sim.coefficients(), &co);
+        assert_eq!(emu.coefficients(), &co);
         // A replayed commit finds no upload.
-        sim.receive(&frame(&HostMsg::UploadCommit));
-        assert_eq!(replies(&mut sim), [BoardMsg::Nack(Nack::NoUpload)]);
+        emu.receive(&frame(&HostMsg::UploadCommit));
+        assert_eq!(replies(&mut emu), [BoardMsg::Nack(Nack::NoUpload)]);
         // Running: samples flow, commits are refused.
-        sim.receive(&frame(&HostMsg::SetMode { mode: Mode::Speed }));
-        sim.tick();
-        sim.tick();
-        let r = replies(&mut sim);
+        emu.receive(&frame(&HostMsg::SetMode { mode: Mode::Speed }));
+        emu.tick();
+        emu.tick();
+        let r = replies(&mut emu);
         assert_eq!(r[0], BoardMsg::Ack);
         assert!(
             matches!(r[2], BoardMsg::Sample(Sample { seq: 1, .. })),
             "{r:?}"
         );
-        sim.receive(&frame(&HostMsg::UploadBegin {
-            total_len: blob.len() as u16,
-            crc,
-        }));
-        sim.receive(&frame(&HostMsg::UploadCommit));
-        let r = replies(&mut sim);
+        send_blob(&mut emu, &blob, 0);
+        let r = replies(&mut emu);
         assert_eq!(r.last(), Some(&BoardMsg::Nack(Nack::Busy)));
     }
 
     /// Upload `co` through the board's own upload handler.
-    fn upload(sim: &mut EmulatedBoard, co: &Coefficients) {
-        let blob = crate::board::coeffs::encode(co).unwrap();
-        let crc = control::blob::CRC32.checksum(&blob);
-        sim.receive(&frame(&HostMsg::UploadBegin {
-            total_len: blob.len() as u16,
-            crc,
-        }));
-        for (k, c) in blob.chunks(CHUNK_LEN).enumerate() {
-            sim.receive(&frame(&chunk(k as u16, c)));
-        }
-        sim.receive(&frame(&HostMsg::UploadCommit));
-        let r = replies(sim);
+    fn upload(emu: &mut EmulatedBoard, co: &Coefficients) {
+        send_blob(emu, &crate::board::coeffs::encode(co).unwrap(), 1);
+        let r = replies(emu);
         assert!(
             matches!(r.last(), Some(BoardMsg::Committed { .. })),
             "{r:?}"
@@ -279,15 +287,15 @@ mod tests {
     }
 
     /// Ticks until a fault (returned with the samples seen) or `n` periods.
-    fn run_until_fault(sim: &mut EmulatedBoard, n: usize) -> (Option<Fault>, Vec<Sample>) {
+    fn run_until_fault(emu: &mut EmulatedBoard, n: usize) -> (Option<Fault>, Vec<Sample>) {
         let mut samples = Vec::new();
         for k in 0..n {
             if k.is_multiple_of(50) {
                 // As a listening host does: a sign of life now and then.
-                sim.receive(&frame(&HostMsg::Heartbeat));
+                emu.receive(&frame(&HostMsg::Heartbeat));
             }
-            sim.tick();
-            for m in replies(sim) {
+            emu.tick();
+            for m in replies(emu) {
                 match m {
                     BoardMsg::Sample(s) => samples.push(s),
                     BoardMsg::Fault(f) => return (Some(f), samples),
@@ -312,61 +320,54 @@ mod tests {
         }
     }
 
-    fn sim_with(plant: EmulatorConfig, co: Option<&Coefficients>) -> EmulatedBoard {
-        let mut sim = EmulatedBoard::new(plant, Wiring::default(), RamFlash::new(None)).unwrap();
-        replies(&mut sim);
+    fn board_with(plant: EmulatorConfig, co: Option<&Coefficients>) -> EmulatedBoard {
+        let mut emu = EmulatedBoard::new(plant, Wiring::default(), RamFlash::new(None)).unwrap();
+        replies(&mut emu);
         if let Some(co) = co {
-            upload(&mut sim, co);
+            upload(&mut emu, co);
         }
-        sim
+        emu
     }
 
     #[test]
     fn speed_and_experiment_need_a_valid_blob_and_sane_parameters() {
-        let mut sim = sim_with(EmulatorConfig::paper(), None);
-        sim.receive(&frame(&HostMsg::SetMode { mode: Mode::Speed }));
-        sim.receive(&frame(&HostMsg::StartExperiment {
+        let mut emu = board_with(EmulatorConfig::paper(), None);
+        emu.receive(&frame(&HostMsg::SetMode { mode: Mode::Speed }));
+        emu.receive(&frame(&HostMsg::StartExperiment {
             signal: Excitation::A,
             duration_s: 1.0,
         }));
         assert_eq!(
-            replies(&mut sim),
+            replies(&mut emu),
             [
                 BoardMsg::Nack(Nack::NoCoefficients),
                 BoardMsg::Nack(Nack::NoCoefficients)
             ]
         );
-        assert!(!sim.is_running());
+        assert!(!emu.is_running());
         // A damaged upload is refused and changes nothing.
         let blob = crate::board::coeffs::encode(&identified()).unwrap();
         let mut bad = blob.clone();
         bad[20] ^= 0x40;
-        sim.receive(&frame(&HostMsg::UploadBegin {
-            total_len: bad.len() as u16,
-            crc: control::blob::CRC32.checksum(&bad),
-        }));
-        for (k, c) in bad.chunks(CHUNK_LEN).enumerate() {
-            sim.receive(&frame(&chunk(k as u16, c)));
-        }
-        sim.receive(&frame(&HostMsg::UploadCommit));
+        send_blob(&mut emu, &bad, 1);
         assert_eq!(
-            replies(&mut sim).last(),
+            replies(&mut emu).last(),
             Some(&BoardMsg::Nack(Nack::BadBlob))
         );
-        sim.receive(&frame(&HostMsg::SetMode { mode: Mode::Speed }));
-        assert_eq!(replies(&mut sim), [BoardMsg::Nack(Nack::NoCoefficients)]);
+        emu.receive(&frame(&HostMsg::SetMode { mode: Mode::Speed }));
+        assert_eq!(replies(&mut emu), [BoardMsg::Nack(Nack::NoCoefficients)]);
         // Identify and commissioning stay allowed.
-        sim.receive(&frame(&HostMsg::Identify));
+        emu.receive(&frame(&HostMsg::Identify));
         assert!(matches!(
-            replies(&mut sim)[0],
+            replies(&mut emu)[0],
             BoardMsg::Identity { coeff_seq: 0, .. }
         ));
-        sim.receive(&frame(&HostMsg::Commission));
-        assert_eq!(replies(&mut sim), [BoardMsg::Ack]);
-        sim.receive(&frame(&HostMsg::Stop));
-        replies(&mut sim);
+        emu.receive(&frame(&HostMsg::Commission));
+        assert_eq!(replies(&mut emu), [BoardMsg::Ack]);
+        emu.receive(&frame(&HostMsg::Stop));
+        replies(&mut emu);
 
-        upload(&mut sim, &identified());
+        upload(&mut emu, &identified());
         for (signal, duration_s) in [
             (Excitation::A, f32::NAN),
             (Excitation::A, f32::INFINITY),
@@ -376,23 +377,23 @@ mod tests {
             (Excitation::Steady { volts: 100.0 }, 1.0),
             (Excitation::Steady { volts: f32::NAN }, 1.0),
         ] {
-            sim.receive(&frame(&HostMsg::StartExperiment { signal, duration_s }));
+            emu.receive(&frame(&HostMsg::StartExperiment { signal, duration_s }));
             assert_eq!(
-                replies(&mut sim),
+                replies(&mut emu),
                 [BoardMsg::Nack(Nack::OutOfRange)],
                 "{signal:?} {duration_s}"
             );
         }
         // Amplitudes are relative to u_max and R·i_max, the smaller: signal d steps up to
         // 5/12·12 V = 5 V by the default u_max, 0.35·0.216 Ω·30 A = 2.27 V by the current.
-        sim.receive(&frame(&HostMsg::StartExperiment {
+        emu.receive(&frame(&HostMsg::StartExperiment {
             signal: Excitation::D,
             duration_s: 6.0,
         }));
-        let (f, samples) = run_until_fault(&mut sim, 600);
+        let (f, samples) = run_until_fault(&mut emu, 600);
         assert_eq!(f, None);
         assert_eq!(samples.len(), 500);
-        let peak = samples.iter().map(|s| s.u.abs()).fold(0.0, f32::max);
+        let peak = peak(&samples, |s| s.u);
         let by_current = 0.35 * co_default_r_i_max();
         assert!(peak > 1.0 && peak <= by_current + 1e-4, "peak {peak}");
     }
@@ -401,16 +402,16 @@ mod tests {
     fn u_max_from_the_blob_bounds_the_speed_loop() {
         let mut co = identified();
         co.pi.u_max = 3.0;
-        let mut sim = sim_with(EmulatorConfig::paper(), Some(&co));
+        let mut emu = board_with(EmulatorConfig::paper(), Some(&co));
         // The speed limit is the no-load speed at u_max (42 rad/s): friction keeps the motor
         // below it, and the loop at its voltage limit.
-        let top = sim.board().speed_limit();
+        let top = emu.board().speed_limit();
         assert!((top - 3.0 / co.motor.kb).abs() < 1e-3, "{top}");
-        sim.receive(&frame(&HostMsg::SetSpeed { omega_ref: top }));
-        sim.receive(&frame(&HostMsg::SetMode { mode: Mode::Speed }));
-        let (f, samples) = run_until_fault(&mut sim, 150);
+        emu.receive(&frame(&HostMsg::SetSpeed { omega_ref: top }));
+        emu.receive(&frame(&HostMsg::SetMode { mode: Mode::Speed }));
+        let (f, samples) = run_until_fault(&mut emu, 150);
         assert_eq!(f, None);
-        let peak = samples.iter().map(|s| s.u.abs()).fold(0.0, f32::max);
+        let peak = peak(&samples, |s| s.u);
         assert!((peak - 3.0).abs() < 1e-6, "peak {peak}");
     }
 
@@ -422,46 +423,45 @@ mod tests {
         let mut co = identified();
         co.limits.i_max = 5.0;
         co.motor.r *= 5.0;
-        let mut sim = sim_with(EmulatorConfig::paper(), Some(&co));
-        sim.receive(&frame(&HostMsg::StartExperiment {
+        let mut emu = board_with(EmulatorConfig::paper(), Some(&co));
+        emu.receive(&frame(&HostMsg::StartExperiment {
             signal: Excitation::Steady { volts: 6.0 },
             duration_s: 2.0,
         }));
-        replies(&mut sim);
-        let (f, _) = run_until_fault(&mut sim, 50);
+        replies(&mut emu);
+        let (f, _) = run_until_fault(&mut emu, 50);
         assert_eq!(f, Some(Fault::OverCurrent));
-        assert!(!sim.is_running());
+        assert!(!emu.is_running());
         // Latched: no start until cleared.
-        sim.receive(&frame(&HostMsg::SetMode { mode: Mode::Speed }));
-        assert_eq!(replies(&mut sim), [BoardMsg::Nack(Nack::Faulted)]);
+        emu.receive(&frame(&HostMsg::SetMode { mode: Mode::Speed }));
+        assert_eq!(replies(&mut emu), [BoardMsg::Nack(Nack::Faulted)]);
         // The bridge is off: the current dies away.
         for _ in 0..20 {
-            sim.tick();
+            emu.tick();
         }
-        assert!(sim.hardware().plant().truth().i.abs() < 1e-3);
-        sim.receive(&frame(&HostMsg::ClearFault));
-        sim.receive(&frame(&HostMsg::SetMode { mode: Mode::Speed }));
-        assert_eq!(replies(&mut sim), [BoardMsg::Ack, BoardMsg::Ack]);
+        assert!(emu.hardware().plant().truth().i.abs() < 1e-3);
+        emu.receive(&frame(&HostMsg::ClearFault));
+        emu.receive(&frame(&HostMsg::SetMode { mode: Mode::Speed }));
+        assert_eq!(replies(&mut emu), [BoardMsg::Ack, BoardMsg::Ack]);
     }
 
     #[test]
     fn a_locked_rotor_is_held_at_the_current_limit_then_stops_as_a_stall() {
         // A locked rotor and a voltage ramp of 8 V/s: 44 A after 1.2 s without a limit.
-        let mut plant = EmulatorConfig::paper();
-        plant.extra_load = Some(std::sync::Arc::new(|x| 1.0e4 * x.omega));
+        let plant = locked_rotor();
         let mut co = identified();
         co.pi.u_max = 20.0;
         co.limits.i_max = 20.0;
-        let mut sim = sim_with(plant, Some(&co));
-        sim.receive(&frame(&HostMsg::StartExperiment {
+        let mut emu = board_with(plant, Some(&co));
+        emu.receive(&frame(&HostMsg::StartExperiment {
             signal: Excitation::Ramp { volts_per_s: 8.0 },
             duration_s: 3.0,
         }));
-        replies(&mut sim);
-        let (f, samples) = run_until_fault(&mut sim, 300);
+        replies(&mut emu);
+        let (f, samples) = run_until_fault(&mut emu, 300);
         assert_eq!(f, Some(Fault::Stall));
         // Held at 0.8·i_max = 16 A, below the 20 A trip, for the stall time.
-        let peak = samples.iter().map(|s| s.i.abs()).fold(0.0, f32::max);
+        let peak = peak(&samples, |s| s.i);
         assert!(peak <= 16.5, "peak {peak} A");
         let last = samples.last().map_or(0.0, |s| s.i);
         assert!((last - 16.0).abs() < 1.0, "last {last} A");
@@ -479,54 +479,51 @@ mod tests {
         // period, before the 12 ms software limit (the widest allowed) can act. The blob
         // says R is ten times the winding's, so the current window lets 12 V through (as a
         // shorted winding would).
-        let mut plant = EmulatorConfig::paper();
-        plant.extra_load = Some(std::sync::Arc::new(|x| 1.0e4 * x.omega));
+        let plant = locked_rotor();
         let mut co = identified();
         co.limits.i_max = control::board::HW_TRIP_A;
         co.motor.r *= 10.0;
-        let mut sim = sim_with(plant, Some(&co));
-        sim.receive(&frame(&HostMsg::StartExperiment {
+        let mut emu = board_with(plant, Some(&co));
+        emu.receive(&frame(&HostMsg::StartExperiment {
             signal: Excitation::Steady { volts: 12.0 },
             duration_s: 2.0,
         }));
-        replies(&mut sim);
-        let (f, samples) = run_until_fault(&mut sim, 10);
+        replies(&mut emu);
+        let (f, samples) = run_until_fault(&mut emu, 10);
         assert_eq!(f, Some(Fault::HardwareOverCurrent));
         assert!(samples.len() <= 1, "{} samples", samples.len());
-        assert!(!sim.is_running());
+        assert!(!emu.is_running());
         // Cut within the period: by its end the winding current has died away.
-        let i = sim.hardware().plant().truth().i.abs();
+        let i = emu.hardware().plant().truth().i.abs();
         assert!(i < 1.0, "{i} A after the stop");
         // Held off until cleared: a start is refused, ClearFault re-arms.
-        sim.receive(&frame(&HostMsg::SetMode { mode: Mode::Speed }));
-        assert_eq!(replies(&mut sim), [BoardMsg::Nack(Nack::Faulted)]);
-        sim.receive(&frame(&HostMsg::ClearFault));
-        sim.tick();
-        sim.receive(&frame(&HostMsg::SetMode { mode: Mode::Speed }));
-        assert_eq!(replies(&mut sim), [BoardMsg::Ack, BoardMsg::Ack]);
+        emu.receive(&frame(&HostMsg::SetMode { mode: Mode::Speed }));
+        assert_eq!(replies(&mut emu), [BoardMsg::Nack(Nack::Faulted)]);
+        emu.receive(&frame(&HostMsg::ClearFault));
+        emu.tick();
+        emu.receive(&frame(&HostMsg::SetMode { mode: Mode::Speed }));
+        assert_eq!(replies(&mut emu), [BoardMsg::Ack, BoardMsg::Ack]);
     }
 
     #[test]
     fn a_blocked_rotor_is_a_stall_fault() {
-        let mut plant = EmulatorConfig::paper();
-        // A locked rotor: an enormous viscous load.
-        plant.extra_load = Some(std::sync::Arc::new(|x| 1.0e4 * x.omega));
+        let plant = locked_rotor();
         let mut co = identified();
         co.limits.i_max = control::board::HW_TRIP_A;
-        let mut sim = sim_with(plant, Some(&co));
-        sim.receive(&frame(&HostMsg::StartExperiment {
+        let mut emu = board_with(plant, Some(&co));
+        emu.receive(&frame(&HostMsg::StartExperiment {
             signal: Excitation::Steady { volts: 8.0 },
             duration_s: 10.0,
         }));
-        replies(&mut sim);
-        let (f, samples) = run_until_fault(&mut sim, 200);
+        replies(&mut emu);
+        let (f, samples) = run_until_fault(&mut emu, 200);
         assert_eq!(f, Some(Fault::Stall));
         let n = samples.len() as u32;
         assert!(
             (control::board::STALL_PERIODS - 2..=control::board::STALL_PERIODS + 2).contains(&n),
             "{n} samples"
         );
-        assert!(!sim.is_running());
+        assert!(!emu.is_running());
     }
 
     #[test]
@@ -534,12 +531,7 @@ mod tests {
         // Two uploads (slot 0, then slot 1), then a double ECC error in slot 1's header, as
         // a commit cut by a power loss leaves it: the board boots on slot 0 instead of
         // hanging, and the next upload rewrites slot 1.
-        let mut slots = Slots::new(
-            RamFlash::new(None),
-            0,
-            super::super::emulated_flash::PAGE as u32,
-        )
-        .unwrap();
+        let mut slots = RamFlash::new(None).into_slots().unwrap();
         let old = identified();
         let mut new = identified();
         new.pi.kp = 0.125;
@@ -551,17 +543,17 @@ mod tests {
             .unwrap();
         let mut flash = slots.into_inner();
         flash.inject_ecc_error(super::super::emulated_flash::PAGE + 8);
-        let mut sim =
+        let mut emu =
             EmulatedBoard::new(EmulatorConfig::paper(), Wiring::default(), flash).unwrap();
-        assert_eq!(replies(&mut sim), []);
-        assert_eq!((sim.coeff_seq(), sim.coefficients()), (1, &old));
+        assert_eq!(replies(&mut emu), []);
+        assert_eq!((emu.coeff_seq(), emu.coefficients()), (1, &old));
         // Speed mode is allowed: the board has valid coefficients.
-        sim.receive(&frame(&HostMsg::SetMode { mode: Mode::Speed }));
-        sim.receive(&frame(&HostMsg::Stop));
-        assert_eq!(replies(&mut sim), [BoardMsg::Ack, BoardMsg::Ack]);
+        emu.receive(&frame(&HostMsg::SetMode { mode: Mode::Speed }));
+        emu.receive(&frame(&HostMsg::Stop));
+        assert_eq!(replies(&mut emu), [BoardMsg::Ack, BoardMsg::Ack]);
         // The unreadable slot's sequence number is lost: the rewrite outranks slot 0.
-        upload(&mut sim, &new);
-        assert_eq!((sim.coeff_seq(), sim.coefficients()), (2, &new));
+        upload(&mut emu, &new);
+        assert_eq!((emu.coeff_seq(), emu.coefficients()), (2, &new));
     }
 
     #[test]
@@ -571,8 +563,7 @@ mod tests {
         // coefficients, warns, and allows identify and commissioning only.
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("flash.bin");
-        let page = super::super::emulated_flash::PAGE as u32;
-        let mut slots = Slots::new(RamFlash::new(Some(path.clone())), 0, page).unwrap();
+        let mut slots = RamFlash::new(Some(path.clone())).into_slots().unwrap();
         slots
             .store(&crate::board::coeffs::encode(&identified()).unwrap())
             .unwrap();
@@ -581,25 +572,25 @@ mod tests {
         bytes[control::slots::SLOT_HEADER_LEN + 30] ^= 0x01;
         std::fs::write(&path, &bytes).unwrap();
 
-        let mut sim = EmulatedBoard::new(
+        let mut emu = EmulatedBoard::new(
             EmulatorConfig::paper(),
             Wiring::default(),
             RamFlash::new(Some(path)),
         )
         .unwrap();
         assert_eq!(
-            replies(&mut sim),
+            replies(&mut emu),
             [BoardMsg::Warning(Warning::NoCoefficients)]
         );
-        assert_eq!(sim.coeff_seq(), 0);
-        sim.receive(&frame(&HostMsg::SetMode { mode: Mode::Speed }));
-        sim.receive(&frame(&HostMsg::StartExperiment {
+        assert_eq!(emu.coeff_seq(), 0);
+        emu.receive(&frame(&HostMsg::SetMode { mode: Mode::Speed }));
+        emu.receive(&frame(&HostMsg::StartExperiment {
             signal: Excitation::C,
             duration_s: 1.0,
         }));
-        sim.receive(&frame(&HostMsg::Identify));
-        sim.receive(&frame(&HostMsg::Commission));
-        let r = replies(&mut sim);
+        emu.receive(&frame(&HostMsg::Identify));
+        emu.receive(&frame(&HostMsg::Commission));
+        let r = replies(&mut emu);
         assert_eq!(r[0], BoardMsg::Nack(Nack::NoCoefficients));
         assert_eq!(r[1], BoardMsg::Nack(Nack::NoCoefficients));
         assert!(
@@ -607,43 +598,43 @@ mod tests {
             "{r:?}"
         );
         assert_eq!(r[3], BoardMsg::Ack);
-        assert!(sim.is_running());
+        assert!(emu.is_running());
     }
 
     #[test]
     fn silence_on_the_link_stops_a_run_and_heartbeats_keep_it() {
-        let mut sim = sim_with(EmulatorConfig::paper(), Some(&identified()));
-        sim.receive(&frame(&HostMsg::SetSpeed { omega_ref: 20.0 }));
-        sim.receive(&frame(&HostMsg::SetMode { mode: Mode::Speed }));
-        replies(&mut sim);
+        let mut emu = board_with(EmulatorConfig::paper(), Some(&identified()));
+        emu.receive(&frame(&HostMsg::SetSpeed { omega_ref: 20.0 }));
+        emu.receive(&frame(&HostMsg::SetMode { mode: Mode::Speed }));
+        replies(&mut emu);
         for k in 0..400u32 {
             if k.is_multiple_of(50) {
-                sim.receive(&frame(&HostMsg::Heartbeat));
+                emu.receive(&frame(&HostMsg::Heartbeat));
             }
-            sim.tick();
+            emu.tick();
         }
-        assert!(sim.is_running());
+        assert!(emu.is_running());
         let mut lost = None;
         for k in 0..400 {
-            sim.tick();
-            if replies(&mut sim).contains(&BoardMsg::Warning(Warning::LinkLost)) {
+            emu.tick();
+            if replies(&mut emu).contains(&BoardMsg::Warning(Warning::LinkLost)) {
                 lost = Some(k);
                 break;
             }
         }
         let k = lost.expect("no link-loss stop");
         assert!(k as u32 <= control::board::LINK_TIMEOUT_PERIODS, "{k}");
-        assert!(!sim.is_running());
+        assert!(!emu.is_running());
     }
 
     /// Ticks until the commissioning ends; its outcome.
-    fn commission_result(sim: &mut EmulatedBoard, extra: &[(usize, HostMsg)]) -> CommissionOutcome {
+    fn commission_result(emu: &mut EmulatedBoard, extra: &[(usize, HostMsg)]) -> CommissionOutcome {
         for k in 0..2000 {
             for (_, m) in extra.iter().filter(|(at, _)| *at == k) {
-                sim.receive(&frame(m));
+                emu.receive(&frame(m));
             }
-            sim.tick();
-            for m in replies(sim) {
+            emu.tick();
+            for m in replies(emu) {
                 if let BoardMsg::Commission { outcome, .. } = m {
                     if !matches!(
                         outcome,
@@ -665,12 +656,12 @@ mod tests {
             phase_order: [2, 1, 0],
             current_inverted: false,
         };
-        let mut sim =
+        let mut emu =
             EmulatedBoard::new(EmulatorConfig::paper(), wiring, RamFlash::new(None)).unwrap();
-        replies(&mut sim);
-        sim.receive(&frame(&HostMsg::Commission));
-        assert_eq!(replies(&mut sim), [BoardMsg::Ack]);
-        sim
+        replies(&mut emu);
+        emu.receive(&frame(&HostMsg::Commission));
+        assert_eq!(replies(&mut emu), [BoardMsg::Ack]);
+        emu
     }
 
     #[test]
@@ -680,8 +671,8 @@ mod tests {
         let once = commission_result(&mut commissioning_board(), &[]);
         assert!(matches!(once, CommissionOutcome::Done(_)), "{once:?}");
         for at in [7, 160, 330] {
-            let mut sim = commissioning_board();
-            let again = commission_result(&mut sim, &[(at, HostMsg::Commission)]);
+            let mut emu = commissioning_board();
+            let again = commission_result(&mut emu, &[(at, HostMsg::Commission)]);
             assert_eq!(again, once, "Commission again after {at} periods");
         }
     }
@@ -695,9 +686,9 @@ mod tests {
             panic!("the first run failed");
         };
         for at in [7, 160, 330] {
-            let mut sim = commissioning_board();
+            let mut emu = commissioning_board();
             let again =
-                commission_result(&mut sim, &[(at, HostMsg::Stop), (at, HostMsg::Commission)]);
+                commission_result(&mut emu, &[(at, HostMsg::Stop), (at, HostMsg::Commission)]);
             let CommissionOutcome::Done(c) = again else {
                 panic!("restarted after {at} periods: {again:?}");
             };

@@ -1,6 +1,7 @@
 //! The emulated board's flash: the STM32G431's two coefficient pages in RAM (optionally
 //! persisted to a file), behind the `embedded-storage` NorFlash traits so that the board
 //! emulator stores blobs with the firmware's own two-slot code (`control::slots`).
+use control::slots::Slots;
 use embedded_storage::nor_flash::{
     ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
 };
@@ -47,6 +48,12 @@ impl RamFlash {
             file,
             ecc: Vec::new(),
         }
+    }
+
+    /// The firmware's two-slot coefficient store ([`control::slots`]) on this flash: one
+    /// page a slot from offset 0, as the `COEFFS` region lays them out.
+    pub fn into_slots(self) -> anyhow::Result<Slots<RamFlash>> {
+        Slots::new(self, 0, PAGE as u32).map_err(|e| anyhow::anyhow!("slot geometry: {e:?}"))
     }
 
     /// Marks the double-word holding byte `offset` as unreadable (a double ECC error).

@@ -40,13 +40,13 @@ pub struct HostView {
 }
 
 impl HostView {
-    /// The host beside `sim` with `unread` bytes of output not read and `quiet` periods
+    /// The host beside `emu` with `unread` bytes of output not read and `quiet` periods
     /// since its last byte.
-    pub fn of(sim: &EmulatedBoard, unread: usize, quiet: u32) -> HostView {
+    pub fn of(emu: &EmulatedBoard, unread: usize, quiet: u32) -> HostView {
         HostView {
             unread,
             quiet,
-            watched: matches!(sim.board().mode(), Mode::Speed | Mode::Experiment),
+            watched: matches!(emu.board().mode(), Mode::Speed | Mode::Experiment),
         }
     }
 
@@ -200,12 +200,12 @@ mod tests {
         start: &[HostMsg],
         periods: usize,
     ) {
-        let mut sim =
+        let mut emu =
             EmulatedBoard::new(EmulatorConfig::paper(), wiring, RamFlash::new(None)).unwrap();
         for m in start {
-            sim.receive(&frame(m));
+            emu.receive(&frame(m));
         }
-        host.unread.extend(sim.take_output());
+        host.unread.extend(emu.take_output());
         let t0 = Instant::now();
         let mut pacer = Pacer::new(speed, t0);
         // Host time advances in steps of 50 µs.
@@ -216,17 +216,17 @@ mod tests {
             host.act(t);
             if board_awake(t) {
                 if !host.sent.is_empty() {
-                    sim.receive(&std::mem::take(&mut host.sent));
+                    emu.receive(&std::mem::take(&mut host.sent));
                     quiet = 0;
                 }
-                let view = |sim: &EmulatedBoard, host: &Host<F>, quiet| {
+                let view = |emu: &EmulatedBoard, host: &Host<F>, quiet| {
                     let unread = if backlog_seen { host.unread.len() } else { 0 };
-                    HostView::of(sim, unread, quiet)
+                    HostView::of(emu, unread, quiet)
                 };
-                while pacer.wait(now, view(&sim, host, quiet)).is_zero() {
-                    let us = pacer.ran(now, view(&sim, host, quiet));
-                    sim.tick_timed(us);
-                    host.unread.extend(sim.take_output());
+                while pacer.wait(now, view(&emu, host, quiet)).is_zero() {
+                    let us = pacer.ran(now, view(&emu, host, quiet));
+                    emu.tick_timed(us);
+                    host.unread.extend(emu.take_output());
                     ran += 1;
                     quiet += 1;
                 }
@@ -235,13 +235,13 @@ mod tests {
         }
     }
 
-    fn upload_default(sim_start: &mut Vec<HostMsg>) {
+    fn upload_default(start: &mut Vec<HostMsg>) {
         let co = control::blob::Coefficients {
             motor_identified: true,
             ..Default::default()
         };
         let blob = crate::board::coeffs::encode(&co).unwrap();
-        sim_start.push(HostMsg::UploadBegin {
+        start.push(HostMsg::UploadBegin {
             total_len: blob.len() as u16,
             crc: control::blob::CRC32.checksum(&blob),
         });
@@ -253,9 +253,9 @@ mod tests {
             if let HostMsg::UploadChunk { data, .. } = &mut chunk {
                 data.extend_from_slice(c).unwrap();
             }
-            sim_start.push(chunk);
+            start.push(chunk);
         }
-        sim_start.push(HostMsg::UploadCommit);
+        start.push(HostMsg::UploadCommit);
     }
 
     #[test]

@@ -77,7 +77,7 @@ pub fn run(args: Args) -> Result<()> {
     if let Some(f) = args.flash.as_ref().filter(|f| f.exists()) {
         crate::input::read(f, crate::board::emulated_flash::SIZE as u64, "flash image")?;
     }
-    let mut sim = EmulatedBoard::new(plant, wiring, RamFlash::new(args.flash.clone()))?;
+    let mut emu = EmulatedBoard::new(plant, wiring, RamFlash::new(args.flash.clone()))?;
     let pty = Pty::open()?;
     println!("{}", pty.path.display());
     std::io::stdout().flush()?;
@@ -85,10 +85,10 @@ pub fn run(args: Args) -> Result<()> {
         "emulated board on {} (time ×{}, coefficients: {}); stop with Ctrl-C",
         crate::log::echo_path(&pty.path),
         args.speed,
-        if sim.coeff_seq() == 0 {
+        if emu.coeff_seq() == 0 {
             "none".to_string()
         } else {
-            format!("slot sequence {}", sim.coeff_seq())
+            format!("slot sequence {}", emu.coeff_seq())
         }
     );
 
@@ -131,21 +131,21 @@ pub fn run(args: Args) -> Result<()> {
         loop {
             match in_rx.try_recv() {
                 Ok(bytes) => {
-                    sim.receive(&bytes);
+                    emu.receive(&bytes);
                     quiet = 0;
                 }
                 Err(mpsc::TryRecvError::Empty) => break,
                 Err(mpsc::TryRecvError::Disconnected) => bail!("the pseudo-terminal closed"),
             }
         }
-        out.flush(&mut sim);
-        let host = HostView::of(&sim, out.unread(&pty), quiet);
+        out.flush(&mut emu);
+        let host = HostView::of(&emu, out.unread(&pty), quiet);
         let wait = pacer.wait(Instant::now(), host);
         if wait.is_zero() {
             let period_us = pacer.ran(Instant::now(), host);
-            sim.tick_timed(period_us);
+            emu.tick_timed(period_us);
             quiet = quiet.saturating_add(1);
-            out.flush(&mut sim);
+            out.flush(&mut emu);
             continue;
         }
         // Wait for host bytes until the period is due; a host that is behind is looked at
@@ -157,13 +157,13 @@ pub fn run(args: Args) -> Result<()> {
         };
         match in_rx.recv_timeout(wait) {
             Ok(bytes) => {
-                sim.receive(&bytes);
+                emu.receive(&bytes);
                 quiet = 0;
             }
             Err(mpsc::RecvTimeoutError::Timeout) => {}
             Err(mpsc::RecvTimeoutError::Disconnected) => bail!("the pseudo-terminal closed"),
         }
-        out.flush(&mut sim);
+        out.flush(&mut emu);
     }
 }
 
@@ -176,8 +176,8 @@ struct Output {
 
 impl Output {
     /// Hands the board's output to the writer (dropped when the writer is far behind).
-    fn flush(&self, sim: &mut EmulatedBoard) {
-        let bytes = sim.take_output();
+    fn flush(&self, emu: &mut EmulatedBoard) {
+        let bytes = emu.take_output();
         let n = bytes.len();
         if n > 0 {
             self.queued.fetch_add(n, Ordering::Relaxed);

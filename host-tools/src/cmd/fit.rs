@@ -14,7 +14,9 @@ fn after_help() -> String {
          linear  the paper's eqs. 1-2 with viscous friction only\n  \
          lugre   LuGre friction (paper eqs. 12-14): static curve from steady-state runs \
          (fit on a `simulate --signal steady` log too), sigma0/sigma1 on the simulation error\n  \
-         sindyc  sparse nonlinear equations with a hidden friction state (SINDYc)\n\n\
+         sindyc  sparse nonlinear equations with a hidden friction state (SINDYc); with \
+         --add presliding the friction's sign is a bristle state, for the host only \
+         (export refuses it)\n\n\
          Every parameter is printed with its unit and standard error; a parameter the data \
          cannot pin down is marked NOT IDENTIFIABLE.\n\n",
     );

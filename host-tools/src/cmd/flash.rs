@@ -46,7 +46,6 @@ pub fn run(args: Args) -> Result<()> {
 pub fn run(args: Args) -> Result<()> {
     use crate::board::emulated_flash::{RamFlash, PAGE, SIZE};
     use anyhow::{anyhow, bail, Context};
-    use control::slots::Slots;
     use embedded_storage::nor_flash::ReadNorFlash;
     use probe_rs::flashing::{DownloadOptions, FlashLoader};
     use probe_rs::{MemoryInterface, Session, SessionConfig};
@@ -70,12 +69,7 @@ pub fn run(args: Args) -> Result<()> {
     // The slot update, computed on a copy of the two pages with the firmware's code.
     let tmp = tempfile::NamedTempFile::new()?;
     std::fs::write(tmp.path(), &before)?;
-    let mut slots = Slots::new(
-        RamFlash::new(Some(tmp.path().to_path_buf())),
-        0,
-        PAGE as u32,
-    )
-    .map_err(|e| anyhow!("slot geometry: {e:?}"))?;
+    let mut slots = RamFlash::new(Some(tmp.path().to_path_buf())).into_slots()?;
     let info = slots
         .store(&bytes)
         .map_err(|e| anyhow!("cannot prepare the slot: {e:?}"))?;
@@ -98,12 +92,7 @@ pub fn run(args: Args) -> Result<()> {
         bail!("verification failed: the flash does not hold what was written");
     }
     std::fs::write(tmp.path(), &after)?;
-    let mut check = Slots::new(
-        RamFlash::new(Some(tmp.path().to_path_buf())),
-        0,
-        PAGE as u32,
-    )
-    .map_err(|e| anyhow!("slot geometry: {e:?}"))?;
+    let mut check = RamFlash::new(Some(tmp.path().to_path_buf())).into_slots()?;
     match check.load().map_err(|e| anyhow!("read back: {e:?}"))? {
         Some((got, c)) if got.seq == info.seq && c == co => {}
         _ => bail!("verification failed: the board would not boot with this blob"),

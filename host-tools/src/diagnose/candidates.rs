@@ -13,6 +13,7 @@
 use super::harmonics;
 use crate::effect_spec::EffectSpec;
 use crate::log::{MotorLog, Plant};
+use crate::numerics::differentiation;
 use control::effects::{smooth_sign, Effect, EffectKind, CURRENT_EPS, VELOCITY_EPS};
 use control::lugre::{LugreObserver, LugreParams};
 use std::collections::BTreeMap;
@@ -75,28 +76,21 @@ pub struct Signals {
     /// Velocity scale of the log relative to the rotary motor the velocity constants were
     /// chosen for ([`velocity_scale`]): 1 for the paper's motor, ≈0.003 for a linear axis in m/s.
     pub vscale: f64,
-    /// Half-width (samples) of the velocity estimate: [`VELOCITY_HALF_S`] in samples.
+    /// Half-width (samples) of the velocity estimate:
+    /// [`differentiation::diagnose_velocity_half`].
     pub velocity_half: usize,
 }
 
-/// Half-width of the velocity estimate in seconds: ±4 samples at the paper's 12 ms.
-pub const VELOCITY_HALF_S: f64 = 0.048;
-
 pub use crate::scales::{samples_for, velocity_scale, REFERENCE_SPEED};
-
-/// Half-width (samples) of the velocity estimate: ±4 × 12 ms. The slope over 9 samples of a
-/// Hall angle (0.095 rad steps) resolves about 0.8 rad/s and lags nothing (centred).
-pub const VELOCITY_HALF: usize = 4;
 
 impl Signals {
     /// Derive the signals from a log. `kt` is the model's torque constant.
     pub fn from_log(log: &MotorLog, plant: Plant, kt: f64) -> Signals {
         let dt = log.sample_period();
-        let velocity_half = samples_for(VELOCITY_HALF_S, dt, log.len());
-        let omega =
-            crate::numerics::differentiation::smoothed_derivative(&log.theta, dt, velocity_half);
+        let velocity_half = differentiation::diagnose_velocity_half(log);
+        let omega = differentiation::smoothed_derivative(&log.theta, dt, velocity_half);
         let vscale = velocity_scale(&omega);
-        let theta_s = crate::numerics::differentiation::moving_average(&log.theta, 2);
+        let theta_s = differentiation::moving_average(&log.theta, 2);
         // The input u[k] is held over [t_k, t_k+1) while angle and current are sampled at t_k.
         // The winding settles within L/R ≈ 1.4 ms, so the current sampled at t_k is the
         // quasi-static response to the input held just before it, u[k−1]: on the sample grid
@@ -1006,7 +1000,7 @@ mod tests {
             kt: 1.0,
             hall_resolution: None,
             vscale: 1.0,
-            velocity_half: VELOCITY_HALF,
+            velocity_half: 4,
         }
     }
 

@@ -36,6 +36,23 @@ pub(super) struct Outcome {
     pub(super) judged: Vec<Judged>,
 }
 
+/// What the selections of one diagnosis share: the options, the level of each entry test,
+/// the units estimates are expressed in (the electrical pass refits R) and what the passes
+/// have found so far.
+pub(super) struct Pass<'a> {
+    pub(super) opts: &'a Options,
+    pub(super) alpha_per_test: f64,
+    pub(super) units: Units,
+    pub(super) acc: Outcome,
+}
+
+impl Pass<'_> {
+    /// Forward selection on `data` at this diagnosis's level and units.
+    fn select(&mut self, data: &EqData) -> Selection {
+        select(data, self.opts, self.alpha_per_test, &mut self.units)
+    }
+}
+
 /// The presliding candidates, tested apart on every window, and their nuisance columns.
 #[derive(Default)]
 pub(super) struct PreslidingTest {
@@ -227,18 +244,15 @@ fn residual_of(
 
 /// Forward selection in the voltage equation. Returns the refitted K_b; voltage losses found
 /// there join the torque equation's base (written in volts, it carries them too).
-#[allow(clippy::too_many_arguments)]
 pub(super) fn electrical_pass(
     f: &Forms,
     elec: &EqData,
     mech: &mut EqData,
     (given, instruments): (Option<Vec<f64>>, Option<Vec<Vec<f64>>>),
-    opts: &Options,
-    alpha_per_test: f64,
-    units: &mut Units,
-    acc: &mut Outcome,
+    pass: &mut Pass,
 ) -> f64 {
-    let out = select(elec, opts, alpha_per_test, units);
+    let out = pass.select(elec);
+    let acc = &mut pass.acc;
     let kb = out
         .base_beta
         .get(2)
@@ -376,11 +390,9 @@ fn noise_weights(
     st: &Structure,
     mech: &EqData,
     keep: &[bool],
-    opts: &Options,
-    alpha_per_test: f64,
-    units: &Units,
+    pass: &Pass,
 ) -> Option<Vec<f64>> {
-    let m = st.motor.filter(|_| opts.steady_angle)?;
+    let m = st.motor.filter(|_| pass.opts.steady_angle)?;
     let b = viscous_of(&st.effects);
     let (a1, a2) = if f.voltage {
         let ratio = if m.kt != 0.0 { m.r / m.kt } else { 0.0 };
@@ -392,27 +404,28 @@ fn noise_weights(
         &f.wf_m.angle_error_variance(a1, a2, &f.s.theta_torque_var),
         keep,
     );
-    let first = select(mech, opts, alpha_per_test, &mut units.clone());
+    let first = select(
+        mech,
+        pass.opts,
+        pass.alpha_per_test,
+        &mut pass.units.clone(),
+    );
     Some(row_scale(&first.base_resid, &v))
 }
 
 /// Forward selection in the torque equation on its moving windows, then presliding on every
 /// window.
-#[allow(clippy::too_many_arguments)]
 pub(super) fn mechanical_pass(
     f: &Forms,
     st: &Structure,
     mut mech: EqData,
     pre: PreslidingTest,
     (kb, given, inst): (f64, Option<Vec<f64>>, Option<(Forms, EqData)>),
-    opts: &Options,
-    alpha_per_test: f64,
-    units: &mut Units,
-    acc: &mut Outcome,
+    pass: &mut Pass,
 ) {
-    complete_torque_equation(f, st, &mut mech, kb, units);
+    complete_torque_equation(f, st, &mut mech, kb, &mut pass.units);
     let instruments = inst.map(|(fs, mut im)| {
-        complete_torque_equation(&fs, st, &mut im, kb, &mut units.clone());
+        complete_torque_equation(&fs, st, &mut im, kb, &mut pass.units.clone());
         im.base_cols
     });
     let mut all_rows = (mech.y.clone(), mech.base_cols.clone());
@@ -425,13 +438,13 @@ pub(super) fn mechanical_pass(
         .filter(|(_, k)| **k)
         .map(|(c, _)| c)
         .collect();
-    let scale = noise_weights(f, st, &mech, &keep, opts, alpha_per_test, units);
+    let scale = noise_weights(f, st, &mech, &keep, pass);
     if let Some(w) = &scale {
         map_rows(&mut mech, |c| c.iter().zip(w).map(|(a, b)| a * b).collect());
     }
-    let out = select(&mech, opts, alpha_per_test, units);
+    let out = pass.select(&mech);
     let unit = if f.voltage { "V·s" } else { "u·s" };
-    acc.equations.push(residual_of(
+    pass.acc.equations.push(residual_of(
         f,
         Equation::Mechanical,
         &out,
@@ -446,7 +459,7 @@ pub(super) fn mechanical_pass(
     };
     let instruments = instruments
         .map(|z: Vec<Vec<f64>>| z.iter().map(|c| scaled(select_rows(c, &keep))).collect());
-    acc.judged.push(Judged {
+    pass.acc.judged.push(Judged {
         eq: Equation::Mechanical,
         scale: scale.clone(),
         given: given.map(|g| scaled(select_rows(&g, &keep))),
@@ -462,10 +475,10 @@ pub(super) fn mechanical_pass(
     });
     if !pre.cand.is_empty() {
         let data = presliding_pass(&mech, &out.findings, all_rows, pre.cand, &f.wf_m, &f.s);
-        let pout = select(&data, opts, alpha_per_test, units);
-        acc.findings.extend(pout.findings);
-        acc.tested.extend(pout.first_round);
+        let pout = pass.select(&data);
+        pass.acc.findings.extend(pout.findings);
+        pass.acc.tested.extend(pout.first_round);
     }
-    acc.findings.extend(out.findings);
-    acc.tested.extend(out.first_round);
+    pass.acc.findings.extend(out.findings);
+    pass.acc.tested.extend(out.first_round);
 }

@@ -294,12 +294,16 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
     let mut pre = equations::PreslidingTest::default();
     let n_variants = equations::add_candidates(&f, st, &mut elec, &mut mech, &mut pre);
     let alpha_per_test = opts.alpha / n_variants.max(1) as f64;
-    let mut units = Units {
-        r: MotorParams::<f64>::paper().r,
-        kt: st.kt,
-        mech_scale: 1.0,
+    let mut pass = equations::Pass {
+        opts,
+        alpha_per_test,
+        units: Units {
+            r: MotorParams::<f64>::paper().r,
+            kt: st.kt,
+            mech_scale: 1.0,
+        },
+        acc: equations::Outcome::default(),
     };
-    let mut acc = equations::Outcome::default();
     let mut kb = 0.0;
     if f.voltage && !elec.y.is_empty() {
         kb = equations::electrical_pass(
@@ -307,10 +311,7 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
             &elec,
             &mut mech,
             (given_elec, inst.as_ref().map(|i| i.1.base_cols.clone())),
-            opts,
-            alpha_per_test,
-            &mut units,
-            &mut acc,
+            &mut pass,
         );
     }
     if !f.wf.centres.is_empty() {
@@ -320,10 +321,7 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
             mech,
             pre,
             (kb, given_mech, inst.map(|i| (i.0, i.2))),
-            opts,
-            alpha_per_test,
-            &mut units,
-            &mut acc,
+            &mut pass,
         );
     }
     let equations::Outcome {
@@ -331,7 +329,7 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
         tested,
         equations,
         judged,
-    } = acc;
+    } = pass.acc;
     resolve_offsets(&mut findings, st.kt);
     findings.sort_by(|a, b| b.score.total_cmp(&a.score));
     findings.truncate(MAX_FINDINGS);

@@ -11,12 +11,13 @@
 //!   position_load) and `∫φ` (offset).
 //!
 //! Only the added effects' magnitudes change; the base model's parameters are kept.
+use crate::ident::linear;
 use crate::log::{MotorLog, Plant};
 use crate::model::Model;
 use crate::numerics::differentiation::smooth_velocity;
 use crate::numerics::least_squares::lstsq;
 use crate::numerics::weak_form;
-use control::effects::{smooth_sign, Effect, CURRENT_EPS};
+use control::effects::Effect;
 
 /// `base` with the effects of `with` (structure) re-estimated on `base`'s residuals in `logs`.
 /// Effects this regression does not cover keep the values they have in `with`.
@@ -34,49 +35,17 @@ pub fn estimate(base: &Model, with: &Model, logs: &[MotorLog]) -> Model {
 }
 
 fn electrical(m: &mut Model, logs: &[MotorLog]) {
-    let idx: Vec<usize> = (0..m.effects.len())
-        .filter(|&k| {
-            matches!(
-                m.effects[k],
-                Effect::Deadtime { .. } | Effect::CurrentOffset { .. }
-            )
-        })
-        .collect();
-    if idx.is_empty() {
+    let extra = linear::electrical_effects(m);
+    if extra.is_empty() {
         return;
     }
     let i0 = control::effects::total_sensor_offset(&m.effects);
     let (r, l, kb) = (m.motor.r, m.motor.l, m.motor.kb);
-    // Columns: L (−∫φ'·I), R (∫φ·I), K_b (−∫φ'·θ), then the effects. The base fit's R and
-    // K_b have absorbed part of the effects, so they are estimated jointly with them.
-    let nm = 3;
-    let mut cols: Vec<Vec<f64>> = vec![Vec::new(); nm + idx.len()];
-    let mut y = Vec::new();
-    for log in logs {
-        let Some(i) = &log.i else { continue };
-        let sgn: Vec<f64> = i
-            .iter()
-            .map(|&c| smooth_sign(c - i0, CURRENT_EPS))
-            .collect();
-        let ones = vec![1.0; log.len()];
-        for w in weak_form::log_windows(log) {
-            y.push(w.int_zoh(&log.u));
-            cols[0].push(-w.int_d(i));
-            cols[1].push(w.int(i));
-            cols[2].push(-w.int_d(&log.theta));
-            for (c, &k) in idx.iter().enumerate() {
-                cols[nm + c].push(match m.effects[k] {
-                    Effect::Deadtime { .. } => w.int(&sgn),
-                    _ => w.int(&ones),
-                });
-            }
-        }
-    }
-    if y.len() <= cols.len() {
+    // Columns: L, R, K_b, then the effects. The base fit's R and K_b have absorbed part of
+    // the effects, so they are estimated jointly with them.
+    let Some(x) = linear::electrical_rows(logs, &extra, i0).solve() else {
         return;
-    }
-    let refs: Vec<&[f64]> = cols.iter().map(|c| c.as_slice()).collect();
-    let x = lstsq(&refs, &y).beta;
+    };
     tracing::debug!("electrical residual regression: {x:?} (was R {r}, L {l}, Kb {kb})");
     if x.iter().any(|v| !v.is_finite()) || x[1] <= 0.0 || x[2] <= 0.0 {
         return;
@@ -84,7 +53,7 @@ fn electrical(m: &mut Model, logs: &[MotorLog]) {
     let r = x[1];
     m.motor.r = r;
     // L stays as fitted: windows of 0.48 s barely resolve the electrical time constant L/R
-    // (about 1 ms), and keeping the fitted L validated better on simulated deadtime data.
+    // (about 1 ms), so their estimate of L is far noisier than the free-run fit's.
     // The L column stays in the regression so that it does not bias R, K_b and the effects.
     // K_t = K_b (SI units): the mechanical equation scales as a whole with K_t, so every
     // mechanical torque parameter scales with it and the motion stays the same.
@@ -100,8 +69,8 @@ fn electrical(m: &mut Model, logs: &[MotorLog]) {
         lg.sigma0 *= c;
         lg.sigma1 *= c;
     }
-    for (c, &k) in idx.iter().enumerate() {
-        let c = nm + c;
+    for (c, &(k, _)) in extra.iter().enumerate() {
+        let c = 3 + c;
         m.effects[k] = match m.effects[k] {
             Effect::Deadtime { .. } => Effect::Deadtime { vd: x[c].max(0.0) },
             // The column ∫φ carries −R·i0.

@@ -9,8 +9,9 @@
 //! scheme of the emulator (`emulator::plant`), L-stable at any step and exact at equilibria
 //! (stiction). The unknown of a sub-step is the new velocity: the residual
 //! `J·(ω' − ω)/h − K_t·I'(ω') + F_f(ω') + loads(ω')` increases with ω', so Newton's method on
-//! its exact slope, kept in a bracket, finds it in two or three evaluations. (An exponential Rosenbrock scheme was tried first: it
-//! diverges at LuGre breakaway, where the bilinear |ω|·z term changes within a step.)
+//! its exact slope, kept in a bracket, finds it in two or three evaluations. An exponential
+//! Rosenbrock scheme would diverge at LuGre breakaway, where the bilinear |ω|·z term changes
+//! within a step.
 //!
 //! # Loads behind a coupling (`compliance`, `backlash`)
 //! Each such effect adds a load inertia `j2` with its own angle and speed (θ2, ω2), coupled to
@@ -62,8 +63,12 @@ pub const SUBSTEPS: usize = 12;
 /// Most loads behind a coupling (`compliance`, `backlash`) a free run carries.
 pub const MAX_LOADS: usize = 2;
 
-/// States: θ, ω, I, z, then (θ2, ω2) of each load behind a coupling (zero without one).
-const NX: usize = 4 + 2 * MAX_LOADS;
+/// States of a run: θ, ω, I, z, then (θ2, ω2) of each load behind a coupling. A run's
+/// state array holds exactly the loads its model has (length `4 + 2·loads`, a const
+/// generic `N` of the sub-step's functions), so a model without a load carries four.
+const fn state_len(loads: usize) -> usize {
+    4 + 2 * loads
+}
 
 /// Contact stiffness of a backlash over the sub-step, as a frequency times the step (as
 /// the emulator's): the critically damped contact rings at `CONTACT_FREQUENCY_STEPS / h`.
@@ -203,15 +208,15 @@ impl RunParams<f64> {
 /// with `I(w)` from the backward-Euler winding equation and the bristle state updated
 /// exactly for `w` (`control::lugre::z_step`). `re` holds the values of `p` (for the
 /// winding's scalar root with a voltage loss, solved in `f64`).
-fn substep_residual<D: RunScalar>(
+fn substep_residual<D: RunScalar, const N: usize>(
     p: &RunParams<D>,
     re: &RunParams<f64>,
-    x: &[D; NX],
+    x: &[D; N],
     u: f64,
     h_th: D,
     h: f64,
     w: D,
-) -> (D, [D; NX]) {
+) -> (D, [D; N]) {
     let m = &p.motor;
     let hd = D::constant(h);
     let current = match p.plant {
@@ -263,7 +268,7 @@ fn substep_residual<D: RunScalar>(
     next[..4].copy_from_slice(&[theta, w, current, z]);
     let mut slot = 4;
     for e in &p.effects {
-        if slot >= NX {
+        if slot >= N {
             break;
         }
         if let Some((th2, w2)) = load_step(e, m.j, theta, w, x[slot], x[slot + 1], h) {
@@ -292,17 +297,17 @@ type Slope = DualVec<f64, 1>;
 /// values `re` of `p` as one-lane dual numbers.
 /// The new velocity is taken from `roots` when it replays a tape.
 #[allow(clippy::too_many_arguments)]
-fn implicit_step<D: RunScalar>(
+fn implicit_step<D: RunScalar, const N: usize>(
     p: &RunParams<D>,
     re: &RunParams<f64>,
     slope: &RunParams<Slope>,
-    x: &[D; NX],
+    x: &[D; N],
     u: f64,
     h_th: D,
     h: f64,
     w_guess: f64,
     roots: &mut SubstepRoots,
-) -> [D; NX] {
+) -> [D; N] {
     let w = match roots.replay() {
         Some(w) => w,
         None => {
@@ -358,10 +363,10 @@ impl SubstepRoots<'_> {
 /// sub-steps' extrapolation. Where the slope is not positive (a residual that is not
 /// increasing there) and no bracket is known, the bracketing search of the emulator
 /// ([`find_root`]) takes over.
-fn substep_velocity(
+fn substep_velocity<const N: usize>(
     re: &RunParams<f64>,
     slope: &RunParams<Slope>,
-    x: &[f64; NX],
+    x: &[f64; N],
     u: f64,
     h_th: f64,
     h: f64,
@@ -704,74 +709,117 @@ pub fn run_range_from<D: RunScalar>(
              carries at most {MAX_LOADS}"
         );
     }
-    let offset = effects::total_sensor_offset(&p.effects);
     let c0 = carried.unwrap_or_else(|| measured_state(p, log, start, omega_at(log, start)));
-    let omega0 = c0.omega.re();
-    let theta0 = D::constant(log.theta[start]);
-    let mut x = [D::zero(); NX];
-    x[..4].copy_from_slice(&[theta0, c0.omega, c0.current, c0.z]);
-    for l in 0..loads {
-        x[4 + 2 * l] = theta0 - c0.load[2 * l];
-        x[5 + 2 * l] = c0.load[2 * l + 1];
-    }
-    let mut h = heat_at(p, log, start);
-    let mut w_prev = omega0;
-    let slope = re.lift::<Slope>();
-    let mut out = Run {
-        theta: Vec::with_capacity(n),
-        omega: Vec::with_capacity(n),
-        i: (p.plant == Plant::Voltage).then(|| Vec::with_capacity(n)),
-        z: p.lugre.is_some().then(|| Vec::with_capacity(n)),
-        load: Vec::with_capacity(if loads > 0 { n } else { 0 }),
+    let run = RangeRun {
+        p,
+        re,
+        log,
+        start,
+        n,
+        loads,
+        substeps,
     };
-    let sub = substeps.max(1);
-    for k in 0..n {
-        out.theta.push(x[0]);
-        out.omega.push(x[1]);
-        if let Some(i) = &mut out.i {
-            i.push(x[2] + offset);
-        }
-        if let Some(z) = &mut out.z {
-            z.push(x[3]);
-        }
-        if loads > 0 {
-            let mut l = [D::zero(); 2 * MAX_LOADS];
-            for j in 0..loads {
-                l[2 * j] = x[0] - x[4 + 2 * j];
-                l[2 * j + 1] = x[5 + 2 * j];
-            }
-            out.load.push(l);
-        }
-        if k + 1 == n {
-            break;
-        }
-        let k = start + k;
-        let u = log.u[k];
-        if p.plant == Plant::Torque {
-            x[2] = D::constant(u);
-        }
-        let dt = (log.t[k + 1] - log.t[k]) / sub as f64;
-        for _ in 0..sub {
-            let w = x[1].re();
-            let guess = w + (w - w_prev);
-            w_prev = w;
-            x = implicit_step(p, re, &slope, &x, u, h, dt, guess, roots);
-            for e in &p.effects {
-                h = e.heat_step(h, x[2], D::constant(dt));
-            }
-        }
-        let xr = x.map(|v| v.re());
-        if !xr.iter().all(|v| v.is_finite()) || xr[1].abs() > 1e7 || xr[2].abs() > 1e7 {
-            bail!(
-                "{}: the model diverged in free run at t = {} s (sample {}); its parameters \
-                 are not physical",
-                crate::log::echo_path(&log.source),
-                log.t[k + 1],
-                k + 2
-            );
-        }
+    // The state array as long as this model's loads need, chosen once per run.
+    match loads {
+        0 => run.states::<{ state_len(0) }>(c0, roots),
+        1 => run.states::<{ state_len(1) }>(c0, roots),
+        _ => run.states::<{ state_len(MAX_LOADS) }>(c0, roots),
     }
-    Ok(out)
+}
+
+/// A run of [`run_range_from`]: the model, the log and its samples `start..start + n`.
+struct RangeRun<'a, D> {
+    p: &'a RunParams<D>,
+    re: &'a RunParams<f64>,
+    log: &'a MotorLog,
+    start: usize,
+    n: usize,
+    /// Loads behind a coupling (at most `(N − 4)/2` of the state length `N`).
+    loads: usize,
+    substeps: usize,
+}
+
+impl<D: RunScalar> RangeRun<'_, D> {
+    /// The run from the states `c0` (and the measured angle), in states of length `N`.
+    fn states<const N: usize>(&self, c0: Carried<D>, roots: &mut SubstepRoots) -> Result<Run<D>> {
+        let RangeRun {
+            p,
+            re,
+            log,
+            start,
+            n,
+            loads,
+            substeps,
+        } = *self;
+        debug_assert!(state_len(loads) <= N);
+        let offset = effects::total_sensor_offset(&p.effects);
+        let omega0 = c0.omega.re();
+        let theta0 = D::constant(log.theta[start]);
+        let mut x = [D::zero(); N];
+        x[..4].copy_from_slice(&[theta0, c0.omega, c0.current, c0.z]);
+        for l in 0..loads {
+            x[4 + 2 * l] = theta0 - c0.load[2 * l];
+            x[5 + 2 * l] = c0.load[2 * l + 1];
+        }
+        let mut h = heat_at(p, log, start);
+        let mut w_prev = omega0;
+        let slope = re.lift::<Slope>();
+        let mut out = Run {
+            theta: Vec::with_capacity(n),
+            omega: Vec::with_capacity(n),
+            i: (p.plant == Plant::Voltage).then(|| Vec::with_capacity(n)),
+            z: p.lugre.is_some().then(|| Vec::with_capacity(n)),
+            load: Vec::with_capacity(if loads > 0 { n } else { 0 }),
+        };
+        let sub = substeps.max(1);
+        for k in 0..n {
+            out.theta.push(x[0]);
+            out.omega.push(x[1]);
+            if let Some(i) = &mut out.i {
+                i.push(x[2] + offset);
+            }
+            if let Some(z) = &mut out.z {
+                z.push(x[3]);
+            }
+            if loads > 0 {
+                let mut l = [D::zero(); 2 * MAX_LOADS];
+                for j in 0..loads {
+                    l[2 * j] = x[0] - x[4 + 2 * j];
+                    l[2 * j + 1] = x[5 + 2 * j];
+                }
+                out.load.push(l);
+            }
+            if k + 1 == n {
+                break;
+            }
+            let k = start + k;
+            let u = log.u[k];
+            if p.plant == Plant::Torque {
+                x[2] = D::constant(u);
+            }
+            let dt = (log.t[k + 1] - log.t[k]) / sub as f64;
+            for _ in 0..sub {
+                let w = x[1].re();
+                let guess = w + (w - w_prev);
+                w_prev = w;
+                x = implicit_step(p, re, &slope, &x, u, h, dt, guess, roots);
+                for e in &p.effects {
+                    h = e.heat_step(h, x[2], D::constant(dt));
+                }
+            }
+            let xr = x.map(|v| v.re());
+            if !xr.iter().all(|v| v.is_finite()) || xr[1].abs() > 1e7 || xr[2].abs() > 1e7 {
+                bail!(
+                    "{}: the model diverged in free run at t = {} s (sample {}); its parameters \
+                 are not physical",
+                    crate::log::echo_path(&log.source),
+                    log.t[k + 1],
+                    k + 2
+                );
+            }
+        }
+        Ok(out)
+    }
 }
 
 #[cfg(test)]

@@ -242,9 +242,11 @@ impl HankelEmbedding {
         Ok(z)
     }
 
-    /// Write the singular-value spectrum as an SVG (log scale, selected components in red),
+    /// Write the singular-value spectrum as an SVG (log scale; the selected components in the
+    /// palette's second colour, the dropped ones in its first),
     /// atomically.
     pub fn spectrum_svg(&self, path: &Path) -> Result<()> {
+        use crate::report::svg::colour;
         use plotters::prelude::*;
         let mut svg = String::new();
         {
@@ -288,20 +290,20 @@ impl HankelEmbedding {
                 .draw_series(
                     pts(false)
                         .into_iter()
-                        .map(|p| Circle::new(p, 3, BLUE.filled())),
+                        .map(|p| Circle::new(p, 3, colour(0).filled())),
                 )
                 .map_err(|e| anyhow::anyhow!("{e}"))?
                 .label("high energy (dropped)")
-                .legend(|(x, y)| Circle::new((x, y), 3, BLUE.filled()));
+                .legend(|(x, y)| Circle::new((x, y), 3, colour(0).filled()));
             chart
                 .draw_series(
                     pts(true)
                         .into_iter()
-                        .map(|p| Circle::new(p, 3, RED.filled())),
+                        .map(|p| Circle::new(p, 3, colour(1).filled())),
                 )
                 .map_err(|e| anyhow::anyhow!("{e}"))?
                 .label("low energy (kept: hidden state)")
-                .legend(|(x, y)| Circle::new((x, y), 3, RED.filled()));
+                .legend(|(x, y)| Circle::new((x, y), 3, colour(1).filled()));
             chart
                 .configure_series_labels()
                 .background_style(WHITE.mix(0.8))
@@ -423,6 +425,12 @@ mod tests {
         let p = dir.path().join("spectrum.svg");
         emb.spectrum_svg(&p).unwrap();
         let text = std::fs::read_to_string(&p).unwrap();
-        assert!(text.starts_with("<svg") && text.contains("#FF0000"));
+        // The selected components are drawn in the palette's second colour.
+        let c = crate::report::svg::colour(1);
+        let hex = format!("#{:02X}{:02X}{:02X}", c.0, c.1, c.2);
+        assert!(
+            text.starts_with("<svg") && text.contains(&hex),
+            "{hex} not drawn"
+        );
     }
 }

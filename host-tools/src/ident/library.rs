@@ -270,23 +270,41 @@ impl Library {
         /// Rows per block: 4096 × 17 f64 = 0.5 MB, about an L2 cache.
         const BLOCK: usize = 4096;
         let (n, p, t) = (s.len(), self.len(), targets.len());
-        let mut buf = Mat::<f64>::zeros(BLOCK.min(n.max(1)), p);
+        // Blocks of the library matrix are evaluated in parallel, a batch of them at a time
+        // (the transcendental terms are most of the cost), and summed in their order.
+        let batch = 2 * rayon::current_num_threads();
+        let mut bufs: Vec<Mat<f64>> = (0..batch)
+            .map(|_| Mat::<f64>::zeros(BLOCK.min(n.max(1)), p))
+            .collect();
         let mut gtt = Mat::<f64>::zeros(p, p);
         let mut gty = Mat::<f64>::zeros(p, t);
         let mut yy = vec![0.0; t];
         let mut start = 0;
         while start < n {
-            let end = (start + BLOCK).min(n);
-            let len = end - start;
-            self.matrix_into(&s.slice(start, end), &mut buf);
-            let blk = buf.as_ref().subrows(0, len);
-            let y = Mat::<f64>::from_fn(len, t, |r, k| targets[k][start + r]);
-            gtt += blk.transpose() * blk;
-            gty += blk.transpose() * &y;
-            for (k, acc) in yy.iter_mut().enumerate() {
-                *acc += targets[k][start..end].iter().map(|v| v * v).sum::<f64>();
+            {
+                use rayon::prelude::*;
+                bufs.par_iter_mut().enumerate().for_each(|(b, buf)| {
+                    let from = start + b * BLOCK;
+                    if from < n {
+                        self.matrix_into(&s.slice(from, (from + BLOCK).min(n)), buf);
+                    }
+                });
             }
-            start = end;
+            for buf in &bufs {
+                if start >= n {
+                    break;
+                }
+                let end = (start + BLOCK).min(n);
+                let len = end - start;
+                let blk = buf.as_ref().subrows(0, len);
+                let y = Mat::<f64>::from_fn(len, t, |r, k| targets[k][start + r]);
+                gtt += blk.transpose() * blk;
+                gty += blk.transpose() * &y;
+                for (k, acc) in yy.iter_mut().enumerate() {
+                    *acc += targets[k][start..end].iter().map(|v| v * v).sum::<f64>();
+                }
+                start = end;
+            }
         }
         Normal::from_products(p, t, |i, j| gtt[(i, j)], |i, k| gty[(i, k)], yy)
     }

@@ -151,7 +151,7 @@ impl EffCols {
 
 /// The rows of a weak-form regression: one column per unknown and the left-hand side, one
 /// entry per window.
-struct WeakRows {
+pub(crate) struct WeakRows {
     cols: Vec<Vec<f64>>,
     y: Vec<f64>,
 }
@@ -165,7 +165,7 @@ impl WeakRows {
     }
 
     /// The least-squares coefficients, or None when there are no more rows than unknowns.
-    fn solve(&self) -> Option<Vec<f64>> {
+    pub(crate) fn solve(&self) -> Option<Vec<f64>> {
         if self.y.len() <= self.cols.len() {
             return None;
         }
@@ -188,7 +188,7 @@ pub fn weak_estimate(m: &mut Model, logs: &[MotorLog], coulomb: bool) -> (f64, f
 /// paper motor's value (L, R) or the model's (K_b).
 fn estimate_electrical(m: &mut Model, logs: &[MotorLog]) {
     let extra = electrical_effects(m);
-    let rows = electrical_rows(logs, &extra);
+    let rows = electrical_rows(logs, &extra, 0.0);
     if let Some(x) = rows.solve() {
         set_electrical(m, &extra, &x);
     }
@@ -196,7 +196,7 @@ fn estimate_electrical(m: &mut Model, logs: &[MotorLog]) {
 
 /// The effects with a term in the electrical equation (deadtime, current offset): (effect
 /// index, kind), in the model's order.
-fn electrical_effects(m: &Model) -> Vec<(usize, EffectKind)> {
+pub(crate) fn electrical_effects(m: &Model) -> Vec<(usize, EffectKind)> {
     m.effects
         .iter()
         .enumerate()
@@ -206,12 +206,20 @@ fn electrical_effects(m: &Model) -> Vec<(usize, EffectKind)> {
 }
 
 /// Rows of the electrical equation over the windows of every log with a current:
-/// `∫φ·u` [V·s] against −∫φ'·I, ∫φ·I, −∫φ'·θ, then ∫φ·sgn(I) or ∫φ per effect of `extra`.
-fn electrical_rows(logs: &[MotorLog], extra: &[(usize, EffectKind)]) -> WeakRows {
+/// `∫φ·u` [V·s] against −∫φ'·I, ∫φ·I, −∫φ'·θ, then ∫φ·sgn(I − i0) or ∫φ per effect of
+/// `extra` (`i0` [A]: the current sensor's offset the model already holds, 0 for none).
+pub(crate) fn electrical_rows(
+    logs: &[MotorLog],
+    extra: &[(usize, EffectKind)],
+    i0: f64,
+) -> WeakRows {
     let mut rows = WeakRows::new(3 + extra.len());
     for log in logs {
         let Some(i) = &log.i else { continue };
-        let sgn_i: Vec<f64> = i.iter().map(|&c| smooth_sign(c, CURRENT_EPS)).collect();
+        let sgn_i: Vec<f64> = i
+            .iter()
+            .map(|&c| smooth_sign(c - i0, CURRENT_EPS))
+            .collect();
         let ones = vec![1.0; log.len()];
         for w in weak_form::log_windows(log) {
             rows.y.push(w.int_zoh(&log.u));

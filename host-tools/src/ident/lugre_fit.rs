@@ -51,8 +51,8 @@ fn in_samples(log: &MotorLog, seconds: f64, min: usize) -> usize {
 /// paper's friction) to stiffer than the paper's 317.
 pub const SIGMA0_GRID: [f64; 5] = [0.3, 3.0, 30.0, 300.0, 3000.0];
 /// Lower bound of σ0 [N·m/rad]: 0.01, a breakaway deflection of 10 rad at the paper's
-/// friction (s(0)/σ0), more than a turn of the rotor: softer is no longer a bristle. (It was
-/// 1.0; a soft bristle of 0.4 N·m/rad then stopped at the bound.)
+/// friction (s(0)/σ0), more than a turn of the rotor: softer is no longer a bristle, and a
+/// bound any stiffer would stop soft bristles of real motors (0.4 N·m/rad has been fitted).
 pub const SIGMA0_MIN: f64 = 0.01;
 /// A soft bristle start (σ0 < 30) is taken only when its simulation cost is below this
 /// fraction of the best stiff start's.

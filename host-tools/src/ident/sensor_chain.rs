@@ -22,8 +22,12 @@ pub fn quantise(theta: f64, resolution: f64) -> f64 {
 /// at the median sample period of its time stamps `t`.
 pub fn velocity_estimate<F: num_traits::Float>(t: &[f64], theta: &[F], window: usize) -> Vec<F> {
     let mut d: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
-    d.sort_by(|a, b| a.total_cmp(b));
-    let ts = d.get(d.len() / 2).copied().unwrap_or(0.0);
+    let ts = if d.is_empty() {
+        0.0
+    } else {
+        let k = d.len() / 2;
+        *d.select_nth_unstable_by(k, |a, b| a.total_cmp(b)).1
+    };
     estimate_velocity(theta, window, F::from(ts).unwrap_or_else(F::zero))
 }
 

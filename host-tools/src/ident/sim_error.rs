@@ -523,7 +523,41 @@ pub fn better_effect_start(model: &mut Model, res: &Residuals) {
         }
         m
     };
-    // Nearest the weak-form estimate first: its cost is the first bound the others meet.
+    // The phase first, at the weak-form magnitude: the phase that fits an angle-periodic
+    // torque best is the same at every magnitude (the misfit of a·sin(hθ + φ') against
+    // A·sin(hθ + φ) is a² + A² − 2aA·cos(φ' − φ), least at φ' = φ whatever a > 0), while
+    // the magnitude that fits best at a wrong phase is shrunk by the cosine of its error.
+    // Then the magnitudes (and the loads' moves and stiffness) at that phase.
+    let mut best = (f64::INFINITY, (1.0, 0.0, false, 1.0));
+    let starts = if shifts.len() > 1 {
+        let phases: Vec<Start> = shifts.iter().map(|&d| (1.0, d, false, 1.0)).collect();
+        best = lowest_start(res, &phases, f64::INFINITY, &trial, &model.effects, best);
+        let phase = best.1 .1;
+        starts
+            .into_iter()
+            .filter(|&(f, d, mv, kf)| {
+                (d == phase || f == 0.0) && (f, d, mv, kf) != (1.0, phase, false, 1.0)
+            })
+            .collect()
+    } else {
+        starts
+    };
+    best = lowest_start(res, &starts, best.0, &trial, &model.effects, best);
+    *model = trial(&best.1);
+}
+
+/// The lowest cost among `starts` (made into models by `trial`) and `best` (the cost and
+/// start found so far; it stays unless a start costs less): runs given up above the lowest
+/// so far, nearest the weak-form estimate first (its cost is the first bound the others
+/// meet).
+fn lowest_start(
+    res: &Residuals,
+    starts: &[Start],
+    bound: f64,
+    trial: &(dyn Fn(&Start) -> Model + Sync),
+    effects: &[control::effects::Effect<f64>],
+    mut best: (f64, Start),
+) -> (f64, Start) {
     let mut order: Vec<usize> = (0..starts.len()).collect();
     order.sort_by(|&a, &b| {
         let off = |(f, d, mv, kf): Start| {
@@ -531,19 +565,17 @@ pub fn better_effect_start(model: &mut Model, res: &Residuals) {
         };
         off(starts[a]).total_cmp(&off(starts[b]))
     });
-    let costs = lowest_costs(res, &order, f64::INFINITY, |k| trial(&starts[k]));
-    let mut best = (f64::INFINITY, (1.0, 0.0, false, 1.0));
+    let costs = lowest_costs(res, &order, bound, |k| trial(&starts[k]));
     for (st, &c) in starts.iter().zip(&costs) {
         tracing::debug!(
-            "effects {:?}, start (factor, shift in Hall steps, load inertia out of J, \
-             stiffness factor) {st:?}: cost {c:.4e} (∞: above the lowest)",
-            model.effects
+            "effects {effects:?}, start (factor, shift in Hall steps, load inertia out of J, \
+             stiffness factor) {st:?}: cost {c:.4e} (∞: above the lowest)"
         );
         if c < best.0 {
             best = (c, *st);
         }
     }
-    *model = trial(&best.1);
+    best
 }
 
 /// A start of [`better_effect_start`]: magnitude factor, phase shift [Hall steps], whether the

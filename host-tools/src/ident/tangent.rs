@@ -13,8 +13,13 @@ use control::effects::Effect;
 use echidna::DualVec;
 use num_traits::Float;
 
-/// Parameter lanes of [`Tangent`]: Jacobian columns per dual free run.
-pub const PARAM_LANES: usize = 6;
+/// Parameter lanes of [`Tangent`]: Jacobian columns per dual free run. Every lane of a run
+/// shares its values (the `exp` of the bristle update and the Stribeck curve, the sub-step's
+/// divisions), which cost far more than a lane's products: one run of twelve lanes costs
+/// less than two of six. Twelve covers the LuGre law, the motor constants and two or three
+/// effect keys, the refinements of `fit --add`; those of two starts run side by side, so
+/// the second core is used without splitting a Jacobian over two runs.
+pub const PARAM_LANES: usize = 12;
 
 /// The dual number of the sensitivity runs: [`PARAM_LANES`] parameter lanes, then the lane
 /// of the sub-step's unknown.

@@ -2,7 +2,8 @@
 //! acceleration carrier) — never as a regression target, which the weak form
 //! ([`super::weak_form`]) handles without differentiating.
 //!
-//! Two estimators, for two different uses, over one half-width [`VELOCITY_HALF_S`]:
+//! Two estimators, for two different uses, over the half-width [`VELOCITY_HALF_S`] (`diagnose`:
+//! the narrower [`DIAGNOSE_VELOCITY_HALF_S`]):
 //! * [`smoothed_derivative`] / [`smooth_velocity`]: the least-squares slope over the window
 //!   (Savitzky–Golay, first order) at a uniform period: the lowest-variance slope of a
 //!   quantised angle, where ω only enters a nonlinear term.
@@ -14,13 +15,25 @@
 //!   slope does not.
 use crate::log::MotorLog;
 
-/// Half-width [s] of both velocity estimators: ±5 samples at the paper's 12 ms, about one
-/// Hall step at 1.6 rad/s, and the span of the firmware's 10-sample moving average.
+/// Half-width [s] of both velocity estimators outside `diagnose`: ±5 samples at the paper's 12 ms,
+/// about one Hall step at 1.6 rad/s, and the span of the firmware's 10-sample moving average.
 pub const VELOCITY_HALF_S: f64 = 0.06;
 
 /// [`VELOCITY_HALF_S`] in samples of `log` (at least one).
 pub fn velocity_half(log: &MotorLog) -> usize {
     crate::scales::samples_for(VELOCITY_HALF_S, log.sample_period(), log.len())
+}
+
+/// Half-width [s] of the velocity `diagnose` builds its candidate columns and carriers from:
+/// ±4 samples at the paper's 12 ms, one sample narrower than [`VELOCITY_HALF_S`]. A bristle
+/// breakaway of a few Hall steps lasts a few samples, and the presliding test finds it only
+/// while the velocity does not smear it; the wider span would trade that for fewer false
+/// alarms (measured in docs/decisions/0012-diagnose-velocity-half-width.md).
+pub const DIAGNOSE_VELOCITY_HALF_S: f64 = 0.048;
+
+/// [`DIAGNOSE_VELOCITY_HALF_S`] in samples of `log` (at least one).
+pub fn diagnose_velocity_half(log: &MotorLog) -> usize {
+    crate::scales::samples_for(DIAGNOSE_VELOCITY_HALF_S, log.sample_period(), log.len())
 }
 
 /// Least-squares slope over `±m` samples (Savitzky–Golay, first order) of a signal sampled

@@ -659,7 +659,7 @@ mod tests {
         // Scale: the Coulomb friction α0 = 0.08 N·m. The rest (0.009 N·m rms) is noise, not
         // bias: Hall quantisation in the back-EMF and inertia terms (0.005 and 0.0026 N·m rms
         // on 0.19 s windows) and the Stribeck curve at a velocity known to ±0.8 rad/s
-        // (0.007 N·m), measured term by term with `examples/weakform_truth.rs`.
+        // (0.007 N·m), measured term by term with `xtask/examples/weakform_truth.rs`.
         assert!(mean.abs() < 0.01 * lg.alpha0, "mean residual {mean} N·m");
         for (name, g) in &regs {
             let g: Vec<f64> = rows.iter().map(|&r| g[r] / norm[r]).collect();

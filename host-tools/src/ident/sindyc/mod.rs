@@ -41,6 +41,8 @@
 //!    equations and Pareto table.
 pub mod embedding;
 pub mod model_file;
+pub mod pieces;
+pub mod presliding;
 pub mod refine;
 pub mod rows;
 pub mod search;
@@ -63,6 +65,7 @@ use crate::ident::stlsq::StlsqOptions;
 use crate::log::{MotorLog, Plant};
 use crate::numerics::weak_form;
 use anyhow::{anyhow, bail, Result};
+use control::effects::EffectKind;
 use control::sindy::{SindyModel, Term};
 use embedding::HiddenState;
 use refine::SimResiduals;
@@ -173,6 +176,7 @@ pub fn identify(
     opts: &SindycOptions,
 ) -> Result<SindycResult> {
     check_logs(fit_logs, val_logs, opts)?;
+    let _faer = SequentialFaer::new();
     let hidden = HiddenState::of_logs(fit_logs, opts)?;
     let mut lib = Library::with_effects(opts.plant, opts.a, 1.0, adds)?;
     // The Stribeck column the refinement may add (see `stribeck_start`); the structure
@@ -227,6 +231,20 @@ pub fn identify(
         |m| search.score_model(m),
         &mut pareto,
     );
+    let (model, validation_fit) = if adds.iter().any(|a| a.kind == EffectKind::Presliding) {
+        let hall = crate::ident::sensor_chain::hall_resolution(&fit_logs[0]);
+        let m = presliding::fit(&model, hall, &res)?;
+        let fit = search.score_model(&m);
+        pareto.push(ParetoRow {
+            terms: m.accel.terms.len() + m.zdot.terms.len() + m.idot.terms.len(),
+            fit,
+            step: "the bristle in place of the sign (--add presliding), refined".into(),
+            accepted: true,
+        });
+        (m, fit.unwrap_or(f64::NAN))
+    } else {
+        (model, validation_fit)
+    };
     Ok(SindycResult {
         equations_text: equations_text(&model, opts.plant),
         pareto_text: pareto_text(&pareto),
@@ -240,6 +258,45 @@ pub fn identify(
         validation_fit,
         z_correlation: hidden.z_correlation,
     })
+}
+
+/// faer's products and decompositions in identification are small (a few dozen columns,
+/// long sums of blocks): its thread team would spend more time waiting at its barriers than
+/// it saves, while the stages' own parallel loops keep the cores busy. Sets faer to one
+/// thread while any identification of the process runs, and back to the setting before the
+/// first of them when the last ends.
+struct SequentialFaer;
+
+/// Identifications running, and faer's setting before the first of them.
+static SEQUENTIAL_FAER: std::sync::Mutex<(usize, Option<faer::Par>)> =
+    std::sync::Mutex::new((0, None));
+
+impl SequentialFaer {
+    fn new() -> Self {
+        let mut g = SEQUENTIAL_FAER
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        if g.0 == 0 {
+            g.1 = Some(faer::get_global_parallelism());
+            faer::set_global_parallelism(faer::Par::Seq);
+        }
+        g.0 += 1;
+        SequentialFaer
+    }
+}
+
+impl Drop for SequentialFaer {
+    fn drop(&mut self) {
+        let mut g = SEQUENTIAL_FAER
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        g.0 -= 1;
+        if g.0 == 0 {
+            if let Some(previous) = g.1.take() {
+                faer::set_global_parallelism(previous);
+            }
+        }
+    }
 }
 
 /// Every log has the columns the plant needs and enough samples for the delay embedding
@@ -304,7 +361,14 @@ pub fn fit_model(req: &super::FitRequest) -> Result<crate::model::Model> {
         model.motor.kb = 0.0;
     }
     sm.j = model.motor.j;
-    model.effects = req.adds.iter().map(|s| s.to_effect()).collect();
+    // A `presliding` add is the bristle of the equations, not an effect with its own
+    // numbers.
+    model.effects = req
+        .adds
+        .iter()
+        .filter(|s| s.kind != EffectKind::Presliding)
+        .map(|s| s.to_effect())
+        .collect();
     model.sindy = Some(to_table(&sm, &res.hankel));
     for (prefix, eq, unit) in [
         ("accel", &sm.accel, "rad/s² per term unit"),

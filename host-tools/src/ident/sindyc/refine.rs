@@ -22,7 +22,7 @@ use control::sindy::{SindyModel, Term};
 /// so it only steers the low frequencies).
 const REFINE_ANGLE_WEIGHT: f64 = 0.3;
 /// Iteration limit of the refinement (one Jacobian = one free run per coefficient each).
-const REFINE_ITER: usize = 25;
+pub(crate) const REFINE_ITER: usize = 25;
 /// Largest model (terms over all equations) the refinement takes on: each iteration costs
 /// one free run per coefficient, and the sparse models the thresholding returns have 5–10.
 const REFINE_MAX_TERMS: usize = 16;
@@ -131,7 +131,7 @@ impl<'a> SimResiduals<'a> {
 
     /// The residual vector the refinement minimises: velocity, current times
     /// `current_weight`, angle times [`REFINE_ANGLE_WEIGHT`], log after log.
-    fn eval(&self, m: &SindyModel<f64>, current_weight: f64) -> Result<Vec<f64>> {
+    pub(crate) fn eval(&self, m: &SindyModel<f64>, current_weight: f64) -> Result<Vec<f64>> {
         let runs = self.outputs(m)?;
         let mut r = Vec::with_capacity(
             runs.iter()
@@ -205,7 +205,7 @@ fn with_values(base: &SindyModel<f64>, slots: &Slots, x: &[f64]) -> SindyModel<f
 /// ([`SimResiduals::current_weight`]), estimated once from the free run of the regression
 /// stage's model and held through the iterations. Errors when the start itself diverges on
 /// the fitting logs.
-fn refine_model(
+pub(crate) fn refine_model(
     m: &SindyModel<f64>,
     res: &SimResiduals,
     max_iter: usize,

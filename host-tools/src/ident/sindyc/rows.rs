@@ -189,21 +189,40 @@ pub fn weak_rows_uniform(lib: &Library, t: &[f64], s: &Signals) -> (Mat<f64>, Ma
     let assemble = |part: &[f64], r: usize| -> f64 { (0..Q).map(|q| part[(r + q) * Q + q]).sum() };
 
     let mut a = Mat::<f64>::zeros(rows, p);
-    // Library, blockwise: BLOCK samples = whole segments, about 0.5 MB of 17 columns.
+    // Library, blockwise: BLOCK samples = whole segments, about 0.5 MB of 17 columns. The
+    // blocks are independent (each gives the pieces of its own segments), so they are
+    // evaluated in parallel, each into a buffer of its thread.
     const BLOCK_SEGS: usize = 200;
-    let mut buf = Mat::<f64>::zeros(BLOCK_SEGS * HOP, p);
     let mut part = vec![0.0; segs * Q];
     let mut col_parts: Vec<Vec<f64>> = vec![vec![0.0; segs * Q]; p];
-    let mut g0 = 0;
-    while g0 < segs {
-        let g1 = (g0 + BLOCK_SEGS).min(segs);
-        let (start, end) = (g0 * HOP, g1 * HOP);
-        lib.matrix_into(&s.slice(start, end), &mut buf);
-        for (j, cp) in col_parts.iter_mut().enumerate() {
-            let col = &buf.col_as_slice(j)[..end - start];
-            pieces(k0, col, &mut cp[g0 * Q..g1 * Q]);
+    {
+        use rayon::prelude::*;
+        // Per block, its pieces column after column: block_parts[b][j·len + i].
+        let blocks: Vec<Vec<f64>> = (0..segs.div_ceil(BLOCK_SEGS))
+            .into_par_iter()
+            .map_init(
+                || Mat::<f64>::zeros(BLOCK_SEGS * HOP, p),
+                |buf, b| {
+                    let g0 = b * BLOCK_SEGS;
+                    let g1 = (g0 + BLOCK_SEGS).min(segs);
+                    let (start, end) = (g0 * HOP, g1 * HOP);
+                    lib.matrix_into(&s.slice(start, end), buf);
+                    let len = (g1 - g0) * Q;
+                    let mut out = vec![0.0; p * len];
+                    for (j, o) in out.chunks_exact_mut(len).enumerate() {
+                        pieces(k0, &buf.col_as_slice(j)[..end - start], o);
+                    }
+                    out
+                },
+            )
+            .collect();
+        for (b, out) in blocks.iter().enumerate() {
+            let g0 = b * BLOCK_SEGS;
+            let len = out.len() / p.max(1);
+            for (cp, o) in col_parts.iter_mut().zip(out.chunks_exact(len.max(1))) {
+                cp[g0 * Q..g0 * Q + len].copy_from_slice(o);
+            }
         }
-        g0 = g1;
     }
     for (j, cp) in col_parts.iter().enumerate() {
         for r in 0..rows {

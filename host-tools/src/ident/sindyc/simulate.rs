@@ -68,7 +68,7 @@ pub fn simulate_substeps(
         (Some(i), true) => i[0],
         _ => 0.0,
     };
-    let mut s = [log.theta[0], freerun::initial_omega(log), 0.0, i0];
+    let start = [log.theta[0], freerun::initial_omega(log), 0.0, i0];
     let zb = model.z_bound();
     let rhs = |s: &[f64; 4], u: f64| -> [f64; 4] {
         let p = TermInputs {
@@ -83,30 +83,32 @@ pub fn simulate_substeps(
     };
     let deps = state_dependencies(model, voltage);
     let kinks = sign_kinks(model, voltage);
-    let mut out = Prediction {
-        t: log.t.clone(),
-        theta: Vec::with_capacity(n),
-        omega: Vec::with_capacity(n),
-        i: voltage.then(|| Vec::with_capacity(n)),
-        z: Some(Vec::with_capacity(n)),
-    };
-    for k in 0..n {
-        out.theta.push(s[0]);
-        out.omega.push(s[1]);
-        if let Some(i) = &mut out.i {
-            i.push(s[3]);
-        }
-        if let Some(z) = &mut out.z {
-            z.push(s[2]);
-        }
-        if k + 1 == n {
-            break;
-        }
+    // The state after sample k from the one at k. With `incs`, the angle enters at -0 and
+    // the increments of a halved step's parts but the last are pushed on `incs` (see
+    // `advance`; one sub-step a sample): the angle's entry of the result is the last part's
+    // increment, exactly (`-0 + x = x`). A run whose steps do not depend on the angle gives
+    // the same other states either way.
+    let step = |k: usize, s: &[f64; 4], mut incs: Option<&mut Vec<f64>>| -> Result<[f64; 4]> {
         let u = log.u[k];
         let dt = (log.t[k + 1] - log.t[k]) / sub as f64;
+        let mut r = *s;
+        if incs.is_some() {
+            r[0] = -0.0;
+        }
         for _ in 0..sub {
             let mut splits = MAX_SPLITS;
-            s = advance(&rhs, &deps, &kinks, &s, u, dt, zb, &mut splits).ok_or_else(|| {
+            r = advance(
+                &rhs,
+                &deps,
+                &kinks,
+                &r,
+                u,
+                dt,
+                zb,
+                &mut splits,
+                incs.as_deref_mut(),
+            )
+            .ok_or_else(|| {
                 anyhow!(
                     "{}: time step {} s before sample {} is too long for the SINDYc model, or \
                      the model's coefficients too large (its matrix exponential is out of \
@@ -117,9 +119,9 @@ pub fn simulate_substeps(
                 )
             })?;
         }
-        if !s.iter().all(|v| v.is_finite())
-            || s[1].abs() > limits.omega
-            || s[3].abs() > limits.current
+        if !r.iter().all(|v| v.is_finite())
+            || r[1].abs() > limits.omega
+            || r[3].abs() > limits.current
         {
             bail!(
                 "{}: the SINDYc model diverged in free run at t = {} s (sample {})",
@@ -128,8 +130,94 @@ pub fn simulate_substeps(
                 k + 2
             );
         }
-    }
-    Ok(out)
+        Ok(r)
+    };
+    let states = if deps[0] || sub > 1 || n < 2 * super::pieces::MIN_PIECE {
+        let mut states = Vec::with_capacity(n);
+        states.push(start);
+        for k in 0..n - 1 {
+            let next = step(k, &states[k], None)?;
+            states.push(next);
+        }
+        states
+    } else {
+        // In pieces, a step returns the angle's increment, and NaN in its place when the
+        // step was halved: the increments of its parts, which are added to the angle one
+        // after the other (each sum rounded), are kept by sample (a re-run's after the
+        // guessed run's). The angles are then summed in order.
+        let parts = std::sync::Mutex::new(Vec::<(usize, Vec<f64>)>::new());
+        let inc = |k: usize, s: &[f64; 4]| -> Result<[f64; 4]> {
+            let mut incs = Vec::new();
+            let mut r = step(k, s, Some(&mut incs))?;
+            if !incs.is_empty() {
+                incs.push(r[0]);
+                r[0] = f64::NAN;
+                parts
+                    .lock()
+                    .unwrap_or_else(std::sync::PoisonError::into_inner)
+                    .push((k, incs));
+            }
+            Ok(r)
+        };
+        let mut states = run_in_pieces(log, voltage, start, &inc)?;
+        let parts: std::collections::HashMap<usize, Vec<f64>> = parts
+            .into_inner()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .into_iter()
+            .collect();
+        for k in 1..n {
+            let mut theta = states[k - 1][0];
+            match parts.get(&(k - 1)).filter(|_| states[k][0].is_nan()) {
+                Some(incs) => incs.iter().for_each(|d| theta += d),
+                None => theta += states[k][0],
+            }
+            if !theta.is_finite() {
+                bail!(
+                    "{}: the SINDYc model diverged in free run at t = {} s (sample {})",
+                    crate::log::echo_path(&log.source),
+                    log.t[k],
+                    k + 1
+                );
+            }
+            states[k][0] = theta;
+        }
+        states
+    };
+    Ok(Prediction {
+        t: log.t.clone(),
+        theta: states.iter().map(|s| s[0]).collect(),
+        omega: states.iter().map(|s| s[1]).collect(),
+        i: voltage.then(|| states.iter().map(|s| s[3]).collect()),
+        z: Some(states.iter().map(|s| s[2]).collect()),
+    })
+}
+
+/// The states of a free run whose steps do not depend on the angle (see [`simulate`]),
+/// computed in parallel pieces ([`super::pieces`]) when the log is long: the same states to
+/// the bit as one run from the start. A piece starts from the log's measured velocity
+/// (centred slope of the angle over ±5 samples, or its `omega` column) and current.
+fn run_in_pieces(
+    log: &MotorLog,
+    voltage: bool,
+    start: [f64; 4],
+    step: &(impl Fn(usize, &[f64; 4]) -> Result<[f64; 4]> + Sync),
+) -> Result<Vec<[f64; 4]>> {
+    let n = log.len();
+    let guess = |k: usize| {
+        let w = match &log.omega {
+            Some(w) => w[k],
+            None => {
+                let (a, b) = (k.saturating_sub(5), (k + 5).min(n - 1));
+                (log.theta[b] - log.theta[a]) / (log.t[b] - log.t[a])
+            }
+        };
+        let i = match (&log.i, voltage) {
+            (Some(i), true) => i[k],
+            _ => 0.0,
+        };
+        [0.0, w, 0.0, i]
+    };
+    super::pieces::run(n, start, step, &guess, 2 * rayon::current_num_threads())
 }
 
 /// Most halvings of one (sub-)step by [`advance`]: enough to resolve a start from rest
@@ -137,13 +225,26 @@ pub fn simulate_substeps(
 /// chatters about zero velocity cannot make a sample cost more than this many extra steps.
 const MAX_SPLITS: usize = 64;
 
+/// Largest change of a bristle state (`|ẋ|·z` in the model) in one step, as a fraction of
+/// its bound `z_max`: while the bristle turns over at a reversal its equation's slope in
+/// `ẋ` falls from `2/z_ss` to 0 and the rotor's presliding damping with it, so a step
+/// whose Jacobian is frozen at its start must see only a small part of the turn. A
+/// twentieth keeps a whole turnover within about 40 steps, inside [`MAX_SPLITS`];
+/// docs/performance-sindyc.md compares the result with sub-steps.
+const BRISTLE_TURN: f64 = 0.05;
+
+/// Distance of a bristle state from saturation, as a fraction of `z_max`, below which its
+/// damping is spent and a step may close it at once.
+const BRISTLE_GAP: f64 = 1e-4;
+
 /// Multiple of a sign-like term's width beyond which it is flat (`tanh(3) > 0.995`).
 const KINK_REACH: f64 = 3.0;
 
 /// The sign-like terms of a model as `(state, width)`: the state `(x, ẋ, z, I)` the term
 /// switches on and the width over which it does (`1/a` for `tanh(a·ẋ)` and `tanh(a·z)`,
 /// [`VELOCITY_EPS`] for the smooth signs of the velocity, the Stribeck velocity `vs`, and
-/// [`CURRENT_EPS`] for the smooth sign of the current).
+/// [`CURRENT_EPS`] for the smooth sign of the current). A bristle state (`|ẋ|·z`) adds the
+/// zero velocity and, as `(2, ∞)`, its own turnover ([`BRISTLE_TURN`]).
 fn sign_kinks(model: &SindyModel<f64>, voltage: bool) -> Vec<(usize, f64)> {
     let mut out: Vec<(usize, f64)> = Vec::new();
     let eqs = [&model.accel, &model.zdot];
@@ -152,6 +253,16 @@ fn sign_kinks(model: &SindyModel<f64>, voltage: bool) -> Vec<(usize, f64)> {
         .chain(voltage.then_some(&model.idot))
         .flat_map(|e| e.terms.iter().map(|(t, _)| *t));
     for t in terms {
+        if t == Term::AbsXdotZ {
+            // The bristle (`--add presliding`): `|ẋ|` switches at zero velocity, and the
+            // step's frozen Jacobian holds only while the bristle turns over a little.
+            for k in [(1, VELOCITY_EPS), (2, f64::INFINITY)] {
+                if !out.contains(&k) {
+                    out.push(k);
+                }
+            }
+            continue;
+        }
         let kink = match t {
             Term::TanhXdot => Some((1, 1.0 / model.a)),
             Term::TanhZ => Some((2, 1.0 / model.a)),
@@ -176,6 +287,10 @@ fn sign_kinks(model: &SindyModel<f64>, voltage: bool) -> Vec<(usize, f64)> {
 /// as soon as the velocity leaves the kink. A step counts as crossing a kink of width `w`
 /// when the state moves by more than `w` and the range it covers reaches within
 /// [`KINK_REACH`]·`w` of zero. `z` is clamped to `±zb` after every step.
+/// With `incs` (a run whose steps do not depend on the angle, started at angle -0), the
+/// angle restarts at -0 after every halved step but the last, whose increment is pushed on
+/// `incs`: the returned angle is the last one's increment, so the angle a run from the true
+/// angle reaches is its angle plus each increment in turn.
 #[allow(clippy::too_many_arguments)]
 fn advance(
     rhs: &impl Fn(&[f64; 4], f64) -> [f64; 4],
@@ -186,19 +301,41 @@ fn advance(
     h: f64,
     zb: f64,
     splits: &mut usize,
+    mut incs: Option<&mut Vec<f64>>,
 ) -> Option<[f64; 4]> {
     let mut next = rosenbrock_step(rhs, deps, s, u, h)?;
     next[2] = next[2].clamp(-zb, zb);
     let crosses = kinks.iter().any(|&(j, w)| {
         let (a, b) = (s[j], next[j]);
+        if j == 2 && w.is_infinite() {
+            // The turn, and its end: the bristle's damping is proportional to its distance
+            // from saturation, which a step must not close by more than half at once.
+            let (ga, gb) = (zb - a.abs(), zb - b.abs());
+            return (b - a).abs() > BRISTLE_TURN * zb
+                || (ga - gb).abs() > 0.5 * ga.max(gb) && ga.max(gb) > BRISTLE_GAP * zb;
+        }
         (b - a).abs() > w && a.min(b) < KINK_REACH * w && a.max(b) > -KINK_REACH * w
     });
     if !crosses || *splits == 0 {
         return Some(next);
     }
     *splits -= 1;
-    let mid = advance(rhs, deps, kinks, s, u, h / 2.0, zb, splits)?;
-    advance(rhs, deps, kinks, &mid, u, h / 2.0, zb, splits)
+    let mut mid = advance(
+        rhs,
+        deps,
+        kinks,
+        s,
+        u,
+        h / 2.0,
+        zb,
+        splits,
+        incs.as_deref_mut(),
+    )?;
+    if let Some(v) = incs.as_deref_mut() {
+        v.push(mid[0]);
+        mid[0] = -0.0;
+    }
+    advance(rhs, deps, kinks, &mid, u, h / 2.0, zb, splits, incs)
 }
 
 /// Which states `(x, ẋ, z, I)` the right-hand side depends on: `ẋ` always (`dx/dt = ẋ`),
@@ -594,6 +731,42 @@ mod tests {
         assert!(z.iter().all(|z| z.abs() <= 2.0 + 1e-12));
         assert!(z.iter().any(|z| z.abs() > 1.9));
         assert!(p.i.is_none());
+    }
+
+    #[test]
+    fn a_bristle_turns_over_at_a_reversal_within_its_bound() {
+        // dẋ/dt = −ẋ/τ + g·u + c·w − d·(ẋ − |ẋ|·w), dw/dt = (ẋ − |ẋ|·w)/z_ss: Coulomb
+        // friction carried by the bristle w, whose damping d (a time constant of 5 µs while
+        // it turns over) holds the rotor at the reversal. In sliding w = sgn ẋ and
+        // ẋ = τ·(g·u + c·w).
+        let (tau, g, c, d, zss) = (0.013, 1000.0, -250.0, 1e5, 1e-3);
+        let mut m = SindyModel::empty(100.0, 1.0, 1.0);
+        m.z_max = 1.0;
+        m.accel = SparseEq::from_slice(&[
+            (Term::Xdot, -1.0 / tau - d),
+            (Term::U, g),
+            (Term::Z, c),
+            (Term::AbsXdotZ, d),
+        ])
+        .unwrap();
+        m.zdot =
+            SparseEq::from_slice(&[(Term::Xdot, 1.0 / zss), (Term::AbsXdotZ, -1.0 / zss)]).unwrap();
+        let log = log_with_input(100, 0.012, |k| if k < 50 { 1.0 } else { -1.0 });
+        let p = simulate(&m, Plant::Torque, &log, Limits::default()).unwrap();
+        let z = p.z.as_ref().unwrap();
+        assert!(z.iter().all(|z| z.abs() <= 1.0));
+        let slide = tau * (g + c);
+        for (k, sign) in [(49, 1.0), (99, -1.0)] {
+            assert!((z[k] - sign).abs() < 1e-9, "w[{k}] = {}", z[k]);
+            let w = p.omega[k];
+            assert!((w - sign * slide).abs() < 1e-6 * slide, "ẋ[{k}] = {w}");
+        }
+        // The split steps agree with 32 sub-steps a sample (the convergence of the step,
+        // to a hundredth of the sliding speed).
+        let fine = simulate_substeps(&m, Plant::Torque, &log, Limits::default(), 32).unwrap();
+        for (a, b) in p.omega.iter().zip(&fine.omega) {
+            assert!((a - b).abs() < 1e-2 * slide, "{a} vs {b}");
+        }
     }
 
     #[test]
