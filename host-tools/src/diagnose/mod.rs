@@ -211,13 +211,16 @@ pub struct Verdict {
 pub(super) struct EqData {
     pub(super) eq: Equation,
     pub(super) y: Vec<f64>,
+    /// The base columns; add them with [`EqData::push_base`] only, which keeps them, their
+    /// names and their instruments in one order.
     pub(super) base_cols: Vec<Vec<f64>>,
     /// What each base column's coefficient is ([`Column`]), for the refitted values.
     pub(super) base_names: Vec<Column>,
+    /// Each base column computed on the model's own noise-free run ([`simulated_log`]), the
+    /// parameter check's instrument for it; `None` where there is no run.
+    pub(super) base_inst: Vec<Option<Vec<f64>>>,
     /// Sample-level columns to carry into the other equation's base.
-    pub(super) base_sample: Vec<Vec<f64>>,
-    /// What each of `base_sample`'s coefficients is.
-    pub(super) sample_names: Vec<Column>,
+    pub(super) base_sample: Vec<SampleColumn>,
     /// Smallest torque [N·m] (RMS of the effect's term) worth reporting.
     pub(super) min_torque: f64,
     /// Base column of the model's Coulomb friction (`sgn ω`) when the model states no positive
@@ -229,14 +232,51 @@ pub(super) struct EqData {
     pub(super) cluster: Vec<usize>,
 }
 
-/// What the coefficient of one base column is: a parameter's name and unit, and whether it
-/// is a torque term (written in volts in a voltage plant's torque equation, so that its
-/// coefficient times `K_t/R` is the parameter).
+impl EqData {
+    /// An equation with no columns yet.
+    pub(super) fn new(eq: Equation, y: Vec<f64>, cluster: Vec<usize>) -> EqData {
+        EqData {
+            eq,
+            y,
+            base_cols: vec![],
+            base_names: vec![],
+            base_inst: vec![],
+            base_sample: vec![],
+            min_torque: 0.0,
+            coulomb_col: None,
+            cand: vec![],
+            cluster,
+        }
+    }
+
+    /// Add one base column with its name and its instrument, so that the three lists keep
+    /// one order.
+    pub(super) fn push_base(&mut self, name: Column, col: Vec<f64>, inst: Option<Vec<f64>>) {
+        self.base_cols.push(col);
+        self.base_names.push(name);
+        self.base_inst.push(inst);
+    }
+}
+
+/// A sample-level column on its way into the other equation's base, with its name and its
+/// counterpart on the model's own run.
+pub(super) struct SampleColumn {
+    pub(super) col: Vec<f64>,
+    pub(super) inst: Option<Vec<f64>>,
+    pub(super) name: Column,
+}
+
+/// What the coefficient of one base column is: a parameter's name and unit, whether it is a
+/// torque term (written in volts in a voltage plant's torque equation, so that its
+/// coefficient times `K_t/R` is the parameter), and whether it is `free`: not a parameter of
+/// the model as given (an equation's own approximation, an effect found in the other
+/// equation), left free in the parameter check.
 #[derive(Debug, Clone)]
 pub(super) struct Column {
     pub(super) name: String,
     pub(super) unit: &'static str,
     pub(super) torque: bool,
+    pub(super) free: bool,
 }
 
 impl Column {
@@ -245,7 +285,14 @@ impl Column {
             name: name.into(),
             unit,
             torque,
+            free: false,
         }
+    }
+
+    /// The same column, free in the parameter check.
+    pub(super) fn free(mut self) -> Column {
+        self.free = true;
+        self
     }
 
     /// The names of an effect's present columns ([`candidates::present_columns`]), in order.
@@ -276,60 +323,17 @@ impl Column {
 /// torque equation ([`equations`]), and the verdict on the model as given ([`judge`]).
 pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
     let f = equations::weak_forms(log, st, opts);
-    // The model's own equations with its own numbers, for the verdict.
-    let (given_mech, given_elec) = match st
-        .motor
-        .map(|m| verdict::given_residuals(&f.s, &f.wf, &f.wf_m, &st.effects, &m))
-    {
-        Some((m, e)) => (Some(m), e),
-        None => (None, None),
-    };
-    let (mut elec, mut mech) = equations::base_equations(&f, st);
-    // The same columns on the model's own noise-free run: the parameter check's instruments.
-    let inst = simulated_log(log, st).map(|l| {
-        let fs = equations::weak_forms(&l, st, opts);
-        let (e, m) = equations::base_equations(&fs, st);
-        (fs, e, m)
-    });
-    let mut pre = equations::PreslidingTest::default();
-    let n_variants = equations::add_candidates(&f, st, &mut elec, &mut mech, &mut pre);
-    let alpha_per_test = opts.alpha / n_variants.max(1) as f64;
-    let mut pass = equations::Pass {
-        opts,
-        alpha_per_test,
-        units: Units {
-            r: MotorParams::<f64>::paper().r,
-            kt: st.kt,
-            mech_scale: 1.0,
-        },
-        acc: equations::Outcome::default(),
-    };
-    let mut kb = 0.0;
-    if f.voltage && !elec.y.is_empty() {
-        kb = equations::electrical_pass(
-            &f,
-            &elec,
-            &mut mech,
-            (given_elec, inst.as_ref().map(|i| i.1.base_cols.clone())),
-            &mut pass,
-        );
-    }
-    if !f.wf.centres.is_empty() {
-        equations::mechanical_pass(
-            &f,
-            st,
-            mech,
-            pre,
-            (kb, given_mech, inst.map(|i| (i.0, i.2))),
-            &mut pass,
-        );
-    }
+    // The same signals on the model's own noise-free run: the parameter check's instruments.
+    let run = simulated_log(log, st)
+        .map(|l| equations::weak_forms(&l, st, opts))
+        .filter(|fs| fs.wf.rows() == f.wf.rows());
+    let (acc, alpha_per_test) = passes(&f, run.as_ref(), st, opts);
     let equations::Outcome {
         mut findings,
         tested,
         equations,
         judged,
-    } = pass.acc;
+    } = acc;
     resolve_offsets(&mut findings, st.kt);
     findings.sort_by(|a, b| b.score.total_cmp(&a.score));
     findings.truncate(MAX_FINDINGS);
@@ -344,6 +348,48 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
         min_explained: opts.min_explained,
         verdict,
     }
+}
+
+/// The weak forms' passes: the model's own residuals, the base and candidate columns of
+/// both equations (with their instruments on the model's run `run`), and forward selection
+/// in the voltage equation, then in the torque equation. Returns what they found and the
+/// level of each entry test.
+fn passes(
+    f: &equations::Forms,
+    run: Option<&equations::Forms>,
+    st: &Structure,
+    opts: &Options,
+) -> (equations::Outcome, f64) {
+    // The model's own equations with its own numbers, for the verdict.
+    let (given_mech, given_elec) = match st
+        .motor
+        .map(|m| verdict::given_residuals(&f.s, &f.wf, &f.wf_m, &st.effects, &m))
+    {
+        Some((m, e)) => (Some(m), e),
+        None => (None, None),
+    };
+    let (mut elec, mut mech) = equations::base_equations(f, run, st);
+    let mut pre = equations::PreslidingTest::default();
+    let n_variants = equations::add_candidates(f, st, &mut elec, &mut mech, &mut pre);
+    let alpha_per_test = opts.alpha / n_variants.max(1) as f64;
+    let mut pass = equations::Pass {
+        opts,
+        alpha_per_test,
+        units: Units {
+            r: MotorParams::<f64>::paper().r,
+            kt: st.kt,
+            mech_scale: 1.0,
+        },
+        acc: equations::Outcome::default(),
+    };
+    let mut kb = 0.0;
+    if f.voltage && !elec.y.is_empty() {
+        kb = equations::electrical_pass(f, &elec, &mut mech, given_elec, &mut pass);
+    }
+    if !f.wf.centres.is_empty() {
+        equations::mechanical_pass((f, run), st, mech, pre, (kb, given_mech), &mut pass);
+    }
+    (pass.acc, alpha_per_test)
 }
 
 /// The model as given, run by the emulator on the log's input (voltage plant, motor
@@ -506,15 +552,9 @@ struct Judged {
     cols: Vec<Vec<f64>>,
     /// What each column's coefficient is.
     names: Vec<Column>,
-    /// The same columns on the model's own noise-free run ([`simulated_log`]), where there
-    /// was one: the parameter check's instruments.
-    instruments: Option<Vec<Vec<f64>>>,
-    /// Columns of `cols` that stand for an approximation of the equation rather than for a
-    /// parameter of the model, free in the parameter check: the voltage equation's
-    /// quasi-static `L·İ ≈ −(L·K_b/R)·ω̇`, whose coefficient the discrete windows do not
-    /// reproduce exactly (the model's L is judged in the torque equation, through the exact
-    /// increments of the measured current).
-    approx: Vec<usize>,
+    /// Each column computed on the model's own noise-free run ([`simulated_log`]), where
+    /// there was one (kept rows, weighted): the parameter check's instruments.
+    instruments: Vec<Option<Vec<f64>>>,
     /// The input at each kept window's centre.
     input: Vec<f64>,
 }
@@ -612,27 +652,22 @@ fn too_few_windows(j: &Judged) -> verdict::Check {
     }
 }
 
-/// The refit's columns split into the tested ones and those of the equation's own
-/// approximation ([`Judged::approx`]), with the index of each tested one.
+/// The parameter check's columns: the tested ones (the model's parameters) with the index
+/// of each, and the free ones ([`Column::free`]); each is its instrument when it has one
+/// of the same length, the measured column otherwise.
 fn tested_columns(j: &Judged) -> (Vec<usize>, Vec<Vec<f64>>, Vec<Vec<f64>>) {
     let col = |k: usize| -> Vec<f64> {
         j.instruments
-            .as_ref()
-            .and_then(|z| z.get(k))
+            .get(k)
+            .and_then(|z| z.as_ref())
             .filter(|z| z.len() == j.cols[k].len() && z.iter().all(|v| v.is_finite()))
             .unwrap_or(&j.cols[k])
             .clone()
     };
-    let idx: Vec<usize> = (0..j.cols.len())
-        .filter(|k| !j.approx.contains(k))
-        .collect();
+    let free = |k: usize| j.names.get(k).is_some_and(|c| c.free);
+    let idx: Vec<usize> = (0..j.cols.len()).filter(|&k| !free(k)).collect();
     let tested = idx.iter().map(|&k| col(k)).collect();
-    let nuisance = j
-        .approx
-        .iter()
-        .filter(|&&k| k < j.cols.len())
-        .map(|&k| col(k))
-        .collect();
+    let nuisance = (0..j.cols.len()).filter(|&k| free(k)).map(col).collect();
     (idx, tested, nuisance)
 }
 
@@ -816,18 +851,16 @@ fn presliding_pass(
             base_cols.extend(v.columns.iter().map(|c| weak_torque(wf, s, c)));
         }
     }
-    EqData {
-        eq: Equation::Mechanical,
+    let mut data = EqData::new(
+        Equation::Mechanical,
         y,
-        base_cols,
-        base_names: vec![],
-        base_sample: vec![],
-        sample_names: vec![],
-        min_torque: mech.min_torque,
-        coulomb_col: mech.coulomb_col,
-        cand,
-        cluster: verdict::hold_clusters(&s.raw_u, &wf.centres),
-    }
+        verdict::hold_clusters(&s.raw_u, &wf.centres),
+    );
+    data.base_cols = base_cols;
+    data.min_torque = mech.min_torque;
+    data.coulomb_col = mech.coulomb_col;
+    data.cand = cand;
+    data
 }
 
 /// The drive torque the model's own mechanical structure predicts from the motion, sample
@@ -1078,8 +1111,59 @@ impl Structure {
 
 #[cfg(test)]
 mod tests {
-    use super::row_scale;
+    use super::{equations, passes, row_scale, Options, Structure};
+    use crate::emulator::{simulate_signal, EmulatorConfig, SignalKind};
     use crate::numerics::statistics::white_noise;
+    use control::effects::{Effect, EffectKind};
+
+    /// Each column of the parameter check meets its own instrument: with the log itself
+    /// standing for the model's run, every instrument equals its column in both equations,
+    /// also when the voltage equation finds an effect whose column joins the torque
+    /// equation's base (free there, as it is not a parameter of the model as given).
+    #[test]
+    fn instruments_stay_in_the_order_of_their_columns() {
+        let mut cfg = EmulatorConfig::paper();
+        cfg.seed = 4;
+        cfg.effects = vec![
+            Effect::Deadtime { vd: 0.5 },
+            Effect::Thermal {
+                k: 0.004,
+                tau: 20.0,
+            },
+        ];
+        let log = simulate_signal(&cfg, SignalKind::A, 60.0).unwrap().log;
+        let mut st = Structure::from_model(&cfg.truth_model());
+        st.effects.retain(|e| e.kind() != EffectKind::Deadtime);
+        let opts = Options::default();
+        let f = equations::weak_forms(&log, &st, &opts);
+        let (acc, _) = passes(&f, Some(&f), &st, &opts);
+        assert!(
+            acc.findings
+                .iter()
+                .any(|x| x.kind == Some(EffectKind::Deadtime)),
+            "the voltage equation must find the dead time for this test to mean anything"
+        );
+        let mut free_in_torque = 0;
+        for j in &acc.judged {
+            assert_eq!(j.instruments.len(), j.cols.len());
+            assert_eq!(j.names.len(), j.cols.len());
+            for (k, (z, c)) in j.instruments.iter().zip(&j.cols).enumerate() {
+                let name = &j.names[k].name;
+                let z = z.as_ref().unwrap_or_else(|| {
+                    assert!(j.names[k].free, "{name} has no instrument");
+                    c
+                });
+                assert!(z == c, "{:?} {name}: instrument is not its column", j.eq);
+                if j.eq == super::Equation::Mechanical && j.names[k].free {
+                    free_in_torque += 1;
+                }
+            }
+        }
+        assert!(
+            free_in_torque > 0,
+            "no found column joined the torque equation"
+        );
+    }
 
     /// Rows whose noise is a known part plus a floor get weights that make them equally
     /// noisy; rows of one variance keep equal weights.
