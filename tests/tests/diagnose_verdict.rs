@@ -65,7 +65,7 @@ fn a_correct_model_is_adequate() {
     ] {
         let mut alarms = Vec::new();
         for seed in 1..=20 {
-            let d = tests::false_alarms::correct_model(maker, SignalKind::A, seed, &opts);
+            let d = e2e::false_alarms::correct_model(maker, SignalKind::A, seed, &opts);
             if !d.verdict.adequate {
                 alarms.push(format!("seed {seed}: {}", summary(&d)));
             }
