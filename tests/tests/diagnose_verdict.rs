@@ -377,10 +377,11 @@ fn write_false_alarm_rows(md: &mut String) {
 }
 
 const VERDICT_LIMITS: &str =
-    "\nThe parameter check tests the model's own residual on the columns of its structure \
-     computed on the model's noise-free run on the same input (decision 0019): the rigid \
-     model of a plant with a coupling or a gap, and a constant K_t where it falls with the \
-     current, are told to refit as well. \
+    "\nThe parameter check tests the model's own residual, less the same on the model's \
+     noise-free run, on the columns of its structure computed on that run, and stands only \
+     when the refitted values also run closer to the log (decision 0019): the rigid model of \
+     a plant with a compliant coupling (on two of three logs) and a constant K_t on voltage \
+     steps are told to refit as well. \
      Limits seen here: a correct model's residual is far noisier in the windows of a slip \
      or an input step than at rest, and over one held voltage step the rotor turns at a \
      steady speed whose Hall rounding error beats slowly with the 12 ms sampling, one error \
@@ -398,9 +399,9 @@ const VERDICT_LIMITS: &str =
      logs, and not adequate on the rest, where the acceleration carries the drift. Judge a \
      model on a multisine. On the low-speed signal c the torque equation keeps too few \
      windows or held inputs for its tests (most windows touch a standstill or a reversal): \
-     mostly \"Cannot judge\". A torque constant that falls 3 % by 10 A is not named on the \
-     fitting signal a, whose current rarely leaves that range, but the parameter check \
-     tells the model with a constant K_t to refit. A compliant coupling is named `compliance` with its load inertia and natural \
+     mostly \"Cannot judge\". A torque constant that falls 3 % by 10 A goes unseen on the \
+     fitting signal a, whose current rarely leaves that range (the refitted values do not \
+     run closer to the log, so the parameter check keeps the model's). A compliant coupling is named `compliance` with its load inertia and natural \
      frequency. A gap is named `backlash` with its load inertia and gap: the load coasts \
      across the gap whenever the rotor slows down and is caught again, which a soft \
      coupling (`compliance` near 1 to 2 Hz) imitates less well; where both explain about \

@@ -656,6 +656,30 @@ mod tests {
         assert!(t0.unwrap().p_value > 1e-3, "{t0:?}");
     }
 
+    /// A run whose angle and current follow the log's truth beats one with a slow error in
+    /// both; the reverse comparison finds no gain.
+    #[test]
+    fn the_free_run_closer_to_the_log_wins() {
+        let n = 3000;
+        let (a, b) = (noise(n, 21), noise(n, 22));
+        let truth = |k: usize| ((k as f64 / 50.0).sin(), (k as f64 / 30.0).cos());
+        let drift = |k: usize| 0.2 * (k as f64 / 400.0).sin();
+        let log_of = |f: &dyn Fn(usize) -> (f64, f64)| MotorLog {
+            t: (0..n).map(|k| k as f64 * 0.01).collect(),
+            u: vec![0.0; n],
+            theta: (0..n).map(|k| f(k).0).collect(),
+            i: Some((0..n).map(|k| f(k).1).collect()),
+            ..MotorLog::default()
+        };
+        let log = log_of(&|k| (truth(k).0 + 0.01 * a[k], truth(k).1 + 0.1 * b[k]));
+        let good = log_of(&truth);
+        let off = log_of(&|k| (truth(k).0 + drift(k), truth(k).1 + drift(k)));
+        let g = free_run_gain(&log, &off, &good).unwrap();
+        assert!(g.gain > 0.5 && g.p_value < 1e-3, "{g:?}");
+        let r = free_run_gain(&log, &good, &off).unwrap();
+        assert!(r.gain < 0.0 && r.p_value > 0.5, "{r:?}");
+    }
+
     #[test]
     fn a_non_finite_residual_fails_the_parameter_check() {
         let refit = noise(100, 9);
