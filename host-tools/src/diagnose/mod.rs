@@ -863,7 +863,10 @@ fn refitted_structure(st: &Structure, refit: &[(String, f64, String)]) -> Struct
 /// equations better, not the motion (a model fitted on its free run sits a little off the
 /// equations' optimum, and a physics its structure lacks can pull the refit anywhere).
 fn weigh_refit_by_free_run(log: &MotorLog, st: &Structure, own: &MotorLog, verdict: &mut Verdict) {
-    let failed = |c: &verdict::Check| c.name == "parameters" && !c.passed && c.p_value.is_finite();
+    // A non-finite residual (statistic infinite) fails whatever a run shows.
+    let failed = |c: &verdict::Check| {
+        c.name == "parameters" && !c.passed && c.p_value.is_finite() && c.statistic.is_finite()
+    };
     if !verdict.checks.iter().any(failed) {
         return;
     }
