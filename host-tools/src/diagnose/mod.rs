@@ -882,8 +882,8 @@ fn weigh_refit_by_free_run(log: &MotorLog, st: &Structure, own: &MotorLog, verdi
     let level = verdict.level;
     let better = gain.p_value < level;
     let words = format!(
-        "the refit's free run {} the log's angle and current by {:.1}% of the model's own squared error (one-sided p = {:.1e} on {} blocks, level {:.1e})",
-        if gain.gain >= 0.0 { "fits" } else { "misses" },
+        "the refit's free run is {} the log's angle and current by {:.1}% of the model's own squared error (one-sided p = {:.1e} on {} blocks, level {:.1e})",
+        if gain.gain >= 0.0 { "closer to" } else { "further from" },
         100.0 * gain.gain.abs(),
         gain.p_value,
         gain.blocks,

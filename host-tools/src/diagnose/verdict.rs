@@ -285,7 +285,8 @@ pub fn cluster_block(refit: &[f64], columns: usize) -> usize {
 /// left free. The test is the jackknifed cluster-robust Wald test of `given` on `cols`
 /// beyond `nuisance` ([`statistics::robust_test_beyond`]), clustered by [`block_clusters`]
 /// in blocks of [`cluster_block`] rows (`hold`: the held input of each row; `refit`: the
-/// refit's residual, for its correlation time and the share a refit removes).
+/// refit's residual, for its correlation time). The check's share is that of `given`,
+/// beyond `nuisance`, that `cols` explain.
 pub fn parameter_check(
     given: &[f64],
     refit: &[f64],
@@ -328,7 +329,7 @@ pub fn parameter_check(
         passed,
         detail: if passed {
             format!(
-                "the model's own parameters are as good as a refit of its structure (a refit removes {:.0}% of its equation error; robust T² = {:.1}, p = {:.1e} on {} clusters)",
+                "the model's own parameters are as good as a refit of its structure (its columns explain {:.0}% of the model's equation error beyond its own run's; robust T² = {:.1}, p = {:.1e} on {} clusters)",
                 100.0 * share,
                 t.t2,
                 t.p_value,
@@ -336,7 +337,7 @@ pub fn parameter_check(
             )
         } else {
             format!(
-                "the model's parameters are off: a refit of the same structure removes {:.0}% of its equation error (robust T² = {:.1}, p = {:.1e} on {} clusters, level {:.1e}); refit first (`motorid fit`), then diagnose again",
+                "the model's parameters are off: its structure's columns explain {:.0}% of its equation error beyond its own run's (robust T² = {:.1}, p = {:.1e} on {} clusters, level {:.1e}); refit first (`motorid fit`), then diagnose again",
                 100.0 * share,
                 t.t2,
                 t.p_value,
