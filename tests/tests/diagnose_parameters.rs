@@ -98,6 +98,45 @@ fn a_wrong_resistance_is_refitted() {
     }
 }
 
+/// A constant load of the wrong sign: the refit moves a parameter (the offset) that the
+/// free-run comparison cannot put into the model, so the Wald test's rejection stands
+/// rather than the model's numbers being called right by a run that never changed.
+#[test]
+fn a_wrong_sign_offset_is_not_adequate() {
+    for seed in [1, 2] {
+        let mut cfg = EmulatorConfig::paper();
+        cfg.seed = seed;
+        cfg.effects = vec![Effect::Offset { t0: 0.03 }];
+        let log = simulate_signal(&cfg, SignalKind::A, 60.0).unwrap().log;
+        let mut st = Structure::from_model(&cfg.truth_model());
+        for e in st.effects.iter_mut() {
+            if let Effect::Offset { t0 } = e {
+                *t0 = -*t0;
+            }
+        }
+        let d = diagnose(&log, &st, &Options::default());
+        assert!(!d.verdict.adequate, "{}", summary(&d));
+    }
+}
+
+/// Torque and back-EMF constants both 15 % high: the voltage equation refits K_b, and the
+/// torque equation's inertia, read with that refitted K_b (the constant the refitted model
+/// runs with), comes back within 10 % of the truth, as for an inertia alone.
+#[test]
+fn constants_off_together_read_the_inertia_with_the_refitted_kb() {
+    let truth = EmulatorConfig::paper().motor.j;
+    for seed in [1, 2] {
+        let d = diagnose_changed(seed, 60.0, |st| {
+            let m = st.motor.as_mut().unwrap();
+            m.kt *= 1.15;
+            m.kb *= 1.15;
+            st.kt *= 1.15;
+        });
+        assert!(!d.verdict.adequate, "{}", summary(&d));
+        told_to_refit(&d, "J", truth, 0.1);
+    }
+}
+
 /// The parameter check's level on correct models: the p-values of both equations' Wald
 /// tests over seeds `1..=SEEDS` (40) of signal a, 60 s, on the built-in emulator and the
 /// independent plant (`PLANTS`, `eo`), and how many fall below 1 %, 5 % and 10 %. The

@@ -617,12 +617,13 @@ fn judge(
             let c = parameter_check(j, given, &cluster, level_per_test);
             if !c.passed {
                 let r = electrical_resistance(judged);
+                let kb = electrical_back_emf(judged);
                 refit.extend(refitted_constants(
                     j,
                     st,
                     given,
                     &cluster,
-                    (r, level_per_test),
+                    (r, kb, level_per_test),
                 ));
             }
             checks.push(c);
@@ -725,6 +726,15 @@ fn electrical_resistance(judged: &[Judged]) -> Option<f64> {
         .and_then(|e| e.beta.first().copied())
 }
 
+/// The back-EMF constant the voltage equation refitted, if it has one: the refitted model
+/// ([`refitted_structure`]) takes it as its torque constant too, so torque-side values are
+/// read with it.
+fn electrical_back_emf(judged: &[Judged]) -> Option<f64> {
+    let e = judged.iter().find(|e| e.eq == Equation::Electrical)?;
+    let k = e.names.iter().position(|c| c.name == "K_b")?;
+    e.beta.get(k).copied()
+}
+
 /// The whiteness and input checks of one equation's residual after the findings; `cluster`
 /// is the hold cluster of each kept window.
 fn residual_checks(j: &Judged, cluster: &[usize], level_per_test: f64) -> [verdict::Check; 2] {
@@ -774,7 +784,7 @@ fn refitted_constants(
     st: &Structure,
     given: &[f64],
     cluster: &[usize],
-    (r_refit, level): (Option<f64>, f64),
+    (r_refit, kb_refit, level): (Option<f64>, Option<f64>, f64),
 ) -> Vec<(String, f64, String)> {
     let (_, tested, nuisance) = tested_columns(j);
     let mut moved = verdict::moved_columns(given, &j.base, (&tested, &nuisance), cluster, level);
@@ -782,7 +792,7 @@ fn refitted_constants(
     if !moved.contains(&true) {
         moved.iter_mut().for_each(|m| *m = true);
     }
-    refit_values(j, st, r_refit)
+    refit_values(j, st, r_refit, kb_refit)
         .into_iter()
         .filter(|(t, _)| moved.get(*t).copied().unwrap_or(false))
         .map(|(_, v)| v)
@@ -792,17 +802,20 @@ fn refitted_constants(
 /// The refitted value (name, value, unit) of each tested parameter of one equation whose
 /// column is not all zero, with its position among the tested columns. A torque term of a
 /// voltage plant's torque equation, written in volts, is its coefficient times `K_t/R`,
-/// with R the refitted one when the voltage equation gave it.
+/// with R and K_t = K_b the refitted ones when the voltage equation gave them (the refitted
+/// model runs with them).
 fn refit_values(
     j: &Judged,
     st: &Structure,
     r_refit: Option<f64>,
+    kb_refit: Option<f64>,
 ) -> Vec<(usize, (String, f64, String))> {
     let m = st.motor.unwrap_or(MotorParams::paper());
     let (idx, _, _) = tested_columns(j);
     let r = r_refit.filter(|r| *r > 0.0).unwrap_or(m.r);
+    let kt = kb_refit.filter(|k| *k > 0.0 && r_refit.is_some()).unwrap_or(m.kt);
     let voltage = st.plant == Plant::Voltage;
-    let scale = if voltage && r > 0.0 { m.kt / r } else { 1.0 };
+    let scale = if voltage && r > 0.0 { kt / r } else { 1.0 };
     idx.iter()
         .enumerate()
         .filter(|(_, &k)| j.cols[k].iter().any(|v| *v != 0.0))
@@ -821,38 +834,45 @@ fn refit_values(
 /// The model with the refit's values `refit` (name, value) of its motor constants and its
 /// static friction law, every other parameter as given; values that are not finite, or not
 /// positive for the motor constants and negative for the friction, stay as given.
-fn refitted_structure(st: &Structure, refit: &[(String, f64, String)]) -> Structure {
+/// Returns `None` when a refitted parameter cannot be put into the model (a parameter the
+/// run does not take, or a value out of its range): a run could then not show what the
+/// refit changes.
+fn refitted_structure(st: &Structure, refit: &[(String, f64, String)]) -> Option<Structure> {
     let mut out = st.clone();
-    let Some(mut m) = st.motor else {
-        return out;
-    };
+    let mut m = st.motor?;
     for (name, v, _) in refit {
         let v = *v;
         if !v.is_finite() {
-            continue;
+            return None;
         }
         let positive = v > 0.0;
+        let mut placed = true;
         match name.as_str() {
             "R" if positive => m.r = v,
             "K_b" if positive => (m.kb, m.kt) = (v, v),
             "J" if positive => m.j = v,
             "L" if positive => m.l = v,
-            _ if v < 0.0 => {}
+            _ if v < 0.0 => placed = false,
             _ => {
+                placed = false;
                 for e in out.effects.iter_mut() {
                     match (e, name.as_str()) {
                         (Effect::Coulomb { fc }, "fc (Coulomb)") => *fc = v,
                         (Effect::Viscous { b }, "b (viscous)") => *b = v,
                         (Effect::Stribeck { fs, .. }, "fs − fc (Stribeck)") => *fs = v,
-                        _ => {}
+                        _ => continue,
                     }
+                    placed = true;
                 }
             }
+        }
+        if !placed {
+            return None;
         }
     }
     out.kt = m.kt;
     out.motor = Some(m);
-    out
+    Some(out)
 }
 
 /// A failed parameter check stands only when the refitted values of the parameters that
@@ -870,7 +890,16 @@ fn weigh_refit_by_free_run(log: &MotorLog, st: &Structure, own: &MotorLog, verdi
     if !verdict.checks.iter().any(failed) {
         return;
     }
-    let refitted = refitted_structure(st, &verdict.refit);
+    // A refit the model cannot run keeps the Wald test's result: no run could show it.
+    let Some(refitted) = refitted_structure(st, &verdict.refit) else {
+        for c in verdict.checks.iter_mut().filter(|c| failed(c)) {
+            c.detail = format!(
+                "{}; the refit moves a parameter a free run of this model cannot take, so the test's result stands",
+                c.detail
+            );
+        }
+        return;
+    };
     let Some(other) = simulated_log(log, &refitted) else {
         return;
     };
