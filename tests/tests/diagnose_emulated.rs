@@ -427,3 +427,47 @@ fn load_friction_is_ranked_first_on_a_braking_signal() {
         );
     }
 }
+
+/// The true model of a plant with a load behind a coupling or a gap (5 Hz, load twice the
+/// rotor; gap 0.5 rad), judged on its own emulated data, seeds 1-3 of signal a: the
+/// verdict's failed checks, findings and carriers, one line per log. Not asserted: these
+/// models are not yet adequate on every log (decision 0019).
+/// `cargo test --release -p e2e --test diagnose_emulated -- --ignored --nocapture`
+#[test]
+#[ignore]
+fn true_load_models_on_their_own_data() {
+    let loads = [
+        (
+            "compliance",
+            Effect::Compliance {
+                j2: 6e-4,
+                k: 6e-4 * (2.0 * std::f64::consts::PI * 5.0f64).powi(2),
+                c: 0.002,
+            },
+        ),
+        ("backlash", Effect::Backlash { j2: 6e-4, gap: 0.5 }),
+    ];
+    for (name, e) in loads {
+        for seed in 1..=3 {
+            let mut cfg = EmulatorConfig::paper();
+            cfg.seed = seed;
+            cfg.effects = vec![e];
+            let log = simulate_signal(&cfg, SignalKind::A, 60.0).unwrap().log;
+            let st = Structure::from_model(&cfg.truth_model());
+            let d = diagnose(&log, &st, &Options::default());
+            let failed: Vec<String> = d
+                .verdict
+                .checks
+                .iter()
+                .filter(|c| !c.passed)
+                .map(|c| format!("{} ({:.1e})", c.detail, c.p_value))
+                .collect();
+            let carriers: Vec<&str> = d.verdict.unexplained.iter().map(|u| u.variable).collect();
+            println!(
+                "{name} seed {seed}: adequate {}, failed {failed:?}, findings {:?}, carriers {carriers:?}",
+                d.verdict.adequate,
+                names(&d)
+            );
+        }
+    }
+}

@@ -11,9 +11,11 @@ use std::path::PathBuf;
     after_help = "How it decides. First the model AS GIVEN: its own equations with its own \
     numbers are written as weak-form residuals (the torque balance and, for a voltage plant, \
     the voltage balance, integrated against smooth windows so the Hall-quantised angle is never \
-    differentiated). PARAMETERS: when a refit of the same structure removes at least half of \
-    that residual (F-test), the parameters are off and the refitted constants are printed: \
-    refit first. WHITENESS: the residual must not be predictable from its own past \
+    differentiated). PARAMETERS: when the structure's own columns (computed on the model's \
+    noise-free run on the same input) significantly explain that residual less the same \
+    residual on that run, and the refitted values of the parameters that moved make a free \
+    run that follows the log's angle and current significantly closer, the parameters are off \
+    and each moved one is printed with its refitted value: refit first. WHITENESS: the residual must not be predictable from its own past \
     (Breusch-Godfrey on disjoint windows). INPUT: it must not be explained by the input of the \
     last windows. Both, and the carriers below, use robust tests that hold their level where the \
     residual is noisier in some windows than others (slips, steps) and where the windows of one \

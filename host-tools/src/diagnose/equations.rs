@@ -6,8 +6,8 @@ use super::candidates::{self, Equation, Signals, Units, Variant};
 use super::forward_select::{select, Selection};
 use super::{
     min_torque, modelled_drive, presliding_candidates, presliding_pass, row_scale, select_rows,
-    signals_of, viscous_of, weak_torque, EqData, EquationResidual, Finding, Judged, Options,
-    Structure, Tested,
+    signals_of, viscous_of, weak_torque, Column, EqData, EquationResidual, Finding, Judged,
+    Options, SampleColumn, Structure, Tested,
 };
 use crate::effect_spec::EffectSpec;
 use crate::log::{MotorLog, Plant};
@@ -97,54 +97,71 @@ pub(super) fn weak_forms(log: &MotorLog, st: &Structure, opts: &Options) -> Form
 }
 
 /// The base of both equations: the model's own structure (R, L, K_b; the inertia; every
-/// effect it has, each in the equation it acts in).
-pub(super) fn base_equations(f: &Forms, st: &Structure) -> (EqData, EqData) {
-    let (s, wf, wf_m) = (&f.s, &f.wf, &f.wf_m);
+/// effect it has, each in the equation it acts in). Each column is defined once and computed
+/// on the log and, as its instrument, on the model's own run `run` when there is one.
+pub(super) fn base_equations(f: &Forms, run: Option<&Forms>, st: &Structure) -> (EqData, EqData) {
+    let both = |def: &dyn Fn(&Forms) -> Vec<f64>| (def(f), run.map(def));
+    let s = &f.s;
     // Electrical equation (voltage plant): V = R·I + L·İ + K_b·ω + losses, on the sample grid
     // (the current sampled at t_k answers the input held just before).
-    let mut elec = EqData {
-        eq: Equation::Electrical,
-        y: wf.integral(&s.u),
-        base_cols: vec![],
-        base_sample: vec![],
-        min_torque: 0.0,
-        coulomb_col: None,
-        cand: vec![],
-        cluster: super::verdict::hold_clusters(&s.raw_u, &wf.centres),
-    };
+    let mut elec = EqData::new(
+        Equation::Electrical,
+        f.wf.integral(&s.u),
+        super::verdict::hold_clusters(&s.raw_u, &f.wf.centres),
+    );
     if f.voltage {
-        let i = s.i.as_ref().unwrap();
-        elec.base_cols.push(wf.integral(i));
+        let (c, z) = both(&|g| g.wf.integral(g.s.i.as_deref().unwrap_or(&[])));
+        elec.push_base(Column::new("R", "Ω", false), c, z);
         // L·dI/dt just before a sample, where the current tracks the back-EMF
         // quasi-statically: −(L·K_b/R)·ω̇ (the sampled current's own derivative would carry
-        // the input's steps, which the winding has settled from by then).
-        elec.base_cols.push(wf.second_derivative(&s.theta));
-        elec.base_cols.push(wf.derivative(&s.theta));
+        // the input's steps, which the winding has settled from by then). Its coefficient
+        // stands for the equation's own approximation, which the discrete windows do not
+        // reproduce exactly: free in the parameter check (the model's L is judged in the
+        // torque equation, through the exact increments of the measured current).
+        let (c, z) = both(&|g| g.wf.second_derivative(&g.s.theta));
+        let name = Column::new("L·K_b/R (quasi-static)", "H·V·s/(Ω·rad)", false);
+        elec.push_base(name.free(), c, z);
+        let (c, z) = both(&|g| g.wf.derivative(&g.s.theta));
+        elec.push_base(Column::new("K_b", "V·s/rad", false), c, z);
     }
     // Mechanical equation. Voltage plant: the current is eliminated with the electrical
     // equation (L·İ ≈ 0 at this sample rate), `K_t·I = (K_t/R)·(V − K_b·ω − losses)`, so the
     // torque balance reads in volts: `V − K_b·ω = (R/K_t)·(J·θ̈ + Σ torques) + losses`. The
     // held input integrates exactly; no sampled current has to stand for its interval.
-    let mut mech = EqData {
-        eq: Equation::Mechanical,
-        y: vec![],
-        base_cols: vec![wf_m.second_derivative(&s.theta_torque)],
-        base_sample: vec![],
-        min_torque: min_torque(st, s),
-        coulomb_col: None,
-        cand: vec![],
-        cluster: super::verdict::hold_clusters(&s.raw_u, &wf.centres),
-    };
+    let mut mech = EqData::new(
+        Equation::Mechanical,
+        vec![],
+        super::verdict::hold_clusters(&s.raw_u, &f.wf.centres),
+    );
+    mech.min_torque = min_torque(st, s);
+    let (c, z) = both(&|g| g.wf_m.second_derivative(&g.s.theta_torque));
+    mech.push_base(Column::new("J", "kg·m²", true), c, z);
     for e in &st.effects {
         if matches!(e, Effect::Coulomb { fc } if *fc <= 0.0) {
             mech.coulomb_col = Some(mech.base_cols.len());
         }
-        for (eq, col) in candidates::present_columns(e, s) {
+        let cols = candidates::present_columns(e, s);
+        let on_run = run.map(|g| candidates::present_columns(e, &g.s));
+        let of = cols.len();
+        for (k, (eq, col)) in cols.into_iter().enumerate() {
+            let name = Column::of_effect(e, eq, k, of);
+            let twin = on_run
+                .as_ref()
+                .and_then(|r| r.get(k))
+                .filter(|(q, _)| *q == eq)
+                .map(|(_, c)| c);
+            let g = run.filter(|_| twin.is_some());
             if eq == Equation::Mechanical {
-                mech.base_cols.push(weak_torque(wf_m, s, &col));
+                let z = g.zip(twin).map(|(g, c)| weak_torque(&g.wf_m, &g.s, c));
+                mech.push_base(name, weak_torque(&f.wf_m, s, &col), z);
             } else {
-                elec.base_cols.push(wf.integral(&col));
-                mech.base_sample.push(col);
+                let z = g.zip(twin).map(|(g, c)| g.wf.integral(c));
+                elec.push_base(name.clone(), f.wf.integral(&col), z);
+                mech.base_sample.push(SampleColumn {
+                    col,
+                    inst: twin.cloned(),
+                    name,
+                });
             }
         }
     }
@@ -153,7 +170,9 @@ pub(super) fn base_equations(f: &Forms, st: &Structure) -> (EqData, EqData) {
     if !st.has(EffectKind::Coulomb)
         && (st.has(EffectKind::Presliding) || st.has(EffectKind::Stribeck))
     {
-        mech.base_cols.push(wf_m.integral(&s.stick_column()));
+        let (c, z) = both(&|g| g.wf_m.integral(&g.s.stick_column()));
+        let name = Column::new("friction at standstill", "N·m", true);
+        mech.push_base(name, c, z);
     }
     (elec, mech)
 }
@@ -248,7 +267,20 @@ pub(super) fn electrical_pass(
                     .is_ok_and(|sp| v.fixed.iter().all(|(k, x)| (sp.get(k) - x).abs() < 1e-9))
         }) {
             if v.0.kind != EffectKind::CurrentOffset {
-                mech.base_sample.extend(v.0.columns.iter().cloned());
+                // Not a parameter of the model as given: free in its parameter check.
+                let of = v.0.columns.len();
+                for (k, col) in v.0.columns.iter().enumerate() {
+                    let name = if of > 1 {
+                        format!("{} [{}]", v.0.kind.name(), k + 1)
+                    } else {
+                        v.0.kind.name().to_string()
+                    };
+                    mech.base_sample.push(SampleColumn {
+                        col: col.clone(),
+                        inst: None,
+                        name: Column::new(name, "V", false).free(),
+                    });
+                }
             }
         }
     }
@@ -262,7 +294,9 @@ pub(super) fn electrical_pass(
         base: out.base_resid.clone(),
         after: out.final_resid.clone(),
         beta: out.base_beta.clone(),
-        p: elec.base_cols.len(),
+        cols: elec.base_cols.clone(),
+        instruments: elec.base_inst.clone(),
+        names: elec.base_names.clone(),
         input: f.wf.integral(&f.s.u),
     });
     acc.findings.extend(out.findings);
@@ -275,12 +309,13 @@ pub(super) fn electrical_pass(
 /// losses, the model's load friction and saturation; and the load-friction candidate's
 /// interval column.
 fn complete_torque_equation(
-    f: &Forms,
+    (f, run): (&Forms, Option<&Forms>),
     st: &Structure,
     mech: &mut EqData,
     kb: f64,
     units: &mut Units,
 ) {
+    let both = |def: &dyn Fn(&Forms) -> Vec<f64>| (def(f), run.map(def));
     let (s, wf_m) = (&f.s, &f.wf_m);
     if f.voltage {
         let zoh = wf_m.integral_zoh(&s.raw_u);
@@ -288,10 +323,12 @@ fn complete_torque_equation(
         mech.y = zoh.iter().zip(&w).map(|(a, b)| a - kb * b).collect();
         units.mech_scale = st.kt / units.r;
         // The winding's L·dI/dt over each interval: its increments, exactly.
-        mech.base_cols.push(wf_m.derivative(s.i.as_ref().unwrap()));
-        for col in std::mem::take(&mut mech.base_sample) {
+        let (c, z) = both(&|g| g.wf_m.derivative(g.s.i.as_deref().unwrap_or(&[])));
+        mech.push_base(Column::new("L", "H", false), c, z);
+        for sc in std::mem::take(&mut mech.base_sample) {
             // Current offsets do not reach the torque equation written in volts.
-            mech.base_cols.push(wf_m.integral(&col));
+            let z = run.zip(sc.inst).map(|(g, c)| g.wf_m.integral(&c));
+            mech.push_base(sc.name, wf_m.integral(&sc.col), z);
         }
     } else {
         mech.y = wf_m.integral_zoh(&s.raw_u);
@@ -300,14 +337,17 @@ fn complete_torque_equation(
     // Load friction per sample interval, with the held input and the angle increments
     // (the braking transients last about one sample; see `load_friction_intervals`): the
     // candidate's column, or the base's when the model has it.
-    let (lf_col, lf_torque) = s.load_friction_intervals(kb, units.r);
+    let r = units.r;
+    let (lf_col, lf_torque) = s.load_friction_intervals(kb, r);
     if st.has(EffectKind::LoadFriction) {
-        mech.base_cols.push(wf_m.integral_zoh(&lf_col));
+        let z = run.map(|g| g.wf_m.integral_zoh(&g.s.load_friction_intervals(kb, r).0));
+        let name = Column::new("load_friction", "N·m per N·m", false);
+        mech.push_base(name, wf_m.integral_zoh(&lf_col), z);
     }
     // A model's saturation likewise per interval (its I³ weighs the step transients).
     if st.has(EffectKind::Saturation) && f.voltage {
-        mech.base_cols
-            .push(wf_m.integral_zoh(&s.saturation_intervals(units.r)));
+        let (c, z) = both(&|g| g.wf_m.integral_zoh(&g.s.saturation_intervals(r)));
+        mech.push_base(Column::new("saturation", "V", false), c, z);
     }
     for (v, cols) in mech.cand.iter_mut() {
         if v.kind == EffectKind::LoadFriction {
@@ -343,6 +383,9 @@ fn moving_windows(f: &Forms) -> Vec<bool> {
 fn map_rows(mech: &mut EqData, op: impl Fn(&[f64]) -> Vec<f64>) {
     mech.y = op(&mech.y);
     mech.base_cols = mech.base_cols.iter().map(|c| op(c)).collect();
+    for z in mech.base_inst.iter_mut().flatten() {
+        *z = op(z);
+    }
     for (_, cols) in mech.cand.iter_mut() {
         *cols = cols.iter().map(|c| op(c)).collect();
     }
@@ -381,14 +424,15 @@ fn noise_weights(
 /// Forward selection in the torque equation on its moving windows, then presliding on every
 /// window.
 pub(super) fn mechanical_pass(
-    f: &Forms,
+    forms: (&Forms, Option<&Forms>),
     st: &Structure,
     mut mech: EqData,
     pre: PreslidingTest,
     (kb, given): (f64, Option<Vec<f64>>),
     pass: &mut Pass,
 ) {
-    complete_torque_equation(f, st, &mut mech, kb, &mut pass.units);
+    let f = forms.0;
+    complete_torque_equation(forms, st, &mut mech, kb, &mut pass.units);
     let mut all_rows = (mech.y.clone(), mech.base_cols.clone());
     all_rows.1.extend(pre.nuisance);
     let keep = moving_windows(f);
@@ -427,7 +471,9 @@ pub(super) fn mechanical_pass(
         base: out.base_resid.clone(),
         after: out.final_resid.clone(),
         beta: out.base_beta.clone(),
-        p: mech.base_cols.len(),
+        cols: mech.base_cols.clone(),
+        instruments: mech.base_inst.clone(),
+        names: mech.base_names.clone(),
     });
     if !pre.cand.is_empty() {
         let data = presliding_pass(&mech, &out.findings, all_rows, pre.cand, &f.wf_m, &f.s);

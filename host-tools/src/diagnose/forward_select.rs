@@ -443,19 +443,13 @@ mod tests {
         let e = noise(n, 2);
         let unrelated = noise(n, 3);
         let y = (0..n).map(|k| 2.0 * a[k] + t0 + sigma * e[k]).collect();
-        EqData {
-            eq: Equation::Mechanical,
-            y,
-            base_cols: vec![a],
-            base_sample: vec![],
-            min_torque: 0.0,
-            coulomb_col: None,
-            cand: vec![
-                variant(EffectKind::Offset, vec![1.0; n]),
-                variant(EffectKind::Viscous, unrelated),
-            ],
-            cluster: (0..n).collect(),
-        }
+        let mut d = EqData::new(Equation::Mechanical, y, (0..n).collect());
+        d.base_cols = vec![a];
+        d.cand = vec![
+            variant(EffectKind::Offset, vec![1.0; n]),
+            variant(EffectKind::Viscous, unrelated),
+        ];
+        d
     }
 
     fn units() -> Units {

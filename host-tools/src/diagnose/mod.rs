@@ -211,9 +211,16 @@ pub struct Verdict {
 pub(super) struct EqData {
     pub(super) eq: Equation,
     pub(super) y: Vec<f64>,
+    /// The base columns; add them with [`EqData::push_base`] only, which keeps them, their
+    /// names and their instruments in one order.
     pub(super) base_cols: Vec<Vec<f64>>,
+    /// What each base column's coefficient is ([`Column`]), for the refitted values.
+    pub(super) base_names: Vec<Column>,
+    /// Each base column computed on the model's own noise-free run ([`simulated_log`]), the
+    /// parameter check's instrument for it; `None` where there is no run.
+    pub(super) base_inst: Vec<Option<Vec<f64>>>,
     /// Sample-level columns to carry into the other equation's base.
-    pub(super) base_sample: Vec<Vec<f64>>,
+    pub(super) base_sample: Vec<SampleColumn>,
     /// Smallest torque [N·m] (RMS of the effect's term) worth reporting.
     pub(super) min_torque: f64,
     /// Base column of the model's Coulomb friction (`sgn ω`) when the model states no positive
@@ -225,22 +232,161 @@ pub(super) struct EqData {
     pub(super) cluster: Vec<usize>,
 }
 
+impl EqData {
+    /// An equation with no columns yet.
+    pub(super) fn new(eq: Equation, y: Vec<f64>, cluster: Vec<usize>) -> EqData {
+        EqData {
+            eq,
+            y,
+            base_cols: vec![],
+            base_names: vec![],
+            base_inst: vec![],
+            base_sample: vec![],
+            min_torque: 0.0,
+            coulomb_col: None,
+            cand: vec![],
+            cluster,
+        }
+    }
+
+    /// Add one base column with its name and its instrument, so that the three lists keep
+    /// one order.
+    pub(super) fn push_base(&mut self, name: Column, col: Vec<f64>, inst: Option<Vec<f64>>) {
+        self.base_cols.push(col);
+        self.base_names.push(name);
+        self.base_inst.push(inst);
+    }
+}
+
+/// A sample-level column on its way into the other equation's base, with its name and its
+/// counterpart on the model's own run.
+pub(super) struct SampleColumn {
+    pub(super) col: Vec<f64>,
+    pub(super) inst: Option<Vec<f64>>,
+    pub(super) name: Column,
+}
+
+/// What the coefficient of one base column is: a parameter's name and unit, whether it is a
+/// torque term (written in volts in a voltage plant's torque equation, so that its
+/// coefficient times `K_t/R` is the parameter), and whether it is `free`: not a parameter of
+/// the model as given (an equation's own approximation, an effect found in the other
+/// equation), left free in the parameter check.
+#[derive(Debug, Clone)]
+pub(super) struct Column {
+    pub(super) name: String,
+    pub(super) unit: &'static str,
+    pub(super) torque: bool,
+    pub(super) free: bool,
+}
+
+impl Column {
+    pub(super) fn new(name: impl Into<String>, unit: &'static str, torque: bool) -> Column {
+        Column {
+            name: name.into(),
+            unit,
+            torque,
+            free: false,
+        }
+    }
+
+    /// The same column, free in the parameter check.
+    pub(super) fn free(mut self) -> Column {
+        self.free = true;
+        self
+    }
+
+    /// The names of an effect's present columns ([`candidates::present_columns`]), in order.
+    pub(super) fn of_effect(e: &Effect<f64>, eq: Equation, k: usize, of: usize) -> Column {
+        let kind = e.kind();
+        let name = match (kind, k) {
+            (EffectKind::Coulomb, 0) => "fc (Coulomb)".to_string(),
+            (EffectKind::Coulomb, _) => "Coulomb at standstill".to_string(),
+            (EffectKind::Viscous, _) => "b (viscous)".to_string(),
+            (EffectKind::Stribeck, _) => "fs − fc (Stribeck)".to_string(),
+            _ if of > 1 => format!("{} [{}]", kind.name(), k + 1),
+            _ => kind.name().to_string(),
+        };
+        if eq == Equation::Electrical {
+            return Column::new(name, "V", false);
+        }
+        let unit = match kind {
+            EffectKind::Viscous | EffectKind::Asymmetry => "N·m·s/rad",
+            EffectKind::Compliance | EffectKind::Backlash => "kg·m²",
+            _ => "N·m",
+        };
+        Column::new(name, unit, true)
+    }
+}
+
 /// Diagnose a log against a model structure: the log in weak form, the base and candidate
 /// columns of both equations, forward selection in the voltage equation and then in the
 /// torque equation ([`equations`]), and the verdict on the model as given ([`judge`]).
 pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
     let f = equations::weak_forms(log, st, opts);
+    // The same signals on the model's own noise-free run: the parameter check's instruments.
+    let own_run = simulated_log(log, st);
+    let run = own_run
+        .as_ref()
+        .map(|l| equations::weak_forms(l, st, opts))
+        .filter(|fs| fs.wf.rows() == f.wf.rows());
+    let (acc, alpha_per_test) = passes(&f, run.as_ref(), st, opts);
+    let equations::Outcome {
+        mut findings,
+        tested,
+        equations,
+        judged,
+    } = acc;
+    resolve_offsets(&mut findings, st.kt);
+    findings.sort_by(|a, b| b.score.total_cmp(&a.score));
+    findings.truncate(MAX_FINDINGS);
+    let mut verdict = judge(&f.s, &f.wf, st, &judged, &findings, opts);
+    if let Some(own) = &own_run {
+        weigh_refit_by_free_run(log, st, own, &mut verdict);
+        verdict.adequate = !judged.is_empty()
+            && findings.is_empty()
+            && verdict.unexplained.is_empty()
+            && verdict.checks.iter().all(|c| c.passed);
+    }
+    verdict.look_alikes =
+        lookalikes::find(&findings, &tested, &verdict.unexplained, alpha_per_test);
+    Diagnosis {
+        effects: findings,
+        tested,
+        equations,
+        alpha_per_test,
+        min_explained: opts.min_explained,
+        verdict,
+    }
+}
+
+/// The weak forms' passes: the model's own residuals, the base and candidate columns of
+/// both equations (with their instruments on the model's run `run`), and forward selection
+/// in the voltage equation, then in the torque equation. Returns what they found and the
+/// level of each entry test.
+fn passes(
+    f: &equations::Forms,
+    run: Option<&equations::Forms>,
+    st: &Structure,
+    opts: &Options,
+) -> (equations::Outcome, f64) {
     // The model's own equations with its own numbers, for the verdict.
-    let (given_mech, given_elec) = match st
+    let (mut given_mech, mut given_elec) = match st
         .motor
         .map(|m| verdict::given_residuals(&f.s, &f.wf, &f.wf_m, &st.effects, &m))
     {
         Some((m, e)) => (Some(m), e),
         None => (None, None),
     };
-    let (mut elec, mut mech) = equations::base_equations(&f, st);
+    // Less the same residual on the model's own noise-free run: what the discrete equations
+    // leave of a perfect model's motion, which a correct model's data leave too.
+    if let (Some(g), Some(m)) = (run, st.motor) {
+        let (on_run, on_run_elec) = verdict::given_residuals(&g.s, &g.wf, &g.wf_m, &st.effects, &m);
+        less_own_run(&mut given_mech, Some(on_run));
+        less_own_run(&mut given_elec, on_run_elec);
+    }
+    let (mut elec, mut mech) = equations::base_equations(f, run, st);
     let mut pre = equations::PreslidingTest::default();
-    let n_variants = equations::add_candidates(&f, st, &mut elec, &mut mech, &mut pre);
+    let n_variants = equations::add_candidates(f, st, &mut elec, &mut mech, &mut pre);
     let alpha_per_test = opts.alpha / n_variants.max(1) as f64;
     let mut pass = equations::Pass {
         opts,
@@ -254,31 +400,69 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
     };
     let mut kb = 0.0;
     if f.voltage && !elec.y.is_empty() {
-        kb = equations::electrical_pass(&f, &elec, &mut mech, given_elec, &mut pass);
+        kb = equations::electrical_pass(f, &elec, &mut mech, given_elec, &mut pass);
     }
     if !f.wf.centres.is_empty() {
-        equations::mechanical_pass(&f, st, mech, pre, (kb, given_mech), &mut pass);
+        equations::mechanical_pass((f, run), st, mech, pre, (kb, given_mech), &mut pass);
     }
-    let equations::Outcome {
-        mut findings,
-        tested,
-        equations,
-        judged,
-    } = pass.acc;
-    resolve_offsets(&mut findings, st.kt);
-    findings.sort_by(|a, b| b.score.total_cmp(&a.score));
-    findings.truncate(MAX_FINDINGS);
-    let mut verdict = judge(&f.s, &f.wf, st, &judged, &findings, opts);
-    verdict.look_alikes =
-        lookalikes::find(&findings, &tested, &verdict.unexplained, alpha_per_test);
-    Diagnosis {
-        effects: findings,
-        tested,
-        equations,
-        alpha_per_test,
-        min_explained: opts.min_explained,
-        verdict,
+    (pass.acc, alpha_per_test)
+}
+
+/// `given` less the model's residual on its own run, row by row (unchanged when either is
+/// missing or their lengths differ).
+fn less_own_run(given: &mut Option<Vec<f64>>, on_run: Option<Vec<f64>>) {
+    if let (Some(g), Some(r)) = (given.as_mut(), on_run) {
+        if g.len() == r.len() {
+            g.iter_mut().zip(&r).for_each(|(x, y)| *x -= y);
+        }
     }
+}
+
+/// The model as given, run by the emulator on the log's input (voltage plant, motor
+/// constants and a measured current only): the log with its angle and current replaced by
+/// the run's true, noise-free ones. The parameter check takes its instruments from it
+/// ([`verdict::parameter_check`]): columns computed from the measured angle carry the
+/// angle's rounding error, which the model's residual carries too, and their correlation
+/// is an errors-in-variables bias that a refit reads as wrong parameters (an inertia 20-40 %
+/// low on slow multisines, where the rounding is a larger part of the acceleration). The
+/// same columns on a run driven by the input alone do not share that error. A model without
+/// bristles runs with a bristle stiffness that holds its static friction within a hundredth
+/// of the Hall step (the run only has to follow the motion; `None` when the emulator refuses
+/// the model).
+fn simulated_log(log: &MotorLog, st: &Structure) -> Option<MotorLog> {
+    let m = st.motor?;
+    if st.plant != Plant::Voltage || log.i.is_none() || log.len() < 2 {
+        return None;
+    }
+    let mut cfg = crate::emulator::EmulatorConfig::paper();
+    cfg.motor = m;
+    let mut law = control::lugre::LugreParams::friction_law(&st.effects);
+    if law.sigma0.is_nan() || law.sigma0 <= 0.0 {
+        let step = log
+            .meta_f64("hall_resolution_rad")
+            .filter(|h| *h > 0.0)
+            .unwrap_or(cfg.hall_resolution());
+        law.sigma0 = 100.0 * (law.alpha0 + law.alpha1).max(1e-6) / step;
+        // Critically damped bristles on the rotor's inertia.
+        law.sigma1 = 2.0 * (law.sigma0 * m.j.max(1e-12)).sqrt();
+    }
+    cfg.lugre = law;
+    let kinds = control::lugre::LugreParams::<f64>::LAW_KINDS;
+    cfg.effects = st
+        .effects
+        .iter()
+        .filter(|e| !kinds.contains(&e.kind()) && e.kind() != EffectKind::Presliding)
+        .copied()
+        .collect();
+    cfg.current_noise = 0.0;
+    let run = crate::emulator::simulate(&cfg, &log.u, log.sample_period()).ok()?;
+    if run.truth.theta.len() != log.len() || run.truth.i.len() != log.len() {
+        return None;
+    }
+    let mut out = log.clone();
+    out.theta = run.truth.theta;
+    out.i = Some(run.truth.i);
+    Some(out)
 }
 
 /// The log's signals; with `steady_angle`, the angle the torque equation integrates is read
@@ -390,8 +574,13 @@ struct Judged {
     after: Vec<f64>,
     /// The refit's coefficients.
     beta: Vec<f64>,
-    /// Number of refitted coefficients.
-    p: usize,
+    /// The refit's columns (kept rows, weighted as the residuals).
+    cols: Vec<Vec<f64>>,
+    /// What each column's coefficient is.
+    names: Vec<Column>,
+    /// Each column computed on the model's own noise-free run ([`simulated_log`]), where
+    /// there was one (kept rows, weighted): the parameter check's instruments.
+    instruments: Vec<Option<Vec<f64>>>,
     /// The input at each kept window's centre.
     input: Vec<f64>,
 }
@@ -418,19 +607,27 @@ fn judge(
             checks.push(too_few_windows(j));
             continue;
         }
-        if let Some(given) = &j.given {
-            let c = parameter_check(j, given, level_per_test);
-            if !c.passed {
-                refit.extend(refitted_constants(j, st, electrical_resistance(judged)));
-            }
-            checks.push(c);
-        }
         let cluster: Vec<usize> = all_clusters
             .iter()
             .zip(&j.keep)
             .filter(|(_, k)| **k)
             .map(|(c, _)| *c)
             .collect();
+        if let Some(given) = &j.given {
+            let c = parameter_check(j, given, &cluster, level_per_test);
+            if !c.passed {
+                let r = electrical_resistance(judged);
+                let kb = electrical_back_emf(judged);
+                refit.extend(refitted_constants(
+                    j,
+                    st,
+                    given,
+                    &cluster,
+                    (r, kb, level_per_test),
+                ));
+            }
+            checks.push(c);
+        }
         checks.extend(residual_checks(j, &cluster, level_per_test));
         let rows = carriers::Rows {
             wf,
@@ -482,10 +679,41 @@ fn too_few_windows(j: &Judged) -> verdict::Check {
     }
 }
 
+/// The parameter check's columns: the tested ones (the model's parameters) with the index
+/// of each, and the free ones ([`Column::free`]); each is its instrument when it has one
+/// of the same length, the measured column otherwise.
+fn tested_columns(j: &Judged) -> (Vec<usize>, Vec<Vec<f64>>, Vec<Vec<f64>>) {
+    let col = |k: usize| -> Vec<f64> {
+        j.instruments
+            .get(k)
+            .and_then(|z| z.as_ref())
+            .filter(|z| z.len() == j.cols[k].len() && z.iter().all(|v| v.is_finite()))
+            .unwrap_or(&j.cols[k])
+            .clone()
+    };
+    let free = |k: usize| j.names.get(k).is_some_and(|c| c.free);
+    let idx: Vec<usize> = (0..j.cols.len()).filter(|&k| !free(k)).collect();
+    let tested = idx.iter().map(|&k| col(k)).collect();
+    let nuisance = (0..j.cols.len()).filter(|&k| free(k)).map(col).collect();
+    (idx, tested, nuisance)
+}
+
 /// Are the model's own parameters as good as a refit of its structure? `given` is the
 /// residual with the model's numbers.
-fn parameter_check(j: &Judged, given: &[f64], level_per_test: f64) -> verdict::Check {
-    let mut c = verdict::parameter_check(given, &j.base, j.p, level_per_test);
+fn parameter_check(
+    j: &Judged,
+    given: &[f64],
+    cluster: &[usize],
+    level_per_test: f64,
+) -> verdict::Check {
+    let (_, tested, nuisance) = tested_columns(j);
+    let mut c = verdict::parameter_check(
+        given,
+        &j.base,
+        (&tested, &nuisance),
+        cluster,
+        level_per_test,
+    );
     c.detail = format!("{}: {}", j.eq.label(), c.detail);
     c
 }
@@ -496,6 +724,15 @@ fn electrical_resistance(judged: &[Judged]) -> Option<f64> {
         .iter()
         .find(|e| e.eq == Equation::Electrical)
         .and_then(|e| e.beta.first().copied())
+}
+
+/// The back-EMF constant the voltage equation refitted, if it has one: the refitted model
+/// ([`refitted_structure`]) takes it as its torque constant too, so torque-side values are
+/// read with it.
+fn electrical_back_emf(judged: &[Judged]) -> Option<f64> {
+    let e = judged.iter().find(|e| e.eq == Equation::Electrical)?;
+    let k = e.names.iter().position(|c| c.name == "K_b")?;
+    e.beta.get(k).copied()
 }
 
 /// The whiteness and input checks of one equation's residual after the findings; `cluster`
@@ -539,42 +776,162 @@ fn merge_carriers(unexplained: &mut Vec<carriers::Carrier>, found: Vec<carriers:
     }
 }
 
-/// The constants a refit of the structure gives (name, value, unit), from one equation's
-/// base coefficients.
+/// The refitted value of every parameter that moved significantly (name, value, unit), from
+/// one equation's base coefficients ([`verdict::moved_columns`] at the check's level); all
+/// of them when none moved alone (the error is shared among correlated parameters).
 fn refitted_constants(
     j: &Judged,
     st: &Structure,
-    r_refit: Option<f64>,
+    given: &[f64],
+    cluster: &[usize],
+    (r_refit, kb_refit, level): (Option<f64>, Option<f64>, f64),
 ) -> Vec<(String, f64, String)> {
-    let mut v = Vec::new();
+    let (_, tested, nuisance) = tested_columns(j);
+    let mut moved = verdict::moved_columns(given, &j.base, (&tested, &nuisance), cluster, level);
+    // The parameters moved together, none alone: the whole refit.
+    if !moved.contains(&true) {
+        moved.iter_mut().for_each(|m| *m = true);
+    }
+    refit_values(j, st, r_refit, kb_refit)
+        .into_iter()
+        .filter(|(t, _)| moved.get(*t).copied().unwrap_or(false))
+        .map(|(_, v)| v)
+        .collect()
+}
+
+/// The refitted value (name, value, unit) of each tested parameter of one equation whose
+/// column is not all zero, with its position among the tested columns. A torque term of a
+/// voltage plant's torque equation, written in volts, is its coefficient times `K_t/R`,
+/// with R and K_t = K_b the refitted ones when the voltage equation gave them (the refitted
+/// model runs with them).
+fn refit_values(
+    j: &Judged,
+    st: &Structure,
+    r_refit: Option<f64>,
+    kb_refit: Option<f64>,
+) -> Vec<(usize, (String, f64, String))> {
     let m = st.motor.unwrap_or(MotorParams::paper());
-    match j.eq {
-        Equation::Electrical => {
-            if let (Some(r), Some(kb)) = (j.beta.first(), j.beta.get(2)) {
-                v.push(("R".to_string(), *r, "Ω".to_string()));
-                v.push(("K_b".to_string(), *kb, "V·s/rad".to_string()));
+    let (idx, _, _) = tested_columns(j);
+    let r = r_refit.filter(|r| *r > 0.0).unwrap_or(m.r);
+    let kt = kb_refit.filter(|k| *k > 0.0 && r_refit.is_some()).unwrap_or(m.kt);
+    let voltage = st.plant == Plant::Voltage;
+    let scale = if voltage && r > 0.0 { kt / r } else { 1.0 };
+    idx.iter()
+        .enumerate()
+        .filter(|(_, &k)| j.cols[k].iter().any(|v| *v != 0.0))
+        .filter_map(|(t, &k)| {
+            let (b, col) = (j.beta.get(k)?, j.names.get(k)?);
+            let (value, unit) = match (col.torque, voltage) {
+                (true, true) => (b * scale, col.unit.to_string()),
+                (true, false) => (*b, format!("u per ({})", col.unit)),
+                (false, _) => (*b, col.unit.to_string()),
+            };
+            Some((t, (col.name.clone(), value, unit)))
+        })
+        .collect()
+}
+
+/// The model with the refit's values `refit` (name, value) of its motor constants and its
+/// static friction law, every other parameter as given; values that are not finite, or not
+/// positive for the motor constants and negative for the friction, stay as given.
+/// Returns `None` when a refitted parameter cannot be put into the model (a parameter the
+/// run does not take, or a value out of its range): a run could then not show what the
+/// refit changes.
+fn refitted_structure(st: &Structure, refit: &[(String, f64, String)]) -> Option<Structure> {
+    let mut out = st.clone();
+    let mut m = st.motor?;
+    for (name, v, _) in refit {
+        let v = *v;
+        if !v.is_finite() {
+            return None;
+        }
+        let positive = v > 0.0;
+        let mut placed = true;
+        match name.as_str() {
+            "R" if positive => m.r = v,
+            "K_b" if positive => (m.kb, m.kt) = (v, v),
+            "J" if positive => m.j = v,
+            "L" if positive => m.l = v,
+            _ if v < 0.0 => placed = false,
+            _ => {
+                placed = false;
+                for e in out.effects.iter_mut() {
+                    match (e, name.as_str()) {
+                        (Effect::Coulomb { fc }, "fc (Coulomb)") => *fc = v,
+                        (Effect::Viscous { b }, "b (viscous)") => *b = v,
+                        (Effect::Stribeck { fs, .. }, "fs − fc (Stribeck)") => *fs = v,
+                        _ => continue,
+                    }
+                    placed = true;
+                }
             }
         }
-        Equation::Mechanical => {
-            if let Some(b) = j.beta.first() {
-                // The torque equation is written in volts: its inertia column carries J·R/K_t,
-                // with R the refitted one when the voltage equation gave it.
-                let r = r_refit.filter(|r| *r > 0.0).unwrap_or(m.r);
-                let scale = if st.plant == Plant::Voltage && r > 0.0 {
-                    m.kt / r
-                } else {
-                    1.0
-                };
-                let unit = if st.plant == Plant::Voltage {
-                    "kg·m²"
-                } else {
-                    "u per rad/s²"
-                };
-                v.push(("J".to_string(), b * scale, unit.to_string()));
-            }
+        if !placed {
+            return None;
         }
     }
-    v
+    out.kt = m.kt;
+    out.motor = Some(m);
+    Some(out)
+}
+
+/// A failed parameter check stands only when the refitted values of the parameters that
+/// moved also run closer to the log than the model's own: the free run of the refitted model
+/// ([`refitted_structure`]) against the model's own run `own`, on the log's input, compared
+/// by [`verdict::free_run_gain`] at the family level [`verdict::ADEQUACY_ALPHA`].
+/// Otherwise the check passes with the comparison in its detail: the refit reads the
+/// equations better, not the motion (a model fitted on its free run sits a little off the
+/// equations' optimum, and a physics its structure lacks can pull the refit anywhere).
+fn weigh_refit_by_free_run(log: &MotorLog, st: &Structure, own: &MotorLog, verdict: &mut Verdict) {
+    // A non-finite residual (statistic infinite) fails whatever a run shows.
+    let failed = |c: &verdict::Check| {
+        c.name == "parameters" && !c.passed && c.p_value.is_finite() && c.statistic.is_finite()
+    };
+    if !verdict.checks.iter().any(failed) {
+        return;
+    }
+    // A refit the model cannot run keeps the Wald test's result: no run could show it.
+    let Some(refitted) = refitted_structure(st, &verdict.refit) else {
+        for c in verdict.checks.iter_mut().filter(|c| failed(c)) {
+            c.detail = format!(
+                "{}; the refit moves a parameter a free run of this model cannot take, so the test's result stands",
+                c.detail
+            );
+        }
+        return;
+    };
+    let Some(other) = simulated_log(log, &refitted) else {
+        return;
+    };
+    let Some(gain) = verdict::free_run_gain(log, own, &other) else {
+        return;
+    };
+    // The gate's own level is the family's: rejecting both tests is never more likely than
+    // rejecting the Wald test alone, so the check keeps its level whatever the gate's.
+    let level = verdict.level;
+    let better = gain.p_value < level;
+    let words = format!(
+        "the refit's free run is {} the log's angle and current by {:.1}% of the model's own squared error (one-sided p = {:.1e} on {} blocks, level {:.1e})",
+        if gain.gain >= 0.0 { "closer to" } else { "further from" },
+        100.0 * gain.gain.abs(),
+        gain.p_value,
+        gain.blocks,
+        level
+    );
+    for c in verdict.checks.iter_mut().filter(|c| failed(c)) {
+        if better {
+            c.detail = format!("{}; {words}", c.detail);
+        } else {
+            c.passed = true;
+            c.detail = format!(
+                "{}: the refit reads the equations better, but {words}, so the model's own parameters stand",
+                c.detail.split(':').next().unwrap_or("")
+            );
+        }
+    }
+    if !better {
+        verdict.refit.clear();
+    }
 }
 
 /// Presliding candidates: only on top of a static friction law (a model without Coulomb or
@@ -651,16 +1008,16 @@ fn presliding_pass(
             base_cols.extend(v.columns.iter().map(|c| weak_torque(wf, s, c)));
         }
     }
-    EqData {
-        eq: Equation::Mechanical,
+    let mut data = EqData::new(
+        Equation::Mechanical,
         y,
-        base_cols,
-        base_sample: vec![],
-        min_torque: mech.min_torque,
-        coulomb_col: mech.coulomb_col,
-        cand,
-        cluster: verdict::hold_clusters(&s.raw_u, &wf.centres),
-    }
+        verdict::hold_clusters(&s.raw_u, &wf.centres),
+    );
+    data.base_cols = base_cols;
+    data.min_torque = mech.min_torque;
+    data.coulomb_col = mech.coulomb_col;
+    data.cand = cand;
+    data
 }
 
 /// The drive torque the model's own mechanical structure predicts from the motion, sample
@@ -911,8 +1268,59 @@ impl Structure {
 
 #[cfg(test)]
 mod tests {
-    use super::row_scale;
+    use super::{equations, passes, row_scale, Options, Structure};
+    use crate::emulator::{simulate_signal, EmulatorConfig, SignalKind};
     use crate::numerics::statistics::white_noise;
+    use control::effects::{Effect, EffectKind};
+
+    /// Each column of the parameter check meets its own instrument: with the log itself
+    /// standing for the model's run, every instrument equals its column in both equations,
+    /// also when the voltage equation finds an effect whose column joins the torque
+    /// equation's base (free there, as it is not a parameter of the model as given).
+    #[test]
+    fn instruments_stay_in_the_order_of_their_columns() {
+        let mut cfg = EmulatorConfig::paper();
+        cfg.seed = 4;
+        cfg.effects = vec![
+            Effect::Deadtime { vd: 0.5 },
+            Effect::Thermal {
+                k: 0.004,
+                tau: 20.0,
+            },
+        ];
+        let log = simulate_signal(&cfg, SignalKind::A, 60.0).unwrap().log;
+        let mut st = Structure::from_model(&cfg.truth_model());
+        st.effects.retain(|e| e.kind() != EffectKind::Deadtime);
+        let opts = Options::default();
+        let f = equations::weak_forms(&log, &st, &opts);
+        let (acc, _) = passes(&f, Some(&f), &st, &opts);
+        assert!(
+            acc.findings
+                .iter()
+                .any(|x| x.kind == Some(EffectKind::Deadtime)),
+            "the voltage equation must find the dead time for this test to mean anything"
+        );
+        let mut free_in_torque = 0;
+        for j in &acc.judged {
+            assert_eq!(j.instruments.len(), j.cols.len());
+            assert_eq!(j.names.len(), j.cols.len());
+            for (k, (z, c)) in j.instruments.iter().zip(&j.cols).enumerate() {
+                let name = &j.names[k].name;
+                let z = z.as_ref().unwrap_or_else(|| {
+                    assert!(j.names[k].free, "{name} has no instrument");
+                    c
+                });
+                assert!(z == c, "{:?} {name}: instrument is not its column", j.eq);
+                if j.eq == super::Equation::Mechanical && j.names[k].free {
+                    free_in_torque += 1;
+                }
+            }
+        }
+        assert!(
+            free_in_torque > 0,
+            "no found column joined the torque equation"
+        );
+    }
 
     /// Rows whose noise is a known part plus a floor get weights that make them equally
     /// noisy; rows of one variance keep equal weights.

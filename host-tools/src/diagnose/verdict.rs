@@ -3,9 +3,11 @@
 //! `diagnose` judges MODEL.toml exactly as it is before it looks for missing physics:
 //! 1. **Parameter check.** The model's own equations, with its own numbers, are written as
 //!    weak-form residuals on the same windows as the structure's refit ([`given_residuals`]).
-//!    When refitting the same structure removes at least [`REFIT_SHARE`] of that residual's
-//!    sum of squares with an F-test p below the level, the parameters are off: the finding
-//!    lists the refitted values and the advice to refit first.
+//!    When that residual, less the same on the model's own noise-free run, is significantly
+//!    explained by the structure's columns computed on that run (the robust test of
+//!    [`parameter_check`]), and the refitted values of the parameters that moved
+//!    ([`moved_columns`]) make a free run closer to the log ([`free_run_gain`]), the
+//!    parameters are off: the finding lists those values and the advice to refit first.
 //! 2. **Whiteness** of the structure's residual: the Breusch–Godfrey regression of the
 //!    residual on its own past values, on every other weak-form window, so that no two
 //!    windows share a sample and a correct model's residual is independent; tested with the
@@ -31,7 +33,7 @@
 //! the tests of one run. A model is *adequate* only when every check passes, no effect of the
 //! list is missing and no variable carries structure.
 use super::candidates::Signals;
-use crate::log::Plant;
+use crate::log::{MotorLog, Plant};
 use crate::numerics::statistics;
 use crate::numerics::weak_form::WeakForm;
 use control::effects::{total_sensor_offset, total_voltage_loss, Effect, EffectInputs};
@@ -42,13 +44,6 @@ use serde::Serialize;
 /// Family-wise level of the adequacy checks: 1 %, the level of the 99 % bands of MATLAB's
 /// `resid`. A correct model is called inadequate at most this often.
 pub const ADEQUACY_ALPHA: f64 = 0.01;
-
-/// Share of the model's own equation residual that a refit of its structure must remove before
-/// `diagnose` says the parameters are off: one half. Then the parameters, not missing physics,
-/// cause most of the error, and any effect found on top of them would be judged against a
-/// wrong baseline. (A fit that minimises the free-run error lands at a slightly different
-/// optimum than the equation-error refit; that difference is a few percent of the residual.)
-pub const REFIT_SHARE: f64 = 0.5;
 
 /// Past disjoint windows used by the whiteness and input tests: 4 (about 0.8 s at the default
 /// window, longer than the mechanical time constant of a small motor).
@@ -237,9 +232,68 @@ pub fn input_check(resid: &[f64], input: &[f64], cluster: &[usize], level: f64) 
     }
 }
 
-/// The parameter check: the model's residual with its own numbers (`given`) against the
-/// refit of the same structure (`refit`, `p` coefficients) on the same rows.
-pub fn parameter_check(given: &[f64], refit: &[f64], p: usize, level: f64) -> Check {
+/// Clusters of the parameter check: runs of at least `block` consecutive rows, never split
+/// inside a held input (`hold`, [`hold_clusters`]). Neighbouring weak-form windows share
+/// samples, and the residual of a correct model stays correlated over its correlation time
+/// (the angle's rounding error and the model's own approximations vary slowly), so each
+/// cluster must span that time for the cluster-robust variance to hold its level.
+pub fn block_clusters(hold: &[usize], block: usize) -> Vec<usize> {
+    let block = block.max(1);
+    let mut id = 0;
+    let mut start = 0;
+    (0..hold.len())
+        .map(|r| {
+            if r > 0 && r - start >= block && hold[r] != hold[r - 1] {
+                id += 1;
+                start = r;
+            }
+            id
+        })
+        .collect()
+}
+
+/// Correlation times a cluster of the parameter check spans: 5. The weak-form windows
+/// overlap by half, and a correct model's residual keeps what its rows share (the angle's
+/// rounding error, the current's filter) over its integrated correlation time τ; blocks of
+/// several τ leave the correlation between neighbouring clusters, which only their edges
+/// share, a small part of each cluster's variance.
+pub const CLUSTER_SPAN: f64 = 5.0;
+
+/// Fewest clusters per tested column in the parameter check: 10. The jackknifed Wald test
+/// reads its statistic against `F(r, G − r)`, which is exact for normal cluster scores and
+/// holds its level for skewed ones only when the G clusters far outnumber the r columns.
+pub const CLUSTERS_PER_COLUMN: usize = 10;
+
+/// Rows per cluster of the parameter check: [`CLUSTER_SPAN`] integrated correlation times
+/// of `refit` (the refit's residual), at least 2, and short enough to leave
+/// [`CLUSTERS_PER_COLUMN`] clusters for each of `columns` tested columns and one more.
+pub fn cluster_block(refit: &[f64], columns: usize) -> usize {
+    let tau = statistics::correlation_time(refit);
+    let span = (CLUSTER_SPAN * tau).ceil() as usize;
+    let most = refit.len() / (CLUSTERS_PER_COLUMN * (columns + 1)).max(1);
+    span.min(most).max(2)
+}
+
+/// The parameter check: does the model's own residual `given` still hold a part that the
+/// columns of its structure explain? `given` is the model's equation residual on the log
+/// less the same residual on the model's own noise-free run on the log's input: with the
+/// model's own parameters the two share what the discrete equations leave of the motion,
+/// and the difference is the sensors' noise, uncorrelated with any column free of it; a
+/// wrong parameter leaves `X·Δβ` in it. `cols` are those columns as instruments (computed
+/// on the model's run where there is one, so that they do not share the angle's rounding
+/// error with `given`), `nuisance` columns that are no parameter of the model as given,
+/// left free. The test is the jackknifed cluster-robust Wald test of `given` on `cols`
+/// beyond `nuisance` ([`statistics::robust_test_beyond`]), clustered by [`block_clusters`]
+/// in blocks of [`cluster_block`] rows (`hold`: the held input of each row; `refit`: the
+/// refit's residual, for its correlation time). The check's share is that of `given`,
+/// beyond `nuisance`, that `cols` explain.
+pub fn parameter_check(
+    given: &[f64],
+    refit: &[f64],
+    (cols, nuisance): (&[Vec<f64>], &[Vec<f64>]),
+    hold: &[usize],
+    level: f64,
+) -> Check {
     let rss_g: f64 = given.iter().map(|v| v * v).sum();
     let rss_r: f64 = refit.iter().map(|v| v * v).sum();
     if !(rss_g.is_finite() && rss_r.is_finite()) {
@@ -252,30 +306,151 @@ pub fn parameter_check(given: &[f64], refit: &[f64], p: usize, level: f64) -> Ch
             detail: "the model's own equations give a non-finite residual on this log (a zero or non-finite constant): refit first".to_string(),
         };
     }
-    let n_eff = statistics::effective_n(refit);
-    let t = statistics::f_test(rss_g, rss_r, p.max(1), 0, n_eff);
-    let share = t.explained;
-    let passed = !(t.p_value < level && share >= REFIT_SHARE);
+    let cluster = block_clusters(hold, cluster_block(refit, cols.len()));
+    let null: Vec<&[f64]> = nuisance.iter().map(|c| c.as_slice()).collect();
+    let (test, share) = statistics::robust_test_beyond(
+        given,
+        &null,
+        cols,
+        &cluster,
+        statistics::CLUSTER_LEVERAGE_CAP,
+    );
+    let Some(t) = test else {
+        let mut c = cannot_judge("parameters", given.len());
+        c.share = share;
+        return c;
+    };
+    let passed = t.p_value >= level;
     Check {
         name: "parameters",
-        statistic: t.f,
+        statistic: t.t2,
         p_value: t.p_value,
         share,
         passed,
         detail: if passed {
             format!(
-                "the model's own parameters are as good as a refit of its structure (a refit removes {:.0}% of its equation error, p = {:.1e})",
+                "the model's own parameters are as good as a refit of its structure (its columns explain {:.0}% of the model's equation error beyond its own run's; robust T² = {:.1}, p = {:.1e} on {} clusters)",
                 100.0 * share,
-                t.p_value
+                t.t2,
+                t.p_value,
+                t.clusters
             )
         } else {
             format!(
-                "the model's parameters are off: a refit of the same structure removes {:.0}% of its equation error (p = {:.1e}); refit first (`motorid fit`), then diagnose again",
+                "the model's parameters are off: its structure's columns explain {:.0}% of its equation error beyond its own run's (robust T² = {:.1}, p = {:.1e} on {} clusters, level {:.1e}); refit first (`motorid fit`), then diagnose again",
                 100.0 * share,
-                t.p_value
+                t.t2,
+                t.p_value,
+                t.clusters,
+                level
             )
         },
     }
+}
+
+/// The free-run comparison of a refit with the model as given ([`free_run_gain`]).
+#[derive(Debug, Clone, Copy)]
+pub struct FreeRunGain {
+    /// Mean of the per-sample loss difference over the mean loss of the model's own run:
+    /// the share of its squared free-run error the refit removes (negative: it adds).
+    pub gain: f64,
+    /// One-sided p-value that the refit runs no closer to the log than the model.
+    pub p_value: f64,
+    /// Blocks of the variance.
+    pub blocks: usize,
+}
+
+/// Does a refit run closer to the log than the model as given? The Diebold–Mariano test of
+/// equal accuracy (*J. Bus. Econ. Stat.* 13, 1995) of two noise-free runs on the log's
+/// input, `own` (the model) and `refit`, against the measured angle and current: the loss
+/// of each run at each sample is the sum over those signals of its squared error over the
+/// measured signal's variance, `d_k` the model's loss less the refit's. The runs' errors
+/// drift slowly, so the variance of the mean of `d` is taken from the sums of `d` over
+/// consecutive blocks of [`CLUSTER_SPAN`] correlation times of `d` (at least 2 samples,
+/// at least 20 blocks), read against Student's t with one less degree of freedom than
+/// blocks. `None` when the runs and the log differ in length or there is no loss.
+pub fn free_run_gain(log: &MotorLog, own: &MotorLog, refit: &MotorLog) -> Option<FreeRunGain> {
+    let n = log.len();
+    if own.len() != n || refit.len() != n || n < 40 {
+        return None;
+    }
+    let mut signals: Vec<(&[f64], &[f64], &[f64])> = vec![(&log.theta, &own.theta, &refit.theta)];
+    if let (Some(i), Some(a), Some(b)) = (&log.i, &own.i, &refit.i) {
+        signals.push((i, a, b));
+    }
+    let mut d = vec![0.0; n];
+    let mut own_loss = 0.0;
+    for (y, a, b) in signals {
+        let mean = y.iter().sum::<f64>() / n as f64;
+        let var = y.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n as f64;
+        if !(var > 0.0 && var.is_finite()) {
+            continue;
+        }
+        // Both runs start where the log starts.
+        let (a0, b0) = (a[0] - y[0], b[0] - y[0]);
+        for k in 0..n {
+            let ea = (y[k] - a[k] + a0).powi(2) / var;
+            let eb = (y[k] - b[k] + b0).powi(2) / var;
+            d[k] += ea - eb;
+            own_loss += ea;
+        }
+    }
+    if !(own_loss > 0.0 && d.iter().all(|v| v.is_finite())) {
+        return None;
+    }
+    let block = ((CLUSTER_SPAN * statistics::correlation_time(&d)).ceil() as usize)
+        .min(n / 20)
+        .max(2);
+    let mean = d.iter().sum::<f64>() / n as f64;
+    let sums: Vec<f64> = d
+        .chunks(block)
+        .map(|c| c.iter().map(|v| v - mean).sum::<f64>())
+        .collect();
+    let g = sums.len();
+    let var =
+        g as f64 / (g as f64 - 1.0) * sums.iter().map(|s| s * s).sum::<f64>() / (n as f64).powi(2);
+    let t = if var > 0.0 { mean / var.sqrt() } else { 0.0 };
+    let student = statrs::distribution::StudentsT::new(0.0, 1.0, (g - 1) as f64).ok()?;
+    use statrs::distribution::ContinuousCDF;
+    Some(FreeRunGain {
+        gain: mean * n as f64 / own_loss,
+        p_value: 1.0 - student.cdf(t),
+        blocks: g,
+    })
+}
+
+/// Which of the columns `cols` moved in the refit: for each, the same robust test of the
+/// given residual on that column alone, beyond all the others and the `nuisance` columns,
+/// at `level` divided by the number of columns (Bonferroni within the check). A parameter
+/// the data cannot tell from the others (its column nearly spanned by them) does not move.
+pub fn moved_columns(
+    given: &[f64],
+    refit: &[f64],
+    (cols, nuisance): (&[Vec<f64>], &[Vec<f64>]),
+    hold: &[usize],
+    level: f64,
+) -> Vec<bool> {
+    let cluster = block_clusters(hold, cluster_block(refit, cols.len()));
+    let each = level / cols.len().max(1) as f64;
+    (0..cols.len())
+        .map(|k| {
+            let null: Vec<&[f64]> = cols
+                .iter()
+                .enumerate()
+                .filter(|(m, _)| *m != k)
+                .map(|(_, c)| c.as_slice())
+                .chain(nuisance.iter().map(|c| c.as_slice()))
+                .collect();
+            let (t, _) = statistics::robust_test_beyond(
+                given,
+                &null,
+                std::slice::from_ref(&cols[k]),
+                &cluster,
+                statistics::CLUSTER_LEVERAGE_CAP,
+            );
+            t.is_some_and(|t| t.p_value < each)
+        })
+        .collect()
 }
 
 /// The model's own load torque [N·m] at each sample, evaluated on the measured motion: its
@@ -482,22 +657,63 @@ mod tests {
         assert!(t0.unwrap().p_value > 1e-3, "{t0:?}");
     }
 
+    /// A run whose angle and current follow the log's truth beats one with a slow error in
+    /// both; the reverse comparison finds no gain.
     #[test]
-    fn a_non_finite_residual_fails_the_parameter_check() {
-        let refit = noise(100, 9);
-        let mut given = refit.clone();
-        given[3] = f64::NAN;
-        assert!(!parameter_check(&given, &refit, 4, 0.01).passed);
-        given[3] = f64::INFINITY;
-        assert!(!parameter_check(&given, &refit, 4, 0.01).passed);
+    fn the_free_run_closer_to_the_log_wins() {
+        let n = 3000;
+        let (a, b) = (noise(n, 21), noise(n, 22));
+        let truth = |k: usize| ((k as f64 / 50.0).sin(), (k as f64 / 30.0).cos());
+        let drift = |k: usize| 0.2 * (k as f64 / 400.0).sin();
+        let log_of = |f: &dyn Fn(usize) -> (f64, f64)| MotorLog {
+            t: (0..n).map(|k| k as f64 * 0.01).collect(),
+            u: vec![0.0; n],
+            theta: (0..n).map(|k| f(k).0).collect(),
+            i: Some((0..n).map(|k| f(k).1).collect()),
+            ..MotorLog::default()
+        };
+        let log = log_of(&|k| (truth(k).0 + 0.01 * a[k], truth(k).1 + 0.1 * b[k]));
+        let good = log_of(&truth);
+        let off = log_of(&|k| (truth(k).0 + drift(k), truth(k).1 + drift(k)));
+        let g = free_run_gain(&log, &off, &good).unwrap();
+        assert!(g.gain > 0.5 && g.p_value < 1e-3, "{g:?}");
+        let r = free_run_gain(&log, &good, &off).unwrap();
+        assert!(r.gain < 0.0 && r.p_value > 0.5, "{r:?}");
     }
 
     #[test]
-    fn parameters_are_off_only_when_a_refit_removes_most_of_the_error() {
+    fn a_non_finite_residual_fails_the_parameter_check() {
+        let refit = noise(100, 9);
+        let cols = vec![noise(100, 10)];
+        let hold: Vec<usize> = (0..100).collect();
+        let mut given = refit.clone();
+        given[3] = f64::NAN;
+        let check = |g: &[f64]| parameter_check(g, &refit, (&cols, &[]), &hold, 0.01).passed;
+        assert!(!check(&given));
+        given[3] = f64::INFINITY;
+        assert!(!check(&given));
+    }
+
+    #[test]
+    fn parameters_are_off_when_the_columns_explain_the_given_residual() {
+        // The given residual is the refit's plus the columns times a parameter error.
         let refit = noise(500, 5);
-        let near: Vec<f64> = refit.iter().map(|v| v * 1.05).collect();
-        assert!(parameter_check(&near, &refit, 4, 0.01).passed);
-        let far: Vec<f64> = refit.iter().map(|v| v * 3.0).collect();
-        assert!(!parameter_check(&far, &refit, 4, 0.01).passed);
+        let cols = vec![noise(500, 6), noise(500, 8)];
+        let hold: Vec<usize> = (0..500).collect();
+        let with =
+            |d: f64| -> Vec<f64> { refit.iter().zip(&cols[0]).map(|(e, x)| e + d * x).collect() };
+        let rejected =
+            |d: f64| !parameter_check(&with(d), &refit, (&cols, &[]), &hold, 0.01).passed;
+        assert!(!rejected(0.0));
+        assert!(rejected(0.5));
+        // A column that stands for the equation's own approximation is free.
+        let free = parameter_check(&with(0.5), &refit, (&cols[1..], &cols[..1]), &hold, 0.01);
+        assert!(free.passed, "{free:?}");
+    }
+
+    #[test]
+    fn clusters_span_a_block_and_never_split_a_hold() {
+        assert_eq!(block_clusters(&[0, 1, 2, 3, 4], 2), vec![0, 0, 1, 1, 2]);
+        assert_eq!(block_clusters(&[0, 0, 0, 1, 2], 2), vec![0, 0, 0, 1, 1]);
     }
 }
