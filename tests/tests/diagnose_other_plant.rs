@@ -298,7 +298,7 @@ fn deadtime_on_d() {
 }
 
 #[test]
-#[ignore = "called adequate: +1-2 % of resistance on the multisine, the thermal candidate misses the Bonferroni level and the parameter check needs half the residual"]
+#[ignore = "called adequate on every seed: +1-2 % of resistance on the multisine; the thermal candidate misses the Bonferroni level and the refitted R does not run closer to the log than the given one"]
 fn thermal_on_a() {
     check("thermal", SignalKind::A);
 }
@@ -334,7 +334,7 @@ fn position_load_on_a() {
 }
 
 #[test]
-#[ignore = "not named: tooth friction on the mostly inertial transmitted torque shows as an inertia error (the parameter check refits J 17-20 % higher)"]
+#[ignore = "not named: tooth friction on the mostly inertial transmitted torque shows as wrong constants: the parameter check refits J and the friction"]
 fn load_friction_on_a() {
     check("load_friction", SignalKind::A);
 }
@@ -346,7 +346,7 @@ fn load_friction_on_d() {
 }
 
 #[test]
-#[ignore = "called adequate: the Stribeck candidate is significant (p < 1e-9) but its whole-log RMS torque is below the relevance floor, and nothing else flags it"]
+#[ignore = "called adequate on two seeds of three: the Stribeck candidate is significant (p < 1e-9) but its whole-log RMS torque is below the relevance floor, and the refitted Coulomb friction runs closer to the log on one seed only"]
 fn stribeck_on_a() {
     check("stribeck", SignalKind::A);
 }
@@ -358,7 +358,6 @@ fn stribeck_on_d() {
 }
 
 #[test]
-#[ignore = "the parameter check fails but its refit lists the inertia only, not the viscous coefficient"]
 fn viscous_on_a() {
     check("viscous", SignalKind::A);
 }
@@ -447,12 +446,12 @@ const TABLE_TAIL: &str = "\nHow to read it. On the voltage steps d a correct mod
      their cause. Causes seen here: the relevance floor (a finding's torque, its RMS over the \
      whole log, must reach 10 % of the Coulomb friction) turns down a significant Stribeck \
      dip, which acts only at low speed, and a cogging of 10 mN·m (an RMS of about 6 mN·m against a floor \
-     of 8.5); the cogging is then carried by `theta`, while the Stribeck dip leaves the model \
-     adequate. A winding that warms by up to 5 K over a minute of the multisine raises R by up to 2 %: \
-     the parameter check's refit is significant (p below 1e-5 in both equations) but removes \
-     less than half of the residual, so the check passes, and the thermal candidate misses the \
-     Bonferroni level. Gear tooth friction \
-     proportional to a transmitted torque that is mostly inertial looks like a larger inertia \
-     (the refit raises J by 17-20 %). On steps, the cluster-robust entry test has some 30 \
-     held inputs and names dead time or load friction on one seed of three. A model without \
-     viscous friction fails the parameter check, whose refit shows only the inertia.\n";
+     of 8.5). The cogging is then carried by `theta`; the Stribeck dip leaves the model \
+     adequate where the parameter check does not refit the Coulomb friction. A winding that \
+     warms by up to 5 K over a minute of the multisine raises R by up to 2 %: the parameter \
+     check refits R, but the thermal candidate misses the Bonferroni level. Gear tooth \
+     friction proportional to a transmitted torque that is mostly inertial looks like wrong \
+     constants (the refit raises J and the friction). On steps, the cluster-robust entry test \
+     has some 30 held inputs and names dead time or load friction on one seed of three. A \
+     model without viscous friction fails the parameter check, whose refit gives the viscous \
+     coefficient.\n";
