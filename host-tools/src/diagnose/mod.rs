@@ -813,7 +813,9 @@ fn refit_values(
     let m = st.motor.unwrap_or(MotorParams::paper());
     let (idx, _, _) = tested_columns(j);
     let r = r_refit.filter(|r| *r > 0.0).unwrap_or(m.r);
-    let kt = kb_refit.filter(|k| *k > 0.0 && r_refit.is_some()).unwrap_or(m.kt);
+    let kt = kb_refit
+        .filter(|k| *k > 0.0 && r_refit.is_some())
+        .unwrap_or(m.kt);
     let voltage = st.plant == Plant::Voltage;
     let scale = if voltage && r > 0.0 { kt / r } else { 1.0 };
     idx.iter()
