@@ -42,6 +42,17 @@ fn check_selection_lines(text: &str) {
     }
 }
 
+/// The demo's standard output, after asserting that it succeeded.
+fn succeeded(out: &std::process::Output) -> String {
+    let text = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(
+        out.status.success(),
+        "demo failed: {text}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    text
+}
+
 #[test]
 fn demo_finds_the_hidden_effect_and_the_error_falls() {
     let dir = tempfile::tempdir().unwrap();
@@ -59,12 +70,7 @@ fn demo_finds_the_hidden_effect_and_the_error_falls() {
             "rep",
         ],
     );
-    let text = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "demo failed: {text}\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let text = succeeded(&out);
     assert!(text.contains("position_load: FOUND"), "{text}");
     check_selection_lines(&text);
     // The kept models, each scored on the test log no choice was made on.
@@ -117,12 +123,7 @@ fn demo_hides_unnamed_physics_and_a_table_takes_it_in() {
             "rep",
         ],
     );
-    let text = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "demo failed: {text}\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let text = succeeded(&out);
     // Step 0's diagnosis: not adequate, carried by the speed, and the table it offers.
     let verdict = text
         .lines()

@@ -499,14 +499,7 @@ fn phi1_structured<const MASK: u8>(
     longer: Option<&Phi>,
     phi: &mut Phi,
 ) -> Option<[f64; 4]> {
-    let norm = a
-        .iter()
-        .map(|r| r.iter().map(|v| v.abs()).sum::<f64>())
-        .fold(0.0, f64::max);
-    let finite = a.iter().flatten().chain(b).all(|v| v.is_finite());
-    if !(finite && norm <= freerun::EXPM_MAX_NORM) {
-        return None;
-    }
+    let norm = phi_norm(a, b)?;
     let s = if norm > 0.5 { ceil_log2(norm / 0.5) } else { 0 };
     // 2^−s exactly (s ≤ 61 for a norm within EXPM_MAX_NORM).
     let scale = f64::from_bits(((1023 - s) as u64) << 52);
@@ -647,6 +640,17 @@ fn mul4v(a: &M4, v: &[f64; 4]) -> [f64; 4] {
     out
 }
 
+/// The ∞-norm of `A` (largest absolute row sum), or `None` when `A` or `b` is not finite
+/// or the norm is beyond [`freerun::EXPM_MAX_NORM`]: the input check of both φ1 products.
+fn phi_norm(a: &M4, b: &[f64; 4]) -> Option<f64> {
+    let norm = a
+        .iter()
+        .map(|r| r.iter().map(|v| v.abs()).sum::<f64>())
+        .fold(0.0, f64::max);
+    let finite = a.iter().flatten().chain(b).all(|v| v.is_finite());
+    (finite && norm <= freerun::EXPM_MAX_NORM).then_some(norm)
+}
+
 /// `φ1(A)·b` with `φ1(A) = Σ_k A^k/(k+1)!`: the last column of the exponential of the
 /// augmented matrix `[[A, b], [0, 0]]` ([`freerun::expm`]), computed without forming it.
 /// Scaling and squaring: `A` and `b` are scaled by `2^−s` so that `‖A‖∞ ≤ 1/2` (the
@@ -656,14 +660,7 @@ fn mul4v(a: &M4, v: &[f64; 4]) -> [f64; 4] {
 /// of 11), and each squaring of the augmented matrix maps `(E, g)` to `(E², E·g + g)`.
 /// `None` when `A` or `b` is not finite or `‖A‖` is beyond [`freerun::EXPM_MAX_NORM`].
 pub fn phi1_times(a: &M4, b: &[f64; 4]) -> Option<[f64; 4]> {
-    let norm = a
-        .iter()
-        .map(|r| r.iter().map(|v| v.abs()).sum::<f64>())
-        .fold(0.0, f64::max);
-    let finite = a.iter().flatten().chain(b).all(|v| v.is_finite());
-    if !(finite && norm <= freerun::EXPM_MAX_NORM) {
-        return None;
-    }
+    let norm = phi_norm(a, b)?;
     let s = if norm > 0.5 {
         (norm / 0.5).log2().ceil() as i32
     } else {
