@@ -490,10 +490,13 @@ fn clear_fault_lets_a_faulted_board_run_again() {
             .parse()
             .unwrap()
     };
-    // The emulated board's period in its own time: 12 ms on average, whatever the host's
-    // scheduling adds as jitter.
+    // The emulated board times its periods on the host's clock, so a loaded host stretches
+    // them without bound (75 ms seen with a test run beside on two cores): the test asks
+    // that the telemetry carries a period, not how long it was; timing is a benchmark's.
+    // Below: this run is paced in real time, so its mean period cannot fall far under the
+    // nominal 12 ms (half of it leaves room for the catch-up of late periods).
     let period = value("loop_period_us");
-    assert!(period > 6_000.0 && period < 60_000.0, "{period}");
+    assert!(period.is_finite() && period > 6_000.0, "{period}");
     assert!(value("loop_jitter_us") >= 0.0);
     assert_eq!(value("loop_overruns"), 0.0);
     assert_eq!(
