@@ -150,12 +150,11 @@ pub(super) fn base_equations(f: &Forms, run: Option<&Forms>, st: &Structure) -> 
                 .and_then(|r| r.get(k))
                 .filter(|(q, _)| *q == eq)
                 .map(|(_, c)| c);
-            let g = run.filter(|_| twin.is_some());
             if eq == Equation::Mechanical {
-                let z = g.zip(twin).map(|(g, c)| weak_torque(&g.wf_m, &g.s, c));
+                let z = run.zip(twin).map(|(g, c)| weak_torque(&g.wf_m, &g.s, c));
                 mech.push_base(name, weak_torque(&f.wf_m, s, &col), z);
             } else {
-                let z = g.zip(twin).map(|(g, c)| g.wf.integral(c));
+                let z = run.zip(twin).map(|(g, c)| g.wf.integral(c));
                 elec.push_base(name.clone(), f.wf.integral(&col), z);
                 mech.base_sample.push(SampleColumn {
                     col,

@@ -342,10 +342,7 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
     let mut verdict = judge(&f.s, &f.wf, st, &judged, &findings, opts);
     if let Some(own) = &own_run {
         weigh_refit_by_free_run(log, st, own, &mut verdict);
-        verdict.adequate = !judged.is_empty()
-            && findings.is_empty()
-            && verdict.unexplained.is_empty()
-            && verdict.checks.iter().all(|c| c.passed);
+        verdict.adequate = adequate(&judged, &findings, &verdict.unexplained, &verdict.checks);
     }
     verdict.look_alikes =
         lookalikes::find(&findings, &tested, &verdict.unexplained, alpha_per_test);
@@ -616,8 +613,8 @@ fn judge(
         if let Some(given) = &j.given {
             let c = parameter_check(j, given, &cluster, level_per_test);
             if !c.passed {
-                let r = electrical_resistance(judged);
-                let kb = electrical_back_emf(judged);
+                let r = electrical_constant(judged, "R");
+                let kb = electrical_constant(judged, "K_b");
                 refit.extend(refitted_constants(
                     j,
                     st,
@@ -647,12 +644,8 @@ fn judge(
         && checks
             .iter()
             .all(|c| c.name != "data" && !c.p_value.is_nan());
-    let adequate = !judged.is_empty()
-        && findings.is_empty()
-        && unexplained.is_empty()
-        && checks.iter().all(|c| c.passed);
     Verdict {
-        adequate,
+        adequate: adequate(judged, findings, &unexplained, &checks),
         judged: testable,
         level,
         level_per_test,
@@ -718,20 +711,25 @@ fn parameter_check(
     c
 }
 
-/// The resistance [Ω] the refit of the electrical equation gives, when it was judged.
-fn electrical_resistance(judged: &[Judged]) -> Option<f64> {
-    judged
-        .iter()
-        .find(|e| e.eq == Equation::Electrical)
-        .and_then(|e| e.beta.first().copied())
+/// Adequate: an equation was judged, nothing is missing or carried, and every check passed.
+fn adequate(
+    judged: &[Judged],
+    findings: &[Finding],
+    unexplained: &[carriers::Carrier],
+    checks: &[verdict::Check],
+) -> bool {
+    !judged.is_empty()
+        && findings.is_empty()
+        && unexplained.is_empty()
+        && checks.iter().all(|c| c.passed)
 }
 
-/// The back-EMF constant the voltage equation refitted, if it has one: the refitted model
-/// ([`refitted_structure`]) takes it as its torque constant too, so torque-side values are
-/// read with it.
-fn electrical_back_emf(judged: &[Judged]) -> Option<f64> {
+/// The value of the voltage equation's refitted constant `name` (`R` [Ω], `K_b` [V·s/rad]),
+/// when that equation was judged. The refitted model ([`refitted_structure`]) takes K_b as
+/// its torque constant too, so torque-side values are read with both.
+fn electrical_constant(judged: &[Judged], name: &str) -> Option<f64> {
     let e = judged.iter().find(|e| e.eq == Equation::Electrical)?;
-    let k = e.names.iter().position(|c| c.name == "K_b")?;
+    let k = e.names.iter().position(|c| c.name == name)?;
     e.beta.get(k).copied()
 }
 

@@ -228,7 +228,7 @@ pub fn fit(req: &FitRequest) -> Result<FitReport> {
     }
     model.data.units = declared_units(req.logs.iter().chain(req.validate));
     relabel_units(&mut model, req.logs);
-    let scores = score_logs_as(&model, req, &validate_role);
+    let scores = score_logs(&model, req, &validate_role);
     let summary_text = summary_of(&model, &scores);
     Ok(FitReport {
         model,
@@ -606,20 +606,10 @@ fn mark_set_to_zero(model: &mut Model, score_with: f64) {
     }
 }
 
-/// A readable summary: parameters, then fits on the fitting and validation logs.
-pub fn summary(model: &Model, req: &FitRequest) -> Result<String> {
-    Ok(summary_of(model, &score_logs(model, req)))
-}
-
-/// Score a fitted model on the request's logs (fitted, then validation).
-/// Every log's free run is independent: they run in parallel.
-pub fn score_logs(model: &Model, req: &FitRequest) -> Vec<LogScores> {
-    score_logs_as(model, req, "validation")
-}
-
-/// [`score_logs`] with the role the `--validate` logs played: `validation`, or a selection
-/// log when the fit chose among candidate models on them.
-fn score_logs_as(model: &Model, req: &FitRequest, validate_role: &str) -> Vec<LogScores> {
+/// Score a fitted model on the request's logs (fitted, then `--validate`), each log's free
+/// run in parallel; `validate_role` names the role the `--validate` logs played:
+/// `validation`, or a selection log when the fit chose among candidate models on them.
+fn score_logs(model: &Model, req: &FitRequest, validate_role: &str) -> Vec<LogScores> {
     use rayon::prelude::*;
     let logs: Vec<(&str, &MotorLog)> = [("fit", req.logs), (validate_role, req.validate)]
         .into_iter()
