@@ -116,7 +116,9 @@ pub enum ZTerms {
     Chosen,
     /// Only starts without `z` (then `z` stays 0).
     Without,
-    /// Only starts with `z`; the one-by-one thresholding may still remove its terms.
+    /// Only starts with `z`, and of those the ones whose acceleration or current equation
+    /// uses it when the ladder has any; the one-by-one thresholding may still remove its
+    /// terms.
     With,
 }
 

@@ -207,6 +207,21 @@ impl<'a> Search<'a> {
         )
     }
 
+    /// Whether a candidate's acceleration or current equation has a term in `z` (only then
+    /// does `z` change the free run).
+    fn uses_z(&self, c: &Candidate) -> bool {
+        [ACCEL, IDOT]
+            .into_iter()
+            .filter(|e| *e < self.equations())
+            .any(|e| {
+                self.lib
+                    .candidates
+                    .iter()
+                    .zip(&c.xn[e])
+                    .any(|(t, v)| *v != 0.0 && t.term.has_z())
+            })
+    }
+
     /// Remove term `j` from equation `e` and refit that equation.
     fn without(&self, c: &Candidate, e: usize, j: usize) -> Candidate {
         self.with_support(c, e, j, false)
@@ -275,6 +290,7 @@ impl<'a> Search<'a> {
         pareto: &mut Vec<ParetoRow>,
     ) -> (Candidate, Option<f64>) {
         let mut best: Option<(Candidate, Option<f64>)> = None;
+        let mut fallback: Option<(Candidate, Option<f64>)> = None;
         // Each threshold is tried with the whole library and without the z terms (then z stays
         // 0): the extracted z only earns its terms if it predicts better.
         let z_terms = self.z_terms;
@@ -334,15 +350,22 @@ impl<'a> Search<'a> {
                 ),
                 accepted: false,
             });
-            let better = match &best {
+            // With `ZTerms::With` a start must use z; the best of the others is kept only for
+            // a ladder where none does.
+            let slot = if z_terms != ZTerms::With || self.uses_z(&c) {
+                &mut best
+            } else {
+                &mut fallback
+            };
+            let better = match slot {
                 None => true,
                 Some((_, bf)) => fit.unwrap_or(f64::NEG_INFINITY) > bf.unwrap_or(f64::NEG_INFINITY),
             };
             if better {
-                best = Some((c, fit));
+                *slot = Some((c, fit));
             }
         }
-        let (start, fit) = best.expect("the ladder is not empty");
+        let (start, fit) = best.or(fallback).expect("the ladder is not empty");
         if let Some(row) = pareto
             .iter_mut()
             .find(|r| r.fit == fit && r.terms == start.terms())
