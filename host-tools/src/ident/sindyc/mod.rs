@@ -104,6 +104,22 @@ pub struct SindycOptions {
     pub tolerance: f64,
     /// Velocity-estimator window of the measured `omega` used for scoring (paper: 10).
     pub velocity_window: usize,
+    /// Whether the structure search's start may, must or must not use `z`.
+    pub z_terms: ZTerms,
+}
+
+/// Which starts of the STLSQ ladder the structure search tries ([`search::Search::stlsq_start`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum ZTerms {
+    /// Each threshold with and without the `z` terms; the better validation fit starts.
+    #[default]
+    Chosen,
+    /// Only starts without `z` (then `z` stays 0).
+    Without,
+    /// Only starts with `z`, and of those the ones whose acceleration or current equation
+    /// uses it when the ladder has any; the one-by-one thresholding may still remove its
+    /// terms.
+    With,
 }
 
 impl Default for SindycOptions {
@@ -116,6 +132,7 @@ impl Default for SindycOptions {
             stlsq: StlsqOptions::default(),
             tolerance: 0.5,
             velocity_window: 10,
+            z_terms: ZTerms::Chosen,
         }
     }
 }
@@ -331,10 +348,22 @@ fn check_logs(fit_logs: &[MotorLog], val_logs: &[MotorLog], opts: &SindycOptions
 
 /// `fit --model sindyc`: identify and wrap as a [`crate::model::Model`] (called from [`super::fit`]).
 pub fn fit_model(req: &super::FitRequest) -> Result<crate::model::Model> {
-    use crate::model::{Model, ModelKind, Parameter};
     let opts = SindycOptions {
         plant: req.plant,
         ..SindycOptions::default()
+    };
+    fit_model_with(req, &opts)
+}
+
+/// [`fit_model`] with other settings of [`identify`] (the request's plant is used).
+pub fn fit_model_with(
+    req: &super::FitRequest,
+    opts: &SindycOptions,
+) -> Result<crate::model::Model> {
+    use crate::model::{Model, ModelKind, Parameter};
+    let opts = SindycOptions {
+        plant: req.plant,
+        ..opts.clone()
     };
     let res = identify(req.logs, req.validate, req.adds, &opts)?;
     tracing::debug!("SINDYc equations:\n{}", res.equations_text);

@@ -4,7 +4,7 @@
 //! examined is a row of the Pareto table (number of terms vs validation fit).
 use super::embedding::HiddenState;
 use super::simulate::{bounded_segments, evaluation_budget, validation_fit, Limits};
-use super::{ParetoRow, SindycOptions};
+use super::{ParetoRow, SindycOptions, ZTerms};
 use crate::ident::library::{Library, ACCEL, EQUATION_NAMES, IDOT, ZDOT};
 use crate::ident::sensor_chain;
 use crate::ident::stlsq::StlsqOptions;
@@ -51,6 +51,7 @@ pub struct Search<'a> {
     window: usize,
     limits: Limits,
     z_max: f64,
+    z_terms: ZTerms,
     sims: usize,
 }
 
@@ -99,6 +100,7 @@ impl<'a> Search<'a> {
                 current: 10.0 * imax + 10.0,
             },
             z_max: 1.5 * hidden.z_peak.max(1e-9),
+            z_terms: opts.z_terms,
             sims: 0,
         }
     }
@@ -205,6 +207,21 @@ impl<'a> Search<'a> {
         )
     }
 
+    /// Whether a candidate's acceleration or current equation has a term in `z` (only then
+    /// does `z` change the free run).
+    fn uses_z(&self, c: &Candidate) -> bool {
+        [ACCEL, IDOT]
+            .into_iter()
+            .filter(|e| *e < self.equations())
+            .any(|e| {
+                self.lib
+                    .candidates
+                    .iter()
+                    .zip(&c.xn[e])
+                    .any(|(t, v)| *v != 0.0 && t.term.has_z())
+            })
+    }
+
     /// Remove term `j` from equation `e` and refit that equation.
     fn without(&self, c: &Candidate, e: usize, j: usize) -> Candidate {
         self.with_support(c, e, j, false)
@@ -262,7 +279,8 @@ impl<'a> Search<'a> {
 
     /// The STLSQ ladder: every threshold multiplier of [`THRESHOLD_LADDER`] on `base`,
     /// each with the whole library and without the z terms (then z stays 0: the extracted z
-    /// only earns its terms if it predicts better). Returns the candidate with the best
+    /// only earns its terms if it predicts better; [`SindycOptions::z_terms`] may keep only
+    /// one of the two). Returns the candidate with the best
     /// validation fit that does not diverge (or the first, when all diverge) and its fit;
     /// every try is a row of `pareto`.
     pub fn stlsq_start(
@@ -272,11 +290,18 @@ impl<'a> Search<'a> {
         pareto: &mut Vec<ParetoRow>,
     ) -> (Candidate, Option<f64>) {
         let mut best: Option<(Candidate, Option<f64>)> = None;
+        let mut fallback: Option<(Candidate, Option<f64>)> = None;
         // Each threshold is tried with the whole library and without the z terms (then z stays
         // 0): the extracted z only earns its terms if it predicts better.
+        let z_terms = self.z_terms;
         let ladder = THRESHOLD_LADDER
             .iter()
-            .flat_map(|m| [(*m, false), (*m, true)]);
+            .flat_map(|m| [(*m, false), (*m, true)])
+            .filter(|(_, z_free)| match z_terms {
+                ZTerms::Chosen => true,
+                ZTerms::Without => *z_free,
+                ZTerms::With => !*z_free,
+            });
         for (mult, z_free) in ladder {
             let o = StlsqOptions {
                 threshold: base.threshold * mult,
@@ -325,15 +350,22 @@ impl<'a> Search<'a> {
                 ),
                 accepted: false,
             });
-            let better = match &best {
+            // With `ZTerms::With` a start must use z; the best of the others is kept only for
+            // a ladder where none does.
+            let slot = if z_terms != ZTerms::With || self.uses_z(&c) {
+                &mut best
+            } else {
+                &mut fallback
+            };
+            let better = match slot {
                 None => true,
                 Some((_, bf)) => fit.unwrap_or(f64::NEG_INFINITY) > bf.unwrap_or(f64::NEG_INFINITY),
             };
             if better {
-                best = Some((c, fit));
+                *slot = Some((c, fit));
             }
         }
-        let (start, fit) = best.expect("the ladder is not empty");
+        let (start, fit) = best.or(fallback).expect("the ladder is not empty");
         if let Some(row) = pareto
             .iter_mut()
             .find(|r| r.fit == fit && r.terms == start.terms())
