@@ -4,7 +4,7 @@
 //! active set: a variable sitting on a bound whose gradient pushes it outward is held there
 //! for the step. The Jacobian is the caller's ([`solve_with_jacobian`]) or numeric (forward
 //! differences, step relative to the variable's scale); the damped normal equations are
-//! solved with faer's Cholesky. The paper
+//! solved by Cholesky ([`solve_pd`]). The paper
 //! used MATLAB's trust-region reflective method; LM with projected bounds reaches the same
 //! minima on these small, well-scaled problems.
 //!
@@ -13,6 +13,7 @@
 //!
 //! [`solve_parallel`] evaluates the Jacobian's columns on rayon's threads: each column is
 //! one more residual evaluation (a free run of the model), and they are independent.
+use crate::numerics::least_squares::solve_pd;
 use anyhow::{bail, Result};
 use rayon::prelude::*;
 
@@ -428,7 +429,7 @@ fn normal_matrix(jac: &[Vec<f64>]) -> Vec<Vec<f64>> {
     a
 }
 
-/// Solve `(JᵀJ + λ·diag(JᵀJ))·δ = −g` over the inactive variables (faer Cholesky).
+/// Solve `(JᵀJ + λ·diag(JᵀJ))·δ = −g` over the inactive variables ([`solve_pd`]).
 fn damped_step(jtj: &[Vec<f64>], g: &[f64], active: &[bool], lambda: f64) -> Option<Vec<f64>> {
     let idx: Vec<usize> = (0..g.len()).filter(|&j| !active[j]).collect();
     let k = idx.len();
@@ -450,14 +451,8 @@ fn damped_step(jtj: &[Vec<f64>], g: &[f64], active: &[bool], lambda: f64) -> Opt
         }
     });
     let b = faer::Mat::<f64>::from_fn(k, 1, |p, _| -g[idx[p]]);
-    let llt = a.llt(faer::Side::Lower).ok()?;
-    use faer::linalg::solvers::Solve;
-    let sol = llt.solve(&b);
-    for (p, &j) in idx.iter().enumerate() {
-        let v = sol[(p, 0)];
-        if !v.is_finite() {
-            return None;
-        }
+    let sol = solve_pd(a.as_ref(), b.as_ref())?;
+    for (&j, v) in idx.iter().zip(sol) {
         step[j] = v;
     }
     Some(step)

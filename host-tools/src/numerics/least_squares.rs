@@ -8,6 +8,8 @@
 //!   condition number, for tables of identified parameters.
 //! - [`solve_spd`]: normal equations already formed (STLSQ), by Cholesky with a
 //!   pseudo-inverse fallback for a singular system.
+//! - [`solve_pd`]: a positive definite system (a damped Levenberg-Marquardt step), by
+//!   Cholesky alone, reporting failure instead of falling back.
 //! - [`leave_one_out_rss`]: the PRESS residual of a fit, each row predicted without itself.
 use anyhow::{bail, Result};
 use faer::linalg::solvers::SolveLstsq;
@@ -488,6 +490,17 @@ pub fn leave_one_out_rss(cols: &[&[f64]], y: &[f64]) -> f64 {
 /// `1 − h` (which loses its digits as `h → 1`).
 const MAX_LEVERAGE: f64 = 0.99;
 
+/// Solve `A x = b` (one right-hand side) by faer's Cholesky alone, for an `A` that is
+/// positive definite by construction (a damped normal matrix): `None` when the factorisation
+/// fails or the solution is not finite, so the caller can react (damp more) instead of
+/// taking a fallback's answer.
+pub fn solve_pd(a: MatRef<'_, f64>, b: MatRef<'_, f64>) -> Option<Vec<f64>> {
+    use faer::linalg::solvers::Solve;
+    let x = a.llt(faer::Side::Lower).ok()?.solve(b);
+    let v: Vec<f64> = (0..a.nrows()).map(|i| x[(i, 0)]).collect();
+    v.iter().all(|x| x.is_finite()).then_some(v)
+}
+
 /// Solve `A x = b` (one right-hand side) for a symmetric positive semi-definite `A` with
 /// unit-ish diagonal, such as the normal equations of unit-norm columns: faer's Cholesky, or
 /// when it fails or a pivot is below 1e-12 of the largest diagonal entry, the minimum-norm
@@ -654,5 +667,21 @@ mod tests {
         let z = Mat::<f64>::zeros(2, 2);
         let b = Mat::<f64>::from_fn(2, 1, |_, _| 1.0);
         assert_eq!(solve_spd(z.as_ref(), b.as_ref()), vec![0.0, 0.0]);
+    }
+
+    #[test]
+    fn solve_pd_solves_a_definite_system_and_refuses_a_singular_one() {
+        let a = Mat::<f64>::from_fn(3, 3, |r, c| if r == c { 2.0 } else { 0.5 });
+        let x_true = [1.0, -2.0, 0.5];
+        let b = Mat::<f64>::from_fn(3, 1, |r, _| (0..3).map(|c| a[(r, c)] * x_true[c]).sum());
+        let x = solve_pd(a.as_ref(), b.as_ref()).expect("positive definite");
+        for (got, want) in x.iter().zip(x_true) {
+            // A 3×3 solve with condition number 2: rounding only.
+            assert!((got - want).abs() < 1e-12, "{x:?}");
+        }
+        // Indefinite (eigenvalues 3 and −1): no Cholesky factor, so no answer.
+        let a = Mat::<f64>::from_fn(2, 2, |r, c| if r == c { 1.0 } else { 2.0 });
+        let b = Mat::<f64>::from_fn(2, 1, |_, _| 1.0);
+        assert_eq!(solve_pd(a.as_ref(), b.as_ref()), None);
     }
 }
