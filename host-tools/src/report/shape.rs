@@ -191,6 +191,7 @@ mod tests {
         let k = model.motor.kt / model.motor.r;
         assert_eq!(d.y_unit, "N·m");
         for (a, b) in d.y.iter().zip(&shape.y) {
+            // One multiplication by K_t/R: rounding only.
             assert!((a - b * k).abs() < 1e-12);
         }
         assert_eq!(d.axis_titles().0, "speed ω [rad/s]");
