@@ -13,7 +13,7 @@
 //!
 //! [`solve_parallel`] evaluates the Jacobian's columns on rayon's threads: each column is
 //! one more residual evaluation (a free run of the model), and they are independent.
-use crate::numerics::least_squares::solve_pd;
+use crate::numerics::least_squares::{normal_inverse_diag, solve_pd};
 use anyhow::{bail, Result};
 use rayon::prelude::*;
 
@@ -385,7 +385,7 @@ fn solve_with(
         evals += f.jacobian(&x, &r, hi, scale, &mut jac);
     }
     let sigma2 = 2.0 * cost / ((m - n).max(1) as f64);
-    let std_err = covariance_diag(&normal_matrix(&jac), scale)
+    let std_err = normal_inverse_diag(&normal_matrix(&jac), scale)
         .into_iter()
         .map(|v| (sigma2 * v).sqrt())
         .collect();
@@ -456,49 +456,6 @@ fn damped_step(jtj: &[Vec<f64>], g: &[f64], active: &[bool], lambda: f64) -> Opt
         step[j] = v;
     }
     Some(step)
-}
-
-/// Diagonal of (JᵀJ)⁻¹ via a scaled pseudo-inverse; ∞ for directions the cost is flat in.
-fn covariance_diag(jtj: &[Vec<f64>], scale: &[f64]) -> Vec<f64> {
-    let n = jtj.len();
-    // Scale to unit diagonal so the rank test is scale-free.
-    let d: Vec<f64> = (0..n).map(|j| jtj[j][j].sqrt()).collect();
-    let mut out = vec![f64::INFINITY; n];
-    let live: Vec<usize> = (0..n)
-        .filter(|&j| d[j] > 1e-300 * scale[j].abs().max(1.0))
-        .collect();
-    if live.is_empty() {
-        return out;
-    }
-    let k = live.len();
-    let a = faer::Mat::<f64>::from_fn(k, k, |p, q| {
-        jtj[live[p]][live[q]] / (d[live[p]] * d[live[q]])
-    });
-    let Ok(svd) = a.thin_svd() else {
-        return out;
-    };
-    let s = svd.S().column_vector();
-    let v = svd.V();
-    let smax = (0..k).map(|i| s[i]).fold(0.0, f64::max);
-    for (p, &j) in live.iter().enumerate() {
-        let mut acc = 0.0;
-        let mut flat = false;
-        for c in 0..k {
-            if s[c] <= 1e-12 * smax {
-                if v[(p, c)].abs() > 1e-6 {
-                    flat = true;
-                }
-                continue;
-            }
-            acc += v[(p, c)].powi(2) / s[c];
-        }
-        out[j] = if flat {
-            f64::INFINITY
-        } else {
-            acc / (d[j] * d[j])
-        };
-    }
-    out
 }
 
 #[cfg(test)]
@@ -636,7 +593,7 @@ mod tests {
             let n = calls.load(std::sync::atomic::Ordering::Relaxed);
             assert_eq!(n, sol.iterations + after, "Jacobians");
             let sigma2 = 2.0 * sol.cost / (t.len() - 2) as f64;
-            let expected: Vec<f64> = covariance_diag(&normal_matrix(&columns(&sol.x)), &scale)
+            let expected: Vec<f64> = normal_inverse_diag(&normal_matrix(&columns(&sol.x)), &scale)
                 .into_iter()
                 .map(|v| (sigma2 * v).sqrt())
                 .collect();
