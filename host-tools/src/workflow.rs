@@ -216,9 +216,16 @@ pub fn selection_fit(model: &Model, logs: &[MotorLog]) -> f64 {
 /// multiple-shooting simulation error of [`Residuals::segmented`] (velocity, current and
 /// angle, each scaled by its spread); +∞ when the model cannot be simulated there.
 pub fn selection_rss(model: &Model, logs: &[MotorLog]) -> f64 {
-    Residuals::segmented(logs, model.sensor.velocity_window)
-        .eval(model)
-        .map_or(f64::INFINITY, |r| r.iter().map(|v| v * v).sum())
+    selection_residual(model, logs).map_or(f64::INFINITY, |r| sum_of_squares(&r))
+}
+
+/// The residual of [`selection_rss`], on the targets `model`'s velocity window makes.
+fn selection_residual(model: &Model, logs: &[MotorLog]) -> Result<Vec<f64>> {
+    Residuals::segmented(logs, model.sensor.velocity_window).eval(model)
+}
+
+fn sum_of_squares(r: &[f64]) -> f64 {
+    r.iter().map(|v| v * v).sum()
 }
 
 /// Does `refit` (the model `base` plus the effect `added`) explain the selection `logs`
@@ -230,11 +237,23 @@ pub fn selection_rss(model: &Model, logs: &[MotorLog]) -> f64 {
 /// fitted on these samples, so the denominator keeps `n_eff − q` degrees of freedom; on
 /// held-out data a larger model is not better by construction, which makes the test
 /// conservative. A base that cannot be simulated loses to any refit that can; a refit that
-/// cannot loses (p = 1).
+/// cannot loses (p = 1). Both models are run on the targets of the refit's velocity window,
+/// so both residuals measure the same thing.
 pub fn selection_test(base: &Model, refit: &Model, added: &EffectSpec, logs: &[MotorLog]) -> FTest {
     let residuals = Residuals::segmented(logs, refit.sensor.velocity_window);
-    let rss = |r: &[f64]| r.iter().map(|v| v * v).sum::<f64>();
-    let Ok(r1) = residuals.eval(refit) else {
+    let r1 = residuals.eval(refit);
+    let rss0 = || residuals.eval(base).map(|r| sum_of_squares(&r));
+    f_test_of(r1, rss0, added)
+}
+
+/// [`selection_test`] from the refit's residual `r1` and the base's residual sum of squares
+/// (asked only when the refit could be simulated), both on the same targets.
+fn f_test_of(
+    r1: Result<Vec<f64>>,
+    rss0: impl FnOnce() -> Result<f64>,
+    added: &EffectSpec,
+) -> FTest {
+    let Ok(r1) = r1 else {
         return FTest {
             f: 0.0,
             p_value: 1.0,
@@ -242,7 +261,7 @@ pub fn selection_test(base: &Model, refit: &Model, added: &EffectSpec, logs: &[M
             delta_bic: f64::INFINITY,
         };
     };
-    let Ok(r0) = residuals.eval(base) else {
+    let Ok(rss0) = rss0() else {
         return FTest {
             f: f64::INFINITY,
             p_value: 0.0,
@@ -252,7 +271,7 @@ pub fn selection_test(base: &Model, refit: &Model, added: &EffectSpec, logs: &[M
     };
     let q = free_params::effect_keys_of(&added.to_effect()).len().max(1);
     let n_eff = r1.len() as f64 / statistics::correlation_time(&r1);
-    statistics::f_test(rss(&r0), rss(&r1), q, 0, n_eff)
+    statistics::f_test(rss0, sum_of_squares(&r1), q, 0, n_eff)
 }
 
 /// True when `s` is one of `specs`' effects (a table: on the same variable).
@@ -483,10 +502,28 @@ fn judge_round(
     round: usize,
 ) -> (Round, bool) {
     let selection_fit = selection_fit(&model, data.select);
-    let selection_rss = selection_rss(&model, data.select);
+    // The selection data is simulated once per model: this round's residual serves its RSS
+    // and the test, and the kept model's RSS from its own round is reused when it was run
+    // on the same targets (the same velocity window; a fit keeps the model's window, so
+    // this is the rule, and a differing window is run again on the refit's targets).
+    let residual = selection_residual(&model, data.select);
+    let selection_rss = residual
+        .as_ref()
+        .map_or(f64::INFINITY, |r| sum_of_squares(r));
     let test = state.kept_at.map(|k| {
         let added = state.adds.last().expect("a refit adds an effect");
-        selection_test(&state.rounds[k].model, &model, added, data.select)
+        let base = &state.rounds[k];
+        let same_targets = base.model.sensor.velocity_window == model.sensor.velocity_window;
+        let rss0 = || {
+            if same_targets && base.selection_rss.is_finite() {
+                Ok(base.selection_rss)
+            } else {
+                Residuals::segmented(data.select, model.sensor.velocity_window)
+                    .eval(&base.model)
+                    .map(|r| sum_of_squares(&r))
+            }
+        };
+        f_test_of(residual, rss0, added)
     });
     let kept = test.is_none_or(|t| t.p_value < SELECTION_ALPHA);
     let fitted = state.adds.clone();
@@ -708,6 +745,7 @@ mod tests {
             .as_ref()
             .expect("the linear model misses friction");
         assert!(matches!(next.reason, Reason::Effect { .. }), "{next:?}");
+        let (_, select) = split_each_in_time(&logs).unwrap();
         let mut kept = first;
         for r in &out.rounds[1..] {
             let proposed = kept.next.as_ref().expect("a refit follows a proposal");
@@ -715,6 +753,10 @@ mod tests {
             assert_eq!(r.adds.last().unwrap().kind, proposed.spec.kind);
             let t = r.selection_test.expect("every refit is tested");
             assert_eq!(r.kept, t.p_value < SELECTION_ALPHA);
+            // The loop reuses each model's selection residual; running both models again
+            // gives the same test, bit for bit.
+            let again = selection_test(&kept.model, &r.model, r.adds.last().unwrap(), &select);
+            assert_eq!(format!("{t:?}"), format!("{again:?}"));
             if r.kept {
                 kept = r;
             }

@@ -130,12 +130,14 @@ fn what_carries_the_rest_is_drawn_in_json_text_and_report() {
     let (x, y) = (numbers(&theta["shape"]["x"]), numbers(&theta["shape"]["y"]));
     assert_eq!(theta["shape"]["y_unit"], "N·m", "{theta}");
     let tau = std::f64::consts::TAU;
+    // The grid spans exactly one revolution: rounding only.
     assert!(x[0].abs() < 1e-9 && (x[x.len() - 1] - tau).abs() < 1e-9);
     let (k, _) = y
         .iter()
         .enumerate()
         .max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()))
         .unwrap();
+    // A six-harmonic series of a sawtooth peaks about π/7 ≈ 0.45 rad from its jump.
     assert!(x[k].min(tau - x[k]) < 0.6, "largest at {}: {theta}", x[k]);
     let near = |lo: f64, hi: f64| -> f64 {
         let v: Vec<f64> = x

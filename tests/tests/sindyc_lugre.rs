@@ -95,6 +95,8 @@ fn sindyc_on_emulated_lugre_motor() {
     let b = dir.join("b.csv");
     let truth = fit_percent(&column(&b, "omega"), &column(&b, "omega_true"));
     eprintln!("validation b, fit on xdot: SINDYc {sindyc:.2} %, linear {linear:.2} %, true states {truth:.2} %");
+    // 5 points, as sindyc_current.rs's GAP: the requirement itself (a library model of the
+    // friction may trail the true law by its approximation), not a margin measured here.
     assert!(
         sindyc > truth - 5.0,
         "SINDYc {sindyc} vs true states {truth}"

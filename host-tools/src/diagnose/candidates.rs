@@ -978,6 +978,7 @@ pub fn spec_of(v: &Variant, beta: &[f64], units: Units) -> EffectSpec {
 
 #[cfg(test)]
 mod tests {
+    // Tolerances of 1e-12 compare a column with its closed form: float rounding.
     use super::*;
 
     /// Signals with the given velocity and modelled drive (the other fields only sized).
@@ -1087,6 +1088,7 @@ mod tests {
         assert_eq!(col[10], 0.0, "motoring");
         assert!((torque[10] - drive(5.0, 50.0)).abs() < 1e-12);
         assert!((col[40] + 2.0 * drive(1.0, 50.0)).abs() < 1e-12);
+        // 0.5 N·m: well beyond the velocity resolution's 0.19 N·m (the column is 1.69).
         assert!(col[40] > 0.5, "hard braking forward: {}", col[40]);
         assert!((torque[40] - drive(1.0, 50.0).abs()).abs() < 1e-12);
         assert_eq!(col[60], 0.0, "braking within the velocity resolution");

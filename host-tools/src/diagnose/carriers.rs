@@ -630,6 +630,8 @@ pub fn explanation(variable: &str, share: f64, hz: Option<f64>, label: &str) -> 
 
 #[cfg(test)]
 mod tests {
+    // The tolerances here (1e-12, 1e-9) compare closed forms with their exact values: float
+    // rounding.
     use super::*;
 
     #[test]

@@ -473,8 +473,13 @@ mod tests {
             "{}",
             out.findings[0].spec
         );
+        // The base fit lacks the offset, which leaks into the slope by 0.5·mean(a)/var(a):
+        // mean(a) over 400 draws is about ±0.03, so a few hundredths, against a standard
+        // error of 2.5e-3; 0.1 covers both.
         assert!((out.base_beta[0] - 2.0).abs() < 0.1, "{:?}", out.base_beta);
         let rss = |r: &[f64]| r.iter().map(|x| x * x).sum::<f64>();
+        // Noise variance 0.05²/3 ≈ 8e-4 against 0.25 for the offset: the ratio is about
+        // 3e-3, and 0.05 would still hold with most of the offset left over.
         assert!(rss(&out.final_resid) < 0.05 * rss(&out.base_resid));
         // Both kinds were tested in the first round; only the offset was kept.
         assert_eq!(out.first_round.len(), 2);
@@ -488,6 +493,8 @@ mod tests {
     fn nothing_is_found_where_nothing_is_missing() {
         let out = select(&data(0.0, 0.05), &Options::default(), 1e-3, &mut units());
         assert!(out.findings.is_empty(), "{:?}", out.findings);
+        // White noise: n_eff is near n = 400; under 100 would mean a correlation time of
+        // four samples, which this residual does not have.
         assert!(out.n_eff_base > 100.0, "{}", out.n_eff_base);
     }
 

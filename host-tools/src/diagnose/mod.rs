@@ -1343,8 +1343,11 @@ mod tests {
             x.iter().sum::<f64>() / x.len() as f64
         };
         let ratio = ms(0) / ms(1);
+        // Mean squares of 1000 and 3000 weighted normal rows: each has a relative standard
+        // error of √(2/n), the ratio about 0.05; 0.8..1.25 is about four of them either side.
         assert!((0.8..1.25).contains(&ratio), "{ratio}");
         let flat = row_scale(&z, &vec![0.5; n]);
+        // One variance: equal weights of 1, up to rounding.
         assert!(flat.iter().all(|x| (x - 1.0).abs() < 1e-9));
     }
 }

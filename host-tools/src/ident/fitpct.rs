@@ -41,6 +41,7 @@ mod tests {
     #[test]
     fn perfect_mean_and_worse() {
         let y = [1.0, 2.0, 3.0, 4.0];
+        // 1e-12: exact cases (a perfect copy, the mean) up to float rounding on four samples.
         assert!((fit_percent(&y, &y).unwrap() - 100.0).abs() < 1e-12);
         assert!(fit_percent(&y, &[2.5; 4]).unwrap().abs() < 1e-12);
         assert!(fit_percent(&y, &[4.0, 3.0, 2.0, 1.0]).unwrap() < 0.0);

@@ -394,6 +394,8 @@ mod tests {
             widen_to_data(-10.0, 10.0, "u", 0.01, 100.0),
             (-1000.0, 1000.0)
         );
+        // The tolerances below are a few float ε of each bound (1e-15 of 5e-4, 1e-25 of
+        // 1e-13, ...): the products are exact up to rounding.
         let (lo, hi) = widen_to_data(0.05, 500.0, "rad/s", 0.01, 100.0);
         assert!((lo - 5e-4).abs() < 1e-15 && hi == 500.0);
         let (lo, hi) = widen_to_data(0.0, 100.0, "u·s/rad", 0.01, 100.0);

@@ -905,6 +905,7 @@ mod tests {
     #[test]
     fn expm_matches_a_rotation() {
         let e = expm(&[[0.0, -3.0], [3.0, 0.0]]).unwrap();
+        // 1e-13: the exponential of a rotation generator is exact up to float rounding.
         assert!((e[0][0] - 3f64.cos()).abs() < 1e-13);
         assert!((e[1][0] - 3f64.sin()).abs() < 1e-13);
     }
@@ -918,6 +919,8 @@ mod tests {
         let pr = simulate(&m, &log).unwrap();
         // ω_ss from K_t·I = b·ω, R·I + K_b·ω = V.
         let w_ss = 6.0 * p.kt / (p.r * m.viscous + p.kt * p.kb);
+        // 1e-6 relative: 4.8 s is hundreds of mechanical time constants (J·R/(K_t·K_b) ≈
+        // 12 ms), so the transient is gone and the exact exponential update leaves rounding.
         assert!(
             (pr.omega[399] - w_ss).abs() < 1e-6 * w_ss,
             "{}",
@@ -932,6 +935,8 @@ mod tests {
         // Below breakaway: K_t·V/R < α0 + α1 → the rotor only deflects the bristles.
         let v_small = 0.5 * (0.08 * m.motor.r / m.motor.kt);
         let pr = simulate(&m, &log_with(vec![v_small; 300], 0.012)).unwrap();
+        // The bristles deflect by about torque/σ0 = 0.04/317 ≈ 1.3e-4 rad; 1e-3 rad (a
+        // hundredth of a Hall step) allows that and no sliding.
         assert!(pr.theta[299].abs() < 1e-3, "{}", pr.theta[299]);
         // Signal a through the emulator (0.2 ms steps) and through this free run (1 ms): the
         // same physics, so the velocity agrees with the emulator's true velocity.
@@ -946,6 +951,9 @@ mod tests {
         log.i = Some(res.truth.i.clone());
         let pr = simulate(&m, &log).unwrap();
         let fit = crate::ident::fitpct::fit_percent(&res.truth.omega, &pr.omega).unwrap();
+        // 97 %: the two integrate the same equations with different steps, so only step
+        // error and the stick-slip timing it shifts remain; a missing effect costs more
+        // (the coupled loads below lose over a point without theirs).
         assert!(fit > 97.0, "fit {fit}");
     }
 
@@ -977,6 +985,8 @@ mod tests {
             let mut rigid = m.clone();
             rigid.effects.clear();
             let without = fit(&rigid);
+            // 97 %: as for the rigid motor above; a point of fit is the least the load must
+            // be worth on a log where it is large (its inertia is twice the rotor's).
             assert!(with > 97.0, "{load:?}: fit {with}");
             assert!(
                 with > without + 1.0,

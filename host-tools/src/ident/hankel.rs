@@ -318,6 +318,8 @@ impl HankelEmbedding {
 
 #[cfg(test)]
 mod tests {
+    // Tolerances of 1e-9 and 1e-8 (relative) compare one product or decomposition computed
+    // two ways: float rounding on a few hundred terms.
     use super::*;
 
     fn signal(n: usize) -> Vec<f64> {

@@ -312,6 +312,8 @@ impl Library {
 
 #[cfg(test)]
 mod tests {
+    // Tolerances of 1e-12 to 1e-9 (relative) compare the same numbers computed two ways, or
+    // a noiseless fit with its exact answer: float rounding.
     use super::*;
 
     /// Sine waves `amp·sin(c·k)`, k < n, one per rate: x, xdot, z, i, u.

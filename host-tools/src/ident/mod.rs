@@ -683,8 +683,27 @@ pub fn declared_units<'a>(logs: impl Iterator<Item = &'a MotorLog>) -> BTreeMap<
 /// unit; on a linear axis (theta in m) `rad` becomes `m` (and, with a voltage plant, `N·m`
 /// becomes `N`).
 pub fn relabel_units(model: &mut Model, logs: &[MotorLog]) {
-    let linear = !logs.is_empty() && logs.iter().all(MotorLog::is_linear);
-    let torque = match model.plant {
+    let linear = is_linear(logs);
+    // A voltage plant on a rotary axis already has its units (N·m, rad).
+    if model.plant == Plant::Voltage && !linear {
+        return;
+    }
+    let torque = torque_unit(model.plant, logs);
+    for p in &mut model.parameters {
+        p.unit = relabel_unit(&p.unit, &torque, linear);
+    }
+}
+
+/// Every log is on a linear axis (theta in m), and there is at least one.
+fn is_linear(logs: &[MotorLog]) -> bool {
+    !logs.is_empty() && logs.iter().all(MotorLog::is_linear)
+}
+
+/// The unit of a torque (or force) on `plant` fitted to `logs`: a torque plant's input unit
+/// when every log declares the same one (`u` otherwise); `N` for a voltage plant on a linear
+/// axis, `N·m` on a rotary one.
+pub fn torque_unit(plant: Plant, logs: &[MotorLog]) -> String {
+    match plant {
         Plant::Torque => {
             let declared: Vec<Option<&String>> = logs.iter().map(|l| l.units.get("u")).collect();
             match declared.first() {
@@ -692,11 +711,8 @@ pub fn relabel_units(model: &mut Model, logs: &[MotorLog]) {
                 _ => "u".to_string(),
             }
         }
-        Plant::Voltage if linear => "N".to_string(),
-        Plant::Voltage => return,
-    };
-    for p in &mut model.parameters {
-        p.unit = relabel_unit(&p.unit, &torque, linear);
+        Plant::Voltage if is_linear(logs) => "N".to_string(),
+        Plant::Voltage => "N·m".to_string(),
     }
 }
 
@@ -880,5 +896,25 @@ mod tests {
         let u = declared_units(logs.iter());
         assert_eq!(u["u"], "N");
         assert_eq!(u["t"], "SI in a.csv; ms in b.csv");
+    }
+
+    #[test]
+    fn torque_unit_follows_the_plant_the_axis_and_the_declared_input() {
+        let rotary = MotorLog::default();
+        let newton = MotorLog {
+            units: [("u".to_string(), "N".to_string())].into(),
+            ..Default::default()
+        };
+        let metres = MotorLog {
+            units: [("theta".to_string(), "m".to_string())].into(),
+            ..Default::default()
+        };
+        let one = std::slice::from_ref;
+        assert_eq!(torque_unit(Plant::Voltage, one(&rotary)), "N·m");
+        assert_eq!(torque_unit(Plant::Voltage, one(&metres)), "N");
+        assert_eq!(torque_unit(Plant::Torque, one(&rotary)), "u");
+        assert_eq!(torque_unit(Plant::Torque, one(&newton)), "N");
+        // Logs that disagree on the input's unit leave it as `u`.
+        assert_eq!(torque_unit(Plant::Torque, &[newton, rotary]), "u");
     }
 }

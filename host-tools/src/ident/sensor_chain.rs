@@ -65,6 +65,7 @@ mod tests {
 
     #[test]
     fn quantiser_and_estimator() {
+        // 1e-12 and 1e-9: float rounding of exact answers (a step of 0.1, a slope of 3).
         assert!((quantise(0.26, 0.1) - 0.3).abs() < 1e-12);
         assert!((quantise(-0.04, 0.1)).abs() < 1e-12);
         let t: Vec<f64> = (0..30).map(|k| k as f64 * 0.012).collect();
@@ -72,6 +73,8 @@ mod tests {
         let w = velocity_estimate(&t, &th, 10);
         assert!((w[25] - 3.0).abs() < 1e-12);
         let (q, wq) = through_sensor(&t, &th, 0.0952, 10);
+        // Quantisation errs by at most half a step (0.0476 rad); the velocity over a
+        // 10-sample (0.12 s) window by at most one step over the window.
         assert!(q
             .iter()
             .zip(&th)

@@ -975,6 +975,7 @@ mod tests {
             "segments {c_seg:.9e}, free run {c_free:.9e}"
         );
         let (c_seg, c_free) = costs(without);
+        // 1e-6: a million times the rounding bound above, so this difference is not rounding.
         assert!(
             (c_seg - c_free).abs() > 1e-6 * c_free,
             "without a velocity column: segments {c_seg:.9e}, free run {c_free:.9e}"
@@ -1139,7 +1140,8 @@ mod tests {
                 assert!(norm > 0.0, "{name}: the residuals do not depend on it");
                 // Central differences err by h² (truncation) for large steps and by the
                 // residual's rounding (the sub-step's root tolerance) over h for small
-                // ones: the best of a few steps is compared.
+                // ones: the best of a few steps is compared. 1e-4 is well above that floor,
+                // and far below the order-one error of a missed or wrong term.
                 let best = [1e-3, 1e-4, 1e-5, 1e-6]
                     .into_iter()
                     .map(|rel| {

@@ -148,6 +148,7 @@ mod tests {
         let w = Tangent::unknown(1.0);
         let g = w * w * w + p * w - Tangent::constant(2.0);
         let s = Tangent::on_root(w * w, g);
+        // 1e-15: the values are exact in binary (1, −1/2, 2); only rounding could move them.
         assert!((s.re - 1.0).abs() < 1e-15);
         assert!((s.eps[0] + 0.5).abs() < 1e-15, "{:?}", s.eps);
         assert_eq!(s.eps[PARAM_LANES], 0.0);

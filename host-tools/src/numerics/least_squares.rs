@@ -8,6 +8,9 @@
 //!   condition number, for tables of identified parameters.
 //! - [`solve_spd`]: normal equations already formed (STLSQ), by Cholesky with a
 //!   pseudo-inverse fallback for a singular system.
+//! - [`normal_inverse_diag`]: the diagonal of `(JᵀJ)⁻¹`, a nonlinear fit's standard errors.
+//! - [`solve_pd`]: a positive definite system (a damped Levenberg-Marquardt step), by
+//!   Cholesky alone, reporting failure instead of falling back.
 //! - [`leave_one_out_rss`]: the PRESS residual of a fit, each row predicted without itself.
 use anyhow::{bail, Result};
 use faer::linalg::solvers::SolveLstsq;
@@ -488,6 +491,17 @@ pub fn leave_one_out_rss(cols: &[&[f64]], y: &[f64]) -> f64 {
 /// `1 − h` (which loses its digits as `h → 1`).
 const MAX_LEVERAGE: f64 = 0.99;
 
+/// Solve `A x = b` (one right-hand side) by faer's Cholesky alone, for an `A` that is
+/// positive definite by construction (a damped normal matrix): `None` when the factorisation
+/// fails or the solution is not finite, so the caller can react (damp more) instead of
+/// taking a fallback's answer.
+pub fn solve_pd(a: MatRef<'_, f64>, b: MatRef<'_, f64>) -> Option<Vec<f64>> {
+    use faer::linalg::solvers::Solve;
+    let x = a.llt(faer::Side::Lower).ok()?.solve(b);
+    let v: Vec<f64> = (0..a.nrows()).map(|i| x[(i, 0)]).collect();
+    v.iter().all(|x| x.is_finite()).then_some(v)
+}
+
 /// Solve `A x = b` (one right-hand side) for a symmetric positive semi-definite `A` with
 /// unit-ish diagonal, such as the normal equations of unit-norm columns: faer's Cholesky, or
 /// when it fails or a pivot is below 1e-12 of the largest diagonal entry, the minimum-norm
@@ -533,6 +547,52 @@ pub fn solve_spd(a: MatRef<'_, f64>, b: MatRef<'_, f64>) -> Vec<f64> {
     } else {
         vec![0.0; q]
     }
+}
+
+/// Diagonal of `(JᵀJ)⁻¹` from the normal matrix `jtj` (a nonlinear fit's parameter
+/// covariance over σ²), by faer's thin SVD of the matrix scaled to unit diagonal, so that the
+/// rank test is scale-free: ∞ for a parameter that moves along a direction the cost is flat
+/// in, or whose column is zero (below 1e-300 of its `scale`).
+pub fn normal_inverse_diag(jtj: &[Vec<f64>], scale: &[f64]) -> Vec<f64> {
+    let n = jtj.len();
+    // Scale to unit diagonal so the rank test is scale-free.
+    let d: Vec<f64> = (0..n).map(|j| jtj[j][j].sqrt()).collect();
+    let mut out = vec![f64::INFINITY; n];
+    let live: Vec<usize> = (0..n)
+        .filter(|&j| d[j] > 1e-300 * scale[j].abs().max(1.0))
+        .collect();
+    if live.is_empty() {
+        return out;
+    }
+    let k = live.len();
+    let a = faer::Mat::<f64>::from_fn(k, k, |p, q| {
+        jtj[live[p]][live[q]] / (d[live[p]] * d[live[q]])
+    });
+    let Ok(svd) = a.thin_svd() else {
+        return out;
+    };
+    let s = svd.S().column_vector();
+    let v = svd.V();
+    let smax = (0..k).map(|i| s[i]).fold(0.0, f64::max);
+    for (p, &j) in live.iter().enumerate() {
+        let mut acc = 0.0;
+        let mut flat = false;
+        for c in 0..k {
+            if s[c] <= 1e-12 * smax {
+                if v[(p, c)].abs() > 1e-6 {
+                    flat = true;
+                }
+                continue;
+            }
+            acc += v[(p, c)].powi(2) / s[c];
+        }
+        out[j] = if flat {
+            f64::INFINITY
+        } else {
+            acc / (d[j] * d[j])
+        };
+    }
+    out
 }
 
 #[cfg(test)]
@@ -654,5 +714,45 @@ mod tests {
         let z = Mat::<f64>::zeros(2, 2);
         let b = Mat::<f64>::from_fn(2, 1, |_, _| 1.0);
         assert_eq!(solve_spd(z.as_ref(), b.as_ref()), vec![0.0, 0.0]);
+    }
+
+    #[test]
+    fn solve_pd_solves_a_definite_system_and_refuses_a_singular_one() {
+        let a = Mat::<f64>::from_fn(3, 3, |r, c| if r == c { 2.0 } else { 0.5 });
+        let x_true = [1.0, -2.0, 0.5];
+        let b = Mat::<f64>::from_fn(3, 1, |r, _| (0..3).map(|c| a[(r, c)] * x_true[c]).sum());
+        let x = solve_pd(a.as_ref(), b.as_ref()).expect("positive definite");
+        for (got, want) in x.iter().zip(x_true) {
+            // A 3×3 solve with condition number 2: rounding only.
+            assert!((got - want).abs() < 1e-12, "{x:?}");
+        }
+        // Indefinite (eigenvalues 3 and −1): no Cholesky factor, so no answer.
+        let a = Mat::<f64>::from_fn(2, 2, |r, c| if r == c { 1.0 } else { 2.0 });
+        let b = Mat::<f64>::from_fn(2, 1, |_, _| 1.0);
+        assert_eq!(solve_pd(a.as_ref(), b.as_ref()), None);
+    }
+
+    #[test]
+    fn normal_inverse_diag_is_the_inverse_or_infinite_where_flat() {
+        // [[4, 2], [2, 3]]⁻¹ = [[3, −2], [−2, 4]] / 8: diagonal 3/8 and 1/2 (rounding only).
+        let jtj = vec![vec![4.0, 2.0], vec![2.0, 3.0]];
+        let d = normal_inverse_diag(&jtj, &[1.0, 1.0]);
+        assert!(
+            (d[0] - 0.375).abs() < 1e-12 && (d[1] - 0.5).abs() < 1e-12,
+            "{d:?}"
+        );
+        // Two identical columns: neither is determined on its own; a zero column neither.
+        let jtj = vec![
+            vec![1.0, 1.0, 0.0, 0.0],
+            vec![1.0, 1.0, 0.0, 0.0],
+            vec![0.0, 0.0, 2.0, 0.0],
+            vec![0.0, 0.0, 0.0, 0.0],
+        ];
+        let d = normal_inverse_diag(&jtj, &[1.0; 4]);
+        assert!(
+            d[0].is_infinite() && d[1].is_infinite() && d[3].is_infinite(),
+            "{d:?}"
+        );
+        assert!((d[2] - 0.5).abs() < 1e-12, "{d:?}");
     }
 }

@@ -45,14 +45,9 @@ fn variable_axis(variable: &str, model: &Model, log: &MotorLog) -> (&'static str
     }
 }
 
-/// The unit of a torque on this model and log: N·m (N on a linear axis), or a torque plant's
-/// declared input unit.
+/// The unit of a torque on this model and log ([`crate::ident::torque_unit`]).
 fn torque_unit(model: &Model, log: &MotorLog) -> String {
-    match model.plant {
-        Plant::Torque => log.units.get("u").cloned().unwrap_or_else(|| "u".into()),
-        Plant::Voltage if log.is_linear() => "N".into(),
-        Plant::Voltage => "N·m".into(),
-    }
+    crate::ident::torque_unit(model.plant, std::slice::from_ref(log))
 }
 
 /// `c`'s function in units: the torque equation of a voltage plant is written in volts, so
@@ -196,6 +191,7 @@ mod tests {
         let k = model.motor.kt / model.motor.r;
         assert_eq!(d.y_unit, "N·m");
         for (a, b) in d.y.iter().zip(&shape.y) {
+            // One multiplication by K_t/R: rounding only.
             assert!((a - b * k).abs() < 1e-12);
         }
         assert_eq!(d.axis_titles().0, "speed ω [rad/s]");

@@ -100,6 +100,7 @@ mod tests {
         let t: Vec<f64> = (0..50).map(|k| 0.012 * k as f64).collect();
         let theta: Vec<f64> = t.iter().map(|t| 3.0 * t - 1.0).collect();
         let v = centred_velocity(&t, &theta, 5);
+        // 1e-9: the slope of a straight line is exact up to rounding.
         assert!(v.iter().all(|v| (v - 3.0).abs() < 1e-9), "{v:?}");
     }
 
@@ -107,6 +108,7 @@ mod tests {
     fn correlation_is_signed_and_zero_for_a_constant() {
         let a = [1.0, 2.0, 3.0, 5.0];
         let b: Vec<f64> = a.iter().map(|x| -2.0 * x + 1.0).collect();
+        // An exact linear relation: −1 up to rounding.
         assert!((correlation(&a, &b) + 1.0).abs() < 1e-12);
         assert_eq!(correlation(&a, &[4.0; 4]), 0.0);
     }
@@ -126,6 +128,7 @@ mod tests {
         let h = HiddenState::of_logs(&logs, &SindycOptions::default()).unwrap();
         let n: usize = h.z.iter().map(Vec::len).sum();
         let rms = (h.z.iter().flatten().map(|z| z * z).sum::<f64>() / n as f64).sqrt();
+        // Normalised to unit RMS by construction: rounding only.
         assert!((rms - 1.0).abs() < 1e-9, "{rms}");
         assert_eq!(h.z[1].len(), logs[1].len());
         assert!(h.z_peak >= 1.0 && h.z_correlation.is_some());
@@ -156,7 +159,12 @@ mod tests {
         let r_paper = correlation(zt, &zp);
         let r_broad = correlation(zt, &zb);
         assert_eq!(zp.len(), v.len());
+        // |r| < 0.1 is under 1 % of the velocity's variance: the projection onto the
+        // complementary subspace leaves almost none of it, where a z that followed the
+        // velocity would correlate near 1.
         assert!(correlation(&v, &zp).abs() < 0.1);
+        // 0.2: many times the standard error of a correlation over 7500 samples of slowly
+        // varying signals (about 1/√n_eff, a few hundredths), so the order is not chance.
         assert!(
             r_broad.abs() > r_paper.abs() + 0.2,
             "{r_paper} vs {r_broad}"

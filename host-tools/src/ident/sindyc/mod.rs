@@ -493,7 +493,11 @@ mod tests {
         )
         .unwrap();
         eprintln!("validation b: SINDYc {ours:.2} %, true model {truth:.2} %");
+        // The same score computed twice: rounding only.
         assert!((ours - res.validation_fit).abs() < 1e-9);
+        // 5 points of velocity fit: the library writes LuGre's friction with smooth signs
+        // and a Hankel state, not its exact law, so the model may trail the truth by the
+        // approximation; a model missing the friction altogether trails by tens of points.
         assert!(ours > truth - 5.0, "{ours} vs {truth}");
         // Every returned model is finite in free run on the other signals too.
         for (k, kind) in [SignalKind::C, SignalKind::D].into_iter().enumerate() {
