@@ -702,4 +702,36 @@ mod tests {
             assert_eq!(c.edges_per_elec_rev, 6);
         }
     }
+
+    #[test]
+    fn commissioning_succeeds_whenever_it_starts() {
+        let mut bad = Vec::new();
+        for idle in 0..300usize {
+            for (h, p) in [
+                ([1u8, 2, 0], [2u8, 1, 0]),
+                ([0, 1, 2], [0, 1, 2]),
+                ([0, 2, 1], [2, 0, 1]),
+            ] {
+                let wiring = Wiring {
+                    hall_order: h,
+                    phase_order: p,
+                    current_inverted: false,
+                };
+                let mut emu =
+                    EmulatedBoard::new(EmulatorConfig::paper(), wiring, RamFlash::new(None))
+                        .unwrap();
+                replies(&mut emu);
+                for _ in 0..idle {
+                    emu.tick();
+                }
+                replies(&mut emu);
+                emu.receive(&frame(&HostMsg::Commission));
+                let r = commission_result(&mut emu, &[]);
+                if !matches!(r, CommissionOutcome::Done(c) if c.edges_per_elec_rev == 6) {
+                    bad.push((idle, h, p, r));
+                }
+            }
+        }
+        assert!(bad.is_empty(), "{} {bad:?}", bad.len());
+    }
 }

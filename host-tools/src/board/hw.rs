@@ -47,8 +47,29 @@ impl Default for Wiring {
 
 /// (high, low) phase of each bridge step, as in `firmware/src/bridge.rs`.
 const STEPS: [(u8, u8); 6] = [(0, 1), (0, 2), (1, 2), (1, 0), (2, 0), (2, 1)];
-/// Torque factor by (aligned sector − rotor sector) mod 6.
-const G: [f64; 6] = [0.0, 1.0, 1.0, 0.0, -1.0, -1.0];
+
+/// `x` wrapped to (−3, 3]: an angle in sectors (60° electrical each) to within half a turn.
+fn wrap_sectors(x: f64) -> f64 {
+    let w = x.rem_euclid(6.0);
+    if w > 3.0 {
+        w - 6.0
+    } else {
+        w
+    }
+}
+
+/// Torque factor of a two-phase vector whose field leads the rotor by `lead` sectors: the
+/// line-to-line back-EMF of trapezoidal phase back-EMFs (flat tops of 120°), normalised to
+/// its flat top. It is zero where the rotor lines up with the field (the equilibrium the
+/// vector holds) and half a turn from there, rises linearly to 1 within one sector (60°
+/// electrical) and stays 1 for the middle sector: `sign(lead)·min(|lead|, 1, 3 − |lead|)`.
+/// Six-step with the right table keeps the lead within 1..2 sectors, where the factor is
+/// 1: the DC-equivalent motor; a table off by a sector loses torque.
+fn two_phase_factor(lead: f64) -> f64 {
+    let l = wrap_sectors(lead);
+    let x = l.abs();
+    l.signum() * x.min(1.0).min(3.0 - x)
+}
 
 /// Parses a permutation of 1, 2, 3 written as three digits ("132").
 pub fn parse_order(s: &str) -> Result<[u8; 3]> {
@@ -84,11 +105,30 @@ impl Wiring {
         (0..3).fold(0, |acc, j| acc | (((code >> self.hall_order[j]) & 1) << j))
     }
 
-    /// The sector bridge step `k` holds the rotor in.
-    pub fn aligned_sector(&self, k: u8) -> u8 {
+    /// The motor's bridge step that the board's bridge step `k` drives.
+    fn motor_step(&self, k: u8) -> u8 {
         let (hi, lo) = STEPS[k as usize % 6];
         let pair = (self.phase_order[hi as usize], self.phase_order[lo as usize]);
         STEPS.iter().position(|&p| p == pair).unwrap_or(0) as u8
+    }
+
+    /// Direction of the field of the board's bridge step `k` [sectors of the motor, 60°
+    /// electrical each, sector `s` centred on `s`]: the motor's step `j` points at the
+    /// boundary between its sectors `j` and `j + 1`, so that step `s + 1` leads a rotor in
+    /// sector `s` by 60..120° (the six-step drive).
+    fn step_field(&self, k: u8) -> f64 {
+        f64::from(self.motor_step(k)) + 0.5
+    }
+
+    /// The motor sector that the board numbers `k` when its own steps are the reference:
+    /// the one centred between the fields of the board's steps `k − 1` and `k` (sector `k`
+    /// of the default wiring), so that the board's step `k + 1` leads it by 60..120°.
+    pub fn aligned_sector(&self, k: u8) -> u8 {
+        let a = self.step_field((k + 5) % 6);
+        let b = self.step_field(k % 6);
+        // The two fields are one sector apart: their midpoint, the short way round.
+        let mid = a + 0.5 * wrap_sectors(b - a);
+        (mid.round() as i64).rem_euclid(6) as u8
     }
 }
 
@@ -221,7 +261,6 @@ impl Hardware {
             }
             let drive = if self.tripped { Drive::Off } else { drive };
             let theta = self.plant.truth().theta;
-            let s = ((theta / step + 0.5).floor() as i64).rem_euclid(6) as usize;
             let (v, k) = match drive {
                 Drive::Off => (0.0, None),
                 Drive::SixStep { volts, table } => {
@@ -235,8 +274,8 @@ impl Hardware {
             };
             let g = match k {
                 Some(k) if v.is_finite() => {
-                    let a = self.wiring.aligned_sector(k) as usize;
-                    G[(a + 6 - s) % 6] * if v < 0.0 { -1.0 } else { 1.0 }
+                    let lead = self.wiring.step_field(k) - theta / step;
+                    two_phase_factor(lead) * if v < 0.0 { -1.0 } else { 1.0 }
                 }
                 _ => 0.0,
             };
