@@ -92,8 +92,10 @@ pub const LOW_LEVEL: f32 = 0.5;
 /// drop to the run's voltage.
 pub const RAMP_START: f32 = 1.0 / 16.0;
 /// Growth of the first hold's voltage above half the dead time's drop per period, while the
-/// current is below [`RAMP_NEAR`] of the limit.
-pub const RAMP_GROWTH: f32 = 1.25;
+/// current is below [`RAMP_NEAR`] of the limit: a quarter through the line-to-line R,
+/// scaled by [`PATH_R_SHARE`] so that the current through the centre vector's smaller R
+/// grows no faster a period (`1 + ¼·¾`).
+pub const RAMP_GROWTH: f32 = 1.1875;
 /// Share of the limit the current passes where the ramp slows to [`RAMP_GROWTH_NEAR`].
 pub const RAMP_NEAR: f32 = 0.25;
 /// Growth per period once the current has passed [`RAMP_NEAR`] of the limit: the last

@@ -75,7 +75,6 @@ struct Pattern {
 /// The pattern the next update event applies.
 static PENDING: Mutex<Cell<Option<Pattern>>> = Mutex::new(Cell::new(None));
 
-
 /// Duty cycle for a voltage magnitude and the bus voltage: `|V|/V_bus`, saturated at
 /// [`MAX_DUTY`]; zero when the bus voltage is not positive.
 pub fn duty(v: f32, v_bus: f32) -> f32 {
