@@ -364,4 +364,56 @@ mod tests {
         assert!(parse_order("112").is_err());
         assert!(parse_order("12").is_err());
     }
+
+    /// Back-EMF of the motor's phase `m` per unit speed, normalised to its flat top, at
+    /// rotor angle `theta` [sectors]: a trapezoid with a flat top of two sectors (120°)
+    /// centred 1½ sectors (90°) behind the phase's axis at sector `1 + 2·m`, and ramps of
+    /// one sector.
+    fn phase_emf(m: u8, theta: f64) -> f64 {
+        let axis = f64::from(1 + 2 * m);
+        let x = wrap_sectors(theta - (axis - 1.5)).abs();
+        (3.0 - 2.0 * x).clamp(-1.0, 1.0)
+    }
+
+    #[test]
+    fn torque_factors_are_the_back_emf_along_each_vectors_path() {
+        let w = Wiring::default();
+        for j in 0..600 {
+            let theta = f64::from(j) * 0.01;
+            let e = |m: u8| phase_emf(m, theta);
+            for k in 0..6u8 {
+                // Current in through the high phase, out through the low one: 2·E at most.
+                let (hi, lo) = STEPS[usize::from(k)];
+                let want = 0.5 * (e(hi) - e(lo));
+                let got = two_phase_factor(w.step_field(k) - theta);
+                assert!(
+                    (got - want).abs() < 1e-9,
+                    "step {k} at {theta}: {got} vs {want}"
+                );
+            }
+            for low in 0..3u8 {
+                // Half the current through each high phase, all of it out through `low`.
+                let (a, b) = ((low + 1) % 3, (low + 2) % 3);
+                let want = 0.5 * (0.5 * (e(a) + e(b)) - e(low));
+                let got = centre_factor(w.centre_field(low) - theta);
+                assert!(
+                    (got - want).abs() < 1e-9,
+                    "centre {low} at {theta}: {got} vs {want}"
+                );
+            }
+        }
+        // A centre vector's field lies midway between the two steps sharing its low phase,
+        // the middle of the sector the board's numbering gives it, whatever the wiring.
+        for o in ["123", "132", "213", "231", "312", "321"] {
+            let w = Wiring {
+                phase_order: parse_order(o).unwrap(),
+                ..Wiring::default()
+            };
+            for low in 0..3u8 {
+                let c = control::board::centre_sector(low);
+                let field = w.centre_field(low);
+                assert_eq!(field, f64::from(w.aligned_sector(c)), "{o}, low {low}");
+            }
+        }
+    }
 }
