@@ -114,8 +114,9 @@ pub const STALL_FRACTION: f32 = 0.5;
 /// Commissioning voltage: at most this fraction of the voltage limit...
 pub const COMMISSION_U_FRACTION: f32 = 0.25;
 /// ...and at most the voltage that drives this fraction of `i_max` (lowered with the board
-/// temperature, [`temperature_derating`]) through R at standstill, above the dead time's
-/// drop; the measured current then holds the run to this fraction of `i_max` whatever the
+/// temperature, [`temperature_derating`]) at standstill through the centre vector's path
+/// (¾ of the blob's line-to-line R, [`crate::commission::PATH_R_SHARE`]), above the dead
+/// time's drop; the measured current then holds the run to this fraction of `i_max` whatever the
 /// blob's R ([`crate::commission`]).
 pub const COMMISSION_I_FRACTION: f32 = 0.3;
 
@@ -125,18 +126,19 @@ pub const PWM_HZ: u32 = 20_000;
 pub const DEAD_TIME_NS: u32 = 500;
 
 /// Voltage [V] the bridge's dead time takes from a vector with a current of one sign, at
-/// bus voltage `v_bus` [V]: in six-step only the high phase's half-bridge switches (the low
-/// phase's low side conducts throughout), and during each of its dead times its diode
-/// clamps the phase to the rail against the command: `t_d·f_PWM·V_bus` (0.24 V at 500 ns,
-/// 20 kHz and 23.5 V).
+/// bus voltage `v_bus` [V]: only the high phases' half-bridges switch (the low phase's low
+/// side conducts throughout), and during each of their dead times their diodes clamp them
+/// to the rail against the command: `t_d·f_PWM·V_bus` (0.24 V at 500 ns, 20 kHz and
+/// 23.5 V), the same for one high phase (six-step) as for two switching together (a
+/// [`Drive::Centre`] vector).
 pub fn dead_time_drop(v_bus: f32) -> f32 {
     (DEAD_TIME_NS as f32 * 1e-9) * PWM_HZ as f32 * v_bus
 }
 
 /// Bridge step (0..5) that drives a rotor in Hall sector `sector`: one vector ahead
 /// (forward, positive voltage) or four ahead (reverse, negative voltage). With a
-/// commissioned table, sector `k` is where bridge step `k` holds the rotor
-/// ([`crate::commission`]), so step `k + 1` leads it by 30-90° electrical.
+/// commissioned table, sector `k` is centred between the fields of bridge steps `k − 1` and
+/// `k` ([`crate::commission`]), so step `k + 1` leads the rotor by 60-120° electrical.
 pub fn commutation_step(sector: u8, reverse: bool) -> u8 {
     (sector % 6 + if reverse { 4 } else { 1 }) % 6
 }
@@ -159,6 +161,24 @@ pub fn six_step_pattern(k: u8, duty: u16) -> ([u16; 3], [bool; 3]) {
     (ccr, enable)
 }
 
+/// The sector whose middle the centre vector with low phase `low` (0..2) points at: the
+/// one between the two bridge steps whose low phase is `low` (`k` and `k + 1` of
+/// [`BRIDGE_STEPS`]), i.e. 4, 0, 2 for U, V, W.
+pub fn centre_sector(low: u8) -> u8 {
+    (2 * (low % 3) + 4) % 6
+}
+
+/// The gate pattern of the centre vector with low phase `low` (0..2) at compare value
+/// `duty`: the two other phases switch together with the duty (complementary), `low` has
+/// its low side on all the time, all three enabled. The field is the sum of the two bridge
+/// steps whose low phase is `low`, 30° electrical from each.
+pub fn centre_pattern(low: u8, duty: u16) -> ([u16; 3], [bool; 3]) {
+    let low = usize::from(low % 3);
+    let mut ccr = [duty; 3];
+    ccr[low] = 0;
+    (ccr, [true; 3])
+}
+
 /// What the bridge does until the next period.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Drive {
@@ -167,8 +187,11 @@ pub enum Drive {
     /// Six-step commutation from the Hall state through `table` at every Hall edge
     /// ([`commutation_step`]), duty |volts|/V_bus, reverse for a negative voltage.
     SixStep { volts: f32, table: HallTable },
-    /// Hold bridge step `step` (0..5) at `volts` ≥ 0 (commissioning).
-    Vector { step: u8, volts: f32 },
+    /// Hold the centre vector with low phase `low` (0..2, [`centre_pattern`]) at `volts` ≥ 0
+    /// whatever the Hall state (commissioning): the rotor rests in the middle of sector
+    /// [`centre_sector`]`(low)`; the current flows through both other phases in parallel
+    /// and leaves through `low` (its shunt reads it all).
+    Centre { low: u8, volts: f32 },
 }
 
 /// What the transport measured this period.
@@ -488,7 +511,8 @@ impl Board {
     /// [`COMMISSION_U_FRACTION`], [`COMMISSION_I_FRACTION`]).
     pub fn commission_volts(&self) -> f32 {
         let u = COMMISSION_U_FRACTION * self.u_limit(self.v_bus);
-        let i = dead_time_drop(self.v_bus) + self.commission_current() * self.coeffs.motor.r;
+        let r = crate::commission::PATH_R_SHARE * self.coeffs.motor.r;
+        let i = dead_time_drop(self.v_bus) + self.commission_current() * r;
         if i < u {
             i
         } else {
@@ -780,9 +804,9 @@ impl Board {
         let edges = m.edges.iter().map(|e| e.state);
         self.applied = None;
         Some(match c.tick(m.hall, edges, m.edges_overflow, m.i_vector) {
-            CommissionStep::Hold { step, volts } => {
+            CommissionStep::Hold { low, volts } => {
                 self.last_volts = volts;
-                Drive::Vector { step, volts }
+                Drive::Centre { low, volts }
             }
             CommissionStep::Done(r) => {
                 let resistance = c.resistance();
@@ -1001,6 +1025,30 @@ mod tests {
             let b = commutation_step((sector + 1) % 6, false);
             assert_eq!(b, (a + 1) % 6);
         }
+    }
+
+    #[test]
+    fn a_centre_vector_is_the_sum_of_the_two_steps_sharing_its_low_phase() {
+        let duty = 1234;
+        let mut sectors = Vec::new();
+        for low in 0..3u8 {
+            let (ccr, en) = centre_pattern(low, duty);
+            assert_eq!(en, [true; 3]);
+            let l = usize::from(low);
+            assert_eq!(ccr[l], 0);
+            assert!((0..3).filter(|&p| p != l).all(|p| ccr[p] == duty));
+            // The steps whose low phase is `low`: k − 1 and k for the centre's sector k.
+            let c = centre_sector(low);
+            sectors.push(c);
+            for k in [(c + 5) % 6, c] {
+                let (hi, lo) = BRIDGE_STEPS[usize::from(k)];
+                assert_eq!(lo, l, "low {low}: step {k}");
+                assert_eq!(ccr[hi], duty);
+            }
+        }
+        // Three centres 120° apart.
+        sectors.sort_unstable();
+        assert_eq!(sectors, [0, 2, 4]);
     }
 
     #[test]
@@ -1253,7 +1301,8 @@ mod tests {
         b.tick(&cool, &mut |_| {});
         let i_full = COMMISSION_I_FRACTION * co.limits.i_max;
         assert_eq!(b.commission_current(), i_full);
-        let v = (dead_time_drop(12.0) + i_full * co.motor.r)
+        // Through the centre vector's path: ¾ of the line-to-line R.
+        let v = (dead_time_drop(12.0) + i_full * crate::commission::PATH_R_SHARE * co.motor.r)
             .min(COMMISSION_U_FRACTION * co.pi.u_max.min(MAX_DUTY * 12.0));
         // 1e-6 V: the same f32 formula, evaluated in another order (an ulp of 2 V is 2.4e-7).
         assert!(

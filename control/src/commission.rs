@@ -1,54 +1,68 @@
 //! Hall commissioning: learn how the Hall sensors and the motor phases are wired.
 //!
-//! The bridge holds one of its six commutation vectors (bridge step `k`, two phases driven)
-//! at a limited voltage; the rotor turns until it sits in the sector where that vector makes
-//! no torque, and the Hall state read there is the state of sector `k`. Stepping `k` through
-//! 0..5 forward twice (the first pass only aligns the rotor, from wherever it was) and then
-//! backward once gives:
-//! - the Hall table: state → sector, so that the sector numbers rise with the vector index,
-//!   which makes [`crate::board::commutation_step`] (step = sector + 1 forward, + 4 reverse)
-//!   drive the motor and the decoded angle count up for a positive voltage;
+//! The bridge holds a centre vector ([`crate::board::Drive::Centre`]: two phases switch
+//! together with the duty, the third has its low side on) at a limited voltage. Its field
+//! is the sum of two neighbouring six-step vectors and points at the middle of a Hall sector,
+//! 30° electrical from both boundaries; the rotor comes to rest there, so the Hall state
+//! read is that sector's whatever the approach direction, the sensors' hysteresis, the noise,
+//! or a sensor placement error below 30°. (A single six-step vector points at a sector
+//! boundary: where six-step applies it, it leads the rotor by 60..120°, so its field lies
+//! 60° past the end of that sector. A rotor held by it rests on the boundary, and the state
+//! read there is a coin toss.) The three centre vectors, one per low phase, point at sectors
+//! 0, 2 and 4 ([`CENTRES`], 120° apart); holding them forward twice (the first pass only
+//! aligns the rotor, from wherever it was) and then backward once gives:
+//! - the Hall table: state → sector, with the states of sectors 0, 2, 4 read and each of
+//!   sectors 1, 3, 5 the one valid state between its neighbours (two states two sensors
+//!   apart have two states between them, one of which is 000 or 111). Sector `k` is the one
+//!   centred between the fields of bridge steps `k − 1` and `k`, so
+//!   [`crate::board::commutation_step`] (step = sector + 1 forward, + 4 reverse) leads the
+//!   rotor by 60..120° (the torque angle centred on 90°) and the decoded angle counts up for
+//!   a positive voltage;
 //! - the direction: whether the learned state sequence is the default 1-3-2-6-4-5 order
 //!   forward or backward (`reversed`), or another order (a permuted Hall connector);
-//! - a pole-pair check: the net Hall edges over one electrical revolution of the vector
-//!   (the second forward pass; an edge back to the state before cancels the edge that left
-//!   it, so a rotor that overshoots and settles back counts once) must be 6, or the Hall
-//!   magnet's pole count differs from the motor's;
-//! - the current-sense sign: with a positive voltage along the held vector the current
-//!   along it is positive; a negative mean says the sense is inverted (`current_sign` −1);
+//! - a pole-pair check: the net Hall edges over one electrical revolution of the field (the
+//!   second forward pass; an edge back to the state before cancels the edge that left it,
+//!   so a rotor that overshoots and settles back counts once) must be the sequence's six
+//!   states in order, or the Hall magnet's pole count differs from the motor's;
+//! - the current-sense sign: with a positive voltage the current out through the low phase
+//!   is positive; a negative mean says the sense is inverted (`current_sign` −1);
 //! - that the current sense sees the current at all ([`CommissionError::NoCurrent`]): the
 //!   mean current at the higher level `Ī_hi` must reach a quarter of what the blob's R
-//!   lets flow, `|Ī_hi| ≥ ¼·min(i_limit, (V_hi − V_d)/R_blob)`, and the two levels' currents
-//!   must differ by a quarter of it, `|Ī_hi − Ī_lo| ≥ ¼·|Ī_hi|` (they differ by a half
-//!   when the sense works). The quarter admits a winding of up to four times the blob's R
-//!   (a first spin runs on the default R) and a dead-time estimate off by half the drop,
-//!   while a dead sense (its offset and noise, tens of mA against amperes) or a hold
-//!   voltage at or below the drop fails: neither a sign nor an R is taken from noise;
-//! - the winding resistance R [Ω] along a vector (two phases in series, the DC-equivalent
-//!   motor's R) from two voltage levels held while the rotor rests (no back-EMF) and the
-//!   current has settled (L/R is a few ms): `R = (V_hi − V_lo)/(Ī_hi − Ī_lo)`. The bridge's
-//!   dead time takes a constant voltage from a current of one sign (`t_d·f_PWM·V_bus`: in
-//!   six-step only the high leg switches; about 0.24 V at 500 ns, 20 kHz and 24 V), and the
-//!   difference cancels it, as it does the current sense's offset
-//!   ([`Commissioner::resistance`]).
+//!   lets flow through the vector's path, `|Ī_hi| ≥ ¼·min(i_limit, (V_hi − V_d)/(¾·R_blob))`,
+//!   and the two levels' currents must differ by a quarter of it, `|Ī_hi − Ī_lo| ≥ ¼·|Ī_hi|`
+//!   (they differ by a half when the sense works). The quarter admits a winding of up to
+//!   four times the blob's R (a first spin runs on the default R) and a dead-time estimate
+//!   off by half the drop, while a dead sense (its offset and noise, tens of mA against
+//!   amperes) or a hold voltage at or below the drop fails: neither a sign nor an R is taken
+//!   from noise;
+//! - the winding resistance R [Ω] (line to line, the DC-equivalent motor's R) from two
+//!   voltage levels held while the rotor rests (no back-EMF) and the current has settled
+//!   (L/R is a few ms). The current flows through the two switching phases in parallel and
+//!   the low phase in series: `R_ph/2 + R_ph`, [`PATH_R_SHARE`] = ¾ of the line-to-line
+//!   `2·R_ph` (in delta the low phase's two windings in parallel, `R_Δ/2` against
+//!   `2·R_Δ/3`: ¾ again), so `R = (V_hi − V_lo)/((Ī_hi − Ī_lo)·¾)`. The bridge's dead time
+//!   takes a constant voltage from a current of one sign (`t_d·f_PWM·V_bus`, both switching
+//!   legs alike: about 0.24 V at 500 ns, 20 kHz and 24 V), and the difference cancels it, as
+//!   it does the current sense's offset ([`Commissioner::resistance`]).
 //!
 //! Each hold lasts [`HOLD_PERIODS`] control periods: the first half at the run's voltage
-//! `V_hi` (the rotor turns and settles), then a quarter at the lower level
+//! `V_hi` (the rotor turns up to 120° and settles), then a quarter at the lower level
 //! `V_lo = V_d + `[`LOW_LEVEL`]`·(V_hi − V_d)` and the last quarter at `V_hi` again (the Hall
 //! state is read at the end, under full torque); the current is averaged over each of the
-//! two quarters but their first two periods (it settles with the winding's L/R, up to 15 ms). `V_d` is the dead time's drop the caller expects: placing the lower level
-//! above it keeps its current at about half the higher level's, of the same sign, where the
-//! drop is constant; an error of `V_d` moves that current, not R.
+//! two quarters but their first two periods (it settles with the winding's L/R, up to 15 ms).
+//! `V_d` is the dead time's drop the caller expects: placing the lower level above it keeps
+//! its current at about half the higher level's, of the same sign, where the drop is
+//! constant; an error of `V_d` moves that current, not R.
 //!
 //! The voltage is chosen by the caller (the board logic limits it to a fraction of `u_max`
-//! and to the voltage that drives a fraction of `i_max` through the blob's R, which may not
-//! be the motor's); the measured current then bounds it:
+//! and to the voltage that drives a fraction of `i_max` through the path's share of the
+//! blob's R, which may not be the motor's); the measured current then bounds it:
 //! - the first hold starts at [`RAMP_START`] of the way from `V_d/2` to `V_hi` and grows by
 //!   [`RAMP_GROWTH`] a period, so the current approaches the limit from below whatever the
 //!   winding's R and even when the drop `V_d` is overestimated twofold (starting at `V_d`
 //!   itself would drive `(V_d − V_d,true)/R` at once: 12 A through 20 mΩ); once the current
-//!   passes [`RAMP_NEAR`] of the limit the growth slows to [`RAMP_GROWTH_NEAR`] and the voltage goes
-//!   no further than the one extrapolated to drive [`RAMP_TARGET`] of the limit,
+//!   passes [`RAMP_NEAR`] of the limit the growth slows to [`RAMP_GROWTH_NEAR`] and the
+//!   voltage goes no further than the one extrapolated to drive [`RAMP_TARGET`] of the limit,
 //!   `V_d + (V − V_d)·RAMP_TARGET·i_limit/|I|`, where the ramp ends;
 //! - whenever `|I|` exceeds the run's current limit `i_limit`, `V_hi` falls to the voltage
 //!   that drives the limit, `V_d + (V − V_d)·i_limit/|I|` for the voltage `V` that drove
@@ -62,8 +76,14 @@ pub const HOLD_PERIODS: u16 = 25;
 /// Smallest share of the expected current the higher level's mean must reach, and of that
 /// mean the two levels' difference must reach ([`CommissionError::NoCurrent`], module docs).
 pub const CURRENT_SHARE: f32 = 0.25;
-/// Holds in a run: two forward passes and one backward pass.
-pub const HOLDS: u8 = 18;
+/// Holds in a run: two forward passes and one backward pass over [`CENTRES`].
+pub const HOLDS: u8 = 9;
+/// The sectors whose middles the held vectors point at, in the forward order, with the
+/// phase each holds low ([`crate::board::centre_sector`]): 120° apart, every other sector.
+pub const CENTRES: [(u8, u8); 3] = [(0, 1), (2, 2), (4, 0)];
+/// Share of the line-to-line R (the DC-equivalent motor's) in a centre vector's current
+/// path: two phases in parallel in series with the third, `R_ph/2 + R_ph` of `2·R_ph`.
+pub const PATH_R_SHARE: f32 = 0.75;
 /// The lower of a hold's two voltage levels, as a fraction of the higher above the dead
 /// time's drop: the current's difference between them is half the higher level's, enough
 /// against the sense's noise, and the lower level's current keeps its sign.
@@ -72,8 +92,10 @@ pub const LOW_LEVEL: f32 = 0.5;
 /// drop to the run's voltage.
 pub const RAMP_START: f32 = 1.0 / 16.0;
 /// Growth of the first hold's voltage above half the dead time's drop per period, while the
-/// current is below [`RAMP_NEAR`] of the limit.
-pub const RAMP_GROWTH: f32 = 1.25;
+/// current is below [`RAMP_NEAR`] of the limit: a quarter through the line-to-line R,
+/// scaled by [`PATH_R_SHARE`] so that the current through the centre vector's smaller R
+/// grows no faster a period (`1 + ¼·¾`).
+pub const RAMP_GROWTH: f32 = 1.1875;
 /// Share of the limit the current passes where the ramp slows to [`RAMP_GROWTH_NEAR`].
 pub const RAMP_NEAR: f32 = 0.25;
 /// Growth per period once the current has passed [`RAMP_NEAR`] of the limit: the last
@@ -91,7 +113,8 @@ pub const DEFAULT_SEQUENCE: [u8; 6] = [1, 3, 2, 6, 4, 5];
 /// What a commissioning run learned (stored with the coefficients).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Commissioning {
-    /// Hall state seen with bridge step `k` held, k = 0..5 (sector `k`'s state).
+    /// Hall state of sector `k`, k = 0..5 (sector `k` centred between the fields of bridge
+    /// steps `k − 1` and `k`).
     #[serde(with = "crate::serde_array")]
     pub sequence: [u8; 6],
     /// The sequence is the default 1-3-2-6-4-5 order backward (motor phases or Hall
@@ -102,10 +125,10 @@ pub struct Commissioning {
     pub permuted: bool,
     /// Sign to apply to the measured current (+1 or −1).
     pub current_sign: i8,
-    /// Hall edges over one electrical revolution of the vector (6 when the Hall magnet has
+    /// Hall edges over one electrical revolution of the field (6 when the Hall magnet has
     /// the motor's pole pairs).
     pub edges_per_elec_rev: u8,
-    /// Voltage the vectors were held at [V].
+    /// Voltage the centre vectors were held at [V].
     pub volts: f32,
 }
 
@@ -133,13 +156,15 @@ pub enum CommissionError {
     NoMotion,
     /// A Hall state 000 or 111 was read.
     InvalidState,
-    /// The six vectors did not give six different states.
+    /// The three vectors did not give three different states (not six states a turn).
     NotSixStates,
-    /// Neighbouring vectors gave states more than one sensor apart.
+    /// Two vectors 120° apart gave states other than two sensors apart (the sequence
+    /// would not step one sensor at a time).
     NotAdjacent,
     /// The backward pass read other states than the forward pass.
     Inconsistent,
-    /// The Hall edges over one electrical revolution were not 6 (pole pairs differ).
+    /// The Hall edges over one electrical revolution were not the sequence's six, one each
+    /// (pole pairs differ).
     PolePairs,
     /// Stopped before the end (a stop command or a fault).
     Aborted,
@@ -165,6 +190,20 @@ pub enum CommissionOutcome {
 
 fn gray(seq: &[u8; 6]) -> bool {
     (0..6).all(|k| (seq[k] ^ seq[(k + 1) % 6]).count_ones() == 1)
+}
+
+/// The valid state between Hall states `a` and `b` two sensors apart: one of the two
+/// differing bits flipped, the other choice being 000 or 111 (`None` unless exactly two
+/// bits differ).
+fn between(a: u8, b: u8) -> Option<u8> {
+    let d = a ^ b;
+    if d.count_ones() != 2 {
+        return None;
+    }
+    let low = d & d.wrapping_neg();
+    [a ^ low, a ^ (d ^ low)]
+        .into_iter()
+        .find(|&s| s != 0 && s != 7)
 }
 
 /// Mean of the current samples at one voltage level.
@@ -198,8 +237,10 @@ impl LevelMean {
 pub struct Commissioner {
     hold: u8,
     period: u16,
-    fwd: [u8; 6],
-    bwd: [u8; 6],
+    /// States read at the end of the holds of [`CENTRES`] in the counted and the backward
+    /// pass.
+    fwd: [u8; 3],
+    bwd: [u8; 3],
     /// Hall states passed in the counted revolution, returns cancelled.
     path: heapless::Vec<u8, 16>,
     /// The path overflowed (far more than one revolution).
@@ -213,7 +254,7 @@ pub struct Commissioner {
     i_limit: f32,
     /// Voltage the bridge's dead time is expected to take [V].
     v_dead: f32,
-    /// The blob's winding resistance [Ω] (what the current is expected from).
+    /// The blob's line-to-line winding resistance [Ω] (what the current is expected from).
     r_model: f32,
     /// Fraction of the way from `v_dead/2` to `volts` the ramp has reached (1: done).
     ramp: f32,
@@ -227,8 +268,8 @@ pub struct Commissioner {
 /// What the sequencer wants this period.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum CommissionStep {
-    /// Hold bridge step `step` at the run's voltage.
-    Hold { step: u8, volts: f32 },
+    /// Hold the centre vector with low phase `low` (0..2) at `volts`.
+    Hold { low: u8, volts: f32 },
     /// Finished.
     Done(Result<Commissioning, CommissionError>),
 }
@@ -236,14 +277,15 @@ pub enum CommissionStep {
 impl Commissioner {
     /// A run at `volts` [V] along each vector, at most `i_limit` [A] (non-finite or not
     /// positive: no current limit), on a bridge whose dead time takes `v_dead` [V] (below 0
-    /// or not finite: 0), on a winding the blob gives `r_model` [Ω] (the expected current).
+    /// or not finite: 0), on a winding whose line-to-line R the blob gives as `r_model` [Ω]
+    /// (the expected current, through [`PATH_R_SHARE`] of it).
     pub fn new(volts: f32, i_limit: f32, v_dead: f32, r_model: f32) -> Self {
         Commissioner {
             hold: 0,
             // The first tick makes it 0.
             period: u16::MAX,
-            fwd: [0; 6],
-            bwd: [0; 6],
+            fwd: [0; 3],
+            bwd: [0; 3],
             path: heapless::Vec::new(),
             path_full: false,
             hi: LevelMean::default(),
@@ -286,13 +328,9 @@ impl Commissioner {
         self.volts
     }
 
-    /// Bridge step of hold `h`: 0..5, 0..5, then 5..0.
-    fn step_of(h: u8) -> u8 {
-        if h < 12 {
-            h % 6
-        } else {
-            5 - (h - 12)
-        }
+    /// Index into [`CENTRES`] of hold `h`: 0, 1, 2 twice, then 2, 1, 0.
+    fn centre_of(h: u8) -> usize {
+        usize::from(if h < 6 { h % 3 } else { 8 - h.min(8) })
     }
 
     /// Net Hall edges of the counted revolution.
@@ -324,7 +362,7 @@ impl Commissioner {
         } else {
             i_vector
         };
-        if (6..12).contains(&self.hold) {
+        if (3..6).contains(&self.hold) {
             // The second forward pass: one electrical revolution, from the state the first
             // pass ended in (the motion into sector 0 of the second pass counts).
             self.path_full |= overflow;
@@ -341,15 +379,15 @@ impl Commissioner {
         self.period = self.period.wrapping_add(1);
         if self.period >= HOLD_PERIODS {
             // The hold is over: the state now is that vector's sector.
-            let k = Self::step_of(self.hold) as usize;
+            let c = Self::centre_of(self.hold);
             match self.hold {
-                5 => {
+                2 => {
                     // The counted revolution starts here.
                     self.path.clear();
                     let _ = self.path.push(hall);
                 }
-                6..=11 => self.fwd[k] = hall,
-                12.. => self.bwd[k] = hall,
+                3..=5 => self.fwd[c] = hall,
+                6.. => self.bwd[c] = hall,
                 _ => {}
             }
             self.hold += 1;
@@ -394,7 +432,7 @@ impl Commissioner {
             && !(3 * HOLD_PERIODS / 4..3 * HOLD_PERIODS / 4 + 2).contains(&p);
         self.last = (volts, level.filter(|_| settled));
         CommissionStep::Hold {
-            step: Self::step_of(self.hold),
+            low: CENTRES[Self::centre_of(self.hold)].1,
             volts,
         }
     }
@@ -424,7 +462,7 @@ impl Commissioner {
     fn current_seen(&self) -> Option<(f32, f32)> {
         let (v_hi, i_hi) = self.hi.mean()?;
         let (_, i_lo) = self.lo.mean()?;
-        let expected = (v_hi - self.v_dead) / self.r_model;
+        let expected = (v_hi - self.v_dead) / (PATH_R_SHARE * self.r_model);
         let expected = if expected < self.i_limit {
             expected
         } else {
@@ -437,8 +475,9 @@ impl Commissioner {
         seen.then_some((i_hi, i_lo))
     }
 
-    /// The winding resistance [Ω] from the holds so far: the difference of the two levels'
-    /// mean voltages over that of their mean currents (module docs); `None` without samples
+    /// The line-to-line winding resistance [Ω] from the holds so far: the difference of the
+    /// two levels' mean voltages over that of their mean currents, over the path's share
+    /// [`PATH_R_SHARE`] (module docs); `None` without samples
     /// at both levels, when the current sense did not see the current
     /// ([`CommissionError::NoCurrent`]), or outside the physical range
     /// [`crate::blob::MOTOR_R`].
@@ -446,29 +485,49 @@ impl Commissioner {
         let (i_hi, i_lo) = self.current_seen()?;
         let (v_hi, _) = self.hi.mean()?;
         let (v_lo, _) = self.lo.mean()?;
-        let r = (v_hi - v_lo) / (i_hi - i_lo).abs();
+        let r = (v_hi - v_lo) / ((i_hi - i_lo).abs() * PATH_R_SHARE);
         let (lo, hi) = crate::blob::MOTOR_R;
         (r >= lo && r <= hi).then_some(r)
     }
 
-    fn result(&self) -> Result<Commissioning, CommissionError> {
-        let seq = self.fwd;
-        if seq.iter().any(|&s| s == 0 || s >= 7) {
+    /// The six sectors' states from the three read (module docs).
+    fn sequence(&self) -> Result<[u8; 6], CommissionError> {
+        let r = self.fwd;
+        if r.iter().any(|&s| s == 0 || s >= 7) {
             return Err(CommissionError::InvalidState);
         }
-        if seq.iter().all(|&s| s == seq[0]) {
+        if r.iter().all(|&s| s == r[0]) {
             return Err(CommissionError::NoMotion);
         }
+        if r[0] == r[1] || r[1] == r[2] || r[2] == r[0] {
+            return Err(CommissionError::NotSixStates);
+        }
+        let mid = |a: u8, b: u8| between(a, b).ok_or(CommissionError::NotAdjacent);
+        let seq = [
+            r[0],
+            mid(r[0], r[1])?,
+            r[1],
+            mid(r[1], r[2])?,
+            r[2],
+            mid(r[2], r[0])?,
+        ];
         if HallTable::from_sequence(seq).is_none() {
             return Err(CommissionError::NotSixStates);
         }
         if !gray(&seq) {
             return Err(CommissionError::NotAdjacent);
         }
-        if self.bwd != seq {
+        Ok(seq)
+    }
+
+    fn result(&self) -> Result<Commissioning, CommissionError> {
+        let seq = self.sequence()?;
+        if self.bwd != self.fwd {
             return Err(CommissionError::Inconsistent);
         }
-        if self.net_edges() != 6 {
+        // The counted revolution runs from the last centre (sector 4) round to it again.
+        let want = (0..7).map(|k| seq[(4 + k) % 6]);
+        if self.net_edges() != 6 || !self.path.iter().copied().eq(want) {
             return Err(CommissionError::PolePairs);
         }
         let Some((i_hi, _)) = self.current_seen() else {
@@ -494,68 +553,174 @@ impl Commissioner {
 mod tests {
     extern crate std;
     use super::*;
+    use crate::board::centre_sector;
+    use std::vec::Vec;
 
-    /// An ideal rotor that jumps into the held vector's sector; Hall states of a given
-    /// sequence; the current `(V − 0.4 V)/0.2 Ω` a hold drives, of a given sign.
-    fn run(seq: [u8; 6], sign: f32, start: u8) -> Result<Commissioning, CommissionError> {
+    /// An ideal rotor in one of six Hall sectors of a given state sequence.
+    struct Rotor {
+        seq: [u8; 6],
+        sector: u8,
+    }
+
+    impl Rotor {
+        fn hall(&self) -> u8 {
+            self.seq[usize::from(self.sector)]
+        }
+
+        /// Turns the short way (up on a tie) into sector `to`, overshooting by one sector
+        /// and back, recording the states entered.
+        fn turn_to(&mut self, to: u8, edges: &mut Vec<u8>) {
+            let start = self.sector;
+            let up = (to + 6 - start) % 6 <= 3;
+            let next = |s: u8, up: bool| if up { (s + 1) % 6 } else { (s + 5) % 6 };
+            while self.sector != to {
+                self.sector = next(self.sector, up);
+                edges.push(self.hall());
+            }
+            if start != to {
+                edges.push(self.seq[usize::from(next(to, up))]);
+                edges.push(self.hall());
+            }
+        }
+    }
+
+    /// A whole run on an ideal rotor that turns into the held vector's sector (Hall states
+    /// of `seq`, starting in sector `start`), with the current `(V − 0.4 V)/(¾·0.2 Ω)` a
+    /// hold drives through the path, read as `sense(true current, period)`; the result and
+    /// the resistance.
+    fn run_with(
+        seq: [u8; 6],
+        start: u8,
+        r: f32,
+        sense: impl Fn(f32, usize) -> f32,
+    ) -> (Result<Commissioning, CommissionError>, Option<f32>) {
         let mut c = Commissioner::new(2.0, 10.0, 0.4, 0.2);
-        let mut sector = start;
-        let mut hall = seq[sector as usize];
+        let mut rotor = Rotor { seq, sector: start };
         // Edges arrive with the next period's measurement.
-        let mut edges: std::vec::Vec<u8> = std::vec::Vec::new();
+        let mut edges = Vec::new();
         let mut i = 0.0f32;
-        for _ in 0..10_000 {
-            match c.tick(hall, edges.drain(..), false, i) {
-                CommissionStep::Done(r) => return r,
-                CommissionStep::Hold { step, volts } => {
-                    i = sign * (volts - 0.4).max(0.0) / 0.2;
-                    // The rotor turns the short way into the vector's sector, overshooting
-                    // by one sector and back.
-                    let start = sector;
-                    while sector != step {
-                        let up = (step + 6 - sector) % 6 <= 3;
-                        sector = if up {
-                            (sector + 1) % 6
-                        } else {
-                            (sector + 5) % 6
-                        };
-                        edges.push(seq[sector as usize]);
-                    }
-                    if start != step {
-                        let up = (step + 6 - start) % 6 <= 3;
-                        let over = if up { (step + 1) % 6 } else { (step + 5) % 6 };
-                        edges.push(seq[over as usize]);
-                        edges.push(seq[step as usize]);
-                    }
-                    hall = seq[sector as usize];
+        for k in 0..10_000 {
+            match c.tick(rotor.hall(), edges.drain(..), false, sense(i, k)) {
+                CommissionStep::Done(res) => return (res, c.resistance()),
+                CommissionStep::Hold { low, volts } => {
+                    i = (volts - 0.4).max(0.0) / (PATH_R_SHARE * r);
+                    let mut e = Vec::new();
+                    rotor.turn_to(centre_sector(low), &mut e);
+                    edges.extend(e);
                 }
             }
         }
         panic!("never finished");
     }
 
-    #[test]
-    fn learns_default_reversed_and_permuted_sequences() {
-        let r = run(DEFAULT_SEQUENCE, 1.0, 3).unwrap();
-        assert_eq!(r.sequence, DEFAULT_SEQUENCE);
-        assert!(!r.reversed && !r.permuted);
-        assert_eq!(r.current_sign, 1);
-        assert_eq!(r.hall_table(), Some(HallTable::DEFAULT_120));
-        let mut rev = DEFAULT_SEQUENCE;
-        rev.reverse();
-        let r = run(rev, -1.0, 0).unwrap();
-        assert!(r.reversed);
-        assert_eq!(r.current_sign, -1);
-        // Hall bits A and B swapped.
-        let sw = DEFAULT_SEQUENCE.map(|s| (s & 4) | ((s & 1) << 1) | ((s >> 1) & 1));
-        let r = run(sw, 1.0, 5).unwrap();
-        assert_eq!(r.sequence, sw);
-        assert!(r.is_valid());
+    fn run(seq: [u8; 6], sign: f32, start: u8) -> Result<Commissioning, CommissionError> {
+        run_with(seq, start, 0.2, |i, _| sign * i).0
     }
 
-    /// Runs a whole commissioning on a resting winding of resistance `r` [Ω] behind a
-    /// dead time of `vd` [V] (the current a voltage drives is `(V − vd)/R`, of its sign);
-    /// returns the sequencer and the largest current [A].
+    #[test]
+    fn centres_pair_each_sector_with_its_low_phase() {
+        for (j, &(sector, low)) in CENTRES.iter().enumerate() {
+            assert_eq!(centre_sector(low), sector);
+            assert_eq!(usize::from(sector), 2 * j);
+        }
+    }
+
+    #[test]
+    fn the_state_between_two_centres_is_the_valid_one() {
+        for k in [0, 2, 4] {
+            let (a, b) = (DEFAULT_SEQUENCE[k], DEFAULT_SEQUENCE[(k + 2) % 6]);
+            assert_eq!(between(a, b), Some(DEFAULT_SEQUENCE[k + 1]));
+            assert_eq!(between(b, a), Some(DEFAULT_SEQUENCE[k + 1]));
+        }
+        // One sensor apart, or all three: no single state between.
+        assert_eq!(between(1, 3), None);
+        assert_eq!(between(1, 6), None);
+    }
+
+    #[test]
+    fn learns_default_reversed_and_permuted_sequences_from_any_sector() {
+        let mut rev = DEFAULT_SEQUENCE;
+        rev.reverse();
+        // Hall bits A and B swapped.
+        let sw = DEFAULT_SEQUENCE.map(|s| (s & 4) | ((s & 1) << 1) | ((s >> 1) & 1));
+        for start in 0..6 {
+            let r = run(DEFAULT_SEQUENCE, 1.0, start).unwrap();
+            assert_eq!(r.sequence, DEFAULT_SEQUENCE, "from {start}");
+            assert!(!r.reversed && !r.permuted);
+            assert_eq!(r.current_sign, 1);
+            assert_eq!(r.edges_per_elec_rev, 6);
+            assert_eq!(r.hall_table(), Some(HallTable::DEFAULT_120));
+            let r = run(rev, -1.0, start).unwrap();
+            assert_eq!(r.sequence, rev, "from {start}");
+            assert!(r.reversed);
+            assert_eq!(r.current_sign, -1);
+            let r = run(sw, 1.0, start).unwrap();
+            assert_eq!(r.sequence, sw, "from {start}");
+            // Two sensors swapped: the default order backward, from another start.
+            assert!(r.reversed && r.is_valid());
+        }
+    }
+
+    #[test]
+    fn a_hall_magnet_with_other_pole_pairs_is_refused() {
+        // Twice the motor's pole pairs: the centres 120° apart read states 240° apart, and
+        // the revolution passes twelve edges.
+        let twice: [u8; 6] = core::array::from_fn(|k| DEFAULT_SEQUENCE[(2 * k) % 6]);
+        let mut c = Commissioner::new(2.0, 10.0, 0.4, 0.2);
+        let mut sector = 0u8;
+        let mut edges = Vec::new();
+        let res = loop {
+            let hall = twice[usize::from(sector)];
+            match c.tick(hall, edges.drain(..), false, 5.0) {
+                CommissionStep::Done(r) => break r,
+                CommissionStep::Hold { low, .. } => {
+                    let to = centre_sector(low);
+                    let up = (to + 6 - sector) % 6 <= 3;
+                    while sector != to {
+                        sector = if up {
+                            (sector + 1) % 6
+                        } else {
+                            (sector + 5) % 6
+                        };
+                        // Two Hall edges per motor sector.
+                        let s = usize::from(2 * sector);
+                        let before = if up { s + 11 } else { s + 1 };
+                        edges.push(DEFAULT_SEQUENCE[before % 6]);
+                        edges.push(DEFAULT_SEQUENCE[s % 6]);
+                    }
+                }
+            }
+        };
+        assert!(res.is_err(), "{res:?}");
+    }
+
+    #[test]
+    fn a_backward_pass_that_reads_otherwise_is_inconsistent() {
+        // The rotor stops one sector short of the centre when it comes from above.
+        let mut c = Commissioner::new(2.0, 10.0, 0.4, 0.2);
+        let mut rotor = Rotor {
+            seq: DEFAULT_SEQUENCE,
+            sector: 0,
+        };
+        let mut edges = Vec::new();
+        let res = loop {
+            match c.tick(rotor.hall(), edges.drain(..), false, 5.0) {
+                CommissionStep::Done(r) => break r,
+                CommissionStep::Hold { low, .. } => {
+                    let to = centre_sector(low);
+                    let mut e = Vec::new();
+                    let down = (to + 6 - rotor.sector) % 6 > 3;
+                    rotor.turn_to(if down { (to + 1) % 6 } else { to }, &mut e);
+                    edges.extend(e);
+                }
+            }
+        };
+        assert_eq!(res, Err(CommissionError::Inconsistent));
+    }
+
+    /// Runs a whole commissioning on a resting winding of line-to-line resistance `r` [Ω]
+    /// behind a dead time of `vd` [V] (the current a voltage drives is `(V − vd)/(¾·R)`, of
+    /// its sign); returns the largest current [A].
     fn resting_winding(c: &mut Commissioner, r: f32, vd: f32) -> f32 {
         let mut i = 0.0f32;
         let mut peak = 0.0f32;
@@ -563,7 +728,7 @@ mod tests {
             match c.tick(1, [], false, i) {
                 CommissionStep::Done(_) => return peak,
                 CommissionStep::Hold { volts, .. } => {
-                    i = (volts - vd).max(0.0) / r;
+                    i = (volts - vd).max(0.0) / (PATH_R_SHARE * r);
                     peak = peak.max(i);
                 }
             }
@@ -589,13 +754,14 @@ mod tests {
 
     #[test]
     fn the_measured_current_lowers_the_hold_voltage_to_the_limit() {
-        // The caller sized 2 V for a 0.2 Ω winding (7.5 A); the winding has 0.05 Ω (30 A).
+        // The caller sized 2 V for a 0.2 Ω winding (10 A through its ¾); the winding has
+        // 0.05 Ω (40 A).
         let mut c = Commissioner::new(2.0, 7.5, 0.5, 0.2);
         let peak = resting_winding(&mut c, 0.05, 0.5);
         assert!(peak <= 7.5 + 1e-3, "peak {peak} A");
-        // The ramp ends at the voltage that drives its target share of the limit:
-        // 0.5 V + 0.9 · 7.5 A · 0.05 Ω.
-        let want = 0.5 + RAMP_TARGET * 7.5 * 0.05;
+        // The ramp ends at the voltage that drives its target share of the limit through
+        // the path: 0.5 V + 0.9 · 7.5 A · ¾ · 0.05 Ω.
+        let want = 0.5 + RAMP_TARGET * 7.5 * PATH_R_SHARE * 0.05;
         assert!((c.volts() - want).abs() < 1e-3, "{} V", c.volts());
         assert!((c.resistance().unwrap() - 0.05).abs() < 1e-4);
     }
@@ -609,31 +775,6 @@ mod tests {
             }
         };
         assert_eq!(r, Err(CommissionError::NoMotion));
-    }
-
-    /// Runs a whole commissioning with an ideal rotor (default sequence) whose current sense
-    /// reads `sense(true current, period)`; the winding has `r` [Ω] behind a 0.4 V drop.
-    fn with_sense(
-        r: f32,
-        sense: impl Fn(f32, usize) -> f32,
-    ) -> (Result<Commissioning, CommissionError>, Option<f32>) {
-        let mut c = Commissioner::new(2.0, 10.0, 0.4, 0.2);
-        let (mut hall, mut i) = (DEFAULT_SEQUENCE[0], 0.0f32);
-        let mut edge = None;
-        for k in 0..10_000 {
-            match c.tick(hall, edge.take(), false, sense(i, k)) {
-                CommissionStep::Done(res) => return (res, c.resistance()),
-                CommissionStep::Hold { step, volts } => {
-                    let next = DEFAULT_SEQUENCE[step as usize];
-                    if next != hall {
-                        edge = Some(next);
-                    }
-                    hall = next;
-                    i = (volts - 0.4).max(0.0) / r;
-                }
-            }
-        }
-        panic!("never finished");
     }
 
     #[test]
@@ -650,13 +791,13 @@ mod tests {
             ("a hundredth of the current", &|i, _| 0.01 * i),
         ];
         for (what, sense) in cases {
-            let (res, r) = with_sense(0.2, sense);
+            let (res, r) = run_with(DEFAULT_SEQUENCE, 0, 0.2, sense);
             assert_eq!(res, Err(CommissionError::NoCurrent), "{what}");
             assert_eq!(r, None, "{what}");
         }
         // A working sense, inverted, on windings of a third and three times the blob's R.
         for r_true in [0.2 / 3.0, 0.6] {
-            let (res, r) = with_sense(r_true, |i, _| -i);
+            let (res, r) = run_with(DEFAULT_SEQUENCE, 0, r_true, |i, _| -i);
             let res = res.unwrap();
             assert_eq!(res.current_sign, -1);
             let r = r.unwrap();
@@ -665,7 +806,7 @@ mod tests {
             assert!((r - r_true).abs() < 1e-3 * r_true, "{r} vs {r_true}");
         }
         // Five times the blob's R: the current is under a quarter of the expected one.
-        let (res, _) = with_sense(1.0, |i, _| i);
+        let (res, _) = run_with(DEFAULT_SEQUENCE, 0, 1.0, |i, _| i);
         assert_eq!(res, Err(CommissionError::NoCurrent));
         // A hold voltage below the dead time's drop drives nothing to measure.
         let mut c = Commissioner::new(0.3, 10.0, 0.4, 0.2);
@@ -680,16 +821,14 @@ mod tests {
     #[test]
     fn each_hold_lasts_hold_periods() {
         let mut c = Commissioner::new(2.0, 10.0, 0.4, 0.2);
-        let mut steps = std::vec::Vec::new();
-        while let CommissionStep::Hold { step, .. } = c.tick(1, [], false, 1.0) {
-            steps.push(step);
+        let mut lows = Vec::new();
+        while let CommissionStep::Hold { low, .. } = c.tick(1, [], false, 1.0) {
+            lows.push(low);
         }
-        assert_eq!(steps.len(), usize::from(HOLDS) * usize::from(HOLD_PERIODS));
-        for (h, hold) in steps.chunks(usize::from(HOLD_PERIODS)).enumerate() {
-            assert!(
-                hold.iter().all(|&k| k == Commissioner::step_of(h as u8)),
-                "{h}"
-            );
+        assert_eq!(lows.len(), usize::from(HOLDS) * usize::from(HOLD_PERIODS));
+        for (h, hold) in lows.chunks(usize::from(HOLD_PERIODS)).enumerate() {
+            let want = CENTRES[Commissioner::centre_of(h as u8)].1;
+            assert!(hold.iter().all(|&l| l == want), "{h}");
         }
     }
 }

@@ -110,7 +110,7 @@ fn event() -> impl Strategy<Value = Event> {
 fn volts(d: &Drive) -> f32 {
     match *d {
         Drive::Off => 0.0,
-        Drive::SixStep { volts, .. } | Drive::Vector { volts, .. } => volts,
+        Drive::SixStep { volts, .. } | Drive::Centre { volts, .. } => volts,
     }
 }
 

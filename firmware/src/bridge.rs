@@ -6,12 +6,18 @@
 //! outputs disabled). Step `k + 3` is step `k` with the polarity reversed
 //! (`control::board::six_step_pattern`, tested on the host). Which step drives
 //! a rotor in a Hall sector is `control::board::commutation_step` (sector + 1 forward,
-//! sector + 4 for a negative voltage), the same rule the emulated board uses; commissioning
-//! holds one step whatever the Hall state ([`Drive::hold`]).
+//! sector + 4 for a negative voltage), the same rule the emulated board uses.
 //!
-//! Because the low phase's low-side switch conducts during the whole period, its shunt
-//! carries the winding current in both the on and the freewheel interval: the firmware
-//! reads that phase's op-amp at any time, without synchronising the ADC to the PWM.
+//! Commissioning holds a centre vector whatever the Hall state ([`Drive::hold`],
+//! `control::board::centre_pattern`): the two phases other than the low one switch with
+//! the same duty `d` (complementary), the low phase has its low side on (duty 0), all three
+//! outputs enabled. Its field points at the middle of a Hall sector, between the fields of
+//! the two six-step vectors that share its low phase.
+//!
+//! In both patterns the low phase's low-side switch conducts during the whole period, and
+//! every other phase's current returns through it: its shunt carries the whole winding
+//! current in both the on and the freewheel interval, so the firmware reads that one
+//! phase's op-amp at any time, without synchronising the ADC to the PWM.
 //!
 //! Commutation follows the rotor at every Hall edge: the TIM4 capture interrupt calls
 //! [`commutate`] (`hall_capture`), and the 12 ms control loop only sets the drive (on/off,
@@ -55,24 +61,19 @@ use crate::board::MAX_DUTY;
 /// Phase order U, V, W as TIM1 channels 1, 2, 3.
 const PHASES: [Channel; 3] = [Channel::Ch1, Channel::Ch2, Channel::Ch3];
 
-/// A six-step pattern ready to apply on the next update event.
+/// A six-step or centre-vector pattern ready to apply on the next update event.
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Pattern {
     /// Compare values of phases U, V, W.
     ccr: [u16; 3],
     /// Outputs (both sides) enabled, per phase.
     enable: [bool; 3],
-    /// The commutation step (0..5).
-    step: u8,
+    /// The phase whose low side is on all the time (its shunt carries the current).
+    low: u8,
 }
 
 /// The pattern the next update event applies.
 static PENDING: Mutex<Cell<Option<Pattern>>> = Mutex::new(Cell::new(None));
-
-/// The phase whose low-side switch is on in step `k`: the one whose shunt to read.
-pub fn low_phase(k: u8) -> usize {
-    control::board::BRIDGE_STEPS[k as usize % 6].1
-}
 
 /// Duty cycle for a voltage magnitude and the bus voltage: `|V|/V_bus`, saturated at
 /// [`MAX_DUTY`]; zero when the bus voltage is not positive.
@@ -90,11 +91,13 @@ pub struct Drive {
     pub on: bool,
     /// Negative voltage: the reversed step (`k + 3`).
     pub reverse: bool,
-    /// Compare value of the high phase (0..=max duty counts).
+    /// Compare value of the high phase, or of both high phases of a centre vector
+    /// (0..=max duty counts).
     pub duty: u16,
     /// Hall state → sector (the coefficients' table; negative = invalid state).
     pub table: [i8; 8],
-    /// Hold this step whatever the Hall state (commissioning).
+    /// Hold the centre vector with this low phase (0..2) whatever the Hall state
+    /// (commissioning).
     pub hold: Option<u8>,
 }
 
@@ -105,34 +108,42 @@ static DRIVE: Mutex<Cell<Drive>> = Mutex::new(Cell::new(Drive {
     table: [-1; 8],
     hold: None,
 }));
-/// Step applied last (for the current measurement: its low phase's shunt).
-static LAST_STEP: AtomicU8 = AtomicU8::new(0);
+/// Low phase of the pattern applied last (for the current measurement: its shunt).
+static LAST_LOW: AtomicU8 = AtomicU8::new(1);
 
 /// Sets what the next commutations apply.
 pub fn set_drive(d: Drive) {
     critical_section::with(|cs| DRIVE.borrow(cs).set(d));
 }
 
-/// The commutation step applied last.
-pub fn last_step() -> u8 {
-    LAST_STEP.load(Ordering::Relaxed)
+/// The low phase (0..2) of the pattern applied last: the one whose shunt to read.
+pub fn last_low() -> usize {
+    usize::from(LAST_LOW.load(Ordering::Relaxed) % 3)
 }
 
 /// The pattern of drive `d` for Hall state `state`; `None`: all off (drive off, invalid
 /// state).
 fn pattern(d: &Drive, state: u8) -> Option<Pattern> {
     let sector = d.table[(state & 7) as usize];
-    let k = match d.hold {
+    let ((ccr, enable), low) = match d.hold {
         _ if !d.on => return None,
-        Some(k) => k % 6,
+        Some(low) => (
+            control::board::centre_pattern(low, d.duty),
+            usize::from(low % 3),
+        ),
         None if sector < 0 => return None,
-        None => control::board::commutation_step(sector as u8, d.reverse),
+        None => {
+            let k = control::board::commutation_step(sector as u8, d.reverse);
+            (
+                control::board::six_step_pattern(k, d.duty),
+                control::board::BRIDGE_STEPS[usize::from(k)].1,
+            )
+        }
     };
-    let (ccr, enable) = control::board::six_step_pattern(k, d.duty);
     Some(Pattern {
         ccr,
         enable,
-        step: k,
+        low: low as u8,
     })
 }
 
@@ -187,7 +198,7 @@ fn TIM1_UP_TIM16() {
     }
     t.egr().write(|w| w.set_comg(true));
     t.bdtr().modify(|w| w.set_moe(true));
-    LAST_STEP.store(p.step, Ordering::Relaxed);
+    LAST_LOW.store(p.low, Ordering::Relaxed);
 }
 
 /// The bridge: owns TIM1 and its six pins, configured by embassy's `ComplementaryPwm`.

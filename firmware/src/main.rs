@@ -371,11 +371,12 @@ fn store_if_idle(board: &mut Board, send: &mut impl FnMut(BoardMsg)) {
 
 /// Sets the drive; the Hall-edge interrupt commutates between samples.
 fn actuate(bridge: &mut Bridge, drive: Drive, v_bus: f32) {
-    // (volts, reverse, Hall table, held step) of a drive that turns the bridge on.
+    // (volts, reverse, Hall table, held centre vector's low phase) of a drive that turns the
+    // bridge on.
     let on = match drive {
         Drive::Off => None,
         Drive::SixStep { volts, table } => Some((volts, volts < 0.0, table.sector, None)),
-        Drive::Vector { step, volts } => Some((volts, false, [-1; 8], Some(step))),
+        Drive::Centre { low, volts } => Some((volts, false, [-1; 8], Some(low))),
     };
     match on {
         None => bridge.off(),

@@ -81,7 +81,7 @@ impl<'d> Sense<'d> {
     pub fn read(&mut self, bridge: &Bridge) -> Readings {
         let v_bus = board::vbus_from_raw(self.adc1.blocking_read(&mut self.vbus, ST_VBUS));
         let temperature_c = board::ntc_celsius(self.adc1.blocking_read(&mut self.ntc, ST_VBUS));
-        let lo = bridge::low_phase(bridge::last_step());
+        let lo = bridge::last_low();
         let raw = self.read_phase(lo);
         // The winding current leaves through the low phase's shunt: along the applied vector
         // it is −i_phase (ASSUMED sign convention; commissioning measures and stores the

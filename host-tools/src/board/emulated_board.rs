@@ -670,13 +670,20 @@ mod tests {
         emu
     }
 
+    /// Periods into a run: in the first hold, in the counted revolution, in the backward
+    /// pass.
+    const RESTART_PERIODS: [usize; 3] = {
+        let h = control::commission::HOLD_PERIODS as usize;
+        [7, 4 * h + 10, 7 * h + 10]
+    };
+
     #[test]
     fn a_retried_commission_request_leaves_the_run_as_it_was() {
         // The host resends `Commission` when the Ack comes late: in the middle of a hold,
         // of the counted revolution, of the backward pass.
         let once = commission_result(&mut commissioning_board(), &[]);
         assert!(matches!(once, CommissionOutcome::Done(_)), "{once:?}");
-        for at in [7, 160, 330] {
+        for at in RESTART_PERIODS {
             let mut emu = commissioning_board();
             let again = commission_result(&mut emu, &[(at, HostMsg::Commission)]);
             assert_eq!(again, once, "Commission again after {at} periods");
@@ -691,7 +698,7 @@ mod tests {
         else {
             panic!("the first run failed");
         };
-        for at in [7, 160, 330] {
+        for at in RESTART_PERIODS {
             let mut emu = commissioning_board();
             let again =
                 commission_result(&mut emu, &[(at, HostMsg::Stop), (at, HostMsg::Commission)]);
@@ -700,6 +707,144 @@ mod tests {
             };
             assert_eq!(c.sequence, once.sequence, "restarted after {at} periods");
             assert_eq!(c.edges_per_elec_rev, 6);
+        }
+    }
+
+    /// The three wirings the start scan covers: the commissioning board's, the default,
+    /// and one whose phase order reverses the motor.
+    const SCAN_WIRINGS: [([u8; 3], [u8; 3]); 3] = [
+        ([1, 2, 0], [2, 1, 0]),
+        ([0, 1, 2], [0, 1, 2]),
+        ([0, 2, 1], [2, 0, 1]),
+    ];
+
+    /// A fresh board wired `(hall, phase)` commissioned after `idle` periods at rest with
+    /// the rotor at `theta` [rad]; its outcome.
+    fn commission_from(wiring: ([u8; 3], [u8; 3]), idle: usize, theta: f64) -> CommissionOutcome {
+        let wiring = Wiring {
+            hall_order: wiring.0,
+            phase_order: wiring.1,
+            current_inverted: false,
+        };
+        let mut emu =
+            EmulatedBoard::new(EmulatorConfig::paper(), wiring, RamFlash::new(None)).unwrap();
+        emu.hardware_mut().place_rotor(theta);
+        replies(&mut emu);
+        for _ in 0..idle {
+            emu.tick();
+        }
+        replies(&mut emu);
+        emu.receive(&frame(&HostMsg::Commission));
+        commission_result(&mut emu, &[])
+    }
+
+    #[test]
+    fn commissioning_succeeds_whenever_it_starts() {
+        // The rotor rests until `Commission` arrives: the idle periods change only the
+        // current sense's noise the run sees. Then rotor angles over one electrical
+        // revolution, boundaries and a sector's middle among them.
+        let step: f64 = control::hall::step_angle(EmulatorConfig::paper().pole_pairs);
+        let starts = (0..300usize)
+            .map(|idle| (idle, 0.0))
+            .chain((0..12).map(|k| (0, (0.5 * f64::from(k) + 0.25) * step)))
+            .chain([(0, 0.5 * step), (0, 3.5 * step), (0, 3.0 * step)]);
+        let mut bad = Vec::new();
+        for (idle, theta) in starts {
+            for w in SCAN_WIRINGS {
+                let r = commission_from(w, idle, theta);
+                // Sector k is the motor's sector the board's centre k points at.
+                let wiring = Wiring {
+                    hall_order: w.0,
+                    phase_order: w.1,
+                    current_inverted: false,
+                };
+                let want: [u8; 6] = std::array::from_fn(|k| {
+                    let motor = wiring.aligned_sector(k as u8);
+                    wiring.hall(control::commission::DEFAULT_SEQUENCE[usize::from(motor)])
+                });
+                if !matches!(r, CommissionOutcome::Done(c)
+                    if c.edges_per_elec_rev == 6 && c.sequence == want)
+                {
+                    bad.push((idle, theta, w, r));
+                }
+            }
+        }
+        assert!(bad.is_empty(), "{} failed: {bad:?}", bad.len());
+    }
+
+    /// Mean torque per amp [N·m/A] in the direction the decoded angle counts up (sector
+    /// numbers of `learned`), of a motor wired as `wiring` driven six-step at `volts` through
+    /// `table`: the back-EMF `applied − R·I` over the speed, averaged once it has settled.
+    fn forward_torque_per_amp(
+        wiring: Wiring,
+        table: control::hall::HallTable,
+        learned: control::hall::HallTable,
+        volts: f32,
+    ) -> f64 {
+        let cfg = EmulatorConfig::paper();
+        let (kt, kb, r) = (cfg.motor.kt, cfg.motor.kb, cfg.motor.r);
+        let mut hw = Hardware::new(cfg, wiring).unwrap();
+        let drive = control::board::Drive::SixStep { volts, table };
+        let dt = f64::from(control::CONTROL_PERIOD_S);
+        // One second to settle, then one to average.
+        let n = (1.0 / dt).round() as usize;
+        for _ in 0..n {
+            hw.apply(drive, dt);
+        }
+        hw.measure();
+        let (mut emf, mut w, mut sectors) = (0.0, 0.0, 0i64);
+        let mut last = learned.sector_of(hw.measure().hall);
+        for _ in 0..n {
+            hw.apply(drive, dt);
+            let t = hw.plant().truth();
+            emf += t.applied_voltage - r * (1.0 + t.heat) * t.i;
+            w += t.omega;
+            for e in hw.measure().edges {
+                let s = learned.sector_of(e.state);
+                if let (Some(a), Some(b)) = (last, s) {
+                    sectors += match (i64::from(b) - i64::from(a)).rem_euclid(6) {
+                        1 => 1,
+                        5 => -1,
+                        _ => 0,
+                    };
+                }
+                last = s;
+            }
+        }
+        // The board's forward direction in the motor's: the sign of the sector count per
+        // turn of the rotor.
+        let forward = if (sectors as f64) * w > 0.0 {
+            1.0
+        } else {
+            -1.0
+        };
+        forward * kt / kb * emf / w
+    }
+
+    #[test]
+    fn the_learned_table_gives_the_most_torque_per_amp_of_its_rotations() {
+        // A table off by a sector still turns the motor, with the torque angle 30° off
+        // its centre: less torque per amp under the trapezoidal back-EMF.
+        for w in SCAN_WIRINGS {
+            let CommissionOutcome::Done(c) = commission_from(w, 0, 0.0) else {
+                panic!("{w:?}: commissioning failed");
+            };
+            let wiring = Wiring {
+                hall_order: w.0,
+                phase_order: w.1,
+                current_inverted: false,
+            };
+            let learned = c.hall_table().unwrap();
+            let volts = 6.0;
+            let tpa: Vec<f64> = (0..6)
+                .map(|rot| {
+                    let seq = std::array::from_fn(|k| c.sequence[(k + 6 - rot) % 6]);
+                    let table = control::hall::HallTable::from_sequence(seq).unwrap();
+                    forward_torque_per_amp(wiring, table, learned, volts)
+                })
+                .collect();
+            let best = (0..6).max_by(|&a, &b| tpa[a].total_cmp(&tpa[b])).unwrap();
+            assert_eq!(best, 0, "{w:?}: torque per amp by rotation {tpa:?}");
         }
     }
 }

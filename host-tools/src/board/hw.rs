@@ -1,14 +1,20 @@
 //! The emulated board's hardware: the motor emulator ([`Plant`]) behind a six-step bridge,
 //! three Hall inputs, a current sense and a capture timer, wired in any order.
 //!
-//! The motor is BLDC-like: bridge step `k` (two phases driven, `control::board`'s step
-//! numbering) holds the rotor in one electrical sector `a(k)`; with the default wiring
-//! `a(k) = k`, and a permutation of the phase connector maps the steps onto each other as
-//! the phase pairs are permuted. With the rotor in sector `s`, the vector makes torque
-//! `K_t·g·I` and back-EMF `K_b·g·ω` with `g = G[(a − s) mod 6]`, `G = [0, 1, 1, 0, −1, −1]`
-//! (the mean of sin(lead) over the sector, normalised: a vector one or two sectors ahead
-//! pulls forward, the vector of the rotor's own sector holds it). The firmware's
-//! commutation, step = sector + 1, gives g = 1: the DC-equivalent motor of the paper.
+//! The motor is BLDC-like, with trapezoidal phase back-EMFs (flat tops of 120°
+//! electrical): the bridge vector applied makes torque `K_t·g·I` and back-EMF `K_b·g·ω`,
+//! where the factor `g` is a continuous function of the lead of the vector's field over the
+//! rotor (60° electrical a Hall sector, sector `s` centred on `s`):
+//! - a six-step vector (bridge step `k`, two phases driven, `control::board`'s numbering)
+//!   has the line-to-line trapezoid ([`two_phase_factor`]); its field points at a sector
+//!   boundary, so the firmware's commutation, step = sector + 1, keeps the lead within
+//!   60..120° where `g = 1`: the DC-equivalent motor of the paper, its R and L line to line;
+//! - a centre vector (commissioning: two phases high together, one low) has its own shape
+//!   ([`centre_factor`]); its field points at a sector's middle and its path has ¾ of the
+//!   line-to-line R and L (two phases in parallel in series with the third).
+//!
+//! A held vector pulls the rotor to where its field is; a permutation of the phase
+//! connector maps the board's vectors onto the motor's as the phases are permuted.
 //! Bridge off: g = 0 and no voltage (the winding current decays, no braking).
 //!
 //! The Hall connector may permute the three sensors, and the current sense may be
@@ -47,8 +53,46 @@ impl Default for Wiring {
 
 /// (high, low) phase of each bridge step, as in `firmware/src/bridge.rs`.
 const STEPS: [(u8, u8); 6] = [(0, 1), (0, 2), (1, 2), (1, 0), (2, 0), (2, 1)];
-/// Torque factor by (aligned sector − rotor sector) mod 6.
-const G: [f64; 6] = [0.0, 1.0, 1.0, 0.0, -1.0, -1.0];
+
+/// `x` wrapped to (−3, 3]: an angle in sectors (60° electrical each) to within half a turn.
+fn wrap_sectors(x: f64) -> f64 {
+    let w = x.rem_euclid(6.0);
+    if w > 3.0 {
+        w - 6.0
+    } else {
+        w
+    }
+}
+
+/// Torque factor of a two-phase vector whose field leads the rotor by `lead` sectors: the
+/// line-to-line back-EMF of trapezoidal phase back-EMFs (flat tops of 120°), normalised to
+/// its flat top. It is zero where the rotor lines up with the field (the equilibrium the
+/// vector holds) and half a turn from there, rises linearly to 1 within one sector (60°
+/// electrical) and stays 1 for the middle sector: `sign(lead)·min(|lead|, 1, 3 − |lead|)`.
+/// Six-step with the right table keeps the lead within 1..2 sectors, where the factor is
+/// 1: the DC-equivalent motor; a table off by a sector loses torque.
+fn two_phase_factor(lead: f64) -> f64 {
+    let l = wrap_sectors(lead);
+    let x = l.abs();
+    l.signum() * x.min(1.0).min(3.0 - x)
+}
+
+/// Torque factor of a centre vector (two phases high together, one low, carrying the
+/// current `I` out of the low phase) whose field leads the rotor by `lead` sectors, in
+/// units of the two-phase flat top: the back-EMF along its path, `(e_a + e_b)/2 − e_c` of
+/// the same trapezoidal phase back-EMFs, over `2·E`. It rises as fast as a two-phase
+/// vector's, to ½ at 30°, then at half that slope to 1 at 90°, symmetric about 90°:
+/// `min(|l|, ½ + (|l| − ½)/2)` for the lead `|l| ≤ 1½` sectors, mirrored beyond.
+fn centre_factor(lead: f64) -> f64 {
+    let l = wrap_sectors(lead);
+    let x = l.abs();
+    let x = x.min(3.0 - x);
+    l.signum() * x.min(0.5 + 0.5 * (x - 0.5))
+}
+
+/// Share of the line-to-line R and L in a centre vector's path: two phases in parallel in
+/// series with the third.
+const CENTRE_PATH: f64 = 0.75;
 
 /// Parses a permutation of 1, 2, 3 written as three digits ("132").
 pub fn parse_order(s: &str) -> Result<[u8; 3]> {
@@ -84,11 +128,40 @@ impl Wiring {
         (0..3).fold(0, |acc, j| acc | (((code >> self.hall_order[j]) & 1) << j))
     }
 
-    /// The sector bridge step `k` holds the rotor in.
-    pub fn aligned_sector(&self, k: u8) -> u8 {
+    /// The motor's bridge step that the board's bridge step `k` drives.
+    fn motor_step(&self, k: u8) -> u8 {
         let (hi, lo) = STEPS[k as usize % 6];
         let pair = (self.phase_order[hi as usize], self.phase_order[lo as usize]);
         STEPS.iter().position(|&p| p == pair).unwrap_or(0) as u8
+    }
+
+    /// Direction of the field of the board's bridge step `k` [sectors of the motor, 60°
+    /// electrical each, sector `s` centred on `s`]: the motor's step `j` points at the
+    /// boundary between its sectors `j` and `j + 1`, so that step `s + 1` leads a rotor in
+    /// sector `s` by 60..120° (the six-step drive).
+    fn step_field(&self, k: u8) -> f64 {
+        f64::from(self.motor_step(k)) + 0.5
+    }
+
+    /// Direction of the field of the board's centre vector with low phase `low` [sectors of
+    /// the motor]: opposite the low phase's axis. The motor's phases U, V, W point at its
+    /// sectors 1, 3, 5 (the fields of its steps, `axis_hi − axis_lo`, then fall on the
+    /// boundaries [`Wiring::step_field`] gives), so the field lies at sector `4 + 2·m` for
+    /// the motor's low phase `m`.
+    fn centre_field(&self, low: u8) -> f64 {
+        let m = self.phase_order[usize::from(low % 3)];
+        f64::from((4 + 2 * m) % 6)
+    }
+
+    /// The motor sector that the board numbers `k` when its own steps are the reference:
+    /// the one centred between the fields of the board's steps `k − 1` and `k` (sector `k`
+    /// of the default wiring), so that the board's step `k + 1` leads it by 60..120°.
+    pub fn aligned_sector(&self, k: u8) -> u8 {
+        let a = self.step_field((k + 5) % 6);
+        let b = self.step_field(k % 6);
+        // The two fields are one sector apart: their midpoint, the short way round.
+        let mid = a + 0.5 * wrap_sectors(b - a);
+        (mid.round() as i64).rem_euclid(6) as u8
     }
 }
 
@@ -141,6 +214,12 @@ impl Hardware {
     /// The emulated motor.
     pub fn plant(&self) -> &Plant {
         &self.plant
+    }
+
+    /// Puts the resting rotor at angle `theta` [rad] (no Hall edges reported for the move).
+    pub fn place_rotor(&mut self, theta: f64) {
+        self.plant.set_truth(theta, 0.0, 0.0, 0.0);
+        self.plant.take_hall_edges();
     }
 
     /// What the board's inputs read now.
@@ -221,31 +300,33 @@ impl Hardware {
             }
             let drive = if self.tripped { Drive::Off } else { drive };
             let theta = self.plant.truth().theta;
-            let s = ((theta / step + 0.5).floor() as i64).rem_euclid(6) as usize;
-            let (v, k) = match drive {
-                Drive::Off => (0.0, None),
+            // (voltage, the torque factor at a positive voltage, the path's share of R and L).
+            let (v, g, path) = match drive {
+                Drive::Off => (0.0, 0.0, 1.0),
                 Drive::SixStep { volts, table } => {
                     let hall = self.wiring.hall(self.plant.hall_state());
                     match table.sector_of(hall) {
-                        Some(sec) => (f64::from(volts), Some(commutation_step(sec, volts < 0.0))),
-                        None => (0.0, None),
+                        Some(sec) => {
+                            let k = commutation_step(sec, volts < 0.0);
+                            let lead = self.wiring.step_field(k) - theta / step;
+                            (f64::from(volts), two_phase_factor(lead), 1.0)
+                        }
+                        None => (0.0, 0.0, 1.0),
                     }
                 }
-                Drive::Vector { step, volts } => (f64::from(volts), Some(step)),
-            };
-            let g = match k {
-                Some(k) if v.is_finite() => {
-                    let a = self.wiring.aligned_sector(k) as usize;
-                    G[(a + 6 - s) % 6] * if v < 0.0 { -1.0 } else { 1.0 }
+                Drive::Centre { low, volts } => {
+                    let lead = self.wiring.centre_field(low) - theta / step;
+                    (f64::from(volts), centre_factor(lead), CENTRE_PATH)
                 }
-                _ => 0.0,
             };
-            self.plant.set_commutation(g);
-            self.plant.apply(if k.is_some() { v } else { 0.0 }, h);
+            let v = if v.is_finite() { v } else { 0.0 };
+            self.plant.set_commutation(if v < 0.0 { -g } else { g });
+            self.plant.set_winding_path(path);
+            self.plant.apply(v, h);
             self.peak_current = self.peak_current.max(self.plant.truth().i.abs());
         }
         self.last_sign = match drive {
-            Drive::SixStep { volts, .. } | Drive::Vector { volts, .. } if volts < 0.0 => -1.0,
+            Drive::SixStep { volts, .. } | Drive::Centre { volts, .. } if volts < 0.0 => -1.0,
             _ => 1.0,
         };
         for e in self.plant.take_hall_edges() {
@@ -282,5 +363,57 @@ mod tests {
         }
         assert!(parse_order("112").is_err());
         assert!(parse_order("12").is_err());
+    }
+
+    /// Back-EMF of the motor's phase `m` per unit speed, normalised to its flat top, at
+    /// rotor angle `theta` [sectors]: a trapezoid with a flat top of two sectors (120°)
+    /// centred 1½ sectors (90°) behind the phase's axis at sector `1 + 2·m`, and ramps of
+    /// one sector.
+    fn phase_emf(m: u8, theta: f64) -> f64 {
+        let axis = f64::from(1 + 2 * m);
+        let x = wrap_sectors(theta - (axis - 1.5)).abs();
+        (3.0 - 2.0 * x).clamp(-1.0, 1.0)
+    }
+
+    #[test]
+    fn torque_factors_are_the_back_emf_along_each_vectors_path() {
+        let w = Wiring::default();
+        for j in 0..600 {
+            let theta = f64::from(j) * 0.01;
+            let e = |m: u8| phase_emf(m, theta);
+            for k in 0..6u8 {
+                // Current in through the high phase, out through the low one: 2·E at most.
+                let (hi, lo) = STEPS[usize::from(k)];
+                let want = 0.5 * (e(hi) - e(lo));
+                let got = two_phase_factor(w.step_field(k) - theta);
+                assert!(
+                    (got - want).abs() < 1e-9,
+                    "step {k} at {theta}: {got} vs {want}"
+                );
+            }
+            for low in 0..3u8 {
+                // Half the current through each high phase, all of it out through `low`.
+                let (a, b) = ((low + 1) % 3, (low + 2) % 3);
+                let want = 0.5 * (0.5 * (e(a) + e(b)) - e(low));
+                let got = centre_factor(w.centre_field(low) - theta);
+                assert!(
+                    (got - want).abs() < 1e-9,
+                    "centre {low} at {theta}: {got} vs {want}"
+                );
+            }
+        }
+        // A centre vector's field lies midway between the two steps sharing its low phase,
+        // the middle of the sector the board's numbering gives it, whatever the wiring.
+        for o in ["123", "132", "213", "231", "312", "321"] {
+            let w = Wiring {
+                phase_order: parse_order(o).unwrap(),
+                ..Wiring::default()
+            };
+            for low in 0..3u8 {
+                let c = control::board::centre_sector(low);
+                let field = w.centre_field(low);
+                assert_eq!(field, f64::from(w.aligned_sector(c)), "{o}, low {low}");
+            }
+        }
     }
 }

@@ -4,9 +4,10 @@ use anyhow::{bail, Result};
 use control::commission::{CommissionError, CommissionOutcome, Commissioning};
 use std::time::Duration;
 
-/// Run the board's Hall commissioning: with the motor free to turn, the board holds each of
-/// its six bridge vectors in turn at a limited voltage (a quarter of u_max, at most the
-/// voltage that drives 30 % of i_max at standstill), both directions, and learns which Hall
+/// Run the board's Hall commissioning: with the motor free to turn, the board holds three
+/// centre vectors in turn (two phases high, one low: each field points at the middle of a
+/// Hall sector) at a limited voltage (a quarter of u_max, at most the voltage that drives
+/// 30 % of i_max at standstill), both directions, and learns which Hall
 /// state belongs to which sector (the Hall table), the direction, the current-sense sign and
 /// whether the Hall sensors have the motor's pole pairs (6 edges per electrical revolution).
 /// The board stores the result with its coefficients (a new flash slot) and uses it at once.
@@ -26,7 +27,7 @@ pub struct Args {
     pub json: bool,
 }
 
-/// Longest wait for the result after the start: the run itself is 18 holds of 0.3 s.
+/// Longest wait for the result after the start: the run itself is 9 holds of 0.3 s.
 const RESULT_TIMEOUT: Duration = Duration::from_secs(60);
 
 fn error_text(e: CommissionError) -> &'static str {
@@ -35,11 +36,11 @@ fn error_text(e: CommissionError) -> &'static str {
             "the Hall state did not change (rotor blocked, voltage too low, or Hall sensors not connected)"
         }
         CommissionError::InvalidState => "a Hall state 000 or 111 was read (a sensor is not connected?)",
-        CommissionError::NotSixStates => "the six vectors did not give six different Hall states",
-        CommissionError::NotAdjacent => "neighbouring vectors gave Hall states more than one sensor apart",
+        CommissionError::NotSixStates => "the three centre vectors did not give three different Hall states",
+        CommissionError::NotAdjacent => "centre vectors 120° apart gave Hall states other than two sensors apart",
         CommissionError::Inconsistent => "the backward pass read other Hall states than the forward pass",
         CommissionError::PolePairs => {
-            "not 6 Hall edges per electrical revolution: the Hall magnet's pole pairs differ from the motor's"
+            "not the sequence's 6 Hall edges per electrical revolution: the Hall magnet's pole pairs differ from the motor's"
         }
         CommissionError::Aborted => "stopped before the end (a stop command or a fault)",
         CommissionError::NoCurrent => {
@@ -102,7 +103,7 @@ pub fn run(args: Args) -> Result<()> {
     } else {
         "default"
     };
-    println!("Hall sequence (bridge steps 0-5): {:?}", c.sequence);
+    println!("Hall sequence (sectors 0-5): {:?}", c.sequence);
     println!("direction: {dir}");
     println!("current-sense sign: {:+}", c.current_sign);
     println!(
@@ -115,7 +116,7 @@ pub fn run(args: Args) -> Result<()> {
         }
     );
     println!(
-        "vector voltage: {} V",
+        "centre vector voltage: {} V",
         crate::cmd::inspect::f32_shortest(c.volts)
     );
     if seq == 0 {

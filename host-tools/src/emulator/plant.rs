@@ -240,6 +240,9 @@ pub struct Plant {
     /// Commutation factor g: torque K_t·g·I and back-EMF K_b·g·ω (1: a DC motor, or a BLDC
     /// motor commutated right; the emulated board sets it per bridge vector).
     g: f64,
+    /// Share of the configured R and L in the current's path (1: the line-to-line winding
+    /// of a two-phase vector; the emulated board sets it per bridge vector).
+    path: f64,
 }
 
 impl std::fmt::Debug for Plant {
@@ -273,6 +276,7 @@ impl Plant {
             sensor_offset,
             omega_prev: 0.0,
             g: 1.0,
+            path: 1.0,
             cfg,
         })
     }
@@ -309,6 +313,17 @@ impl Plant {
     /// applied lines up with the rotor (the emulated board, `board::hw`).
     pub fn set_commutation(&mut self, g: f64) {
         self.g = if g.is_finite() { g } else { 0.0 };
+    }
+
+    /// Set the share of the configured R and L in the current's path for the next
+    /// [`Plant::apply`] (1, the default: the line-to-line winding; ¾ for two phases in
+    /// parallel in series with the third, a three-phase bridge's centre vector).
+    pub fn set_winding_path(&mut self, share: f64) {
+        self.path = if share.is_finite() && share > 0.0 {
+            share
+        } else {
+            1.0
+        };
     }
 
     /// The true state.
@@ -387,8 +402,9 @@ impl Plant {
     /// The new current for a trial new velocity `w` (backward Euler on the winding).
     fn current_for(&self, v: f64, h: f64, r: f64, w: f64) -> f64 {
         let m = &self.cfg.motor;
-        let a = m.l / h + r;
-        let rhs = m.l / h * self.state.i + v - m.kb * self.g * w;
+        let (l, r) = (self.path * m.l, self.path * r);
+        let a = l / h + r;
+        let rhs = l / h * self.state.i + v - m.kb * self.g * w;
         if self.vloss_max == 0.0 {
             return rhs / a;
         }
