@@ -16,9 +16,9 @@
 use control::lugre::LugreParams;
 use motorid::diagnose::candidates::Signals;
 use motorid::emulator::{signal, EmulatorConfig, Plant, SignalKind, SAMPLE_PERIOD};
-use motorid::ident::sindyc::correlation as corr;
 use motorid::log::MotorLog;
 use motorid::numerics::differentiation::smooth_velocity;
+use motorid::numerics::statistics::correlation as corr;
 use motorid::numerics::statistics::rms;
 use motorid::numerics::weak_form::{windows, WeakForm, Window, HOP, WINDOW};
 

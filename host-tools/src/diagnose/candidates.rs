@@ -281,9 +281,8 @@ pub const STICK_SPEED: f64 = 1.0;
 /// two weak-form half-widths (2 × [`crate::numerics::weak_form::HALF_WIDTH_S`]), so that no window that
 /// holds a reversal sees it. A fast reversal can skip the stick band between two samples, and
 /// its window keeps the friction's switch (the velocity estimate's sign lags the true one) and
-/// the drive's own braking right before it: with the column reaching into those windows a
-/// correct model got μ ≈ −0.12 to −0.16 (p down to 4e-26) on a 4–9 Hz speed-swing test signal
-/// that brakes 20 % of the time; with the guard −0.09 to +0.01 (p ≥ 0.03).
+/// the drive's own braking right before it, which a correct model would read as a negative μ
+/// (measured in decision 0026).
 pub const LOAD_FRICTION_GUARD_S: f64 = 2.0 * crate::numerics::weak_form::HALF_WIDTH_S;
 
 impl Signals {
@@ -308,9 +307,8 @@ impl Signals {
     /// two samples before a stop) the column is zero: the effect cannot be told from a lower
     /// K_t there, and no finding is the right answer. The whole `|drive|·sgn(ω)` as a column
     /// is the modelled drive itself, which differs from the base only by the weak form's
-    /// errors (the angle leak of `J·∫φ''θ`, the smoothed acceleration of the modelled drive):
-    /// on a correct model and 60 s of signal a it "explained" 15–50 % of the torque residual
-    /// with μ ≈ 1.3–1.4.
+    /// errors (the angle leak of `J·∫φ''θ`, the smoothed acceleration of the modelled drive),
+    /// which such a column would fit as a large spurious μ (decision 0026).
     pub fn load_friction_column(&self) -> Vec<f64> {
         let guard = samples_for(LOAD_FRICTION_GUARD_S, self.dt, self.len());
         let near = self.near_reversal(guard);
@@ -339,11 +337,10 @@ impl Signals {
     /// and within [`LOAD_FRICTION_GUARD_S`] of a reversal or standstill, as
     /// [`Self::load_friction_column`]. `torque` is `|drive|·sgn(motion)` (0 while stuck).
     ///
-    /// Why: the paper motor brakes only in the ≈13 ms mechanical transient after a step down
-    /// of the voltage (signal d: −46 A, −3 N·m right after a 10 V → 0 step), about one sample
-    /// long. The sampled current (or the modelled drive built from the smoothed acceleration)
-    /// misses most of that interval; the interval mean from the held voltage and the angle
-    /// increment matches the fine-grid braking integral to 4–14 % (signal d, seeds 1–3).
+    /// Why: a motor whose mechanical transient is shorter than a sample brakes for about one
+    /// sample after a step down of the voltage; the sampled current (or the modelled drive
+    /// built from the smoothed acceleration) misses most of that interval, the interval mean
+    /// from the held voltage and the angle increment does not (decision 0026).
     pub fn load_friction_intervals(&self, kb: f64, r: f64) -> (Vec<f64>, Vec<f64>) {
         let n = self.len();
         let guard = samples_for(LOAD_FRICTION_GUARD_S, self.dt, self.len());

@@ -261,10 +261,9 @@ const STRIBECK_RESTARTS: ([f64; 3], [f64; 4]) = ([0.1, 0.25, 0.5], [1.0, 3.0, 10
 /// A refinement can end in a corner where the inductance and inertia mimic a Stribeck bump
 /// the friction law does not carry: with α1 at its bound 0, v0 has no effect on the cost
 /// and the pair cannot leave; with added effects (the grid is then always tried), the
-/// refinement from the base structure can also end with a small α1 and L and J compensating (on the
-/// emulated motor with a hidden offset: L 1.6 times the truth, J 11 % low, then from the
-/// grid's start L and J within 10 % and 4 %). A grid that finds nothing cheaper costs
-/// twelve simulations.
+/// refinement from the base structure can also end with a small α1 and L and J compensating
+/// (the case is measured in decision 0026). A grid that finds nothing cheaper costs twelve
+/// simulations.
 fn restart_stribeck(
     m: &mut Model,
     base_free: &[Free],

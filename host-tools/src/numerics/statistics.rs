@@ -589,6 +589,27 @@ pub fn residualise(c: &[f64], null: &[&[f64]]) -> Vec<f64> {
 }
 
 /// `n` standard normal numbers from `seed` (for the statistics' tests).
+/// Pearson correlation of two equally long series (0 when one is constant).
+pub fn correlation(a: &[f64], b: &[f64]) -> f64 {
+    let n = a.len().min(b.len()) as f64;
+    if n < 2.0 {
+        return 0.0;
+    }
+    let ma = a.iter().sum::<f64>() / n;
+    let mb = b.iter().sum::<f64>() / n;
+    let (mut sab, mut saa, mut sbb) = (0.0, 0.0, 0.0);
+    for (x, y) in a.iter().zip(b) {
+        sab += (x - ma) * (y - mb);
+        saa += (x - ma) * (x - ma);
+        sbb += (y - mb) * (y - mb);
+    }
+    if saa <= 0.0 || sbb <= 0.0 {
+        0.0
+    } else {
+        sab / (saa * sbb).sqrt()
+    }
+}
+
 #[cfg(test)]
 pub(crate) fn white_noise(n: usize, seed: u64) -> Vec<f64> {
     use rand::{Rng, SeedableRng};

@@ -6,6 +6,7 @@ use crate::real_data::static_curve::{Selection, Term};
 use crate::real_data::{emps, emps_loop, locate, omni_dc, screw_drives};
 use anyhow::{Context, Result};
 use motorid::log::MotorLog;
+use motorid::numerics::statistics::correlation;
 use std::fmt::Write;
 use std::path::{Path, PathBuf};
 
@@ -346,12 +347,6 @@ fn position_note(md: &mut String, train: &MotorLog, test: &MotorLog) -> Result<(
         correlation(&ca, &cb)
     );
     Ok(())
-}
-
-/// Pearson correlation of two equally long series.
-fn correlation(a: &[f64], b: &[f64]) -> f64 {
-    use statrs::statistics::Statistics;
-    a.covariance(b) / (a.std_dev() * b.std_dev())
 }
 
 /// The authors' IDIM-LS regression run on each log alone, for the record (no choice is made

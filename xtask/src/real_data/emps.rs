@@ -15,6 +15,7 @@ use super::butterworth::LowPass;
 use super::static_curve::sgn;
 use anyhow::{bail, Result};
 use motorid::log::{ColumnMap, MotorLog, Plant};
+use motorid::numerics::differentiation::smoothed_derivative;
 use motorid::numerics::least_squares::{ols, Ols};
 use std::path::Path;
 
@@ -117,15 +118,7 @@ pub struct Idim {
 /// Butterworth at 100 Hz (filtfilt), then central differences.
 pub fn filtered_states(q: &[f64], dt: f64) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
     let qf = LowPass::new(4, 100.0, 1.0 / dt).filtfilt(q);
-    let d = |x: &[f64]| -> Vec<f64> {
-        let n = x.len();
-        (0..n)
-            .map(|k| {
-                let (a, b) = (k.saturating_sub(1), (k + 1).min(n - 1));
-                (x[b] - x[a]) / ((b - a) as f64 * dt)
-            })
-            .collect()
-    };
+    let d = |x: &[f64]| smoothed_derivative(x, dt, 1);
     let dq = d(&qf);
     let ddq = d(&dq);
     (qf, dq, ddq)

@@ -5,6 +5,7 @@
 use super::{centred_velocity, velocity_half, SindycOptions};
 use crate::ident::hankel::{HankelEmbedding, Selection};
 use crate::log::MotorLog;
+use crate::numerics::statistics::correlation;
 use anyhow::{bail, Context, Result};
 
 /// The embedded signals of the fitting logs.
@@ -66,27 +67,6 @@ impl HiddenState {
             z,
             z_correlation,
         })
-    }
-}
-
-/// Pearson correlation of two equally long series (0 when one is constant).
-pub fn correlation(a: &[f64], b: &[f64]) -> f64 {
-    let n = a.len().min(b.len()) as f64;
-    if n < 2.0 {
-        return 0.0;
-    }
-    let ma = a.iter().sum::<f64>() / n;
-    let mb = b.iter().sum::<f64>() / n;
-    let (mut sab, mut saa, mut sbb) = (0.0, 0.0, 0.0);
-    for (x, y) in a.iter().zip(b) {
-        sab += (x - ma) * (y - mb);
-        saa += (x - ma) * (x - ma);
-        sbb += (y - mb) * (y - mb);
-    }
-    if saa <= 0.0 || sbb <= 0.0 {
-        0.0
-    } else {
-        sab / (saa * sbb).sqrt()
     }
 }
 

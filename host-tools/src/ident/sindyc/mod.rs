@@ -50,7 +50,7 @@ pub mod simulate;
 pub mod step;
 
 pub use crate::numerics::differentiation::{centred_velocity, velocity_half, VELOCITY_HALF_S};
-pub use embedding::correlation;
+
 pub use model_file::{equations_text, from_table, pareto_text, to_table};
 pub use rows::{weak_rows, weak_rows_generic, weak_rows_uniform};
 pub use simulate::{
