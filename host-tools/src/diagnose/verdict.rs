@@ -63,6 +63,10 @@ pub struct Check {
     pub passed: bool,
     /// One sentence for a person.
     pub detail: String,
+    /// A caveat on the check's level on this log: the parameter check's clusters spanning
+    /// fewer than [`CLUSTER_SPAN`] correlation times ([`short_clusters_note`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub note: Option<String>,
 }
 
 /// The residual of every other row (disjoint windows when the stride is half the window).
@@ -181,6 +185,7 @@ pub fn whiteness_check(resid: &[f64], cluster: &[usize], level: f64) -> Check {
         p_value: t.p_value,
         share: r2,
         passed,
+        note: None,
         detail: format!(
             "the residual's own past explains {:.0}% of it (Breusch–Godfrey, {} lags of disjoint windows, robust p = {:.1e}; white at level {:.1e}: {})",
             100.0 * r2,
@@ -201,6 +206,7 @@ fn cannot_judge(name: &'static str, rows: usize) -> Check {
         p_value: f64::NAN,
         share: 0.0,
         passed: false,
+        note: None,
         detail: format!("cannot judge the {name} of the residual on {rows} disjoint windows: too few windows or held inputs for the test to reject anything"),
     }
 }
@@ -220,6 +226,7 @@ pub fn input_check(resid: &[f64], input: &[f64], cluster: &[usize], level: f64) 
         p_value: t.p_value,
         share,
         passed,
+        note: None,
         detail: format!(
             "the input over the last {} windows explains {:.0}% of the residual (robust T² = {:.2}, p = {:.1e}; independent at level {:.1e}: {})",
             LAGS + 1,
@@ -303,12 +310,14 @@ pub fn parameter_check(
             p_value: 0.0,
             share: 1.0,
             passed: false,
+            note: None,
             detail: "the model's own equations give a non-finite residual on this log (a zero or non-finite constant): refit first".to_string(),
         };
     }
-    let cluster = block_clusters(hold, cluster_block(refit, cols.len()));
+    let block = cluster_block(refit, cols.len());
+    let cluster = block_clusters(hold, block);
     let null: Vec<&[f64]> = nuisance.iter().map(|c| c.as_slice()).collect();
-    let (test, share) = statistics::robust_test_beyond(
+    let (test, share) = statistics::small_sample_test_beyond(
         given,
         &null,
         cols,
@@ -320,32 +329,50 @@ pub fn parameter_check(
         c.share = share;
         return c;
     };
-    let passed = t.p_value >= level;
+    let p = t.p_value;
+    let passed = p >= level;
     Check {
         name: "parameters",
         statistic: t.t2,
-        p_value: t.p_value,
+        p_value: p,
         share,
         passed,
+        note: short_clusters_note(block, statistics::correlation_time(refit)),
         detail: if passed {
             format!(
-                "the model's own parameters are as good as a refit of its structure (its columns explain {:.0}% of the model's equation error beyond its own run's; robust T² = {:.1}, p = {:.1e} on {} clusters)",
+                "the model's own parameters are as good as a refit of its structure (its columns explain {:.0}% of the model's equation error beyond its own run's; robust T² = {:.1}, p = {:.1e} on {} clusters, {:.0} effective)",
                 100.0 * share,
                 t.t2,
-                t.p_value,
-                t.clusters
+                p,
+                t.clusters,
+                t.effective_clusters
             )
         } else {
             format!(
-                "the model's parameters are off: its structure's columns explain {:.0}% of its equation error beyond its own run's (robust T² = {:.1}, p = {:.1e} on {} clusters, level {:.1e}); refit first (`motorid fit`), then diagnose again",
+                "the model's parameters are off: its structure's columns explain {:.0}% of its equation error beyond its own run's (robust T² = {:.1}, p = {:.1e} on {} clusters, {:.0} effective, level {:.1e}); refit first (`motorid fit`), then diagnose again",
                 100.0 * share,
                 t.t2,
-                t.p_value,
+                p,
                 t.clusters,
+                t.effective_clusters,
                 level
             )
         },
     }
+}
+
+/// The caveat of a parameter check whose blocks of `block` rows ([`cluster_block`]) are
+/// shorter than [`CLUSTER_SPAN`] correlation times `tau` [rows]: the log is too short for
+/// [`CLUSTERS_PER_COLUMN`] clusters of that span, neighbouring clusters share more of their
+/// error, and the test may reject a correct model more often than its level says.
+pub fn short_clusters_note(block: usize, tau: f64) -> Option<String> {
+    let tau = tau.max(1.0);
+    let span = block as f64 / tau;
+    (block < (CLUSTER_SPAN * tau).ceil() as usize).then(|| {
+        format!(
+            "clusters span {span:.1} correlation times (the test is read for {CLUSTER_SPAN:.0}): on this short log the check may reject correct parameters more often than its level"
+        )
+    })
 }
 
 /// The free-run comparison of a refit with the model as given ([`free_run_gain`]).
@@ -441,7 +468,7 @@ pub fn moved_columns(
                 .map(|(_, c)| c.as_slice())
                 .chain(nuisance.iter().map(|c| c.as_slice()))
                 .collect();
-            let (t, _) = statistics::robust_test_beyond(
+            let (t, _) = statistics::small_sample_test_beyond(
                 given,
                 &null,
                 std::slice::from_ref(&cols[k]),
