@@ -25,7 +25,9 @@
 //! whose rounding error drifts slowly, one shared error for all the windows of the hold.
 //! Tests that assume one variance and independent windows read both as structure; the
 //! jackknifed cluster-robust Wald tests of [`crate::numerics::statistics::robust_wald_test`]
-//! do not for the input and the carriers (why this form: `docs/decisions/0011-robust-wald-verdict.md`). A test that cannot
+//! do not for the input and the carriers (why this form: `docs/decisions/0011-robust-wald-verdict.md`;
+//! the parameter check reads its test in the small-sample form of
+//! [`crate::numerics::statistics::small_sample_test_beyond`], decision 0019). A test that cannot
 //! reject on the log leaves the verdict "cannot judge".
 //! 4. **What carries the rest** ([`super::carriers`]).
 //!
@@ -266,9 +268,10 @@ pub fn block_clusters(hold: &[usize], block: usize) -> Vec<usize> {
 /// share, a small part of each cluster's variance.
 pub const CLUSTER_SPAN: f64 = 5.0;
 
-/// Fewest clusters per tested column in the parameter check: 10. The jackknifed Wald test
-/// reads its statistic against `F(r, G − r)`, which is exact for normal cluster scores and
-/// holds its level for skewed ones only when the G clusters far outnumber the r columns.
+/// Fewest clusters per tested column in the parameter check: 10. The test reads its
+/// statistic as Hotelling's `T²` with the clusters' effective number as its degrees of
+/// freedom, which is exact for normal cluster scores and holds its level for skewed ones
+/// only when the clusters far outnumber the r columns.
 pub const CLUSTERS_PER_COLUMN: usize = 10;
 
 /// Rows per cluster of the parameter check: [`CLUSTER_SPAN`] integrated correlation times
@@ -289,8 +292,9 @@ pub fn cluster_block(refit: &[f64], columns: usize) -> usize {
 /// wrong parameter leaves `X·Δβ` in it. `cols` are those columns as instruments (computed
 /// on the model's run where there is one, so that they do not share the angle's rounding
 /// error with `given`), `nuisance` columns that are no parameter of the model as given,
-/// left free. The test is the jackknifed cluster-robust Wald test of `given` on `cols`
-/// beyond `nuisance` ([`statistics::robust_test_beyond`]), clustered by [`block_clusters`]
+/// left free. The test is the small-sample cluster-robust Wald test of `given` on `cols`
+/// beyond `nuisance` ([`statistics::small_sample_test_beyond`]: CR2 scores, read with the
+/// effective number of clusters as degrees of freedom), clustered by [`block_clusters`]
 /// in blocks of [`cluster_block`] rows (`hold`: the held input of each row; `refit`: the
 /// refit's residual, for its correlation time). The check's share is that of `given`,
 /// beyond `nuisance`, that `cols` explain.
@@ -648,6 +652,16 @@ pub fn given_residuals(
 mod tests {
     use super::*;
     use crate::numerics::statistics::white_noise as noise;
+
+    /// The note appears exactly when the blocks are shorter than 5 correlation times.
+    #[test]
+    fn short_clusters_are_noted_only_below_their_span() {
+        assert!(short_clusters_note(5, 1.0).is_none());
+        assert!(short_clusters_note(12, 2.3).is_none());
+        let note = short_clusters_note(2, 1.0).unwrap();
+        assert!(note.contains("2.0 correlation times"), "{note}");
+        assert!(short_clusters_note(5, 1.2).is_some());
+    }
 
     #[test]
     fn white_noise_passes_whiteness_at_about_the_level() {

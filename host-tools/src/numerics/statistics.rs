@@ -213,7 +213,8 @@ pub fn rms(x: &[f64]) -> f64 {
 pub struct RobustTest {
     /// Hotelling's `T²` of the columns' coefficients.
     pub t2: f64,
-    /// Its p-value, read from `F(r, G − r)`.
+    /// Its p-value, read from `F(r, G − r)` ([`small_sample_test_beyond`]: from
+    /// `F(r, η − r + 1)`).
     pub p_value: f64,
     /// Numerical rank `r` of the tested columns' cluster scores.
     pub rank: usize,
@@ -577,7 +578,7 @@ fn approximate_hotelling(a: &[f64], scores: &[Vec<f64>], eta: f64) -> Option<Rob
     let r = scores.len();
     let eta = eta.min(scores.first()?.len() as f64);
     let rf = r as f64;
-    if !(eta > rf + 1.0) {
+    if eta.is_nan() || eta <= rf + 1.0 {
         return None;
     }
     let base = hotelling(a, scores)?;
@@ -979,7 +980,7 @@ mod tests {
             .enumerate()
             .map(|(i, v)| if i < 9 { 3.0 + v } else { 0.1 * v })
             .collect();
-        let nb = orthonormal_span(&[ncol.clone()], n).unwrap();
+        let nb = orthonormal_span(std::slice::from_ref(&ncol), n).unwrap();
         let z: Vec<Vec<f64>> = (1..3).map(|k| residualise(&draw(k), &[&ncol])).collect();
         let q = orthonormal_span(&z, n).unwrap();
         let u = residualise(&draw(3), &[&ncol]);
