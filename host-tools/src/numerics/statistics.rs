@@ -329,7 +329,10 @@ enum Form {
 /// `s_g ~ N(0, σ²A_g)`, and `η` is the number of degrees of freedom of the Wishart matrix of
 /// the same mean (`σ²I`) and the same total variance of its entries (Pustejovsky and Tipton,
 /// *J. Bus. Econ. Stat.* 36, 2018). `η = G` when every cluster holds the same share of every
-/// direction, and falls towards the number of clusters that hold them when a few do.
+/// direction, and falls towards the number of clusters that hold them when a few do. The
+/// paper computes the variance from the adjusted residuals, which the fit correlates; this
+/// count leaves that out, a correlation that grows with a cluster's leverage (which the
+/// leverage cap keeps at most a half on the tested directions).
 fn effective_clusters(q: &[Vec<f64>], bounds: &[(usize, usize)]) -> f64 {
     let r = q.len();
     let total: f64 = bounds
