@@ -15,7 +15,9 @@ use std::path::PathBuf;
     noise-free run on the same input) significantly explain that residual less the same \
     residual on that run, and the refitted values of the parameters that moved make a free \
     run that follows the log's angle and current significantly closer, the parameters are off \
-    and each moved one is printed with its refitted value: refit first. When the log is too     short for that test's clusters to span 5 correlation times of the residual, a NOTE says     so (JSON: the check's \"note\"): the check may then reject correct parameters more often     than its level. WHITENESS: the residual must not be predictable from its own past \
+    and each moved one is printed with its refitted value: refit first. When the log is too \
+    short for that test's clusters to span 5 correlation times of the residual, a NOTE says \
+    so (JSON: the check's \"note\"): the check's level was not measured at that length. WHITENESS: the residual must not be predictable from its own past \
     (Breusch-Godfrey on disjoint windows). INPUT: it must not be explained by the input of the \
     last windows. Both, and the carriers below, use robust tests that hold their level where the \
     residual is noisier in some windows than others (slips, steps) and where the windows of one \

@@ -367,14 +367,15 @@ pub fn parameter_check(
 
 /// The caveat of a parameter check whose blocks of `block` rows ([`cluster_block`]) are
 /// shorter than [`CLUSTER_SPAN`] correlation times `tau` [rows]: the log is too short for
-/// [`CLUSTERS_PER_COLUMN`] clusters of that span, neighbouring clusters share more of their
-/// error, and the test may reject a correct model more often than its level says.
+/// [`CLUSTERS_PER_COLUMN`] clusters of that span (per tested column), and the check's level
+/// was not measured at such a cluster length. The span printed is a lower bound: a block
+/// never splits a held input, so clusters can be longer.
 pub fn short_clusters_note(block: usize, tau: f64) -> Option<String> {
     let tau = tau.max(1.0);
     let span = block as f64 / tau;
     (block < (CLUSTER_SPAN * tau).ceil() as usize).then(|| {
         format!(
-            "clusters span {span:.1} correlation times (the test is read for {CLUSTER_SPAN:.0}): on this short log the check may reject correct parameters more often than its level"
+            "clusters span at least {span:.1} correlation times, fewer than the {CLUSTER_SPAN:.0} the check's level was measured at (the log is short for the columns tested): its level at this length is not known"
         )
     })
 }
