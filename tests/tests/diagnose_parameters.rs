@@ -1,8 +1,9 @@
 //! The parameter check of `diagnose` on the built-in emulator: a model whose own numbers are
 //! off (inertia +10 %, Coulomb friction doubled, resistance +39 %) is told to refit, with the
-//! refitted value of the parameter that moved. (A
-//! correct model staying adequate on 20 seeds is
-//! `diagnose_verdict::a_correct_model_is_adequate`.)
+//! refitted value of the parameter that moved. (A correct model staying adequate on 20
+//! seeds is `diagnose_verdict::a_correct_model_is_adequate`; the check's level on correct
+//! models, down to the level at which it decides, is measured by
+//! `parameter_check_calibration`.)
 use control::effects::Effect;
 use motorid::diagnose::{diagnose, Diagnosis, Options, Structure};
 use motorid::emulator::{simulate_signal, EmulatorConfig, SignalKind};
@@ -141,48 +142,24 @@ fn constants_off_together_read_the_inertia_with_the_refitted_kb() {
     }
 }
 
-/// The parameter check's level on correct models: the p-values of both equations' Wald
-/// tests over seeds `1..=SEEDS` (40) of signal a, 60 s, on the built-in emulator and the
-/// independent plant (`PLANTS`, `eo`), and how many fall below 1 %, 5 % and 10 %. The
-/// rates are compared with their binomial bands in decision 0019.
-/// `cargo test --release -p e2e --test diagnose_parameters -- --ignored --nocapture`
+/// On 20 s the torque equation's refit has too few rows for 10 clusters of 5 correlation
+/// times per column of the LuGre structure: its parameter check says so in a note; on 120 s
+/// neither equation's check needs one.
 #[test]
-#[ignore]
-fn parameter_check_level_scan() {
-    use e2e::false_alarms::{correct_model, Maker};
-    let env = |k: &str| std::env::var(k).ok();
-    let seeds: u64 = env("SEEDS").and_then(|s| s.parse().ok()).unwrap_or(40);
-    for plant in env("PLANTS").unwrap_or_else(|| "eo".into()).chars() {
-        let maker = match plant {
-            'e' => Maker::Emulator,
-            _ => Maker::Other {
-                hall: None,
-                noise: None,
-            },
-        };
-        let mut ps: Vec<(&str, f64)> = Vec::new();
-        for seed in 1..=seeds {
-            let d = correct_model(maker, SignalKind::A, seed, &Options::default());
-            for c in d.verdict.checks.iter().filter(|c| c.name == "parameters") {
-                let eq = if c.detail.starts_with("voltage") {
-                    "voltage"
-                } else {
-                    "torque"
-                };
-                println!("{plant} seed {seed} {eq}: p {:.2e}", c.p_value);
-                ps.push((eq, c.p_value));
-            }
-        }
-        for eq in ["voltage", "torque"] {
-            let p: Vec<f64> = ps.iter().filter(|x| x.0 == eq).map(|x| x.1).collect();
-            let below = |a: f64| p.iter().filter(|v| **v < a).count();
-            println!(
-                "{plant} {eq}: {} logs, p < 1 %: {}, p < 5 %: {}, p < 10 %: {}",
-                p.len(),
-                below(0.01),
-                below(0.05),
-                below(0.10)
-            );
-        }
-    }
+fn a_short_log_notes_its_short_clusters() {
+    let noted = |seconds: f64| -> Vec<String> {
+        diagnose_changed(1, seconds, |_| {})
+            .verdict
+            .checks
+            .iter()
+            .filter(|c| c.name == "parameters")
+            .filter_map(|c| c.note.clone())
+            .collect()
+    };
+    let short = noted(20.0);
+    assert!(
+        short.iter().any(|n| n.contains("correlation times")),
+        "{short:?}"
+    );
+    assert!(noted(120.0).is_empty());
 }

@@ -15,7 +15,9 @@ use std::path::PathBuf;
     noise-free run on the same input) significantly explain that residual less the same \
     residual on that run, and the refitted values of the parameters that moved make a free \
     run that follows the log's angle and current significantly closer, the parameters are off \
-    and each moved one is printed with its refitted value: refit first. WHITENESS: the residual must not be predictable from its own past \
+    and each moved one is printed with its refitted value: refit first. When the log is too \
+    short for that test's clusters to span 5 correlation times of the residual, a NOTE says \
+    so (JSON: the check's \"note\"): the check's level was not measured at that length. WHITENESS: the residual must not be predictable from its own past \
     (Breusch-Godfrey on disjoint windows). INPUT: it must not be explained by the input of the \
     last windows. Both, and the carriers below, use robust tests that hold their level where the \
     residual is noisier in some windows than others (slips, steps) and where the windows of one \
@@ -215,6 +217,16 @@ fn print_text(model: &Model, log: &MotorLog, args: &Args, d: &diagnose::Diagnosi
     }
 }
 
+/// The caveats of the checks, passed or failed, each under the check's name and equation.
+fn print_notes(v: &diagnose::Verdict) {
+    for c in &v.checks {
+        if let Some(note) = &c.note {
+            let eq = c.detail.split(':').next().unwrap_or("");
+            println!("  NOTE {:<10} {eq}: {note}", c.name);
+        }
+    }
+}
+
 fn print_verdict(model: &Model, log: &MotorLog, args: &Args, d: &diagnose::Diagnosis) {
     let v = &d.verdict;
     let failed: Vec<&diagnose::verdict::Check> = v.checks.iter().filter(|c| !c.passed).collect();
@@ -225,6 +237,7 @@ fn print_verdict(model: &Model, log: &MotorLog, args: &Args, d: &diagnose::Diagn
             crate::log::echo_path(&args.data),
             100.0 * v.level
         );
+        print_notes(v);
         return;
     }
     // Every failed check is one that could not decide (its p-value NaN), and nothing else
@@ -255,6 +268,7 @@ fn print_verdict(model: &Model, log: &MotorLog, args: &Args, d: &diagnose::Diagn
         };
         println!("  {tag} {:<10} {}", c.name, c.detail);
     }
+    print_notes(v);
     if !v.refit.is_empty() {
         let vals: Vec<String> = v
             .refit

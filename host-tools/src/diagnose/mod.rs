@@ -664,6 +664,7 @@ fn too_few_windows(j: &Judged) -> verdict::Check {
         p_value: f64::NAN,
         share: 0.0,
         passed: false,
+        note: None,
         detail: format!(
             "{} equation: only {} usable windows (at least {MIN_VERDICT_ROWS} are needed to test the residual); record a longer log with more motion",
             j.eq.label(),
@@ -754,6 +755,7 @@ fn untested_carriers(j: &Judged, untested: &[&str]) -> Option<verdict::Check> {
         p_value: f64::NAN,
         share: 0.0,
         passed: false,
+        note: None,
         detail: format!(
             "{} equation: cannot judge what {} carry: too few windows or held inputs for the test to reject anything",
             j.eq.label(),

@@ -25,7 +25,9 @@
 //! whose rounding error drifts slowly, one shared error for all the windows of the hold.
 //! Tests that assume one variance and independent windows read both as structure; the
 //! jackknifed cluster-robust Wald tests of [`crate::numerics::statistics::robust_wald_test`]
-//! do not for the input and the carriers (why this form: `docs/decisions/0011-robust-wald-verdict.md`). A test that cannot
+//! do not for the input and the carriers (why this form: `docs/decisions/0011-robust-wald-verdict.md`;
+//! the parameter check reads its test in the small-sample form of
+//! [`crate::numerics::statistics::small_sample_test_beyond`], decision 0019). A test that cannot
 //! reject on the log leaves the verdict "cannot judge".
 //! 4. **What carries the rest** ([`super::carriers`]).
 //!
@@ -63,6 +65,10 @@ pub struct Check {
     pub passed: bool,
     /// One sentence for a person.
     pub detail: String,
+    /// A caveat on the check's level on this log: the parameter check's clusters spanning
+    /// fewer than [`CLUSTER_SPAN`] correlation times ([`short_clusters_note`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub note: Option<String>,
 }
 
 /// The residual of every other row (disjoint windows when the stride is half the window).
@@ -181,6 +187,7 @@ pub fn whiteness_check(resid: &[f64], cluster: &[usize], level: f64) -> Check {
         p_value: t.p_value,
         share: r2,
         passed,
+        note: None,
         detail: format!(
             "the residual's own past explains {:.0}% of it (Breusch–Godfrey, {} lags of disjoint windows, robust p = {:.1e}; white at level {:.1e}: {})",
             100.0 * r2,
@@ -201,6 +208,7 @@ fn cannot_judge(name: &'static str, rows: usize) -> Check {
         p_value: f64::NAN,
         share: 0.0,
         passed: false,
+        note: None,
         detail: format!("cannot judge the {name} of the residual on {rows} disjoint windows: too few windows or held inputs for the test to reject anything"),
     }
 }
@@ -220,6 +228,7 @@ pub fn input_check(resid: &[f64], input: &[f64], cluster: &[usize], level: f64) 
         p_value: t.p_value,
         share,
         passed,
+        note: None,
         detail: format!(
             "the input over the last {} windows explains {:.0}% of the residual (robust T² = {:.2}, p = {:.1e}; independent at level {:.1e}: {})",
             LAGS + 1,
@@ -259,9 +268,10 @@ pub fn block_clusters(hold: &[usize], block: usize) -> Vec<usize> {
 /// share, a small part of each cluster's variance.
 pub const CLUSTER_SPAN: f64 = 5.0;
 
-/// Fewest clusters per tested column in the parameter check: 10. The jackknifed Wald test
-/// reads its statistic against `F(r, G − r)`, which is exact for normal cluster scores and
-/// holds its level for skewed ones only when the G clusters far outnumber the r columns.
+/// Fewest clusters per tested column in the parameter check: 10. The test reads its
+/// statistic as Hotelling's `T²` with the clusters' effective number as its degrees of
+/// freedom, which is exact for normal cluster scores and holds its level for skewed ones
+/// only when the clusters far outnumber the r columns.
 pub const CLUSTERS_PER_COLUMN: usize = 10;
 
 /// Rows per cluster of the parameter check: [`CLUSTER_SPAN`] integrated correlation times
@@ -282,8 +292,9 @@ pub fn cluster_block(refit: &[f64], columns: usize) -> usize {
 /// wrong parameter leaves `X·Δβ` in it. `cols` are those columns as instruments (computed
 /// on the model's run where there is one, so that they do not share the angle's rounding
 /// error with `given`), `nuisance` columns that are no parameter of the model as given,
-/// left free. The test is the jackknifed cluster-robust Wald test of `given` on `cols`
-/// beyond `nuisance` ([`statistics::robust_test_beyond`]), clustered by [`block_clusters`]
+/// left free. The test is the small-sample cluster-robust Wald test of `given` on `cols`
+/// beyond `nuisance` ([`statistics::small_sample_test_beyond`]: CR2 scores, read with the
+/// effective number of clusters as degrees of freedom), clustered by [`block_clusters`]
 /// in blocks of [`cluster_block`] rows (`hold`: the held input of each row; `refit`: the
 /// refit's residual, for its correlation time). The check's share is that of `given`,
 /// beyond `nuisance`, that `cols` explain.
@@ -303,12 +314,14 @@ pub fn parameter_check(
             p_value: 0.0,
             share: 1.0,
             passed: false,
+            note: None,
             detail: "the model's own equations give a non-finite residual on this log (a zero or non-finite constant): refit first".to_string(),
         };
     }
-    let cluster = block_clusters(hold, cluster_block(refit, cols.len()));
+    let block = cluster_block(refit, cols.len());
+    let cluster = block_clusters(hold, block);
     let null: Vec<&[f64]> = nuisance.iter().map(|c| c.as_slice()).collect();
-    let (test, share) = statistics::robust_test_beyond(
+    let (test, share) = statistics::small_sample_test_beyond(
         given,
         &null,
         cols,
@@ -320,32 +333,51 @@ pub fn parameter_check(
         c.share = share;
         return c;
     };
-    let passed = t.p_value >= level;
+    let p = t.p_value;
+    let passed = p >= level;
     Check {
         name: "parameters",
         statistic: t.t2,
-        p_value: t.p_value,
+        p_value: p,
         share,
         passed,
+        note: short_clusters_note(block, statistics::correlation_time(refit)),
         detail: if passed {
             format!(
-                "the model's own parameters are as good as a refit of its structure (its columns explain {:.0}% of the model's equation error beyond its own run's; robust T² = {:.1}, p = {:.1e} on {} clusters)",
+                "the model's own parameters are as good as a refit of its structure (its columns explain {:.0}% of the model's equation error beyond its own run's; robust T² = {:.1}, p = {:.1e} on {} clusters, {:.0} effective)",
                 100.0 * share,
                 t.t2,
-                t.p_value,
-                t.clusters
+                p,
+                t.clusters,
+                t.effective_clusters
             )
         } else {
             format!(
-                "the model's parameters are off: its structure's columns explain {:.0}% of its equation error beyond its own run's (robust T² = {:.1}, p = {:.1e} on {} clusters, level {:.1e}); refit first (`motorid fit`), then diagnose again",
+                "the model's parameters are off: its structure's columns explain {:.0}% of its equation error beyond its own run's (robust T² = {:.1}, p = {:.1e} on {} clusters, {:.0} effective, level {:.1e}); refit first (`motorid fit`), then diagnose again",
                 100.0 * share,
                 t.t2,
-                t.p_value,
+                p,
                 t.clusters,
+                t.effective_clusters,
                 level
             )
         },
     }
+}
+
+/// The caveat of a parameter check whose blocks of `block` rows ([`cluster_block`]) are
+/// shorter than [`CLUSTER_SPAN`] correlation times `tau` [rows]: the log is too short for
+/// [`CLUSTERS_PER_COLUMN`] clusters of that span (per tested column), and the check's level
+/// was not measured at such a cluster length. The span printed is a lower bound: a block
+/// never splits a held input, so clusters can be longer.
+pub fn short_clusters_note(block: usize, tau: f64) -> Option<String> {
+    let tau = tau.max(1.0);
+    let span = block as f64 / tau;
+    (block < (CLUSTER_SPAN * tau).ceil() as usize).then(|| {
+        format!(
+            "clusters span at least {span:.1} correlation times, fewer than the {CLUSTER_SPAN:.0} the check's level was measured at (the log is short for the columns tested): its level at this length is not known"
+        )
+    })
 }
 
 /// The free-run comparison of a refit with the model as given ([`free_run_gain`]).
@@ -441,7 +473,7 @@ pub fn moved_columns(
                 .map(|(_, c)| c.as_slice())
                 .chain(nuisance.iter().map(|c| c.as_slice()))
                 .collect();
-            let (t, _) = statistics::robust_test_beyond(
+            let (t, _) = statistics::small_sample_test_beyond(
                 given,
                 &null,
                 std::slice::from_ref(&cols[k]),
@@ -621,6 +653,16 @@ pub fn given_residuals(
 mod tests {
     use super::*;
     use crate::numerics::statistics::white_noise as noise;
+
+    /// The note appears exactly when the blocks are shorter than 5 correlation times.
+    #[test]
+    fn short_clusters_are_noted_only_below_their_span() {
+        assert!(short_clusters_note(5, 1.0).is_none());
+        assert!(short_clusters_note(12, 2.3).is_none());
+        let note = short_clusters_note(2, 1.0).unwrap();
+        assert!(note.contains("2.0 correlation times"), "{note}");
+        assert!(short_clusters_note(5, 1.2).is_some());
+    }
 
     #[test]
     fn white_noise_passes_whiteness_at_about_the_level() {

@@ -213,7 +213,8 @@ pub fn rms(x: &[f64]) -> f64 {
 pub struct RobustTest {
     /// Hotelling's `T²` of the columns' coefficients.
     pub t2: f64,
-    /// Its p-value, read from `F(r, G − r)`.
+    /// Its p-value, read from `F(r, G − r)` ([`small_sample_test_beyond`]: from
+    /// `F(r, η − r + 1)`).
     pub p_value: f64,
     /// Numerical rank `r` of the tested columns' cluster scores.
     pub rank: usize,
@@ -222,6 +223,9 @@ pub struct RobustTest {
     /// Share of `u`'s sum of squares in the directions left out because one cluster decides
     /// them alone ([`CLUSTER_LEVERAGE_CAP`]): what the test could not look at.
     pub dropped_share: f64,
+    /// Degrees of freedom of the variance estimate `SᵀS`: `G` for [`robust_wald_test`], the
+    /// effective number of clusters `η ≤ G` for [`small_sample_test_beyond`].
+    pub effective_clusters: f64,
 }
 
 /// Cluster-robust Wald test that the columns `z` explain nothing of `u`, the residual of the
@@ -257,7 +261,7 @@ pub fn robust_wald_test_capped(
     cluster: &[usize],
     cap: f64,
 ) -> Option<RobustTest> {
-    wald_test_beyond_basis(u, z, &[], cluster, cap)
+    wald_test_beyond_basis(u, z, &[], cluster, (cap, Form::Jackknife))
 }
 
 /// [`robust_wald_test_capped`] of `u` and `z` that are residuals after the null model whose
@@ -269,7 +273,7 @@ fn wald_test_beyond_basis(
     z: &[Vec<f64>],
     null: &[Vec<f64>],
     cluster: &[usize],
-    cap: f64,
+    (cap, form): (f64, Form),
 ) -> Option<RobustTest> {
     let n = u.len().min(cluster.len());
     if null.iter().any(|c| c.len() < n) {
@@ -298,10 +302,56 @@ fn wald_test_beyond_basis(
         .iter()
         .map(|c| c.iter().zip(u).map(|(x, y)| x * y).sum())
         .collect();
-    let scores = jackknife_scores(u, &q, null, &a, &bounds)?;
-    let mut t = hotelling(&a, &scores)?;
+    let scores = jackknife_scores(u, &q, null, &a, &bounds, form)?;
+    let mut t = match form {
+        Form::Jackknife => hotelling(&a, &scores)?,
+        Form::SmallSample => approximate_hotelling(&a, &scores, effective_clusters(&q, &bounds))?,
+    };
     t.dropped_share = dropped_share;
     Some(t)
+}
+
+/// How [`wald_test_beyond_basis`] adjusts each cluster's score and reads its statistic.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Form {
+    /// The leave-one-cluster-out score `(I − H_g)⁻¹e_g` (CR3), read against `F(r, G − r)`.
+    Jackknife,
+    /// The score `(I − H_g)^(−1/2) e_g` (CR2, Bell and McCaffrey, *Surv. Methodol.* 28, 2002),
+    /// whose `SᵀS` is unbiased for the coefficients' variance when the rows are independent
+    /// with one variance, read as Hotelling's `T²` with the effective number of clusters `η`
+    /// of that estimate as its degrees of freedom ([`small_sample_test_beyond`]).
+    SmallSample,
+}
+
+/// Effective number of clusters of the variance estimate on the orthonormal directions `q`:
+/// `η = r(r+1) / Σ_g (tr(A_g²) + tr(A_g)²)`, `A_g = Q_gᵀQ_g` the cluster's leverage. With
+/// independent rows of one variance `σ²` the CR2 estimate is `Σ_g s_g s_gᵀ` with
+/// `s_g ~ N(0, σ²A_g)`, and `η` is the number of degrees of freedom of the Wishart matrix of
+/// the same mean (`σ²I`) and the same total variance of its entries (Pustejovsky and Tipton,
+/// *J. Bus. Econ. Stat.* 36, 2018). `η = G` when every cluster holds the same share of every
+/// direction, and falls towards the number of clusters that hold them when a few do. The
+/// paper computes the variance from the adjusted residuals, which the fit correlates; this
+/// count leaves that out, a correlation that grows with a cluster's leverage (which the
+/// leverage cap keeps at most a half on the tested directions).
+fn effective_clusters(q: &[Vec<f64>], bounds: &[(usize, usize)]) -> f64 {
+    let r = q.len();
+    let total: f64 = bounds
+        .iter()
+        .map(|&bd| {
+            let a = cluster_leverage(q, bd);
+            let trace: f64 = (0..r).map(|i| a[(i, i)]).sum();
+            let square: f64 = (0..r)
+                .flat_map(|i| (0..r).map(move |j| (i, j)))
+                .map(|(i, j)| a[(i, j)] * a[(i, j)])
+                .sum();
+            square + trace * trace
+        })
+        .sum();
+    if total > 0.0 {
+        (r * (r + 1)) as f64 / total
+    } else {
+        bounds.len() as f64
+    }
 }
 
 /// `[lo, hi)` row ranges of the consecutive runs of one id in `cluster`.
@@ -416,6 +466,7 @@ fn jackknife_scores(
     null: &[Vec<f64>],
     a: &[f64],
     bounds: &[(usize, usize)],
+    form: Form,
 ) -> Option<Vec<Vec<f64>>> {
     let r = q.len();
     let e: Vec<f64> = (0..u.len())
@@ -428,7 +479,11 @@ fn jackknife_scores(
         if hi - lo == 1 {
             // One row: `(I − h_i)⁻¹` is the scalar `1/(1 − h_i)` of the full model's leverage.
             let h: f64 = full.iter().map(|c| c[lo] * c[lo]).sum();
-            let inv = 1.0 / (1.0 - h).max(LEAVE_OUT_FLOOR);
+            let left = (1.0 - h).max(LEAVE_OUT_FLOOR);
+            let inv = match form {
+                Form::Jackknife => 1.0 / left,
+                Form::SmallSample => 1.0 / left.sqrt(),
+            };
             for (col, c) in scores.iter_mut().zip(q) {
                 col.push(c[lo] * e[lo] * inv);
             }
@@ -443,11 +498,18 @@ fn jackknife_scores(
         });
         let evd = leverage.self_adjoint_eigen(faer::Side::Lower).ok()?;
         let (lam, vecs) = (evd.S().column_vector(), evd.U());
-        // t = (I − F_gᵀF_g)⁻¹ F_gᵀ e_g.
+        // t = g(F_gᵀF_g)·F_gᵀ e_g, with (I − F_gF_gᵀ)^p = I + F_g·g(F_gᵀF_g)·F_gᵀ for the
+        // power p = −1 (CR3: g(λ) = 1/(1 − λ)) or −1/2 (CR2: g(λ) = ((1 − λ)^(−1/2) − 1)/λ,
+        // 1/2 at λ = 0).
         let mut t = vec![0.0; f];
         for m in 0..f {
-            let vb: f64 = (0..f).map(|c| vecs[(c, m)] * bf[c]).sum::<f64>()
-                / (1.0 - lam[m]).max(LEAVE_OUT_FLOOR);
+            let left = (1.0 - lam[m]).max(LEAVE_OUT_FLOOR);
+            let gain = match form {
+                Form::Jackknife => 1.0 / left,
+                Form::SmallSample if lam[m] > 1e-12 => (1.0 / left.sqrt() - 1.0) / lam[m],
+                Form::SmallSample => 0.5,
+            };
+            let vb: f64 = (0..f).map(|c| vecs[(c, m)] * bf[c]).sum::<f64>() * gain;
             for c in 0..f {
                 t[c] += vecs[(c, m)] * vb;
             }
@@ -508,6 +570,30 @@ fn hotelling(a: &[f64], scores: &[Vec<f64>]) -> Option<RobustTest> {
         rank: r,
         clusters: g,
         dropped_share: 0.0,
+        effective_clusters: gf,
+    })
+}
+
+/// Hotelling's `T²(r, η)` of the projections `a` against the CR2 cluster scores `S`:
+/// `W = aᵀ(SᵀS)⁻¹a`, `(η − r + 1)/(η·r)·W ~ F(r, η − r + 1)` ([`small_sample_test_beyond`]);
+/// `t2` is `W`. `None` when `η ≤ r + 1` or as [`hotelling`].
+fn approximate_hotelling(a: &[f64], scores: &[Vec<f64>], eta: f64) -> Option<RobustTest> {
+    let r = scores.len();
+    let eta = eta.min(scores.first()?.len() as f64);
+    let rf = r as f64;
+    if eta.is_nan() || eta <= rf + 1.0 {
+        return None;
+    }
+    let base = hotelling(a, scores)?;
+    let g = base.clusters as f64;
+    let wald = base.t2 * g / (g - 1.0);
+    let f = (eta - rf + 1.0) / (eta * rf) * wald;
+    let p = FisherSnedecor::new(rf, eta - rf + 1.0).ok()?.sf(f);
+    p.is_finite().then_some(RobustTest {
+        t2: wald,
+        p_value: p,
+        effective_clusters: eta,
+        ..base
     })
 }
 
@@ -545,6 +631,38 @@ pub fn robust_test_beyond(
     cluster: &[usize],
     cap: f64,
 ) -> (Option<RobustTest>, f64) {
+    test_beyond(y, null, cols, cluster, (cap, Form::Jackknife))
+}
+
+/// [`robust_test_beyond`] in the small-sample form of Pustejovsky and Tipton (*J. Bus. Econ.
+/// Stat.* 36, 2018): the CR2 scores (each cluster's residual times `(I − H_g)^(−1/2)`, `H_g`
+/// its block of the full model's hat matrix) and `W = aᵀ(SᵀS)⁻¹a` read as Hotelling's
+/// `T²(r, η)`, `(η − r + 1)/(η·r)·W ~ F(r, η − r + 1)`, with the effective number of
+/// clusters `η` ([`RobustTest::effective_clusters`]) in place of `G`. `F(r, G − r)` takes
+/// the variance estimate to have `G − 1` degrees of freedom, which holds only when every
+/// cluster holds about the same share of the tested directions; where a few clusters hold
+/// most of one (a parameter seen only at the reversals, or in the few holds of a step
+/// input), the estimate rests on those few and the test rejects too often, more so the
+/// further out in its tail it is read. The jackknife's CR3 scores correct that in part by
+/// inflating the few clusters' scores, and with `η` as well would correct it twice. `None`
+/// when `η ≤ r + 1`, or as [`robust_test_beyond`].
+pub fn small_sample_test_beyond(
+    y: &[f64],
+    null: &[&[f64]],
+    cols: &[Vec<f64>],
+    cluster: &[usize],
+    cap: f64,
+) -> (Option<RobustTest>, f64) {
+    test_beyond(y, null, cols, cluster, (cap, Form::SmallSample))
+}
+
+fn test_beyond(
+    y: &[f64],
+    null: &[&[f64]],
+    cols: &[Vec<f64>],
+    cluster: &[usize],
+    (cap, form): (f64, Form),
+) -> (Option<RobustTest>, f64) {
     let base = super::least_squares::lstsq(null, y);
     // Each column scaled to unit norm before it is residualised, so that the rank is judged
     // on columns of like scale ([`robust_wald_test`]) and a column the null model spans
@@ -575,7 +693,7 @@ pub fn robust_test_beyond(
     let null_cols: Vec<Vec<f64>> = null.iter().map(|c| c[..n].to_vec()).collect();
     let null_basis = orthonormal_span(&null_cols, n).unwrap_or_default();
     (
-        wald_test_beyond_basis(&base.resid, &z, &null_basis, cluster, cap),
+        wald_test_beyond_basis(&base.resid, &z, &null_basis, cluster, (cap, form)),
         share,
     )
 }
@@ -831,7 +949,7 @@ mod tests {
             .map(|c| c.iter().zip(&u).map(|(x, v)| x * v).sum())
             .collect();
         let bounds = cluster_bounds(&cluster);
-        let scores = jackknife_scores(&u, &q, &nb, &a, &bounds).unwrap();
+        let scores = jackknife_scores(&u, &q, &nb, &a, &bounds, Form::Jackknife).unwrap();
         for (g, &(lo, hi)) in bounds.iter().enumerate() {
             // Refit y on [1, ncol, q] without the cluster; its residuals on the cluster.
             let keep: Vec<usize> = (0..n).filter(|&i| i < lo || i >= hi).collect();
@@ -859,6 +977,140 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// The CR2 score of each cluster is `Q_gᵀ(I − H_g)^(−1/2)e_g`, the inverse square root
+    /// taken here by the eigenvalues of the cluster's own `I − H_g` (rows × rows) rather
+    /// than through the columns' Gram matrix as [`jackknife_scores`] does.
+    #[test]
+    fn small_sample_scores_use_the_inverse_square_root_of_the_clusters_hat() {
+        let n = 60;
+        let cluster: Vec<usize> = (0..n).map(|i| (i / 3 + i / 7) % 17).collect();
+        let cluster: Vec<usize> = {
+            // Consecutive runs of unequal length: ids increase at each change.
+            let mut id = 0;
+            (0..n)
+                .map(|i| {
+                    if i > 0 && cluster[i] != cluster[i - 1] {
+                        id += 1;
+                    }
+                    id
+                })
+                .collect()
+        };
+        let draw = |k: u64| noise(n, 500 + k);
+        let ncol: Vec<f64> = draw(0)
+            .iter()
+            .enumerate()
+            .map(|(i, v)| if i < 9 { 3.0 + v } else { 0.1 * v })
+            .collect();
+        let nb = orthonormal_span(std::slice::from_ref(&ncol), n).unwrap();
+        let z: Vec<Vec<f64>> = (1..3).map(|k| residualise(&draw(k), &[&ncol])).collect();
+        let q = orthonormal_span(&z, n).unwrap();
+        let u = residualise(&draw(3), &[&ncol]);
+        let a: Vec<f64> = q
+            .iter()
+            .map(|c| c.iter().zip(&u).map(|(x, v)| x * v).sum())
+            .collect();
+        let e: Vec<f64> = (0..n)
+            .map(|i| u[i] - q.iter().zip(&a).map(|(c, ac)| c[i] * ac).sum::<f64>())
+            .collect();
+        let bounds = cluster_bounds(&cluster);
+        let scores = jackknife_scores(&u, &q, &nb, &a, &bounds, Form::SmallSample).unwrap();
+        let full: Vec<&Vec<f64>> = nb.iter().chain(&q).collect();
+        for (g, &(lo, hi)) in bounds.iter().enumerate() {
+            let m = hi - lo;
+            let left = faer::Mat::<f64>::from_fn(m, m, |i, j| {
+                let h: f64 = full.iter().map(|c| c[lo + i] * c[lo + j]).sum();
+                if i == j {
+                    1.0 - h
+                } else {
+                    -h
+                }
+            });
+            let evd = left.self_adjoint_eigen(faer::Side::Lower).unwrap();
+            let (lam, v) = (evd.S().column_vector(), evd.U());
+            let adjusted: Vec<f64> = (0..m)
+                .map(|i| {
+                    (0..m)
+                        .map(|k| {
+                            let proj: f64 = (0..m).map(|j| v[(j, k)] * e[lo + j]).sum();
+                            v[(i, k)] * proj / lam[k].sqrt()
+                        })
+                        .sum()
+                })
+                .collect();
+            for (j, qj) in q.iter().enumerate() {
+                let s: f64 = (0..m).map(|i| qj[lo + i] * adjusted[i]).sum();
+                assert!(
+                    (scores[j][g] - s).abs() < 1e-9 * (1.0 + s.abs()),
+                    "cluster {g} direction {j}: {} vs {s}",
+                    scores[j][g]
+                );
+            }
+        }
+    }
+
+    /// The effective number of clusters is `G` when every cluster holds the same share of
+    /// the tested direction, and the number of clusters that hold it when only some do.
+    #[test]
+    fn effective_clusters_count_the_clusters_that_hold_the_direction() {
+        let (n, size) = (400, 10);
+        let bounds: Vec<(usize, usize)> =
+            (0..n / size).map(|g| (g * size, g * size + size)).collect();
+        let even: Vec<f64> = (0..n)
+            .map(|i| if i % 2 == 0 { 1.0 } else { -1.0 })
+            .collect();
+        let q = orthonormal_span(&[even], n).unwrap();
+        assert!((effective_clusters(&q, &bounds) - 40.0).abs() < 1e-9);
+        let few: Vec<f64> = (0..n)
+            .map(|i| if i < 4 * size { 1.0 } else { 0.0 })
+            .collect();
+        let q = orthonormal_span(&[few], n).unwrap();
+        assert!((effective_clusters(&q, &bounds) - 4.0).abs() < 1e-9);
+    }
+
+    /// A column that lives mostly in 5 of 40 clusters (ten times the amplitude there): under
+    /// the null the small-sample test holds its level at 5 % and 1 % over 400 draws (more
+    /// than 32 or 10 rejections have binomial probability below 0.1 %), where the variance
+    /// estimate rests on about 5 clusters and `F(1, G − 1)` reads it as if on 39.
+    #[test]
+    fn small_sample_test_holds_its_level_where_few_clusters_hold_the_column() {
+        let (n, size) = (400, 10);
+        let cluster: Vec<usize> = (0..n).map(|k| k / size).collect();
+        let col: Vec<f64> = noise(n, 900)
+            .iter()
+            .enumerate()
+            .map(|(i, v)| if i < 5 * size { 3.0 * v } else { 0.3 * v })
+            .collect();
+        let ones = vec![1.0; n];
+        let (mut at5, mut at1) = (0, 0);
+        for seed in 0..400 {
+            let y = noise(n, 1000 + seed);
+            let (t, _) = small_sample_test_beyond(
+                &y,
+                &[&ones],
+                std::slice::from_ref(&col),
+                &cluster,
+                CLUSTER_LEVERAGE_CAP,
+            );
+            let t = t.unwrap();
+            assert!(t.effective_clusters < 10.0, "η = {}", t.effective_clusters);
+            at5 += usize::from(t.p_value < 0.05);
+            at1 += usize::from(t.p_value < 0.01);
+        }
+        assert!(at5 <= 32 && at1 <= 10, "{at5} at 5 %, {at1} at 1 % of 400");
+        // Not the trivial way: a strong effect is still found.
+        let e = noise(n, 77);
+        let y: Vec<f64> = (0..n).map(|i| e[i] + 0.5 * col[i]).collect();
+        let (t, _) = small_sample_test_beyond(
+            &y,
+            &[&ones],
+            std::slice::from_ref(&col),
+            &cluster,
+            CLUSTER_LEVERAGE_CAP,
+        );
+        assert!(t.unwrap().p_value < 1e-3);
     }
 
     #[test]
