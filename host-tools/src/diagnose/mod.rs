@@ -43,7 +43,9 @@ use control::motor::MotorParams;
 use serde::Serialize;
 
 /// Family-wise false-alarm probability of one `diagnose` run: the chance that a correct model
-/// gets any finding at all is at most 0.1 % (Bonferroni over every variant tested).
+/// gets any finding at all is at most 0.1 % (Bonferroni over every variant tested), where
+/// the entry tests' p-values are valid; columns built from the measured angle share its
+/// rounding with the residual, and for those the level is not shown (decision 0024).
 pub const FAMILY_ALPHA: f64 = 1e-3;
 /// Smallest fraction of an equation's residual sum of squares an effect must explain to be
 /// reported: 2 %. Below that, adding the effect would not change a fit noticeably, however
