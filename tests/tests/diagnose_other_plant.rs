@@ -281,7 +281,6 @@ fn check(name: &str, kind: SignalKind) {
 }
 
 #[test]
-#[ignore = "cogging is carried by theta, not named: its RMS torque over the log (about 6 mN·m) is below the relevance floor of 10 % of Coulomb friction (8.5 mN·m) although the harmonic-6 candidate is significant"]
 fn cogging_on_a() {
     check("cogging", SignalKind::A);
 }
@@ -298,7 +297,7 @@ fn deadtime_on_d() {
 }
 
 #[test]
-#[ignore = "called adequate on every seed: +1-2 % of resistance on the multisine; the thermal candidate misses the Bonferroni level and the refitted R does not run closer to the log than the given one"]
+#[ignore = "called adequate on every seed: +1-2 % of resistance on the multisine; the parameter check rejects the given R, but its refit (with an unidentifiable L) does not run closer to the log, and the thermal candidate misses the Bonferroni level (docs/decisions/0024-significance-not-size.md)"]
 fn thermal_on_a() {
     check("thermal", SignalKind::A);
 }
@@ -346,13 +345,12 @@ fn load_friction_on_d() {
 }
 
 #[test]
-#[ignore = "called adequate on two seeds of three: the Stribeck candidate is significant (p < 1e-9) but its whole-log RMS torque is below the relevance floor, and the refitted Coulomb friction runs closer to the log on one seed only"]
 fn stribeck_on_a() {
     check("stribeck", SignalKind::A);
 }
 
 #[test]
-#[ignore = "not named: only the checks that cannot judge voltage steps fail"]
+#[ignore = "named on 1 of 3 seeds only: on the others only the checks that cannot judge voltage steps fail"]
 fn stribeck_on_d() {
     check("stribeck", SignalKind::D);
 }
@@ -443,13 +441,11 @@ const TABLE_TAIL: &str = "\nHow to read it. On the voltage steps d a correct mod
      carrier or a failed check that decided. The tests in \
      `tests/tests/diagnose_other_plant.rs` hold each effect to the promise (never adequate, \
      named on at least 2 of 3 seeds) and keep the cases that fall short `#[ignore]`d with \
-     their cause. Causes seen here: the relevance floor (a finding's torque, its RMS over the \
-     whole log, must reach 10 % of the Coulomb friction) turns down a significant Stribeck \
-     dip, which acts only at low speed, and a cogging of 10 mN·m (an RMS of about 6 mN·m against a floor \
-     of 8.5). The cogging is then carried by `theta`; the Stribeck dip leaves the model \
-     adequate where the parameter check does not refit the Coulomb friction. A winding that \
-     warms by up to 5 K over a minute of the multisine raises R by up to 2 %: the parameter \
-     check refits R, but the thermal candidate misses the Bonferroni level. Gear tooth \
+     their cause. Causes seen here: a winding that warms by up to 5 K over a minute of the \
+     multisine raises R by up to 2 %: the parameter check of the voltage equation rejects the \
+     given R, but the refitted model's free run is no closer to the log, so the given \
+     parameters stand, and the thermal candidate misses the Bonferroni level \
+     (docs/decisions/0024-significance-not-size.md). Gear tooth \
      friction proportional to a transmitted torque that is mostly inertial looks like wrong \
      constants (the refit raises J and the friction). On steps, the cluster-robust entry test \
      has some 30 held inputs and names dead time or load friction on one seed of three. A \

@@ -2,8 +2,9 @@
 //! columns (the base), add the candidate effect that removes the most residual, while it is
 //! significant (the entry test: the jackknifed cluster-robust Wald test of its columns beyond
 //! the base, on disjoint windows clustered by held input, at the family's per-test level),
-//! relevant (a share of the base residual and a torque above the relevance floor), favoured
-//! by BIC and physically plausible; one variant per effect kind.
+//! relevant (a share of the base residual; a second inertia also a torque above the floor of
+//! `MIN_TORQUE_FRACTION`), favoured by BIC and physically plausible; one variant per effect
+//! kind.
 //!
 //! Why a robust entry test: a correct model's residual is far noisier in the windows of a
 //! slip or an input step than elsewhere, and the windows of one held input share one error
@@ -258,8 +259,8 @@ impl<'a> Problem<'a> {
     /// The candidate to add: the one removing the most residual among those significant,
     /// relevant (against the model's own residual `rss0`: an effect that removes 2 % of what
     /// is left after larger findings may still change the model's fit by a fraction of a
-    /// percent, and in the torque equation at least `min_torque`), favoured by BIC and
-    /// physically plausible.
+    /// percent), favoured by BIC and physically plausible; a second inertia on a coupling
+    /// also at least `min_torque` (see `MIN_TORQUE_FRACTION`).
     fn pick(&self, st: &State, best: &[Best], alpha: f64, min_explained: f64) -> Option<Best> {
         best.iter()
             .filter(|(ci, rss1, t)| {
@@ -267,7 +268,7 @@ impl<'a> Problem<'a> {
                     && (st.rss_cur - rss1) >= min_explained * st.rss0
                     && t.delta_bic < 0.0
                     && plausible(&self.spec_for(&st.base, *ci))
-                    && (self.data.eq != Equation::Mechanical
+                    && (self.data.cand[*ci].0.kind != EffectKind::Compliance
                         || self.size_of(&st.base, *ci) >= st.min_torque)
             })
             .max_by(|a, b| b.1.total_cmp(&a.1))
@@ -499,8 +500,18 @@ mod tests {
     }
 
     #[test]
-    fn an_effect_below_the_torque_floor_is_not_reported() {
+    fn a_significant_effect_is_reported_whatever_its_torque() {
         let mut d = data(0.5, 0.05);
+        d.min_torque = 1.0;
+        let out = select(&d, &Options::default(), 1e-3, &mut units());
+        let names: Vec<&str> = out.findings.iter().map(|f| f.name.as_str()).collect();
+        assert_eq!(names, ["offset"]);
+    }
+
+    #[test]
+    fn a_second_inertia_below_the_torque_floor_is_not_reported() {
+        let mut d = data(0.5, 0.05);
+        d.cand[0].0.kind = EffectKind::Compliance;
         d.min_torque = 1.0;
         let out = select(&d, &Options::default(), 1e-3, &mut units());
         assert!(out.findings.is_empty(), "{:?}", out.findings);

@@ -17,9 +17,10 @@
 //!    shared error of one held input are not taken for evidence.
 //!    It is kept when it is **significant** (p below [`FAMILY_ALPHA`] divided by the number of
 //!    candidate variants tested, Bonferroni, and a lower BIC) **and relevant** (it explains at
-//!    least [`MIN_EXPLAINED`] of the model's own residual sum of squares, and its torque is at
-//!    least [`MIN_TORQUE_FRACTION`] of the Coulomb friction); it then joins the base and the
-//!    next one is tested, until none passes.
+//!    least [`MIN_EXPLAINED`] of the model's own residual sum of squares; a second inertia on
+//!    a coupling, whose column shares the angle's reading with the inertia's, also a torque of
+//!    at least [`MIN_TORQUE_FRACTION`] of the Coulomb friction); it then joins the base and
+//!    the next one is tested, until none passes.
 //! 4. Each finding's coefficients become a spec (`cogging:harmonic=7,amp=0.03,phase=0.2`) that
 //!    `fit --add` accepts; its score is the fraction of the base residual it explains.
 pub mod candidates;
@@ -42,7 +43,9 @@ use control::motor::MotorParams;
 use serde::Serialize;
 
 /// Family-wise false-alarm probability of one `diagnose` run: the chance that a correct model
-/// gets any finding at all is at most 0.1 % (Bonferroni over every variant tested).
+/// gets any finding at all is at most 0.1 % (Bonferroni over every variant tested), where
+/// the entry tests' p-values are valid; columns built from the measured angle share its
+/// rounding with the residual, and for those the level is not shown (decision 0024).
 pub const FAMILY_ALPHA: f64 = 1e-3;
 /// Smallest fraction of an equation's residual sum of squares an effect must explain to be
 /// reported: 2 %. Below that, adding the effect would not change a fit noticeably, however
@@ -1074,15 +1077,16 @@ pub(crate) fn select_rows(v: &[f64], keep: &[bool]) -> Vec<f64> {
         .collect()
 }
 
-/// Smallest torque worth reporting, as a fraction of the model's Coulomb friction (or of the
-/// RMS drive torque when the model has none): 10 %. When the model has Coulomb friction
+/// Smallest torque of a second inertia on a coupling (`compliance`) worth reporting, as a
+/// fraction of the model's Coulomb friction (or of the RMS drive torque when the model has
+/// none): 10 %. Only that effect has it: its column, like the inertia's, is computed from the
+/// measured angle, whose rounding the residual shares, and on slow multisines the entry test
+/// reads that shared error as a small load (`docs/decisions/0024-significance-not-size.md`);
+/// every other effect is reported when it is significant and explains its share. When the model has Coulomb friction
 /// without a positive value, the one refitted in the base is used; when `diagnose` finds
 /// Coulomb friction, the one found is used for the effects tested after it (a closed-loop
 /// positioning axis spends its drive on inertia: its RMS drive can be several times its
 /// friction, so that smaller effects would never count while Coulomb is unknown).
-/// The weak-form torque balance carries systematic errors of a few percent of the friction
-/// (Hall quantisation at reversals, the sampled current standing for its interval); an effect
-/// below this would not change a fit.
 pub const MIN_TORQUE_FRACTION: f64 = 0.10;
 
 fn min_torque(st: &Structure, s: &Signals) -> f64 {
