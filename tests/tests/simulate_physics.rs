@@ -7,6 +7,7 @@ use motorid::emulator::experiments::steady_speed;
 use motorid::emulator::{
     signal, simulate, EmulatorConfig, LoadInputs, Plant, SignalKind, SAMPLE_PERIOD,
 };
+use motorid::numerics::statistics::rms_diff;
 
 fn quiet() -> EmulatorConfig {
     EmulatorConfig {
@@ -177,10 +178,6 @@ fn series(cfg: &EmulatorConfig, kind: SignalKind, secs: f64) -> (Vec<f64>, Vec<f
     let u = signal(kind, secs, 5);
     let r = simulate(cfg, &u, SAMPLE_PERIOD).unwrap();
     (r.truth.omega, r.truth.i)
-}
-
-fn rms_diff(a: &[f64], b: &[f64]) -> f64 {
-    (a.iter().zip(b).map(|(x, y)| (x - y).powi(2)).sum::<f64>() / a.len() as f64).sqrt()
 }
 
 #[test]

@@ -36,6 +36,7 @@
 //! list is missing and no variable carries structure.
 use super::candidates::Signals;
 use crate::log::{MotorLog, Plant};
+use crate::numerics::differentiation::smoothed_derivative;
 use crate::numerics::statistics;
 use crate::numerics::weak_form::WeakForm;
 use control::effects::{total_sensor_offset, total_voltage_loss, Effect, EffectInputs};
@@ -538,8 +539,9 @@ pub fn load_torque(effects: &[Effect<f64>], s: &Signals) -> Vec<f64> {
             }
             Effect::Backlash { j2, gap } if j2 > 0.0 && s.dt > 0.0 => {
                 let mut a = s.backlash_acceleration(gap);
-                for (k, w) in s.omega.windows(3).enumerate() {
-                    a[k + 1] += (w[2] - w[0]) / (2.0 * s.dt);
+                let rotor = smoothed_derivative(&s.omega, s.dt, 1);
+                for (a, r) in a.iter_mut().zip(&rotor) {
+                    *a += r;
                 }
                 (j2, a)
             }

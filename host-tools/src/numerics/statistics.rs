@@ -208,6 +208,15 @@ pub fn rms(x: &[f64]) -> f64 {
     (x.iter().map(|v| v * v).sum::<f64>() / x.len() as f64).sqrt()
 }
 
+/// Root mean square of `a − b` over their common length.
+pub fn rms_diff(a: &[f64], b: &[f64]) -> f64 {
+    let n = a.len().min(b.len());
+    if n == 0 {
+        return 0.0;
+    }
+    (a.iter().zip(b).map(|(x, y)| (x - y).powi(2)).sum::<f64>() / n as f64).sqrt()
+}
+
 /// A cluster-robust test of added columns ([`robust_wald_test`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RobustTest {

@@ -224,15 +224,7 @@ impl WeakForm {
     pub fn new(n: usize, dt: f64, half: usize, stride: usize) -> WeakForm {
         let half = half.max(2);
         let phi: Vec<f64> = (-(half as isize)..=(half as isize))
-            .map(|k| {
-                let s = k as f64 / half as f64;
-                let q = 1.0 - s * s;
-                if q > 0.0 {
-                    q.powi(4)
-                } else {
-                    0.0
-                }
-            })
+            .map(|k| bump(k as f64 / half as f64))
             .collect();
         let centres = if n > 2 * half {
             (half..n - half).step_by(stride.max(1)).collect()

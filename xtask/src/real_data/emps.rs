@@ -352,11 +352,7 @@ pub fn simulate_closed_loop(
     (qs, us)
 }
 
-/// Root mean square of `a − b`.
-pub fn rms_diff(a: &[f64], b: &[f64]) -> f64 {
-    let n = a.len().min(b.len());
-    (a.iter().zip(b).map(|(x, y)| (x - y).powi(2)).sum::<f64>() / n as f64).sqrt()
-}
+pub use motorid::numerics::statistics::rms_diff;
 
 /// Relative error `100·‖a − b‖/‖a‖` [%] (the description's eq. 11).
 pub fn relative_error_pct(a: &[f64], b: &[f64]) -> f64 {
