@@ -175,3 +175,15 @@ pub(super) fn key_mut<'a, D>(e: &'a mut Effect<D>, key: &str) -> Option<&'a mut 
         _ => None,
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The help text states the number of nodes the board holds.
+    #[test]
+    fn help_names_the_most_bins() {
+        let help = D.help.unwrap();
+        assert!(help.contains(&format!("[2 to {TABLE_MAX_BINS}]")), "{help}");
+    }
+}
