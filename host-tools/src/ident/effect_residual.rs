@@ -153,9 +153,9 @@ fn mechanical(m: &mut Model, logs: &[MotorLog]) {
             .collect();
         for w in weak_form::log_windows(log) {
             let drive = if voltage {
-                m.motor.kt * w.int(&cur)
+                m.motor.kt * w.int(cur)
             } else {
-                w.int_zoh(&cur)
+                w.int_zoh(cur)
             };
             y.push(drive - m.motor.j * w.int_dd(&log.theta) - w.int(&fric));
             for (c, gv) in g.iter().enumerate() {
