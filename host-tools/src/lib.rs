@@ -20,6 +20,7 @@ pub mod closed_loop;
 pub mod cmd;
 pub mod diagnose;
 pub mod effect_spec;
+pub mod effects;
 pub mod emulator;
 pub mod ident;
 pub mod input;

@@ -226,7 +226,7 @@ mod effects_serde {
                 let kind = EffectKind::from_name(&en.name).ok_or_else(|| {
                     serde::de::Error::custom(format!("unknown effect '{}'", echo(&en.name)))
                 })?;
-                let keys = crate::effect_spec::keys(kind);
+                let keys = crate::effects::of(kind).keys;
                 for k in en.values.keys() {
                     if !keys.iter().any(|key| key.name == k) {
                         return Err(serde::de::Error::custom(format!(

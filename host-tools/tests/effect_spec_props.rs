@@ -2,7 +2,8 @@
 //! mutations of valid specs never panic; an error is one line naming the flag; a spec that
 //! parses has finite values within its keys' ranges and gives the same effect back.
 use control::effects::EffectKind;
-use motorid::effect_spec::{keys, EffectSpec};
+use motorid::effect_spec::EffectSpec;
+use motorid::effects;
 use proptest::prelude::*;
 
 /// Longest error line: the flag, the echoed spec and the list of known effects or keys.
@@ -23,7 +24,7 @@ fn parse_checked(flag: &str, spec: &str) -> Result<(), TestCaseError> {
             );
         }
         Ok(s) => {
-            for key in keys(s.kind) {
+            for key in effects::of(s.kind).keys {
                 let v = s.get(key.name);
                 let (lo, hi) = key.range();
                 prop_assert!(v.is_finite(), "{} = {}", key.name, v);
@@ -60,7 +61,7 @@ fn valid_spec() -> impl Strategy<Value = String> {
         proptest::collection::vec((any::<proptest::sample::Index>(), 0.0f64..=1.0), 0..4),
     )
         .prop_map(|(kind, picks)| {
-            let ks = keys(kind);
+            let ks = effects::of(kind).keys;
             let mut parts: Vec<String> = Vec::new();
             let mut used = std::collections::BTreeSet::new();
             for (i, f) in picks {

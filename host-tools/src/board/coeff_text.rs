@@ -5,7 +5,7 @@
 //! Units are the blob's, rotary SI (for a linear axis read rad as m and N·m as N). The JSON
 //! also carries the [`Coefficients`] object itself, which reads back into the same values,
 //! and the blob's byte layout.
-use crate::effect_spec::{self, EffectSpec};
+use crate::effect_spec::EffectSpec;
 use anyhow::Result;
 use control::blob::{self, Coefficients};
 use serde_json::{json, Value};
@@ -95,7 +95,7 @@ fn walk(v: &Value, path: String, specs: &[EffectSpec], out: &mut Vec<Leaf>) {
     }
 }
 
-/// The unit of a leaf: the fixed table, or an effect key's unit from [`effect_spec::keys`].
+/// The unit of a leaf: the fixed table, or an effect key's unit from [`crate::effects::Descriptor::keys`].
 fn unit_of(path: &str, specs: &[EffectSpec]) -> &'static str {
     if let Some((_, u)) = UNITS.iter().find(|(p, _)| *p == path) {
         return u;
@@ -103,7 +103,11 @@ fn unit_of(path: &str, specs: &[EffectSpec]) -> &'static str {
     let parts: Vec<&str> = path.split('.').collect();
     if let ["effects", k, _, key] = parts[..] {
         if let Some(spec) = k.parse::<usize>().ok().and_then(|k| specs.get(k)) {
-            if let Some(key) = effect_spec::keys(spec.kind).iter().find(|x| x.name == key) {
+            if let Some(key) = crate::effects::of(spec.kind)
+                .keys
+                .iter()
+                .find(|x| x.name == key)
+            {
                 return key.unit;
             }
         }

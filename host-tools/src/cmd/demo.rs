@@ -551,7 +551,7 @@ pub fn hidden_effects(args: &Args) -> Result<Vec<EffectSpec>> {
             DEFAULT_EFFECT
         };
         let mut spec = EffectSpec::bare(k);
-        for key in crate::effect_spec::keys(k) {
+        for key in crate::effects::of(k).keys {
             spec.values.insert(key.name.to_string(), key.default);
         }
         vec![spec]

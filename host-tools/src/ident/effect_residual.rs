@@ -11,13 +11,15 @@
 //!   position_load) and `∫φ` (offset).
 //!
 //! Only the added effects' magnitudes change; the base model's parameters are kept.
+use crate::effects::{self, TorqueSignals, WeakTorque};
+use crate::ident::free_params::Slot;
 use crate::ident::linear;
 use crate::log::{MotorLog, Plant};
 use crate::model::Model;
 use crate::numerics::differentiation::smooth_velocity;
 use crate::numerics::least_squares::lstsq;
 use crate::numerics::weak_form;
-use control::effects::Effect;
+use control::effects::{smooth_sign, Effect};
 
 /// `base` with the effects of `with` (structure) re-estimated on `base`'s residuals in `logs`.
 /// Effects this regression does not cover keep the values they have in `with`.
@@ -69,39 +71,63 @@ fn electrical(m: &mut Model, logs: &[MotorLog]) {
         lg.sigma0 *= c;
         lg.sigma1 *= c;
     }
-    for (c, &(k, _)) in extra.iter().enumerate() {
-        let c = 3 + c;
-        m.effects[k] = match m.effects[k] {
-            Effect::Deadtime { .. } => Effect::Deadtime { vd: x[c].max(0.0) },
-            // The column ∫φ carries −R·i0.
-            _ if r > 0.0 => Effect::CurrentOffset { i0: -x[c] / r },
-            e => e,
-        };
+    for (c, &(k, v)) in extra.iter().enumerate() {
+        let value = (v.value)(x[3 + c], r).max(v.residual_floor);
+        Slot::Effect(k, v.key).set(m, value);
+    }
+}
+
+/// The signals of one log the torque regressors are made of: smoothed velocity, its smooth
+/// sign, the current less the sensor offset (the command on a torque plant).
+struct Signals {
+    ws: Vec<f64>,
+    sgn: Vec<f64>,
+    cur: Vec<f64>,
+}
+
+/// The columns of effect `e` in the mechanical residual regression: a sine and a cosine
+/// of h·θ for an angle-periodic torque, else one per key of its weak-form torque.
+fn columns(e: &Effect<f64>, kt: f64, log: &MotorLog, s: &Signals) -> Vec<Vec<f64>> {
+    let d = effects::of(e.kind());
+    match (d.weak_torque, (d.harmonic)(e)) {
+        (WeakTorque::Periodic, Some(h)) => vec![
+            log.theta.iter().map(|t| (h * t).sin()).collect(),
+            log.theta.iter().map(|t| (h * t).cos()).collect(),
+        ],
+        (WeakTorque::PerKey(keys), _) => {
+            let s = TorqueSignals {
+                effect: e,
+                kt,
+                theta: &log.theta,
+                ws: &s.ws,
+                sgn: &s.sgn,
+                cur: &s.cur,
+            };
+            keys.iter().map(|(_, g)| g(&s)).collect()
+        }
+        _ => vec![],
+    }
+}
+
+/// The keys [`columns`] estimates, in its order.
+fn column_keys(e: &Effect<f64>) -> Vec<&'static str> {
+    match effects::of(e.kind()).weak_torque {
+        WeakTorque::Periodic => vec!["amp", "phase"],
+        WeakTorque::PerKey(keys) => keys.iter().map(|(k, _)| *k).collect(),
+        _ => vec![],
     }
 }
 
 fn mechanical(m: &mut Model, logs: &[MotorLog]) {
     let idx: Vec<usize> = (0..m.effects.len())
-        .filter(|&k| {
-            matches!(
-                m.effects[k],
-                Effect::Cogging { .. } | Effect::PositionLoad { .. } | Effect::Offset { .. }
-            )
-        })
+        .filter(|&k| effects::of(m.effects[k].kind()).on_residual)
         .collect();
     if idx.is_empty() {
         return;
     }
     let voltage = m.plant == Plant::Voltage;
     let i0 = control::effects::total_sensor_offset(&m.effects);
-    let mut ncols = 0;
-    for &k in &idx {
-        ncols += if matches!(m.effects[k], Effect::Offset { .. }) {
-            1
-        } else {
-            2
-        };
-    }
+    let ncols: usize = idx.iter().map(|&k| column_keys(&m.effects[k]).len()).sum();
     let mut cols: Vec<Vec<f64>> = vec![Vec::new(); ncols];
     let mut y = Vec::new();
     for log in logs {
@@ -111,6 +137,7 @@ fn mechanical(m: &mut Model, logs: &[MotorLog]) {
             (false, _) => log.u.clone(),
         };
         let ws = smooth_velocity(log);
+        let sgn = ws.iter().map(|&w| smooth_sign(w, m.sign_width)).collect();
         let fric: Vec<f64> = ws
             .iter()
             .map(|&w| match &m.lugre {
@@ -118,26 +145,17 @@ fn mechanical(m: &mut Model, logs: &[MotorLog]) {
                 None => m.viscous * w,
             })
             .collect();
-        let mut g: Vec<Vec<f64>> = Vec::new();
-        for &k in &idx {
-            match m.effects[k] {
-                Effect::Cogging { harmonic, .. } => {
-                    let h = harmonic as f64;
-                    g.push(log.theta.iter().map(|t| (h * t).sin()).collect());
-                    g.push(log.theta.iter().map(|t| (h * t).cos()).collect());
-                }
-                Effect::PositionLoad { .. } => {
-                    g.push(log.theta.iter().map(|t| t.sin()).collect());
-                    g.push(log.theta.iter().map(|t| t.cos()).collect());
-                }
-                _ => g.push(vec![1.0; log.len()]),
-            }
-        }
+        let sig = Signals { ws, sgn, cur };
+        let cur = &sig.cur;
+        let g: Vec<Vec<f64>> = idx
+            .iter()
+            .flat_map(|&k| columns(&m.effects[k], m.motor.kt, log, &sig))
+            .collect();
         for w in weak_form::log_windows(log) {
             let drive = if voltage {
-                m.motor.kt * w.int(&cur)
+                m.motor.kt * w.int(cur)
             } else {
-                w.int_zoh(&cur)
+                w.int_zoh(cur)
             };
             y.push(drive - m.motor.j * w.int_dd(&log.theta) - w.int(&fric));
             for (c, gv) in g.iter().enumerate() {
@@ -156,28 +174,16 @@ fn mechanical(m: &mut Model, logs: &[MotorLog]) {
     }
     let mut c = 0;
     for &k in &idx {
-        m.effects[k] = match m.effects[k] {
-            Effect::Cogging { harmonic, .. } => {
-                let (a, b) = (x[c], x[c + 1]);
-                c += 2;
-                Effect::Cogging {
-                    harmonic,
-                    amp: a.hypot(b),
-                    phase: b.atan2(a),
-                }
+        let keys = column_keys(&m.effects[k]);
+        if keys == ["amp", "phase"] {
+            let (a, b) = (x[c], x[c + 1]);
+            Slot::Effect(k, "amp").set(m, a.hypot(b));
+            Slot::Effect(k, "phase").set(m, b.atan2(a));
+        } else {
+            for (j, key) in keys.into_iter().enumerate() {
+                Slot::Effect(k, key).set(m, x[c + j]);
             }
-            Effect::PositionLoad { .. } => {
-                let (a, b) = (x[c], x[c + 1]);
-                c += 2;
-                Effect::PositionLoad {
-                    amp: a.hypot(b),
-                    phase: b.atan2(a),
-                }
-            }
-            _ => {
-                c += 1;
-                Effect::Offset { t0: x[c - 1] }
-            }
-        };
+        }
+        c += column_keys(&m.effects[k]).len();
     }
 }

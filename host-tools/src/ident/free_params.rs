@@ -1,8 +1,8 @@
 //! The free parameters of a model structure: which numbers of a [`Model`] a fit may move,
 //! with their units and bounds, read and written by name.
-use crate::effect_spec::{keys, EffectSpec};
+use crate::effect_spec::EffectSpec;
+use crate::effects::{self, FitKey};
 use crate::model::{Model, Parameter};
-use control::effects::EffectKind;
 
 /// One number inside a model.
 #[derive(Debug, Clone, PartialEq)]
@@ -58,7 +58,8 @@ impl Slot {
             Slot::Lugre("v0") => "rad/s".into(),
             Slot::Lugre("sigma0") => "N·m/rad".into(),
             Slot::Lugre(_) => "N·m".into(),
-            Slot::Effect(i, k) => keys(m.effects[*i].kind())
+            Slot::Effect(i, k) => effects::of(m.effects[*i].kind())
+                .keys
                 .iter()
                 .find(|key| key.name == *k)
                 .map(|key| key.unit.to_string())
@@ -118,43 +119,10 @@ impl Slot {
     }
 }
 
-/// The continuous (estimable) keys of an effect, with bounds. Structural keys (cogging
-/// `harmonic`) stay fixed. Bounds: physical sign where there is one, else ± a generous range.
-pub fn effect_keys(kind: EffectKind) -> Vec<(&'static str, f64, f64)> {
-    use std::f64::consts::PI;
-    match kind {
-        EffectKind::Coulomb => vec![("fc", 0.0, 10.0)],
-        EffectKind::Viscous => vec![("b", 0.0, 10.0)],
-        EffectKind::Stribeck => vec![("fs", 0.0, 10.0), ("vs", 0.05, 500.0)],
-        EffectKind::Presliding => vec![("sigma0", 1.0, 1e5), ("sigma1", 0.0, 1e3)],
-        EffectKind::Cogging => vec![("amp", -10.0, 10.0), ("phase", -4.0 * PI, 4.0 * PI)],
-        EffectKind::PositionLoad => vec![("amp", -10.0, 10.0), ("phase", -4.0 * PI, 4.0 * PI)],
-        EffectKind::Offset => vec![("t0", -10.0, 10.0)],
-        EffectKind::Asymmetry => vec![("dv", -10.0, 10.0), ("dc", -10.0, 10.0)],
-        EffectKind::Deadtime => vec![("vd", -5.0, 5.0)],
-        EffectKind::CurrentOffset => vec![("i0", -50.0, 50.0)],
-        EffectKind::Thermal => vec![("k", 0.0, 1.0), ("tau", 0.5, 1e4)],
-        EffectKind::LoadFriction => vec![("mu", 0.0, 2.0)],
-        // Up to K_t halved at 1 A: far beyond any real motor, a bound only against runaway.
-        EffectKind::Saturation => vec![("k", 0.0, 1.0)],
-        // A load from a hundredth to a hundred times a small rotor, couplings from 0.5 Hz up.
-        EffectKind::Compliance => vec![("j2", 1e-6, 1.0), ("k", 1e-4, 1e4), ("c", 0.0, 10.0)],
-        // A gap from none up to a quarter revolution of the rotor.
-        EffectKind::Backlash => vec![("j2", 1e-6, 1.0), ("gap", 0.0, 0.5 * PI)],
-        // The node values of a table depend on its `bins`: see [`table_keys`].
-        EffectKind::Table => vec![],
-    }
-}
-
-/// The estimable keys of effect `e` with bounds: [`effect_keys`], and for a table its node
-/// torques `b0..b<bins-1>` (± 10 N·m, as an offset).
-pub fn effect_keys_of(e: &control::effects::Effect<f64>) -> Vec<(&'static str, f64, f64)> {
-    match *e {
-        control::effects::Effect::Table { bins, .. } => (0..bins as usize)
-            .map(|k| (crate::effect_spec::table_value_key(k), -10.0, 10.0))
-            .collect(),
-        _ => effect_keys(e.kind()),
-    }
+/// The estimable keys of effect `e` with the bounds a fit keeps them in (its descriptor's
+/// [`effects::Descriptor::fit_keys`]); structural keys (cogging `harmonic`) stay fixed.
+pub fn effect_keys_of(e: &control::effects::Effect<f64>) -> Vec<FitKey> {
+    (effects::of(e.kind()).fit_keys)(e)
 }
 
 /// The parameter table of a model for these free parameters, with standard errors.

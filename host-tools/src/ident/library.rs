@@ -6,27 +6,10 @@
 //! equations identified here. Columns are evaluated with one tight loop per term (the 17
 //! paper terms) or through [`Term::eval`] (effect terms); a test checks both agree.
 //!
-//! Effect → terms (documented choice):
-//!
-//! | effect | terms | equation |
-//! |---|---|---|
-//! | `coulomb` | `sgn(xdot)` | acceleration |
-//! | `viscous` | (ẋ is already in the library) | – |
-//! | `stribeck` | `exp(-(xdot/vs)^2)*sgn(xdot)` | acceleration |
-//! | `presliding` | (z terms are already in the library) | – |
-//! | `cogging:harmonic=k` | `sin(k*x)`, `cos(k*x)` | acceleration |
-//! | `position_load` | `sin(1*x)`, `cos(1*x)` | acceleration |
-//! | `offset` | `1` | acceleration |
-//! | `asymmetry` | `|xdot|`, `|sgn(xdot)|` | acceleration |
-//! | `load_friction` | `|i|*sgn(xdot)` | acceleration |
-//! | `deadtime` | `sgn(i)` | current |
-//! | `current_offset` | `1` | current |
-//! | `thermal` | `i^2` | current |
-//!
-//! `thermal`: the firmware's term inputs carry no heat state, so the resistance rise
-//! `R·h(t)·I` with `h ∝ running mean of I²` is approximated by the instantaneous `I²` term
-//! (the heat proxy at thermal equilibrium, sign-less); the main job's thermal recovery is the
-//! grey-box models' business, SINDYc only gets this proxy.
+//! The terms each effect adds, and the equation they may appear in, are in its descriptor
+//! ([`crate::effects`]): a Coulomb-like effect adds its sign term to the acceleration
+//! equation, an electrical one its term to the current equation; effects without a term
+//! (a second inertia, a table) refuse with the advice to fit a LuGre model.
 //!
 //! With `--plant torque` there is no current: terms containing `I` are left out and there is
 //! no current equation.
@@ -34,7 +17,6 @@ use crate::effect_spec::EffectSpec;
 use crate::log::Plant;
 use crate::numerics::least_squares::NormalEquations;
 use anyhow::Result;
-use control::effects::EffectKind;
 use control::sindy::{Term, TermInputs};
 use faer::Mat;
 
@@ -127,43 +109,13 @@ impl Library {
     /// The paper's library plus the terms of `adds` (see the module doc's table).
     pub fn with_effects(plant: Plant, a: f64, vs: f64, adds: &[EffectSpec]) -> Result<Library> {
         let mut lib = Self::paper(plant, a, vs);
-        const ACC: [bool; 3] = [true, false, false];
-        const CUR: [bool; 3] = [false, false, true];
         for spec in adds {
-            match spec.kind {
-                EffectKind::Coulomb => lib.add(Term::SgnXdot, ACC, plant),
-                EffectKind::Viscous | EffectKind::Presliding => {}
-                EffectKind::Stribeck => {
-                    lib.vs = spec.get("vs");
-                    lib.add(Term::StribeckXdot, ACC, plant);
-                }
-                EffectKind::Cogging => {
-                    let k = spec.get("harmonic").round().clamp(1.0, u16::MAX as f64) as u16;
-                    lib.add(Term::SinTheta(k), ACC, plant);
-                    lib.add(Term::CosTheta(k), ACC, plant);
-                }
-                EffectKind::PositionLoad => {
-                    lib.add(Term::SinTheta(1), ACC, plant);
-                    lib.add(Term::CosTheta(1), ACC, plant);
-                }
-                EffectKind::Offset => lib.add(Term::One, ACC, plant),
-                EffectKind::Asymmetry => {
-                    lib.add(Term::AbsXdot, ACC, plant);
-                    lib.add(Term::AbsSgnXdot, ACC, plant);
-                }
-                EffectKind::LoadFriction => lib.add(Term::AbsISgnXdot, ACC, plant),
-                EffectKind::Deadtime => lib.add(Term::SgnI, CUR, plant),
-                EffectKind::CurrentOffset => lib.add(Term::One, CUR, plant),
-                EffectKind::Thermal => lib.add(Term::ISquared, CUR, plant),
-                EffectKind::Saturation => lib.add(Term::ICubed, ACC, plant),
-                EffectKind::Backlash | EffectKind::Table => anyhow::bail!(
-                    "--add {}: a SINDYc library has no term for it; fit --model lugre --add {}",
-                    spec.kind.name(),
-                    spec
-                ),
-                EffectKind::Compliance => anyhow::bail!(
-                    "--add compliance: a SINDYc library has no load state for a second inertia; fit --model lugre --add compliance"
-                ),
+            let terms = (crate::effects::of(spec.kind).sindy)(spec)?;
+            if let Some(vs) = terms.vs {
+                lib.vs = vs;
+            }
+            for (term, allowed) in terms.terms {
+                lib.add(term, allowed, plant);
             }
         }
         Ok(lib)

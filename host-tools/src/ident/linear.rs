@@ -7,8 +7,9 @@
 //! Mechanical equation, with K_t = K_b (SI units; the data fixes only K_t/J otherwise):
 //! `K_t·∫φ·I = J·∫φ''·θ + b·(−∫φ'·θ) + Σ c_e·∫φ·g_e(θ, ω, I)`.
 //! Then every parameter is refined on the free-run simulation error.
-use super::free_params::{effect_keys, effect_keys_of, Free, Slot};
+use super::free_params::{effect_keys_of, Free, Slot};
 use super::FitRequest;
+use crate::effects::{self, Regressor, TorqueSignals, VoltageColumn, WeakTorque};
 use crate::log::{MotorLog, Plant};
 use crate::model::{Model, ModelKind, Parameter};
 use crate::numerics::differentiation::smooth_velocity;
@@ -105,34 +106,11 @@ fn set_table_range(spec: &mut crate::effect_spec::EffectSpec, logs: &[MotorLog],
     }
 }
 
-/// The hat functions of a table's nodes on one log: column k is `h_k(x)` (see
-/// [`control::effects::table_nodes`]), x the table's variable (θ, the smoothed velocity
-/// `ws`, or the current `cur`).
-pub fn table_columns(e: &Effect<f64>, theta: &[f64], ws: &[f64], cur: &[f64]) -> Vec<Vec<f64>> {
-    use control::effects::{table_nodes, TableVar};
-    let Effect::Table {
-        var, bins, lo, hi, ..
-    } = *e
-    else {
-        return vec![];
-    };
-    let x = match var {
-        TableVar::Theta => theta,
-        TableVar::Omega => ws,
-        TableVar::Current => cur,
-    };
-    let mut cols = vec![vec![0.0; x.len()]; bins as usize];
-    for (k, &v) in x.iter().enumerate() {
-        let (k0, k1, w) = table_nodes(var, bins, lo, hi, v);
-        cols[k0][k] += 1.0 - w;
-        cols[k1][k] += w;
-    }
-    cols
-}
-
 /// Mechanical regressors g_e of the linear-in-parameter effects: (effect index, key(s)).
 enum EffCols {
-    One(usize, &'static str),
+    /// One key and its regressor (the torque per unit of the key).
+    One(usize, &'static str, Regressor),
+    /// A sine and a cosine of `h·θ` (amplitude and phase), h the periods per revolution.
     SinCos(usize, f64),
     /// A table's node torques, one column per node.
     Table(usize, usize),
@@ -195,13 +173,12 @@ fn estimate_electrical(m: &mut Model, logs: &[MotorLog]) {
 }
 
 /// The effects with a term in the electrical equation (deadtime, current offset): (effect
-/// index, kind), in the model's order.
-pub(crate) fn electrical_effects(m: &Model) -> Vec<(usize, EffectKind)> {
+/// index, its term), in the model's order.
+pub(crate) fn electrical_effects(m: &Model) -> Vec<(usize, &'static effects::Voltage)> {
     m.effects
         .iter()
         .enumerate()
-        .filter(|(_, e)| matches!(e.kind(), EffectKind::Deadtime | EffectKind::CurrentOffset))
-        .map(|(k, e)| (k, e.kind()))
+        .filter_map(|(k, e)| effects::of(e.kind()).voltage.as_ref().map(|v| (k, v)))
         .collect()
 }
 
@@ -210,7 +187,7 @@ pub(crate) fn electrical_effects(m: &Model) -> Vec<(usize, EffectKind)> {
 /// `extra` (`i0` [A]: the current sensor's offset the model already holds, 0 for none).
 pub(crate) fn electrical_rows(
     logs: &[MotorLog],
-    extra: &[(usize, EffectKind)],
+    extra: &[(usize, &effects::Voltage)],
     i0: f64,
 ) -> WeakRows {
     let mut rows = WeakRows::new(3 + extra.len());
@@ -226,10 +203,10 @@ pub(crate) fn electrical_rows(
             rows.cols[0].push(-w.int_d(i));
             rows.cols[1].push(w.int(i));
             rows.cols[2].push(-w.int_d(&log.theta));
-            for (c, (_, kind)) in extra.iter().enumerate() {
-                rows.cols[3 + c].push(match kind {
-                    EffectKind::Deadtime => w.int(&sgn_i),
-                    _ => w.int(&ones),
+            for (c, (_, v)) in extra.iter().enumerate() {
+                rows.cols[3 + c].push(match v.column {
+                    VoltageColumn::SignOfCurrent => w.int(&sgn_i),
+                    VoltageColumn::One => w.int(&ones),
                 });
             }
         }
@@ -239,7 +216,7 @@ pub(crate) fn electrical_rows(
 
 /// Stores the electrical coefficients `x` (L, R, K_b, then one per effect of `extra`): the
 /// deadtime's v_d [V] as estimated, the current offset's i0 [A] from its voltage −R·i0.
-fn set_electrical(m: &mut Model, extra: &[(usize, EffectKind)], x: &[f64]) {
+fn set_electrical(m: &mut Model, extra: &[(usize, &effects::Voltage)], x: &[f64]) {
     let fallback = control::motor::MotorParams::<f64>::paper();
     m.motor.l = if x[0] > 0.0 { x[0] } else { fallback.l };
     m.motor.r = if x[1] > 0.0 { x[1] } else { fallback.r };
@@ -247,12 +224,9 @@ fn set_electrical(m: &mut Model, extra: &[(usize, EffectKind)], x: &[f64]) {
         m.motor.kb = x[2];
         m.motor.kt = x[2];
     }
-    for (c, (k, kind)) in extra.iter().enumerate() {
-        let v = x[3 + c];
-        m.effects[*k] = match kind {
-            EffectKind::Deadtime => Effect::Deadtime { vd: v },
-            _ => Effect::CurrentOffset { i0: -v / m.motor.r },
-        };
+    for (c, (k, v)) in extra.iter().enumerate() {
+        let value = (v.value)(x[3 + c], m.motor.r);
+        Slot::Effect(*k, v.key).set(m, value);
     }
 }
 
@@ -279,21 +253,22 @@ fn estimate_mechanical(m: &mut Model, logs: &[MotorLog], coulomb: bool) -> (f64,
 fn mechanical_effects(m: &Model) -> Vec<EffCols> {
     let mut map = Vec::new();
     for (k, e) in m.effects.iter().enumerate() {
-        match *e {
-            Effect::Coulomb { .. } => map.push(EffCols::One(k, "fc")),
-            Effect::Stribeck { .. } => map.push(EffCols::One(k, "fs")),
-            Effect::Offset { .. } => map.push(EffCols::One(k, "t0")),
-            Effect::LoadFriction { .. } => map.push(EffCols::One(k, "mu")),
-            Effect::Saturation { .. } => map.push(EffCols::One(k, "k")),
-            Effect::Viscous { .. } => map.push(EffCols::One(k, "b")),
-            Effect::Asymmetry { .. } => {
-                map.push(EffCols::One(k, "dv"));
-                map.push(EffCols::One(k, "dc"));
+        let d = effects::of(e.kind());
+        match d.weak_torque {
+            WeakTorque::None => {}
+            WeakTorque::PerKey(keys) => {
+                map.extend(keys.iter().map(|&(key, g)| EffCols::One(k, key, g)))
             }
-            Effect::Cogging { harmonic, .. } => map.push(EffCols::SinCos(k, harmonic as f64)),
-            Effect::PositionLoad { .. } => map.push(EffCols::SinCos(k, 1.0)),
-            Effect::Table { bins, .. } => map.push(EffCols::Table(k, bins as usize)),
-            _ => {}
+            WeakTorque::Periodic => {
+                if let Some(h) = (d.harmonic)(e) {
+                    map.push(EffCols::SinCos(k, h))
+                }
+            }
+            WeakTorque::Table => {
+                if let Effect::Table { bins, .. } = *e {
+                    map.push(EffCols::Table(k, bins as usize))
+                }
+            }
         }
     }
     map
@@ -367,47 +342,29 @@ fn effect_regressors(
     let mut g: Vec<Vec<f64>> = Vec::new();
     for c in map {
         match *c {
-            EffCols::One(k, key) => g.push(one_regressor(m, k, key, log, s)),
+            EffCols::One(k, _, regressor) => g.push(regressor(&TorqueSignals {
+                effect: &m.effects[k],
+                kt: m.motor.kt,
+                theta: &log.theta,
+                ws: &s.ws,
+                sgn: &s.sgn,
+                cur: &s.cur,
+            })),
             EffCols::SinCos(_, h) => {
                 g.push(log.theta.iter().map(|t| (h * t).sin()).collect());
                 g.push(log.theta.iter().map(|t| (h * t).cos()).collect());
             }
             EffCols::Table(k, _) => {
-                g.extend(table_columns(&m.effects[k], &log.theta, &s.ws, &s.cur));
+                g.extend(effects::table::columns(
+                    &m.effects[k],
+                    &log.theta,
+                    &s.ws,
+                    &s.cur,
+                ));
             }
         }
     }
     g
-}
-
-/// The regressor of the key `key` of effect `k`: the torque per unit of that key.
-fn one_regressor(
-    m: &Model,
-    k: usize,
-    key: &str,
-    log: &MotorLog,
-    sig: &MechanicalSignals,
-) -> Vec<f64> {
-    let (ws, sgn, cur) = (&sig.ws, &sig.sgn, &sig.cur);
-    match (m.effects[k], key) {
-        (Effect::Stribeck { vs, .. }, _) => ws
-            .iter()
-            .zip(sgn)
-            .map(|(w, s)| (-(w / vs).powi(2)).exp() * s)
-            .collect(),
-        (Effect::Offset { .. }, _) => vec![1.0; log.len()],
-        (Effect::LoadFriction { .. }, _) => cur
-            .iter()
-            .zip(sgn)
-            .map(|(c, s)| (m.motor.kt * c).abs() * s)
-            .collect(),
-        // The torque a falling K_t loses, to first order in k: K_t·k·I³.
-        (Effect::Saturation { .. }, _) => cur.iter().map(|c| m.motor.kt * c * c * c).collect(),
-        (Effect::Viscous { .. }, _) => ws.clone(),
-        (Effect::Asymmetry { .. }, "dv") => ws.iter().map(|w| w.abs()).collect(),
-        (Effect::Asymmetry { .. }, _) => sgn.iter().map(|s| s.abs()).collect(),
-        _ => sgn.clone(),
-    }
 }
 
 /// Stores the effects' coefficients `x` (in `map`'s order): a key clamped to its bounds, a
@@ -417,8 +374,8 @@ fn set_mechanical_effects(m: &mut Model, map: &[EffCols], x: &[f64]) {
     let mut c = 0;
     for e in map {
         match *e {
-            EffCols::One(k, key) => {
-                let (lo, hi) = bounds_of(m.effects[k].kind(), key);
+            EffCols::One(k, key, _) => {
+                let (lo, hi) = bounds_of(&m.effects[k], key);
                 Slot::Effect(k, key).set(m, x[c].clamp(lo, hi));
             }
             EffCols::SinCos(k, _) => {
@@ -428,7 +385,7 @@ fn set_mechanical_effects(m: &mut Model, map: &[EffCols], x: &[f64]) {
             }
             EffCols::Table(k, n) => {
                 for node in 0..n {
-                    let key = crate::effect_spec::table_value_key(node);
+                    let key = effects::table_value_key(node);
                     Slot::Effect(k, key).set(m, x[c + node].clamp(-10.0, 10.0));
                 }
             }
@@ -437,8 +394,8 @@ fn set_mechanical_effects(m: &mut Model, map: &[EffCols], x: &[f64]) {
     }
 }
 
-fn bounds_of(kind: EffectKind, key: &str) -> (f64, f64) {
-    effect_keys(kind)
+fn bounds_of(e: &Effect<f64>, key: &str) -> (f64, f64) {
+    effect_keys_of(e)
         .into_iter()
         .find(|(k, _, _)| *k == key)
         .map(|(_, lo, hi)| (lo, hi))

@@ -7,7 +7,7 @@
 //! the measured signal so that the three are comparable.
 use super::free_params::{parameter_rows, Free, Slot};
 use super::freerun::{RunParams, SubstepRoots};
-use super::tangent::{effect_key_mut, RunScalar, Tangent, PARAM_LANES};
+use super::tangent::{RunScalar, Tangent, PARAM_LANES};
 use super::{freerun, nlsq, progress, sensor_chain};
 use crate::log::MotorLog;
 use crate::model::{Model, ModelKind, Parameter};
@@ -400,7 +400,11 @@ fn seed(p: &mut RunParams<Tangent>, slot: &Slot, lane: usize) {
             }
         }
         Slot::Effect(i, k) => {
-            if let Some(v) = p.effects.get_mut(*i).and_then(|e| effect_key_mut(e, k)) {
+            if let Some(v) = p
+                .effects
+                .get_mut(*i)
+                .and_then(|e| crate::effects::key_mut(e, k))
+            {
                 one(v);
             }
         }
@@ -457,28 +461,9 @@ pub fn lowest_costs(
 /// The effects of `model` with their magnitudes multiplied by `f` (keys other than the
 /// magnitude, such as a phase or a time constant, kept); `f = 0` is the model without them.
 pub fn scale_effect_magnitudes(model: &Model, f: f64) -> Model {
-    use control::effects::Effect;
     let mut m = model.clone();
     for e in &mut m.effects {
-        match e {
-            Effect::Coulomb { fc } => *fc *= f,
-            Effect::Viscous { b } => *b *= f,
-            Effect::Stribeck { fs, .. } => *fs *= f,
-            Effect::Cogging { amp, .. } | Effect::PositionLoad { amp, .. } => *amp *= f,
-            Effect::Offset { t0 } => *t0 *= f,
-            Effect::Asymmetry { dv, dc } => {
-                *dv *= f;
-                *dc *= f
-            }
-            Effect::Deadtime { vd } => *vd *= f,
-            Effect::CurrentOffset { i0 } => *i0 *= f,
-            Effect::Thermal { k, .. } => *k *= f,
-            Effect::LoadFriction { mu } => *mu *= f,
-            Effect::Saturation { k } => *k *= f,
-            Effect::Compliance { j2, .. } | Effect::Backlash { j2, .. } => *j2 *= f,
-            Effect::Table { values, .. } => values.iter_mut().for_each(|v| *v *= f),
-            Effect::Presliding { .. } => {}
-        }
+        (crate::effects::of(e.kind()).scale)(e, f);
     }
     m
 }
@@ -498,13 +483,10 @@ pub fn better_effect_start(model: &mut Model, res: &Residuals) {
         return;
     }
     let step = model.sensor.hall_resolution_rad;
-    let periodic = model.effects.iter().any(|e| {
-        matches!(
-            e,
-            control::effects::Effect::Cogging { .. }
-                | control::effects::Effect::PositionLoad { .. }
-        )
-    });
+    let periodic = model
+        .effects
+        .iter()
+        .any(|e| (crate::effects::of(e.kind()).harmonic)(e).is_some());
     let shifts: &[f64] = if periodic && step > 0.0 {
         &[0.0, -0.25, 0.25, -0.5, 0.5]
     } else {
@@ -625,15 +607,12 @@ type Start = (f64, f64, bool, f64);
 /// `model` with the phase of each angle-periodic effect moved as the angle would be moved by
 /// `dtheta` [rad]: `h·dtheta` for a cogging torque of harmonic h, `dtheta` for a position load.
 fn shift_phases(model: &Model, dtheta: f64) -> Model {
-    use control::effects::Effect;
     let mut m = model.clone();
     for e in &mut m.effects {
-        match e {
-            Effect::Cogging {
-                harmonic, phase, ..
-            } => *phase += f64::from(*harmonic) * dtheta,
-            Effect::PositionLoad { phase, .. } => *phase += dtheta,
-            _ => {}
+        if let Some(h) = (crate::effects::of(e.kind()).harmonic)(e) {
+            if let Some(phase) = crate::effects::key_mut(e, "phase") {
+                *phase += h * dtheta;
+            }
         }
     }
     m

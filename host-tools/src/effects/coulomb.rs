@@ -1,0 +1,35 @@
+//! `coulomb`: a constant friction torque opposing the motion.
+use super::*;
+
+const KEYS: &[Key] = &[k("fc", "N·m", 0.05, "Coulomb friction torque")];
+
+pub static D: Descriptor = Descriptor {
+    kind: EffectKind::Coulomb,
+    meaning: "friction of constant size opposing the motion",
+    keys: KEYS,
+    help: None,
+    check: no_check,
+    to_effect: |s| Effect::Coulomb { fc: s.get("fc") },
+    values: |e| match *e {
+        Effect::Coulomb { fc } => vec![("fc", fc)],
+        _ => vec![],
+    },
+    fit_keys: |_| vec![("fc", 0.0, 10.0)],
+    scale: |e, f| {
+        if let Effect::Coulomb { fc } = e {
+            *fc *= f
+        }
+    },
+    harmonic: not_periodic,
+    weak_torque: WeakTorque::PerKey(&[("fc", sign_of_velocity)]),
+    voltage: None,
+    on_residual: false,
+    sindy: |_| terms(&[(Term::SgnXdot, IN_ACCEL)]),
+};
+
+pub(super) fn key_mut<'a, D>(e: &'a mut Effect<D>, key: &str) -> Option<&'a mut D> {
+    match (e, key) {
+        (Effect::Coulomb { fc }, "fc") => Some(fc),
+        _ => None,
+    }
+}

@@ -1,0 +1,45 @@
+//! `deadtime`: the inverter's voltage loss, with the sign of the current.
+use super::*;
+
+const KEYS: &[Key] = &[k(
+    "vd",
+    "V",
+    0.3,
+    "inverter voltage loss, sign of the current",
+)];
+
+pub static D: Descriptor = Descriptor {
+    kind: EffectKind::Deadtime,
+    meaning: "voltage the inverter loses to its dead time, with the sign of the current",
+    keys: KEYS,
+    help: None,
+    check: no_check,
+    to_effect: |s| Effect::Deadtime { vd: s.get("vd") },
+    values: |e| match *e {
+        Effect::Deadtime { vd } => vec![("vd", vd)],
+        _ => vec![],
+    },
+    fit_keys: |_| vec![("vd", -5.0, 5.0)],
+    scale: |e, f| {
+        if let Effect::Deadtime { vd } = e {
+            *vd *= f
+        }
+    },
+    harmonic: not_periodic,
+    weak_torque: WeakTorque::None,
+    voltage: Some(Voltage {
+        column: VoltageColumn::SignOfCurrent,
+        key: "vd",
+        value: |x, _| x,
+        residual_floor: 0.0,
+    }),
+    on_residual: false,
+    sindy: |_| terms(&[(Term::SgnI, IN_CURRENT)]),
+};
+
+pub(super) fn key_mut<'a, D>(e: &'a mut Effect<D>, key: &str) -> Option<&'a mut D> {
+    match (e, key) {
+        (Effect::Deadtime { vd }, "vd") => Some(vd),
+        _ => None,
+    }
+}

@@ -1,0 +1,346 @@
+//! One descriptor per physical effect: what the host knows about an effect beside its
+//! equations (which are in `control::effects`). Each effect's file holds its name and meaning,
+//! its keys (unit, default, meaning, accepted values), the bounds a fit keeps its estimable
+//! keys in, and the regressor columns and library terms the identification code builds from
+//! it. This file is the registry: the list of every descriptor and the lookup by kind or name.
+//!
+//! The spec parser ([`crate::effect_spec`]), the free parameters, the weak-form regressions
+//! and the SINDYc library read an effect only through its [`Descriptor`].
+use crate::effect_spec::EffectSpec;
+use crate::ident::library::ACCEL;
+use anyhow::Result;
+use control::effects::{Effect, EffectKind, TableVar, TABLE_MAX_BINS};
+use control::sindy::Term;
+
+mod asymmetry;
+mod backlash;
+mod cogging;
+mod compliance;
+mod coulomb;
+mod current_offset;
+mod deadtime;
+mod load_friction;
+mod offset;
+mod position_load;
+mod presliding;
+mod saturation;
+mod stribeck;
+pub mod table;
+mod thermal;
+mod viscous;
+
+pub use table::table_value_key;
+
+/// One key of an effect: name, unit, default value (for the emulator), meaning.
+pub struct Key {
+    pub name: &'static str,
+    pub unit: &'static str,
+    pub default: f64,
+    pub meaning: &'static str,
+    /// Never negative, whatever its unit allows elsewhere (a width, a spring, a damper).
+    pub nonnegative: bool,
+}
+
+impl Key {
+    /// The values this key accepts (inclusive), by its unit: wide enough for any motor or
+    /// linear axis (torques and forces up to 10⁴ N·m or N), narrow enough that a simulation
+    /// stays finite and quick. Signs are free where a fit may estimate either sign; a time
+    /// constant or a velocity scale must be positive.
+    pub fn range(&self) -> (f64, f64) {
+        let (lo, hi) = self.unit_range();
+        (if self.nonnegative { lo.max(0.0) } else { lo }, hi)
+    }
+
+    fn unit_range(&self) -> (f64, f64) {
+        match self.unit {
+            "N·m" | "N·m·s/rad" | "V" | "A" => (-1e4, 1e4),
+            "N·m/rad" => (-1e9, 1e9),
+            "rad" => (-1e3, 1e3),
+            "rad/s" => (1e-6, 1e5),
+            "1/rev" => (2.0, 1000.0),
+            "1/A²" => (-1e3, 1e3),
+            "kg·m²" => (0.0, 1e3),
+            TABLE_VAR_UNIT => (0.0, 2.0),
+            "bins" => (2.0, TABLE_MAX_BINS as f64),
+            "rad, rad/s or A" => (-1e5, 1e5),
+            "s" => (1e-3, 1e7),
+            "1" => (-1.0, 1.0),
+            _ => (-1e9, 1e9),
+        }
+    }
+}
+
+/// The "unit" of a table's `var` key: its value is a variable's name, stored as its index
+/// in [`TableVar::ALL`].
+pub const TABLE_VAR_UNIT: &str = "theta|omega|current";
+
+/// A key that may take either sign.
+pub(crate) const fn k(
+    name: &'static str,
+    unit: &'static str,
+    default: f64,
+    meaning: &'static str,
+) -> Key {
+    Key {
+        name,
+        unit,
+        default,
+        meaning,
+        nonnegative: false,
+    }
+}
+
+/// [`k`] for a key that is never negative.
+pub(crate) const fn k0(
+    name: &'static str,
+    unit: &'static str,
+    default: f64,
+    meaning: &'static str,
+) -> Key {
+    Key {
+        nonnegative: true,
+        ..k(name, unit, default, meaning)
+    }
+}
+
+/// An estimable key with the bounds a fit keeps it in: physical sign where there is one,
+/// else ± a generous range.
+pub type FitKey = (&'static str, f64, f64);
+
+/// The signals a torque regressor is made of, on one log.
+pub struct TorqueSignals<'a> {
+    /// The effect (its structural keys: a Stribeck velocity, a harmonic).
+    pub effect: &'a Effect<f64>,
+    /// Torque constant K_t [N·m/A] (1 on a torque plant).
+    pub kt: f64,
+    /// Rotor angle [rad].
+    pub theta: &'a [f64],
+    /// Smoothed velocity [rad/s].
+    pub ws: &'a [f64],
+    /// Smooth sign of `ws`.
+    pub sgn: &'a [f64],
+    /// Current less the sensor offset [A], or the torque command on a torque plant.
+    pub cur: &'a [f64],
+}
+
+/// A torque regressor: the torque per unit of one key, sample by sample.
+pub type Regressor = fn(&TorqueSignals) -> Vec<f64>;
+
+/// How an effect's torque enters the mechanical equation's linear regression.
+#[derive(Clone, Copy)]
+pub enum WeakTorque {
+    /// Not linear in its keys (or no torque): left to the free-run refinement.
+    None,
+    /// Linear in these keys, one regressor each.
+    PerKey(&'static [(&'static str, Regressor)]),
+    /// `amp·cos(h·θ − phase)`: a sine and a cosine column of h·θ, h from [`Descriptor::harmonic`].
+    Periodic,
+    /// A lookup table: one hat-function column per node ([`table::columns`]).
+    Table,
+}
+
+/// The column an electrical effect adds to the electrical equation's regression.
+#[derive(Clone, Copy, PartialEq, Eq)]
+pub enum VoltageColumn {
+    /// `∫φ·sgn(I − i0)`.
+    SignOfCurrent,
+    /// `∫φ`.
+    One,
+}
+
+/// An effect with a term in the electrical equation.
+pub struct Voltage {
+    pub column: VoltageColumn,
+    /// The key the coefficient sets.
+    pub key: &'static str,
+    /// The key's value from the column's coefficient `x` [V] and the resistance `r` [Ω].
+    pub value: fn(x: f64, r: f64) -> f64,
+    /// Lowest value the residual regression of `fit --add` keeps.
+    pub residual_floor: f64,
+}
+
+/// What an effect adds to the SINDYc library: terms with the equations they may appear in,
+/// and the Stribeck velocity the library's Stribeck term uses, if the effect sets it.
+pub struct SindyTerms {
+    pub terms: Vec<(Term, [bool; 3])>,
+    pub vs: Option<f64>,
+}
+
+/// Allowed in the acceleration equation only.
+pub const IN_ACCEL: [bool; 3] = {
+    let mut a = [false; 3];
+    a[ACCEL] = true;
+    a
+};
+/// Allowed in the current equation only.
+pub const IN_CURRENT: [bool; 3] = [false, false, true];
+
+/// Everything the host knows about one effect beside its equations.
+pub struct Descriptor {
+    pub kind: EffectKind,
+    /// One line: what the effect is, physically.
+    pub meaning: &'static str,
+    /// The keys, in the order a spec prints them.
+    pub keys: &'static [Key],
+    /// `--help` text replacing the list of keys (for keys that come in a number).
+    pub help: Option<&'static str>,
+    /// Checks beyond each key's range (a whole number, an order of keys).
+    pub check: fn(&EffectSpec) -> Result<()>,
+    /// The effect with a spec's values (defaults where not given).
+    pub to_effect: fn(&EffectSpec) -> Effect<f64>,
+    /// An effect's keys and values.
+    pub values: fn(&Effect<f64>) -> Vec<(&'static str, f64)>,
+    /// The estimable keys with the bounds a fit keeps them in; structural keys (a harmonic,
+    /// a table's variable) stay fixed.
+    pub fit_keys: fn(&Effect<f64>) -> Vec<FitKey>,
+    /// The effect with its magnitudes multiplied by `f` (a phase or time constant kept).
+    pub scale: fn(&mut Effect<f64>, f: f64),
+    /// Periods per revolution of an angle-periodic torque.
+    pub harmonic: fn(&Effect<f64>) -> Option<f64>,
+    /// Its torque in the mechanical equation's weak-form regression.
+    pub weak_torque: WeakTorque,
+    /// Its term in the electrical equation's regression.
+    pub voltage: Option<Voltage>,
+    /// Re-estimated on a fitted model's residual (`fit --add`), not only refined.
+    pub on_residual: bool,
+    /// Its SINDYc library terms, or why it has none.
+    pub sindy: fn(&EffectSpec) -> Result<SindyTerms>,
+}
+
+/// Every descriptor, in [`EffectKind::ALL`]'s order.
+pub static ALL: [&Descriptor; 16] = [
+    &coulomb::D,
+    &viscous::D,
+    &stribeck::D,
+    &presliding::D,
+    &cogging::D,
+    &position_load::D,
+    &offset::D,
+    &asymmetry::D,
+    &deadtime::D,
+    &current_offset::D,
+    &thermal::D,
+    &load_friction::D,
+    &saturation::D,
+    &compliance::D,
+    &backlash::D,
+    &table::D,
+];
+
+/// The descriptor of an effect kind.
+pub fn of(kind: EffectKind) -> &'static Descriptor {
+    ALL.iter()
+        .copied()
+        .find(|d| d.kind == kind)
+        .expect("every kind has a descriptor")
+}
+
+/// The descriptor of an effect name (`position_load`), if it names one.
+pub fn by_name(name: &str) -> Option<&'static Descriptor> {
+    ALL.iter().copied().find(|d| d.kind.name() == name)
+}
+
+/// The number behind key `key` of an effect in any number type (the free runs' duals), if
+/// it has one. A function pointer cannot be generic, so this one accessor dispatches here
+/// to the effect's file.
+pub fn key_mut<'a, D: num_traits::Float>(e: &'a mut Effect<D>, key: &str) -> Option<&'a mut D> {
+    match e.kind() {
+        EffectKind::Coulomb => coulomb::key_mut(e, key),
+        EffectKind::Viscous => viscous::key_mut(e, key),
+        EffectKind::Stribeck => stribeck::key_mut(e, key),
+        EffectKind::Presliding => presliding::key_mut(e, key),
+        EffectKind::Cogging => cogging::key_mut(e, key),
+        EffectKind::PositionLoad => position_load::key_mut(e, key),
+        EffectKind::Offset => offset::key_mut(e, key),
+        EffectKind::Asymmetry => asymmetry::key_mut(e, key),
+        EffectKind::Deadtime => deadtime::key_mut(e, key),
+        EffectKind::CurrentOffset => current_offset::key_mut(e, key),
+        EffectKind::Thermal => thermal::key_mut(e, key),
+        EffectKind::LoadFriction => load_friction::key_mut(e, key),
+        EffectKind::Saturation => saturation::key_mut(e, key),
+        EffectKind::Compliance => compliance::key_mut(e, key),
+        EffectKind::Backlash => backlash::key_mut(e, key),
+        EffectKind::Table => table::key_mut(e, key),
+    }
+}
+
+/// [`Descriptor::check`] of effects without checks beyond their keys' ranges.
+pub(crate) fn no_check(_: &EffectSpec) -> Result<()> {
+    Ok(())
+}
+
+/// [`Descriptor::harmonic`] of effects that are not periodic in angle.
+pub(crate) fn not_periodic(_: &Effect<f64>) -> Option<f64> {
+    None
+}
+
+/// [`Descriptor::sindy`] of effects whose terms the paper's library already has.
+pub(crate) fn in_paper_library(_: &EffectSpec) -> Result<SindyTerms> {
+    Ok(SindyTerms {
+        terms: vec![],
+        vs: None,
+    })
+}
+
+/// [`Descriptor::sindy`] of effects the library has no term for.
+pub(crate) fn no_sindy_term(spec: &EffectSpec) -> Result<SindyTerms> {
+    anyhow::bail!(
+        "--add {}: a SINDYc library has no term for it; fit --model lugre --add {}",
+        spec.kind.name(),
+        spec
+    )
+}
+
+/// SINDYc terms without a Stribeck velocity.
+pub(crate) fn terms(t: &[(Term, [bool; 3])]) -> Result<SindyTerms> {
+    Ok(SindyTerms {
+        terms: t.to_vec(),
+        vs: None,
+    })
+}
+
+/// Regressor: the smooth sign of the velocity (a Coulomb-like torque).
+pub(crate) fn sign_of_velocity(s: &TorqueSignals) -> Vec<f64> {
+    s.sgn.to_vec()
+}
+
+/// The table variable's code in a spec (`var` = index in [`TableVar::ALL`]).
+pub(crate) fn table_var_code(var: TableVar) -> f64 {
+    TableVar::ALL.iter().position(|x| *x == var).unwrap_or(0) as f64
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_registry_has_every_kind_once_in_order() {
+        for (d, kind) in ALL.iter().zip(EffectKind::ALL) {
+            assert_eq!(d.kind, kind);
+            assert!(std::ptr::eq(of(kind), *d));
+            assert!(std::ptr::eq(by_name(kind.name()).unwrap(), *d));
+            assert!(!d.meaning.is_empty() && !d.keys.is_empty());
+        }
+        assert!(by_name("gravity").is_none());
+    }
+
+    #[test]
+    fn values_name_keys_and_key_mut_reaches_each_estimable_key() {
+        for d in ALL {
+            let mut e = (d.to_effect)(&EffectSpec::bare(d.kind));
+            for (key, _) in (d.values)(&e) {
+                assert!(d.keys.iter().any(|k| k.name == key), "{key}");
+            }
+            let values = (d.values)(&e);
+            for (key, _, _) in (d.fit_keys)(&e.clone()) {
+                let want = values.iter().find(|(k, _)| *k == key).map(|(_, v)| *v);
+                assert_eq!(
+                    key_mut(&mut e, key).map(|v| *v),
+                    want,
+                    "{}.{key}",
+                    d.kind.name()
+                );
+            }
+        }
+    }
+}

@@ -1,0 +1,44 @@
+//! `position_load`: a load torque periodic in angle, one period per revolution.
+use super::*;
+use std::f64::consts::PI;
+
+#[rustfmt::skip]
+const KEYS: &[Key] = &[
+    k("amp", "N·m", 0.05, "torque amplitude (one period per revolution)"),
+    k("phase", "rad", 0.0, "phase"),
+];
+
+pub static D: Descriptor = Descriptor {
+    kind: EffectKind::PositionLoad,
+    meaning: "load torque periodic in angle, one period per revolution (an unbalance)",
+    keys: KEYS,
+    help: None,
+    check: no_check,
+    to_effect: |s| Effect::PositionLoad {
+        amp: s.get("amp"),
+        phase: s.get("phase"),
+    },
+    values: |e| match *e {
+        Effect::PositionLoad { amp, phase } => vec![("amp", amp), ("phase", phase)],
+        _ => vec![],
+    },
+    fit_keys: |_| vec![("amp", -10.0, 10.0), ("phase", -4.0 * PI, 4.0 * PI)],
+    scale: |e, f| {
+        if let Effect::PositionLoad { amp, .. } = e {
+            *amp *= f
+        }
+    },
+    harmonic: |e| matches!(e, Effect::PositionLoad { .. }).then_some(1.0),
+    weak_torque: WeakTorque::Periodic,
+    voltage: None,
+    on_residual: true,
+    sindy: |_| terms(&[(Term::SinTheta(1), IN_ACCEL), (Term::CosTheta(1), IN_ACCEL)]),
+};
+
+pub(super) fn key_mut<'a, D>(e: &'a mut Effect<D>, key: &str) -> Option<&'a mut D> {
+    match (e, key) {
+        (Effect::PositionLoad { amp, .. }, "amp") => Some(amp),
+        (Effect::PositionLoad { phase, .. }, "phase") => Some(phase),
+        _ => None,
+    }
+}

@@ -1,0 +1,44 @@
+//! `saturation`: a torque constant falling with current.
+use super::*;
+
+/// Default k = 2e-4/A²: K_t down 2 % at 10 A and 24 % at 40 A, the board's peak rating;
+/// small BLDC motors lose 10-30 % of K_t at two to three times their continuous current.
+const KEYS: &[Key] = &[k(
+    "k",
+    "1/A²",
+    2e-4,
+    "torque constant falls as K_t/(1 + k·I²)",
+)];
+
+pub static D: Descriptor = Descriptor {
+    kind: EffectKind::Saturation,
+    meaning: "torque constant falling at high current as the iron saturates",
+    keys: KEYS,
+    help: None,
+    check: no_check,
+    to_effect: |s| Effect::Saturation { k: s.get("k") },
+    values: |e| match *e {
+        Effect::Saturation { k } => vec![("k", k)],
+        _ => vec![],
+    },
+    // Up to K_t halved at 1 A: far beyond any real motor, a bound only against runaway.
+    fit_keys: |_| vec![("k", 0.0, 1.0)],
+    scale: |e, f| {
+        if let Effect::Saturation { k } = e {
+            *k *= f
+        }
+    },
+    harmonic: not_periodic,
+    // The torque a falling K_t loses, to first order in k: K_t·k·I³.
+    weak_torque: WeakTorque::PerKey(&[("k", |s| s.cur.iter().map(|c| s.kt * c * c * c).collect())]),
+    voltage: None,
+    on_residual: false,
+    sindy: |_| terms(&[(Term::ICubed, IN_ACCEL)]),
+};
+
+pub(super) fn key_mut<'a, D>(e: &'a mut Effect<D>, key: &str) -> Option<&'a mut D> {
+    match (e, key) {
+        (Effect::Saturation { k }, "k") => Some(k),
+        _ => None,
+    }
+}
