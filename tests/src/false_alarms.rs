@@ -91,3 +91,14 @@ pub fn correct_structure(p: &OtherPlant) -> Structure {
         }),
     }
 }
+
+/// A scan's setting from the environment variable `name`, when set and parseable.
+pub fn env<T: std::str::FromStr>(name: &str) -> Option<T> {
+    std::env::var(name).ok().and_then(|s| s.parse().ok())
+}
+
+/// The signal a scan's letter names (`SIGS=abcd`).
+pub fn signal_of(letter: char) -> SignalKind {
+    SignalKind::from_name(&letter.to_string())
+        .unwrap_or_else(|| panic!("SIGS: '{letter}' is not a signal (a, b, c or d)"))
+}

@@ -8,13 +8,8 @@
 //! Environment: `SEEDS` (20), `SIGS` (`abcd`), `PLANTS` (`eo`: emulator, other plant),
 //! `STEADY=1` (`Options::steady_angle`), and for the other plant `HALL` (its angle step in
 //! rad; 1e-7 for an almost perfect sensor) and `INOISE` (its current noise in A).
-use e2e::false_alarms::{cannot_judge, correct_model, Maker};
+use e2e::false_alarms::{cannot_judge, correct_model, env, signal_of, Maker};
 use motorid::diagnose::{Diagnosis, Options};
-use motorid::emulator::SignalKind;
-
-fn env<T: std::str::FromStr>(name: &str) -> Option<T> {
-    std::env::var(name).ok().and_then(|s| s.parse().ok())
-}
 
 fn opts() -> Options {
     Options {
@@ -55,15 +50,6 @@ fn summary(d: &Diagnosis) -> String {
     format!("[{}] {:?} [{}]", checks.join(" "), ef, un.join(" "))
 }
 
-fn kind_of(c: char) -> SignalKind {
-    match c {
-        'a' => SignalKind::A,
-        'b' => SignalKind::B,
-        'c' => SignalKind::C,
-        _ => SignalKind::D,
-    }
-}
-
 #[test]
 #[ignore = "a measurement: prints the false-alarm counts"]
 fn false_alarm_counts() {
@@ -82,7 +68,7 @@ fn false_alarm_counts() {
         for sig in sigs.chars() {
             let (mut alarms, mut unjudged) = (0, 0);
             for seed in 1..=seeds {
-                let d = correct_model(maker, kind_of(sig), seed, &opts());
+                let d = correct_model(maker, signal_of(sig), seed, &opts());
                 if d.verdict.adequate {
                     continue;
                 }

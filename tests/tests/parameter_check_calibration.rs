@@ -10,22 +10,8 @@
 //! Environment: `OTHER` (logs of the independent plant per signal, 100), `EMU` (logs of the
 //! emulator per signal, 50), `SIGS` (`ad`), `FIRST` (first seed, 1001), `VERBOSE=1` (one
 //! line per check, with its detail).
-use e2e::false_alarms::{correct_model, Maker};
+use e2e::false_alarms::{correct_model, env, signal_of, Maker};
 use motorid::diagnose::{Diagnosis, Options};
-use motorid::emulator::SignalKind;
-
-fn env<T: std::str::FromStr>(name: &str) -> Option<T> {
-    std::env::var(name).ok().and_then(|s| s.parse().ok())
-}
-
-fn kind_of(c: char) -> SignalKind {
-    match c {
-        'a' => SignalKind::A,
-        'b' => SignalKind::B,
-        'c' => SignalKind::C,
-        _ => SignalKind::D,
-    }
-}
 
 /// `P(X ≤ k)` for `X ~ Binomial(n, p)`, by the pmf's recurrence (exact enough for the
 /// few hundred trials here).
@@ -138,7 +124,7 @@ fn parameter_check_calibration() {
         let mut level = f64::NAN;
         for sig in sigs.chars() {
             for seed in first..first + per_signal {
-                let d = correct_model(maker, kind_of(sig), seed, &Options::default());
+                let d = correct_model(maker, signal_of(sig), seed, &Options::default());
                 level = d.verdict.level_per_test;
                 let r = rows(&d);
                 if verbose {
