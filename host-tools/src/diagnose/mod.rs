@@ -10,7 +10,7 @@
 //!    velocity, thermal time constant, bristle stiffness). Presliding is tested apart, on
 //!    every window of the torque equation (the reversals and standstills where it lives
 //!    included), on top of a model with Coulomb or Stribeck friction; see
-//!    [`candidates::PRESLIDING_DEFLECTION_GRID`] and [`PRESLIDING_GAIN`].
+//!    [`crate::effects::presliding::DEFLECTION_GRID`] and [`PRESLIDING_GAIN`].
 //! 3. Forward selection: the candidate that explains most of the residual is tested beyond
 //!    the base with the jackknifed cluster-robust Wald test on disjoint windows, clustered by
 //!    held input ([`statistics::robust_wald_test`]), so that a few noisy windows or the
@@ -33,6 +33,7 @@ pub mod regions;
 pub mod verdict;
 
 use crate::effect_spec::EffectSpec;
+use crate::effects::presliding;
 use crate::log::{MotorLog, Plant};
 use crate::numerics::least_squares;
 use crate::numerics::statistics;
@@ -942,7 +943,7 @@ fn weigh_refit_by_free_run(log: &MotorLog, st: &Structure, own: &MotorLog, verdi
 /// Presliding candidates: only on top of a static friction law (a model without Coulomb or
 /// Stribeck friction has no breakaway for bristles to soften). The law is the model's: its
 /// Coulomb friction (refitted when it states none), Stribeck and viscous friction; σ1 follows
-/// from the refitted inertia ([`candidates::presliding_variants`]).
+/// from the refitted inertia ([`presliding::variants`]).
 fn presliding_candidates(s: &Signals, st: &Structure) -> (Vec<Vec<f64>>, Vec<Variant>) {
     if !(st.has(EffectKind::Coulomb) || st.has(EffectKind::Stribeck)) {
         return (vec![], vec![]);
@@ -978,14 +979,13 @@ fn presliding_candidates(s: &Signals, st: &Structure) -> (Vec<Vec<f64>>, Vec<Var
     if law.alpha0 <= 0.0 {
         law.alpha0 = fc_fit.max(0.0);
     }
-    let nuisance =
-        candidates::presliding_variants(s, &law, j, &[candidates::PRESLIDING_NUISANCE_STEPS])
-            .into_iter()
-            .flat_map(|v| v.columns)
-            .collect();
+    let nuisance = presliding::variants(s, &law, j, &[presliding::NUISANCE_STEPS])
+        .into_iter()
+        .flat_map(|v| v.columns)
+        .collect();
     (
         nuisance,
-        candidates::presliding_variants(s, &law, j, &candidates::PRESLIDING_DEFLECTION_GRID),
+        presliding::variants(s, &law, j, &presliding::DEFLECTION_GRID),
     )
 }
 

@@ -36,6 +36,27 @@ pub static D: Descriptor = Descriptor {
     voltage: None,
     on_residual: false,
     sindy: |_| terms(&[(Term::AbsXdot, IN_ACCEL), (Term::AbsSgnXdot, IN_ACCEL)]),
+    diagnose: Diagnose {
+        variants: |s| {
+            let columns = vec![s.omega.iter().map(|w| w.abs()).collect()];
+            vec![Variant::new(
+                EffectKind::Asymmetry,
+                Equation::Mechanical,
+                vec![],
+                columns,
+            )]
+        },
+        present: |_, s| {
+            vec![(
+                Equation::Mechanical,
+                s.omega.iter().map(|w| w.abs()).collect(),
+            )]
+        },
+        keys: |b, _, v| {
+            put(v, "dv", b[0]);
+            put(v, "dc", 0.0)
+        },
+    },
 };
 
 pub(super) fn key_mut<'a, D>(e: &'a mut Effect<D>, key: &str) -> Option<&'a mut D> {

@@ -25,6 +25,22 @@ pub static D: Descriptor = Descriptor {
     voltage: None,
     on_residual: false,
     sindy: |_| terms(&[(Term::SgnXdot, IN_ACCEL)]),
+    diagnose: Diagnose {
+        variants: |s| {
+            let columns = vec![s.sgn_omega(), s.stick_column()];
+            vec![Variant::new(
+                EffectKind::Coulomb,
+                Equation::Mechanical,
+                vec![],
+                columns,
+            )]
+        },
+        present: |_, s| {
+            let mech = Equation::Mechanical;
+            vec![(mech, s.sgn_omega()), (mech, s.stick_column())]
+        },
+        keys: |b, _, v| put(v, "fc", b[0]),
+    },
 };
 
 pub(super) fn key_mut<'a, D>(e: &'a mut Effect<D>, key: &str) -> Option<&'a mut D> {

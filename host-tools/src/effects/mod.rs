@@ -4,13 +4,16 @@
 //! keys in, and the regressor columns and library terms the identification code builds from
 //! it. This file is the registry: the list of every descriptor and the lookup by kind or name.
 //!
-//! The spec parser ([`crate::effect_spec`]), the free parameters, the weak-form regressions
-//! and the SINDYc library read an effect only through its [`Descriptor`].
+//! The spec parser ([`crate::effect_spec`]), the free parameters, the weak-form regressions,
+//! the SINDYc library and `diagnose`'s candidates read an effect only through its
+//! [`Descriptor`].
+use crate::diagnose::candidates::{Equation, Signals, Units, Variant};
 use crate::effect_spec::EffectSpec;
 use crate::ident::library::ACCEL;
 use anyhow::Result;
 use control::effects::{Effect, EffectKind, TableVar, TABLE_MAX_BINS};
 use control::sindy::Term;
+use std::collections::BTreeMap;
 
 mod asymmetry;
 mod backlash;
@@ -22,7 +25,7 @@ mod deadtime;
 mod load_friction;
 mod offset;
 mod position_load;
-mod presliding;
+pub mod presliding;
 mod saturation;
 mod stribeck;
 pub mod table;
@@ -205,6 +208,25 @@ pub struct Descriptor {
     pub on_residual: bool,
     /// Its SINDYc library terms, or why it has none.
     pub sindy: fn(&EffectSpec) -> Result<SindyTerms>,
+    /// What `diagnose` tries and says about it.
+    pub diagnose: Diagnose,
+}
+
+/// What `diagnose` knows about an effect: the variants it tries when a model lacks the
+/// effect, the columns that stand for it when the model has it, and how a variant's fitted
+/// coefficients become the effect's keys.
+pub struct Diagnose {
+    /// The variants tried when the model lacks the effect, one per point of its grid over
+    /// the keys that enter nonlinearly (a harmonic, a Stribeck velocity, a time constant);
+    /// empty where the effect cannot show in these signals or is not a candidate.
+    pub variants: fn(&Signals) -> Vec<Variant>,
+    /// The columns that stand for the effect when the model has it (its nonlinear keys taken
+    /// from the model), each in its equation.
+    pub present: fn(&Effect<f64>, &Signals) -> Vec<(Equation, Vec<f64>)>,
+    /// The keys a variant's fitted coefficients `b` set (torque-equation ones in N·m; at
+    /// least two, zero beyond the variant's columns), into `values` beside the variant's
+    /// fixed keys.
+    pub keys: fn(b: &[f64], units: Units, values: &mut BTreeMap<String, f64>),
 }
 
 /// Every descriptor, in [`EffectKind::ALL`]'s order.
@@ -289,6 +311,24 @@ pub(crate) fn no_sindy_term(spec: &EffectSpec) -> Result<SindyTerms> {
         spec.kind.name(),
         spec
     )
+}
+
+/// [`Diagnose::variants`] of effects `diagnose` does not try by themselves.
+pub(crate) fn no_variants(_: &Signals) -> Vec<Variant> {
+    vec![]
+}
+
+/// [`Diagnose::present`] of effects without a column of their own in the base.
+pub(crate) fn no_columns(_: &Effect<f64>, _: &Signals) -> Vec<(Equation, Vec<f64>)> {
+    vec![]
+}
+
+/// [`Diagnose::keys`] of effects whose keys all come from the variant's grid.
+pub(crate) fn no_keys(_: &[f64], _: Units, _: &mut BTreeMap<String, f64>) {}
+
+/// [`Diagnose::keys`] helper: set `key` to `x`.
+pub(crate) fn put(values: &mut BTreeMap<String, f64>, key: &str, x: f64) {
+    values.insert(key.to_string(), x);
 }
 
 /// SINDYc terms without a Stribeck velocity.

@@ -26,6 +26,19 @@ pub static D: Descriptor = Descriptor {
     on_residual: false,
     // ẋ is already in the library.
     sindy: in_paper_library,
+    diagnose: Diagnose {
+        variants: |s| {
+            let columns = vec![s.omega.clone()];
+            vec![Variant::new(
+                EffectKind::Viscous,
+                Equation::Mechanical,
+                vec![],
+                columns,
+            )]
+        },
+        present: |_, s| vec![(Equation::Mechanical, s.omega.clone())],
+        keys: |b, _, v| put(v, "b", b[0]),
+    },
 };
 
 pub(super) fn key_mut<'a, D>(e: &'a mut Effect<D>, key: &str) -> Option<&'a mut D> {
