@@ -56,6 +56,15 @@ pub static D: Descriptor = Descriptor {
             put(v, "dv", b[0]);
             put(v, "dc", 0.0)
         },
+        column_names: &[],
+        torque_unit: "N·m·s/rad",
+        plausible: always_plausible,
+        explain: |s| {
+            format!(
+                "friction differs by direction: viscous friction {:+.2e} N·m per rad/s going forward against backward",
+                2.0 * s.get("dv")
+            )
+        },
     },
 };
 

@@ -57,6 +57,16 @@ pub static D: Descriptor = Descriptor {
             _ => vec![],
         },
         keys: |b, _, v| put(v, "j2", b[0]),
+        column_names: &[],
+        torque_unit: "kg·m²",
+        plausible: |s| s.get("j2") > 0.0,
+        explain: |s| {
+            format!(
+                "a load of {:.2e} kg·m² is dragged along only after the rotor has turned {:.3} rad alone past each reversal (backlash in a gear or coupling)",
+                s.get("j2"),
+                s.get("gap")
+            )
+        },
     },
 };
 

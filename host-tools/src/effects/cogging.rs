@@ -83,6 +83,16 @@ pub static D: Descriptor = Descriptor {
             vec![(Equation::Mechanical, a), (Equation::Mechanical, b)]
         },
         keys: amp_phase,
+        column_names: &[],
+        torque_unit: "N·m",
+        plausible: always_plausible,
+        explain: |s| {
+            format!(
+                "a torque of {:.3} N·m repeats {} times per revolution (cogging between magnets and stator teeth)",
+                s.get("amp"),
+                s.get("harmonic")
+            )
+        },
     },
 };
 

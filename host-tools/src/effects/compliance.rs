@@ -75,6 +75,16 @@ pub static D: Descriptor = Descriptor {
             values.insert("k".into(), b[0] * wn * wn);
             values.insert("c".into(), 2.0 * z * wn * b[0]);
         },
+        column_names: &[],
+        torque_unit: "kg·m²",
+        plausible: |s| s.get("j2") > 0.0,
+        explain: |s| {
+            format!(
+                "a second inertia of {:.2e} kg·m² follows the rotor through a compliant coupling resonating near {:.2} Hz against a fixed rotor (a flexible coupling, a long shaft, a belt)",
+                s.get("j2"),
+                (s.get("k") / s.get("j2")).sqrt() / (2.0 * std::f64::consts::PI)
+            )
+        },
     },
 };
 

@@ -40,6 +40,15 @@ pub static D: Descriptor = Descriptor {
             vec![(mech, s.sgn_omega()), (mech, s.stick_column())]
         },
         keys: |b, _, v| put(v, "fc", b[0]),
+        column_names: &["fc (Coulomb)", "Coulomb at standstill"],
+        torque_unit: "N·m",
+        plausible: |s| s.get("fc") > 0.0,
+        explain: |s| {
+            format!(
+                "a constant friction of {:.3} N·m opposes the motion in either direction (Coulomb)",
+                s.get("fc")
+            )
+        },
     },
 };
 

@@ -49,6 +49,15 @@ pub static D: Descriptor = Descriptor {
             None => vec![],
         },
         keys: |b, units, v| put(v, "i0", -b[0] / units.r),
+        column_names: &[],
+        torque_unit: "N·m",
+        plausible: always_plausible,
+        explain: |s| {
+            format!(
+                "the current sensor reads {:.3} A too much at zero current (offset)",
+                s.get("i0")
+            )
+        },
     },
 };
 

@@ -52,6 +52,15 @@ pub static D: Descriptor = Descriptor {
                 .collect()
         },
         keys: |b, _, v| put(v, "vd", b[0]),
+        column_names: &[],
+        torque_unit: "N·m",
+        plausible: |s| s.get("vd") > 0.0,
+        explain: |s| {
+            format!(
+                "the inverter loses {:.3} V with the sign of the current (dead time)",
+                s.get("vd")
+            )
+        },
     },
 };
 

@@ -51,6 +51,15 @@ pub static D: Descriptor = Descriptor {
         // friction scales the whole base by 1/(1 − μ) (a lower K_t), the braking part then
         // enters with μ/(1 − μ).
         keys: |b, _, v| put(v, "mu", b[0] / (1.0 + b[0])),
+        column_names: &[],
+        torque_unit: "N·m",
+        plausible: |s| (0.0..=crate::diagnose::MAX_LOAD_FRICTION).contains(&s.get("mu")),
+        explain: |s| {
+            format!(
+                "friction grows with the transmitted torque, {:.3} N·m per N·m (gears, screws)",
+                s.get("mu")
+            )
+        },
     },
 };
 

@@ -227,6 +227,16 @@ pub struct Diagnose {
     /// least two, zero beyond the variant's columns), into `values` beside the variant's
     /// fixed keys.
     pub keys: fn(b: &[f64], units: Units, values: &mut BTreeMap<String, f64>),
+    /// Names of its present columns in the base, where they have their own (else the
+    /// effect's name, numbered when it has several).
+    pub column_names: &'static [&'static str],
+    /// Unit of a present column's coefficient in the torque equation.
+    pub torque_unit: &'static str,
+    /// Whether a finding's fitted keys are physical: a dissipation dissipates, a load has an
+    /// inertia. An implausible best fit is not reported.
+    pub plausible: fn(&EffectSpec) -> bool,
+    /// What a finding means physically, as a clause for `diagnose`'s sentence (lower case).
+    pub explain: fn(&EffectSpec) -> String,
 }
 
 /// Every descriptor, in [`EffectKind::ALL`]'s order.
@@ -325,6 +335,11 @@ pub(crate) fn no_columns(_: &Effect<f64>, _: &Signals) -> Vec<(Equation, Vec<f64
 
 /// [`Diagnose::keys`] of effects whose keys all come from the variant's grid.
 pub(crate) fn no_keys(_: &[f64], _: Units, _: &mut BTreeMap<String, f64>) {}
+
+/// [`Diagnose::plausible`] of effects whose every fitted value is physical.
+pub(crate) fn always_plausible(_: &EffectSpec) -> bool {
+    true
+}
 
 /// [`Diagnose::keys`] helper: set `key` to `x`.
 pub(crate) fn put(values: &mut BTreeMap<String, f64>, key: &str, x: f64) {

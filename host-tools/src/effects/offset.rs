@@ -37,6 +37,15 @@ pub static D: Descriptor = Descriptor {
         },
         present: |_, s| vec![(Equation::Mechanical, vec![1.0; s.len()])],
         keys: |b, _, v| put(v, "t0", b[0]),
+        column_names: &[],
+        torque_unit: "N·m",
+        plausible: always_plausible,
+        explain: |s| {
+            format!(
+                "a constant load torque of {:.3} N·m pulls in one direction",
+                s.get("t0")
+            )
+        },
     },
 };
 

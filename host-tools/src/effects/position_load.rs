@@ -44,6 +44,15 @@ pub static D: Descriptor = Descriptor {
             vec![(Equation::Mechanical, a), (Equation::Mechanical, b)]
         },
         keys: super::cogging::amp_phase,
+        column_names: &[],
+        torque_unit: "N·m",
+        plausible: always_plausible,
+        explain: |s| {
+            format!(
+                "a torque of {:.3} N·m repeats once per revolution (gravity on an arm or an unbalanced load)",
+                s.get("amp")
+            )
+        },
     },
 };
 

@@ -53,6 +53,15 @@ pub static D: Descriptor = Descriptor {
             vec![(Equation::Mechanical, s.breakaway_column(tau))]
         },
         keys: no_keys,
+        column_names: &[],
+        torque_unit: "N·m",
+        plausible: always_plausible,
+        explain: |s| {
+            format!(
+                "friction builds up over a deflection after each reversal and breakaway instead of switching at once (presliding, the LuGre bristle state, stiffness about {:.3} N·m/rad: `fit --model lugre` has it)",
+                s.get("sigma0")
+            )
+        },
     },
 };
 

@@ -45,6 +45,16 @@ pub static D: Descriptor = Descriptor {
         variants: no_variants,
         present: no_columns,
         keys: |b, _, v| put(v, "k", b[0]),
+        column_names: &[],
+        torque_unit: "N·m",
+        plausible: |s| s.get("k") > 0.0,
+        explain: |s| {
+            format!(
+                "the torque constant falls at high current (magnetic saturation, K_t/(1 + k·I²) with k = {:.2e}/A², {:.0}% lower at 20 A)",
+                s.get("k"),
+                100.0 * (1.0 - 1.0 / (1.0 + s.get("k") * 400.0))
+            )
+        },
     },
 };
 

@@ -67,6 +67,16 @@ pub static D: Descriptor = Descriptor {
             vec![(Equation::Mechanical, column(s, vs))]
         },
         keys: |b, _, v| put(v, "fs", b[0]),
+        column_names: &["fs − fc (Stribeck)"],
+        torque_unit: "N·m",
+        plausible: |s| s.get("fs") > 0.0,
+        explain: |s| {
+            format!(
+                "friction is {:.3} N·m higher at low speed and falls off above about {} rad/s (Stribeck)",
+                s.get("fs"),
+                s.get("vs")
+            )
+        },
     },
 };
 

@@ -165,6 +165,15 @@ pub static D: Descriptor = Descriptor {
         variants: no_variants,
         present: no_columns,
         keys: no_keys,
+        column_names: &[],
+        torque_unit: "N·m",
+        plausible: always_plausible,
+        explain: |s| {
+            format!(
+                "a torque that depends on {} as the fitted lookup table describes",
+                s.table_var().name()
+            )
+        },
     },
 };
 

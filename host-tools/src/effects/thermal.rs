@@ -60,6 +60,16 @@ pub static D: Descriptor = Descriptor {
             _ => vec![],
         },
         keys: |b, units, v| put(v, "k", b[0] / units.r),
+        column_names: &[],
+        torque_unit: "N·m",
+        plausible: |s| s.get("k") > 0.0,
+        explain: |s| {
+            format!(
+                "the winding resistance rises as the current heats the motor ({:.1e} per A², time constant {} s)",
+                s.get("k"),
+                s.get("tau")
+            )
+        },
     },
 };
 

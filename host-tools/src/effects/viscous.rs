@@ -38,6 +38,15 @@ pub static D: Descriptor = Descriptor {
         },
         present: |_, s| vec![(Equation::Mechanical, s.omega.clone())],
         keys: |b, _, v| put(v, "b", b[0]),
+        column_names: &["b (viscous)"],
+        torque_unit: "N·m·s/rad",
+        plausible: |s| s.get("b") > 0.0,
+        explain: |s| {
+            format!(
+                "friction grows in proportion to speed, {:.2e} N·m per rad/s (viscous)",
+                s.get("b")
+            )
+        },
     },
 };
 
