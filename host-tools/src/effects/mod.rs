@@ -364,6 +364,76 @@ pub(crate) fn table_var_code(var: TableVar) -> f64 {
     TableVar::ALL.iter().position(|x| *x == var).unwrap_or(0) as f64
 }
 
+/// Effects, or `diagnose`'s carrier variables (`theta`, `omega`, `reversal`, ...), that one
+/// log can leave looking alike, and an experiment in which they differ.
+pub struct LookAlikes {
+    /// The pairs this experiment separates, in either order; `"*"` pairs an effect with
+    /// anything no other row pairs it with.
+    pub pairs: &'static [(&'static str, &'static str)],
+    /// The experiment (a log to record or simulate) and what tells them apart there.
+    pub experiment: &'static str,
+}
+
+/// Every look-alike pair with the experiment that separates it (see decision 0025 for why a
+/// table names both sides rather than one effect's file holding the pair).
+#[rustfmt::skip]
+pub static LOOK_ALIKES: &[LookAlikes] = &[
+    LookAlikes {
+        pairs: &[("offset", "asymmetry")],
+        experiment: "hold the rotor near standstill with a small voltage in each direction, and run steady speeds both ways: a constant load pulls the same way at rest, a direction-dependent friction acts only while moving (`motorid simulate --signal steady`, or record it)",
+    },
+    LookAlikes {
+        pairs: &[("load_friction", "deadtime"), ("load_friction", "saturation")],
+        experiment: "voltage steps down while the rotor turns fast (signal d): load-dependent friction acts only while the drive brakes the rotor, dead time follows the sign of the current whether braking or not",
+    },
+    LookAlikes {
+        pairs: &[("cogging", "position_load"), ("cogging", "theta")],
+        experiment: "a slow run at constant speed over several revolutions: count the periods of the error per revolution (one: a position load; the number of magnet/slot periods: cogging)",
+    },
+    LookAlikes {
+        pairs: &[("stribeck", "presliding"), ("presliding", "reversal")],
+        experiment: "slow reversals of small amplitude (a fraction of a revolution) against steady low speeds: presliding shows as a deflection before breakaway at each reversal, a Stribeck dip as a function of speed",
+    },
+    LookAlikes {
+        pairs: &[("coulomb", "stribeck"), ("coulomb", "viscous"), ("viscous", "stribeck"), ("stribeck", "omega")],
+        experiment: "steady speeds at several levels, low ones included (`motorid simulate --signal steady`): the static friction curve separates a constant, a dip at low speed and a slope",
+    },
+    LookAlikes {
+        pairs: &[("current_offset", "offset"), ("current_offset", "deadtime")],
+        experiment: "a run at zero voltage with the rotor still: a current-sensor offset reads a current where there is none",
+    },
+    LookAlikes {
+        pairs: &[("thermal", "time"), ("thermal", "*")],
+        experiment: "a long run at high current followed by a rest with the same excitation: heating grows and decays with its time constant, wear or a supply sag does not",
+    },
+    LookAlikes {
+        pairs: &[("backlash", "compliance")],
+        experiment: "a slow reversal at low speed (`motorid simulate --signal ramp`, or `motorid record --signal ramp`: slow ramps from rest in each direction), then steps (signal d): a gap shows as a dead band after each change of direction, in which the rotor travels the gap's angle freely with no torque passed to the load; a compliant coupling passes torque at once and shows as a resonance that the steps excite and the rotor's angle rings at",
+    },
+    LookAlikes {
+        pairs: &[("reversal", "frequency")],
+        experiment: "steps in one direction only, without reversals: a resonance still rings after each step, backlash does not show",
+    },
+    LookAlikes {
+        pairs: &[("acceleration", "current"), ("saturation", "acceleration")],
+        experiment: "slow ramps at high current (a locked or heavily loaded rotor): a falling torque constant shows at high current without acceleration, an inertia error only with acceleration",
+    },
+    LookAlikes {
+        pairs: &[("viscous", "asymmetry")],
+        experiment: "steady speeds in both directions: the friction curve of each direction on its own",
+    },
+];
+
+/// The experiment of [`LOOK_ALIKES`] that tells `a` from `b` (either order): a row naming
+/// both, else a row pairing either with `"*"`.
+pub fn experiment(a: &str, b: &str) -> Option<&'static str> {
+    let both = |(x, y): &(&str, &str)| (a == *x && b == *y) || (a == *y && b == *x);
+    let any = |(x, y): &(&str, &str)| *y == "*" && (a == *x || b == *x);
+    let row =
+        |m: &dyn Fn(&(&str, &str)) -> bool| LOOK_ALIKES.iter().find(|r| r.pairs.iter().any(m));
+    row(&both).or_else(|| row(&any)).map(|r| r.experiment)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -377,6 +447,35 @@ mod tests {
             assert!(!d.meaning.is_empty() && !d.keys.is_empty());
         }
         assert!(by_name("gravity").is_none());
+    }
+
+    /// Every name of the look-alike table is an effect or a carrier variable, and no pair
+    /// is listed twice (in either order), so the row found does not depend on the order.
+    #[test]
+    fn look_alike_pairs_name_effects_or_carriers_once() {
+        let carriers = [
+            "theta",
+            "omega",
+            "acceleration",
+            "current",
+            "time",
+            "reversal",
+            "frequency",
+        ];
+        let known = |n: &str| by_name(n).is_some() || carriers.contains(&n) || n == "*";
+        let mut seen = Vec::new();
+        for row in LOOK_ALIKES {
+            assert!(!row.experiment.is_empty());
+            for &(a, b) in row.pairs {
+                assert!(known(a) && known(b) && a != "*", "{a}, {b}");
+                let key = if a < b { (a, b) } else { (b, a) };
+                assert!(!seen.contains(&key), "{a}, {b} twice");
+                seen.push(key);
+                assert_eq!(experiment(a, b), Some(row.experiment));
+                assert_eq!(experiment(b, a), Some(row.experiment));
+            }
+        }
+        assert!(experiment("cogging", "offset").is_none());
     }
 
     #[test]
