@@ -212,6 +212,9 @@ pub struct Descriptor {
     pub diagnose: Diagnose,
 }
 
+/// Sample-level columns, each with the equation it belongs to.
+pub type Columns = Vec<(Equation, Vec<f64>)>;
+
 /// What `diagnose` knows about an effect: the variants it tries when a model lacks the
 /// effect, the columns that stand for it when the model has it, and how a variant's fitted
 /// coefficients become the effect's keys.
@@ -222,7 +225,7 @@ pub struct Diagnose {
     pub variants: fn(&Signals) -> Vec<Variant>,
     /// The columns that stand for the effect when the model has it (its nonlinear keys taken
     /// from the model), each in its equation.
-    pub present: fn(&Effect<f64>, &Signals) -> Vec<(Equation, Vec<f64>)>,
+    pub present: fn(&Effect<f64>, &Signals) -> Columns,
     /// The keys a variant's fitted coefficients `b` set (torque-equation ones in N·m; at
     /// least two, zero beyond the variant's columns), into `values` beside the variant's
     /// fixed keys.
@@ -329,7 +332,7 @@ pub(crate) fn no_variants(_: &Signals) -> Vec<Variant> {
 }
 
 /// [`Diagnose::present`] of effects without a column of their own in the base.
-pub(crate) fn no_columns(_: &Effect<f64>, _: &Signals) -> Vec<(Equation, Vec<f64>)> {
+pub(crate) fn no_columns(_: &Effect<f64>, _: &Signals) -> Columns {
     vec![]
 }
 
