@@ -472,8 +472,8 @@ const RUN_STEP: f64 = 2e-3;
 /// two threads, combined as twice the half-step run less the full-step one (Richardson).
 /// The plant's implicit scheme is first order in its step, so the combination cancels the
 /// leading error of both runs and follows the motion more closely than either, at a small
-/// part of the cost of one run at the emulator's default step. `None` when the emulator
-/// refuses the configuration or the run diverges.
+/// part of the cost of one run at the emulator's default step; the full-step run alone when
+/// the emulator refuses the half step. `None` when it refuses both or the run diverges.
 fn extrapolated_run(
     cfg: &crate::emulator::EmulatorConfig,
     u: &[f64],
@@ -486,7 +486,13 @@ fn extrapolated_run(
         crate::emulator::simulate(&c, u, ts).ok().map(|r| r.truth)
     };
     let (half, full) = rayon::join(|| run_at(0.5 * ts / steps), || run_at(ts / steps));
-    let (mut half, full) = (half?, full?);
+    // A period so short that the half step is below the emulator's smallest: the full-step
+    // run alone, whose step is then a small part of a period anyway.
+    let (mut half, full) = match (half, full) {
+        (Some(h), Some(f)) => (h, f),
+        (None, Some(f)) => return Some((f.theta, f.i)),
+        _ => return None,
+    };
     let extrapolate = |x: &mut Vec<f64>, y: &[f64]| {
         x.iter_mut().zip(y).for_each(|(a, b)| *a = 2.0 * *a - b);
     };
