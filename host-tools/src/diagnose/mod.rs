@@ -583,6 +583,9 @@ struct Judged {
     instruments: Vec<Option<Vec<f64>>>,
     /// The input at each kept window's centre.
     input: Vec<f64>,
+    /// Effects left significant but below the share a finding must explain
+    /// ([`forward_select::Small`]).
+    small: Vec<forward_select::Small>,
 }
 
 /// The verdict on the model as given ([`verdict`], [`carriers`]).
@@ -628,6 +631,11 @@ fn judge(
             }
             checks.push(c);
         }
+        checks.extend(verdict::small_effects_check(
+            j.eq.label(),
+            &j.small,
+            opts.min_explained,
+        ));
         checks.extend(residual_checks(j, &cluster, level_per_test));
         let rows = carriers::Rows {
             wf,

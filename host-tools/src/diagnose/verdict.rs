@@ -55,7 +55,8 @@ pub const LAGS: usize = 4;
 /// One adequacy check.
 #[derive(Debug, Clone, Serialize)]
 pub struct Check {
-    /// `parameters`, `whiteness` or `input`.
+    /// `parameters`, `whiteness`, `input`, `small effects` (an effect left significant but
+    /// below the share a finding must explain), `carriers` or `data` (cannot judge).
     pub name: &'static str,
     /// Test statistic (F for the parameters, Hotelling's T² for the others; NaN when the
     /// test cannot decide on this log).
@@ -198,6 +199,44 @@ pub fn whiteness_check(resid: &[f64], cluster: &[usize], level: f64) -> Check {
             if passed { "yes" } else { "no" }
         ),
     }
+}
+
+/// The failed check of an equation in which forward selection left effects that are
+/// significant at the findings' per-test level but explain less than `min_explained` of the
+/// model's residual ([`super::forward_select::Small`]); `None` when it left none. The model
+/// misses something the data show, so it is not adequate; no effect is named, as the column
+/// that caught it need not be the physics behind it. Its statistic and p-value are those of
+/// the most significant one, its share their largest.
+pub(super) fn small_effects_check(
+    label: &str,
+    small: &[super::forward_select::Small],
+    min_explained: f64,
+) -> Option<Check> {
+    let first = small.first()?;
+    let each: Vec<String> = small
+        .iter()
+        .map(|e| {
+            format!(
+                "{}, p = {:.1e} ({:.1}% of the residual)",
+                e.name,
+                e.p_value,
+                100.0 * e.share
+            )
+        })
+        .collect();
+    Some(Check {
+        name: "small effects",
+        statistic: first.t2,
+        p_value: first.p_value,
+        share: small.iter().map(|e| e.share).fold(0.0, f64::max),
+        passed: false,
+        note: None,
+        detail: format!(
+            "{label}: a significant but small effect (< {:.0}% of the residual) is left: {}; the column of the list that caught it need not be its physics, so none is named",
+            100.0 * min_explained,
+            each.join("; ")
+        ),
+    })
 }
 
 /// A check its test cannot decide on this log (too few rows or held inputs): not passed, its
