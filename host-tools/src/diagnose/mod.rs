@@ -20,7 +20,9 @@
 //!    least [`MIN_EXPLAINED`] of the model's own residual sum of squares; a second inertia on
 //!    a coupling, whose column shares the angle's reading with the inertia's, also a torque of
 //!    at least [`MIN_TORQUE_FRACTION`] of the Coulomb friction); it then joins the base and
-//!    the next one is tested, until none passes.
+//!    the next one is tested, until none passes. A candidate left that passes every rule but
+//!    the share is not named, and fails the verdict's `small effects` check: the model
+//!    misses something the data show, too small to estimate.
 //! 4. Each finding's coefficients become a spec (`cogging:harmonic=7,amp=0.03,phase=0.2`) that
 //!    `fit --add` accepts; its score is the fraction of the base residual it explains.
 pub mod candidates;

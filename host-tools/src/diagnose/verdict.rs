@@ -8,6 +8,9 @@
 //!    [`parameter_check`]), and the refitted values of the parameters that moved
 //!    ([`moved_columns`]) make a free run closer to the log ([`free_run_gain`]), the
 //!    parameters are off: the finding lists those values and the advice to refit first.
+//!    Once the Wald test has rejected, the same residual is also tested for the parameters
+//!    drifting along the log ([`parameter_drift`]); a drift fails the check whatever the
+//!    free run shows, since no constant value follows it.
 //! 2. **Whiteness** of the structure's residual: the Breusch–Godfrey regression of the
 //!    residual on its own past values, on every other weak-form window, so that no two
 //!    windows share a sample and a correct model's residual is independent; tested with the
@@ -461,13 +464,14 @@ pub fn parameter_drift(
     let (mid, span) = (0.5 * (lo + hi), (hi - lo).max(f64::MIN_POSITIVE));
     let tested: Vec<Vec<f64>> = cols
         .iter()
-        .map(|c| c.iter().zip(times).map(|(x, t)| x * (t - mid) / span).collect())
+        .map(|c| {
+            c.iter()
+                .zip(times)
+                .map(|(x, t)| x * (t - mid) / span)
+                .collect()
+        })
         .collect();
-    let null: Vec<&[f64]> = cols
-        .iter()
-        .chain(nuisance)
-        .map(|c| c.as_slice())
-        .collect();
+    let null: Vec<&[f64]> = cols.iter().chain(nuisance).map(|c| c.as_slice()).collect();
     let cluster = block_clusters(hold, cluster_block(refit, tested.len()));
     statistics::small_sample_test_beyond(
         given,
