@@ -297,7 +297,7 @@ fn deadtime_on_d() {
 }
 
 #[test]
-#[ignore = "not named: +1-2 % of resistance on the multisine; the thermal candidate misses the Bonferroni level, and the model is not adequate by the voltage equation's parameter drift instead (docs/decisions/0027-significant-means-not-adequate.md)"]
+#[ignore = "not named: +1-2 % of resistance on the multisine; the thermal candidate misses the Bonferroni level, and the model is not adequate by the voltage equation's parameter drift instead (docs/decisions/0028-significant-means-not-adequate.md)"]
 fn thermal_on_a() {
     check("thermal", SignalKind::A);
 }
@@ -445,7 +445,7 @@ const TABLE_TAIL: &str = "\nHow to read it. On the voltage steps d a correct mod
      multisine raises R by up to 2 %: the thermal candidate misses the Bonferroni level, and \
      the model is not adequate because the voltage equation's parameter check sees its \
      parameters drift along the log, not by a name \
-     (docs/decisions/0027-significant-means-not-adequate.md). Gear tooth \
+     (docs/decisions/0028-significant-means-not-adequate.md). Gear tooth \
      friction proportional to a transmitted torque that is mostly inertial looks like wrong \
      constants (the refit raises J and the friction). On steps, the cluster-robust entry test \
      has some 30 held inputs and names dead time or load friction on one seed of three. A \
