@@ -258,9 +258,22 @@ impl OtherPlant {
 
     /// Run the plant on `u` (volts held over each period `ts`) and sample it like the board.
     pub fn run(&self, u: &[f64], ts: f64, seed: u64) -> MotorLog {
+        self.run_with_velocity(u, ts, seed, 0.0).0
+    }
+
+    /// [`OtherPlant::run`] from the rotor (and load) angle `theta0` [rad], with the rotor's
+    /// true velocity at each sample [rad/s] (which the log, like the board's, does not
+    /// carry): what a model's free run is scored against.
+    pub fn run_with_velocity(
+        &self,
+        u: &[f64],
+        ts: f64,
+        seed: u64,
+        theta0: f64,
+    ) -> (MotorLog, Vec<f64>) {
         let sub = 240; // 50 µs steps: RK4 stable for L/R ≈ 1.3 ms and an 80 Hz contact.
         let h = ts / sub as f64;
-        let mut x = [0.0f64; 6];
+        let mut x = [theta0, 0.0, 0.0, theta0, 0.0, 0.0];
         let mut rng = Lcg(seed.wrapping_mul(6364136223846793005).wrapping_add(1));
         let mut log = MotorLog {
             source: PathBuf::from("other_plant.csv"),
@@ -268,6 +281,7 @@ impl OtherPlant {
             ..MotorLog::default()
         };
         let mut i_meas = Vec::with_capacity(u.len());
+        let mut omega = Vec::with_capacity(u.len());
         for (k, &v) in u.iter().enumerate() {
             let t = k as f64 * ts;
             log.t.push(t);
@@ -278,6 +292,7 @@ impl OtherPlant {
                 read += i0;
             }
             i_meas.push(read);
+            omega.push(x[1]);
             for s in 0..sub {
                 let tt = t + s as f64 * h;
                 let k1 = self.deriv(tt, &x, v);
@@ -297,7 +312,7 @@ impl OtherPlant {
         log.meta.insert("sample_period".into(), format!("{ts}"));
         log.meta
             .insert("hall_resolution_rad".into(), format!("{}", self.hall));
-        log
+        (log, omega)
     }
 }
 

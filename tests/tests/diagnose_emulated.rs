@@ -303,8 +303,8 @@ fn top_spec(d: &Diagnosis, name: &str, what: &str) -> EffectSpec {
 /// σ0 = 0.4 N·m/rad: a breakaway deflection of 2.6 Hall steps). A static friction model (the
 /// paper's Coulomb, Stribeck and viscous friction, no bristle state) is told it lacks
 /// presliding, with a stiffness within a factor 2: one step of the deflection grid
-/// (`PRESLIDING_DEFLECTION_GRID`, 2, 4 and 8 Hall steps), which puts the true 2.6 steps at
-/// 2 steps (σ0 = 0.51).
+/// (`effects::presliding::DEFLECTION_GRID`, 2, 4 and 8 Hall steps), which puts the true 2.6
+/// steps at 2 steps (σ0 = 0.51).
 #[test]
 fn visible_presliding_is_ranked_first_against_static_friction() {
     let p = control::lugre::LugreParams::<f64>::paper();

@@ -16,7 +16,7 @@ use control::effects::Effect;
 use control::motor::MotorParams;
 use e2e::other_plant::{Extra, OtherPlant};
 use motorid::emulator::{signal, SignalKind};
-use motorid::log::Plant;
+use motorid::log::{MotorLog, Plant};
 use motorid::model::{Model, ModelKind};
 use serde_json::Value;
 
@@ -283,6 +283,227 @@ fn check(name: &str, kind: SignalKind) {
 #[test]
 fn cogging_on_a() {
     check("cogging", SignalKind::A);
+}
+
+/// The identification loop on the plant with its slot cogging hidden, as
+/// `tests/tests/fit_add_effects.rs` runs it on the emulator: a LuGre fit on the multisine a
+/// and the steady runs, diagnosed, refitted once with what the diagnosis named, the refit
+/// kept or not on a selection draw of signal b; scored on a second draw of b no choice was
+/// made on, as the free run's velocity against the plant's true velocity.
+///
+/// The true model is the plant's constants with both cogging harmonics, their phases in the
+/// log's angle: the plant's Hall reading is the floor of its angle, the product's the
+/// nearest step, so the log's angle is the plant's less half a step. A free run starts from
+/// the log's first angle, which puts the rotor anywhere in its Hall band; the test draw is
+/// run from [`LOOP_STARTS`] starts across the band and each model scored by its mean fit,
+/// so that no model gains from where one start happens to fall.
+struct CoggingLoop {
+    seed: u64,
+    /// The added spec as `diagnose` printed it and as refitted; whether the refit was kept.
+    added: Option<(String, String, bool)>,
+    base: f64,
+    refit: Option<f64>,
+    truth: f64,
+    /// The true model with the slot harmonic alone (what one cogging term can reach).
+    truth_one: f64,
+}
+
+impl CoggingLoop {
+    /// Share of the gap from the base fit to the true model the refit closes.
+    fn closed(&self) -> f64 {
+        self.refit
+            .map_or(0.0, |r| (r - self.base) / (self.truth - self.base))
+    }
+}
+
+/// Fitting, selection and test lengths [s], those of `fit_add_effects.rs`.
+const LOOP_FIT_SECONDS: f64 = 50.0;
+const LOOP_STEADY_SECONDS: f64 = 40.0;
+const LOOP_SELECT_SECONDS: f64 = 40.0;
+/// Starts of the test draw within the first Hall band, evenly spread.
+const LOOP_STARTS: usize = 5;
+
+fn cogging_loop(seed: u64) -> CoggingLoop {
+    use motorid::ident::{self, free_params::Constraints};
+    use motorid::workflow;
+    let c = case("cogging");
+    let p = OtherPlant::new(c.extra);
+    // The fitting and selection logs from the centre of the first band.
+    let run = |kind: SignalKind, seconds: f64, s: u64, name: &str, theta0: f64| {
+        let (mut log, omega) = p.run_with_velocity(&signal(kind, seconds, s), TS, s, theta0);
+        log.source = name.into();
+        (log, omega)
+    };
+    let centre = 0.5 * p.hall;
+    let fit_logs = vec![
+        run(SignalKind::A, LOOP_FIT_SECONDS, seed, "a.csv", centre).0,
+        run(
+            SignalKind::Steady,
+            LOOP_STEADY_SECONDS,
+            seed,
+            "steady.csv",
+            centre,
+        )
+        .0,
+    ];
+    let select = [run(
+        SignalKind::B,
+        LOOP_SELECT_SECONDS,
+        seed + 1000,
+        "b.csv",
+        centre,
+    )
+    .0];
+    let tests: Vec<(MotorLog, Vec<f64>)> = (0..LOOP_STARTS)
+        .map(|k| {
+            let theta0 = (k as f64 + 0.5) / LOOP_STARTS as f64 * p.hall;
+            run(
+                SignalKind::B,
+                LOOP_SELECT_SECONDS,
+                seed + 3000,
+                "b-test.csv",
+                theta0,
+            )
+        })
+        .collect();
+    let out = workflow::run(
+        &workflow::Config {
+            kind: ModelKind::Lugre,
+            plant: Plant::Voltage,
+            fit_logs: &fit_logs,
+            select_logs: &select,
+            start: Vec::new(),
+            constraints: &Constraints::NONE,
+            max_rounds: 1,
+            diagnose: motorid::diagnose::Options::default(),
+        },
+        &mut |req| Ok(ident::fit(req)?.model),
+        &mut |_| {},
+    )
+    .unwrap();
+    let score = |m: &Model| {
+        let fits = tests.iter().map(|(log, omega)| {
+            ident::freerun::simulate(m, log)
+                .ok()
+                .and_then(|pr| ident::fitpct::fit_percent(omega, &pr.omega).ok())
+                .unwrap_or(f64::NEG_INFINITY)
+        });
+        fits.sum::<f64>() / LOOP_STARTS as f64
+    };
+    let mut truth = given_model(&p, true);
+    if let Extra::SlotCogging {
+        slots,
+        a1,
+        p1,
+        a2,
+        p2,
+    } = c.extra
+    {
+        // Each harmonic's phase in the log's angle (the plant's less half a step).
+        let h = f64::from(slots);
+        truth.effects.push(Effect::Cogging {
+            harmonic: slots,
+            amp: a1,
+            phase: p1 + h * centre,
+        });
+        truth.effects.push(Effect::Cogging {
+            harmonic: 2 * slots,
+            amp: a2,
+            phase: p2 + 2.0 * h * centre,
+        });
+    }
+    let mut truth_one = truth.clone();
+    truth_one.effects.pop();
+    let refit = out.rounds.get(1);
+    CoggingLoop {
+        seed,
+        added: refit.map(|r| {
+            let spec = r.adds.last().unwrap();
+            let fitted = r
+                .model
+                .effects
+                .iter()
+                .rev()
+                .find(|e| e.kind() == spec.kind)
+                .map_or(String::new(), |e| {
+                    motorid::effect_spec::EffectSpec::from_effect(e).to_string()
+                });
+            (spec.to_string(), fitted, r.kept)
+        }),
+        base: score(&out.rounds[0].model),
+        refit: refit.map(|r| score(&r.model)),
+        truth: score(&truth),
+        truth_one: score(&truth_one),
+    }
+}
+
+/// The loop's rows for `COGGING_SEEDS` (comma-separated; default [`SEEDS`]), the loops side
+/// by side, printed.
+fn cogging_rows() -> Vec<CoggingLoop> {
+    let seeds: Vec<u64> = std::env::var("COGGING_SEEDS")
+        .ok()
+        .map(|v| v.split(',').filter_map(|s| s.parse().ok()).collect())
+        .unwrap_or(SEEDS.to_vec());
+    let rows: Vec<CoggingLoop> = std::thread::scope(|scope| {
+        let loops: Vec<_> = seeds
+            .iter()
+            .map(|&s| scope.spawn(move || cogging_loop(s)))
+            .collect();
+        loops.into_iter().map(|h| h.join().unwrap()).collect()
+    });
+    for r in &rows {
+        eprintln!(
+            "seed {}: base {:.2} refit {} truth {:.2} (slot harmonic alone {:.2}) closed {:.0} %; \
+             added {:?}",
+            r.seed,
+            r.base,
+            r.refit.map_or("none".into(), |x| format!("{x:.2}")),
+            r.truth,
+            r.truth_one,
+            100.0 * r.closed(),
+            r.added
+        );
+    }
+    rows
+}
+
+/// The hidden cogging was added by name and its refit kept.
+fn cogging_added(r: &CoggingLoop) -> bool {
+    r.added
+        .as_ref()
+        .is_some_and(|(spec, _, kept)| *kept && spec.starts_with("cogging"))
+}
+
+/// Cogging found by name on this plant: on every seed the loop adds it and keeps the refit,
+/// and on at least 2 of 3 (the rule of this file's names, [`NAMED_AT_LEAST`]) the refit
+/// closes at least half of the gap between the base fit and the true model on fresh data.
+/// Every seed is held to it by the ignored test below; the gap is under a point of fit, and
+/// the seed that falls short misses by the selection log's choice of cogging estimate
+/// (docs/limits.md).
+#[test]
+fn cogging_found_by_name_closes_half_the_gap_on_most_seeds() {
+    let rows = cogging_rows();
+    assert!(
+        rows.iter().all(cogging_added),
+        "cogging not added and kept on every seed"
+    );
+    let closed = rows.iter().filter(|r| r.closed() >= 0.5).count();
+    assert!(
+        closed >= NAMED_AT_LEAST * rows.len() / SEEDS.len(),
+        "half the gap closed on {closed} of {} seeds",
+        rows.len()
+    );
+}
+
+#[test]
+#[ignore = "seed 3 closes 13 % of a gap of 0.4 points: the selection log prefers the cogging estimated by weak form on the base fit (18 % high, 0.14 rad off) to the joint refinement's (within 1 %), by 0.05 points; the true cogging on the same constants would close 51 % (docs/limits.md)"]
+fn cogging_found_by_name_closes_half_the_gap() {
+    let failed: Vec<u64> = cogging_rows()
+        .iter()
+        .filter(|r| !(cogging_added(r) && r.closed() >= 0.5))
+        .map(|r| r.seed)
+        .collect();
+    assert!(failed.is_empty(), "seeds {failed:?} below half the gap");
 }
 
 #[test]

@@ -1,6 +1,8 @@
-//! The candidate regressors of every physical effect: what each effect of the
-//! effect list adds to the mechanical (torque) or electrical (voltage) equation, sample by sample,
-//! and how the fitted coefficients turn back into the effect's parameters (its spec).
+//! The candidate regressors of the physical effects: the sample-level signals and columns
+//! the effects add to the mechanical (torque) or electrical (voltage) equation, and the
+//! variants `diagnose` tests. Which columns an effect adds, over which grid of its
+//! nonlinear keys, and how the fitted coefficients turn back into its keys (its spec) is in
+//! the effect's descriptor ([`crate::effects::Diagnose`]); this module reads it from there.
 //!
 //! Equations, with the sign conventions of `control::effects` (load torques oppose motion,
 //! voltage losses are subtracted from the command):
@@ -12,9 +14,10 @@
 //! coefficients.
 use super::harmonics;
 use crate::effect_spec::EffectSpec;
+use crate::effects;
 use crate::log::{MotorLog, Plant};
 use crate::numerics::differentiation;
-use control::effects::{smooth_sign, Effect, EffectKind, CURRENT_EPS, VELOCITY_EPS};
+use control::effects::{smooth_sign, Effect, EffectKind, VELOCITY_EPS};
 use control::lugre::{LugreObserver, LugreParams};
 use std::collections::BTreeMap;
 
@@ -139,7 +142,16 @@ impl Signals {
         self.t.is_empty()
     }
 
-    fn sgn_omega(&self) -> Vec<f64> {
+    /// The measured current [A] of a voltage plant, where the voltage equation exists.
+    pub fn current(&self) -> Option<&Vec<f64>> {
+        match self.plant {
+            Plant::Voltage => self.i.as_ref(),
+            _ => None,
+        }
+    }
+
+    /// Smooth sign of the velocity, of width [`Self::velocity_eps`].
+    pub fn sgn_omega(&self) -> Vec<f64> {
         let eps = self.velocity_eps();
         self.omega.iter().map(|w| smooth_sign(*w, eps)).collect()
     }
@@ -611,298 +623,35 @@ pub struct Variant {
     pub torque: Option<Vec<f64>>,
 }
 
-/// Grid of Stribeck velocities [rad/s] (times [`Signals::vscale`]): around the paper's v0 = 3.7 rad/s, from the
-/// velocity resolution (≈1 rad/s) up to where Stribeck merges with viscous friction.
-pub const STRIBECK_GRID: [f64; 6] = [1.0, 2.0, 3.5, 5.0, 8.0, 12.0];
-/// Grid of thermal time constants [s]: small motors heat in 5 s (winding) to minutes (case).
-pub const THERMAL_GRID: [f64; 6] = [5.0, 10.0, 20.0, 40.0, 80.0, 160.0];
-/// Grid of breakaway time constants σ1/σ0 [s] for the breakaway column of a model that has
-/// presliding: the paper's 22.2/317 = 70 ms, and a factor of about 2.5 either way.
-pub const BREAKAWAY_GRID: [f64; 3] = [0.03, 0.07, 0.18];
-/// Grid of breakaway deflections `s(0)/σ0` of a missing presliding, in angle steps (Hall
-/// steps): from two steps to 8, a factor of 2 apart (the estimated σ0 is then within a factor
-/// √2 of the best grid point). Where a sharp friction switch falls between two Hall edges is
-/// uncertain by up to a full step of travel (the quantisation error spans ±½ step), so a
-/// bristle that deflects one step cannot be told from ordinary stick-slip friction seen
-/// through the sensor: on a plant with Karnopp stick-slip friction and no bristles at all,
-/// a one-step variant was named on most seeds (`tests/tests/diagnose_verdict.rs`).
-pub const PRESLIDING_DEFLECTION_GRID: [f64; 3] = [2.0, 4.0, 8.0];
-/// Breakaway deflection [angle steps] of the nuisance term in the presliding test's base.
-pub const PRESLIDING_NUISANCE_STEPS: f64 = 0.5;
-
-/// Damping ratios of a missing compliance: a lightly damped coupling (a flexible coupling,
-/// a long shaft: ζ ≈ 0.05) and a well damped one (an elastomer coupling, a belt: ζ ≈ 0.3).
-pub const COMPLIANCE_ZETA: [f64; 2] = [0.05, 0.3];
-
-/// Natural frequencies [Hz] of a missing compliance, a factor 1.4 apart (the resonance's
-/// half-power width at ζ = 0.3): from 8 periods per log up to ten times the input's RMS
-/// frequency ([`super::carriers::rms_frequency`]), the weak-form window's reach
-/// (1.5/half-width) and 0.45 of the sample rate, whichever is lowest. A coupling far above
-/// the excitation's band moves with the rotor: its column differs from the inertia's by
-/// (f/f_n)², and fitting that difference would fit the sensor chain's lag instead.
-pub fn compliance_grid(s: &Signals) -> Vec<f64> {
-    let span = s.t.last().copied().unwrap_or(0.0) - s.t.first().copied().unwrap_or(0.0);
-    if span <= 0.0 || s.dt <= 0.0 {
-        return vec![];
-    }
-    let half_s = crate::numerics::weak_form::HALF_WIDTH_S.max(2.0 * s.dt);
-    let f_u = super::carriers::rms_frequency(&s.raw_u, s.dt);
-    let lo = 8.0 / span;
-    let hi =
-        (0.45 / s.dt)
-            .min(1.5 / half_s)
-            .min(if f_u > 0.0 { 10.0 * f_u } else { f64::INFINITY });
-    let mut v = Vec::new();
-    let mut f = lo;
-    while f <= hi && v.len() < 40 {
-        v.push(f);
-        f *= 1.4;
-    }
-    v
-}
-
-/// Gaps [rad] a backlash is tested at, a factor 1.6 apart (the gap is then estimated within
-/// a factor of about 1.26): from two angle quantisation steps (a gap of one step hides in
-/// the quantisation of the angle) up to the median angle the rotor travels between two
-/// reversals ([`Signals::median_swing`]; a gap wider than most swings is closed only on the
-/// longest ones, and its column rests on those few), at most 12 gaps. None when the log has
-/// fewer than two reversals: the load then parts from the rotor only where it slows down,
-/// and a gap cannot be told from the load's own inertia.
-pub fn backlash_gaps(s: &Signals) -> Vec<f64> {
-    let step = s.angle_step();
-    if !(step.is_finite() && step > 0.0) {
-        return vec![];
-    }
-    let Some(top) = s.median_swing() else {
-        return vec![];
-    };
-    (0..12)
-        .map(|k| 2.0 * step * 1.6f64.powi(k))
-        .take_while(|g| *g <= top)
-        .collect()
-}
-
-/// Variants of a missing backlash: one per gap of [`backlash_gaps`], the column
-/// [`Signals::backlash_acceleration`] (its coefficient is the load's inertia j2).
-fn backlash_variants(s: &Signals) -> Vec<Variant> {
-    backlash_gaps(s)
-        .into_iter()
-        .map(|gap| Variant {
-            kind: EffectKind::Backlash,
-            equation: Equation::Mechanical,
-            fixed: vec![("gap", gap)],
-            columns: vec![s.backlash_acceleration(gap)],
+impl Variant {
+    /// A variant whose size is measured on its own columns.
+    pub fn new(
+        kind: EffectKind,
+        equation: Equation,
+        fixed: Fixed,
+        columns: Vec<Vec<f64>>,
+    ) -> Variant {
+        Variant {
+            kind,
+            equation,
+            fixed,
+            columns,
             torque: None,
-        })
-        .collect()
-}
-
-/// Variants of a missing presliding on top of a static friction law `law` (its α0, α1, v0,
-/// α2; σ0 and σ1 are set here): one per breakaway deflection of
-/// [`PRESLIDING_DEFLECTION_GRID`], σ0 = s(0)/deflection, σ1 = 2·√(σ0·J) (critical damping
-/// of the rotor inertia `inertia` on the bristle spring). The column is
-/// [`Signals::presliding_column`]: the friction the bristles take away from (or add to) the
-/// static law after each reversal and breakaway.
-pub fn presliding_variants(
-    s: &Signals,
-    law: &LugreParams<f64>,
-    inertia: f64,
-    grid: &[f64],
-) -> Vec<Variant> {
-    let s0 = law.s(0.0);
-    if !(s0 > 0.0 && s0.is_finite()) {
-        return vec![];
+        }
     }
-    let step = s.angle_step();
-    grid.iter()
-        .map(|&d| {
-            let sigma0 = s0 / (d * step);
-            let sigma1 = 2.0 * (sigma0 * inertia.max(0.0)).sqrt();
-            let p = LugreParams {
-                sigma0,
-                sigma1,
-                ..*law
-            };
-            Variant {
-                kind: EffectKind::Presliding,
-                equation: Equation::Mechanical,
-                fixed: vec![("sigma0", sigma0), ("sigma1", sigma1)],
-                columns: vec![s.presliding_column(&p)],
-                torque: None,
-            }
-        })
-        .collect()
 }
 
 /// Every variant of an effect on these signals (empty when the effect cannot show in them,
-/// e.g. electrical effects on a torque plant).
+/// e.g. electrical effects on a torque plant): the effect's grid
+/// ([`crate::effects::Diagnose::variants`]).
 pub fn variants(kind: EffectKind, s: &Signals) -> Vec<Variant> {
-    let n = s.len();
-    let one = |equation, fixed: Fixed, columns: Vec<Vec<f64>>| Variant {
-        kind,
-        equation,
-        fixed,
-        columns,
-        torque: None,
-    };
-    let mech = Equation::Mechanical;
-    let elec = Equation::Electrical;
-    let sgn = s.sgn_omega();
-    let voltage = s.plant == Plant::Voltage && s.i.is_some();
-    match kind {
-        EffectKind::Coulomb => vec![one(mech, vec![], vec![sgn, s.stick_column()])],
-        EffectKind::Viscous => vec![one(mech, vec![], vec![s.omega.clone()])],
-        EffectKind::Stribeck => STRIBECK_GRID
-            .iter()
-            .map(|&vs0| {
-                let vs = vs0 * s.vscale;
-                let col = s
-                    .omega
-                    .iter()
-                    .zip(&sgn)
-                    .map(|(w, g)| (-(w / vs) * (w / vs)).exp() * g)
-                    .collect();
-                one(mech, vec![("vs", vs)], vec![col])
-            })
-            .collect(),
-        // Its columns depend on the model's static friction law and the refitted inertia:
-        // `diagnose` builds them itself with [`presliding_variants`].
-        EffectKind::Presliding => vec![],
-        EffectKind::Cogging => {
-            let hmax = harmonics::resolvable(s.hall_resolution);
-            (2..=hmax)
-                .map(|h| {
-                    let [a, b] = s.angle_pair(h);
-                    one(mech, vec![("harmonic", h as f64)], vec![a, b])
-                })
-                .collect()
-        }
-        EffectKind::PositionLoad => {
-            let [a, b] = s.angle_pair(1);
-            vec![one(mech, vec![], vec![a, b])]
-        }
-        EffectKind::Offset => vec![one(mech, vec![], vec![vec![1.0; n]])],
-        EffectKind::Asymmetry => {
-            vec![one(
-                mech,
-                vec![],
-                vec![s.omega.iter().map(|w| w.abs()).collect()],
-            )]
-        }
-        EffectKind::LoadFriction => vec![Variant {
-            torque: Some(s.load_friction_torque()),
-            ..one(mech, vec![], vec![s.load_friction_column()])
-        }],
-        // Not a candidate yet: the weak form sees I³ only through each interval's mean, and
-        // the current's fall inside an interval after a voltage step biases that column (on a
-        // correct model it estimated k ≈ 1.7e-4/A², the size of a real saturation) and makes
-        // it collide with load friction. A falling K_t is reported through the `current` and
-        // `acceleration` carriers (`carriers.rs`) and fitted by `fit --add saturation`.
-        EffectKind::Saturation => vec![],
-        // A load on a coupling, over natural frequencies from a few periods per log to the
-        // sample rate's reach, each lightly or well damped ([`COMPLIANCE_ZETA`]).
-        EffectKind::Compliance => compliance_grid(s)
-            .into_iter()
-            .flat_map(|f| COMPLIANCE_ZETA.iter().map(move |&z| (f, z)))
-            .map(|(f, z)| {
-                one(
-                    mech,
-                    vec![("fn", f), ("zeta", z)],
-                    vec![s.load_acceleration(f, z)],
-                )
-            })
-            .collect(),
-        EffectKind::Deadtime if voltage => {
-            let i = s.i.as_ref().unwrap();
-            vec![one(
-                elec,
-                vec![],
-                vec![i.iter().map(|c| smooth_sign(*c, CURRENT_EPS)).collect()],
-            )]
-        }
-        EffectKind::CurrentOffset if voltage => vec![one(elec, vec![], vec![vec![1.0; n]])],
-        EffectKind::Thermal if voltage => {
-            let duration = s.t.last().copied().unwrap_or(0.0) - s.t.first().copied().unwrap_or(0.0);
-            THERMAL_GRID
-                .iter()
-                .filter(|&&tau| tau <= 2.0 * duration.max(5.0))
-                .map(|&tau| one(elec, vec![("tau", tau)], vec![s.thermal_column(tau)]))
-                .collect()
-        }
-        EffectKind::Deadtime | EffectKind::CurrentOffset | EffectKind::Thermal => vec![],
-        // A table is not a named physics: `diagnose` offers it where an `unexplained`
-        // carrier (θ, ω, I) holds structure no named effect explains (`carriers.rs`).
-        EffectKind::Table => vec![],
-        EffectKind::Backlash => backlash_variants(s),
-    }
+    (effects::of(kind).diagnose.variants)(s)
 }
 
 /// Columns that stand for an effect the model already has (its nonlinear parameters taken
 /// from the model), in its equation; empty for effects with no column.
 pub fn present_columns(e: &Effect<f64>, s: &Signals) -> Vec<(Equation, Vec<f64>)> {
-    let n = s.len();
-    let mech = Equation::Mechanical;
-    let elec = Equation::Electrical;
-    let voltage = s.plant == Plant::Voltage && s.i.is_some();
-    match *e {
-        Effect::Coulomb { .. } => vec![(mech, s.sgn_omega()), (mech, s.stick_column())],
-        Effect::Viscous { .. } => vec![(mech, s.omega.clone())],
-        Effect::Stribeck { vs, .. } => {
-            let vs = if vs > 0.0 { vs } else { 3.5 };
-            let sgn = s.sgn_omega();
-            vec![(
-                mech,
-                s.omega
-                    .iter()
-                    .zip(&sgn)
-                    .map(|(w, g)| (-(w / vs) * (w / vs)).exp() * g)
-                    .collect(),
-            )]
-        }
-        Effect::Presliding { sigma0, sigma1 } => {
-            let tau = if sigma0 > 0.0 && sigma1 > 0.0 {
-                sigma1 / sigma0
-            } else {
-                0.07
-            };
-            vec![(mech, s.breakaway_column(tau))]
-        }
-        Effect::Cogging { harmonic, .. } => {
-            let [a, b] = s.angle_pair(harmonic as u32);
-            vec![(mech, a), (mech, b)]
-        }
-        Effect::PositionLoad { .. } => {
-            let [a, b] = s.angle_pair(1);
-            vec![(mech, a), (mech, b)]
-        }
-        Effect::Offset { .. } => vec![(mech, vec![1.0; n])],
-        Effect::Asymmetry { .. } => vec![(mech, s.omega.iter().map(|w| w.abs()).collect())],
-        // Its column needs the fitted K_b and R: `diagnose` adds it to the torque equation's
-        // base itself (`Signals::load_friction_intervals`).
-        Effect::LoadFriction { .. } => vec![],
-        // Its column needs the fitted K_b and R: `diagnose` adds it to the torque equation's
-        // base itself (`Signals::saturation_intervals`).
-        Effect::Saturation { .. } => vec![],
-        Effect::Compliance { j2, k, c } if j2 > 0.0 && k > 0.0 => {
-            let wn = (k / j2).sqrt();
-            let f = wn / (2.0 * std::f64::consts::PI);
-            let z = c / (2.0 * (k * j2).sqrt());
-            vec![(mech, s.load_acceleration(f, z))]
-        }
-        Effect::Backlash { j2, gap } if j2 > 0.0 => vec![(mech, s.backlash_acceleration(gap))],
-        Effect::Deadtime { .. } if voltage => {
-            let i = s.i.as_ref().unwrap();
-            vec![(
-                elec,
-                i.iter().map(|c| smooth_sign(*c, CURRENT_EPS)).collect(),
-            )]
-        }
-        Effect::CurrentOffset { .. } if voltage => {
-            vec![(elec, vec![1.0; n]), (mech, vec![1.0; n])]
-        }
-        Effect::Thermal { tau, .. } if voltage => vec![(elec, s.thermal_column(tau.max(0.1)))],
-        _ => vec![],
-    }
+    (effects::of(e.kind()).diagnose.present)(e, s)
 }
 
 /// Parameters of the physical unit system the spec needs (fitted in the base equations).
@@ -920,53 +669,18 @@ pub struct Units {
 /// The spec of an effect from a variant's fitted coefficients.
 pub fn spec_of(v: &Variant, beta: &[f64], units: Units) -> EffectSpec {
     let mut values = BTreeMap::new();
-    let mut put = |k: &str, x: f64| {
-        values.insert(k.to_string(), x);
-    };
     for (k, x) in &v.fixed {
-        put(k, *x);
+        values.insert(k.to_string(), *x);
     }
     let scale = if v.equation == Equation::Mechanical {
         units.mech_scale
     } else {
         1.0
     };
-    let b0 = beta.first().copied().unwrap_or(0.0) * scale;
-    match v.kind {
-        EffectKind::Coulomb => put("fc", b0),
-        EffectKind::Viscous => put("b", b0),
-        EffectKind::Stribeck => put("fs", b0),
-        EffectKind::Presliding => {}
-        EffectKind::Cogging | EffectKind::PositionLoad => {
-            let (amp, phase) =
-                harmonics::amp_phase(b0, beta.get(1).copied().unwrap_or(0.0) * scale);
-            put("amp", amp);
-            put("phase", phase);
-        }
-        EffectKind::Offset => put("t0", b0),
-        EffectKind::Asymmetry => {
-            put("dv", b0);
-            put("dc", 0.0)
-        }
-        // The braking column's coefficient is μ/(1 − μ): the motoring part μ·drive of the
-        // friction scales the whole base by 1/(1 − μ) (a lower K_t), the braking part then
-        // enters with μ/(1 − μ).
-        EffectKind::LoadFriction => put("mu", b0 / (1.0 + b0)),
-        EffectKind::Deadtime => put("vd", b0),
-        EffectKind::CurrentOffset => put("i0", -b0 / units.r),
-        EffectKind::Thermal => put("k", b0 / units.r),
-        EffectKind::Saturation => put("k", b0),
-        EffectKind::Compliance => {
-            let f = values.remove("fn").unwrap_or(0.0);
-            let z = values.remove("zeta").unwrap_or(0.0);
-            let wn = 2.0 * std::f64::consts::PI * f;
-            values.insert("j2".into(), b0);
-            values.insert("k".into(), b0 * wn * wn);
-            values.insert("c".into(), 2.0 * z * wn * b0);
-        }
-        EffectKind::Backlash => put("j2", b0),
-        EffectKind::Table => {}
-    }
+    let b: Vec<f64> = (0..beta.len().max(2))
+        .map(|k| beta.get(k).copied().unwrap_or(0.0) * scale)
+        .collect();
+    (effects::of(v.kind).diagnose.keys)(&b, units, &mut values);
     EffectSpec {
         kind: v.kind,
         values,

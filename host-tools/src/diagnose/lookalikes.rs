@@ -14,6 +14,7 @@
 //! leader is at most [`CLOSE`] of its share alone. Two independent effects keep their whole
 //! share when the other enters, however close their sizes.
 use super::{carriers::Carrier, Finding, Tested};
+use crate::effects;
 use serde::Serialize;
 
 /// Ratio of explained shares above which two significant explanations count as look-alikes:
@@ -34,39 +35,14 @@ pub struct LookAlike {
     pub both_found: bool,
 }
 
-/// The experiment that separates two effects or carriers (order does not matter).
+/// The experiment that separates two effects or carriers (order does not matter): the
+/// registry's table ([`effects::LOOK_ALIKES`]), else a log that excites each on its own.
 pub fn experiment(a: &str, b: &str) -> String {
-    let pair = |x: &str, y: &str| (a == x && b == y) || (a == y && b == x);
-    let text = if pair("offset", "asymmetry") {
-        "hold the rotor near standstill with a small voltage in each direction, and run steady speeds both ways: a constant load pulls the same way at rest, a direction-dependent friction acts only while moving (`motorid simulate --signal steady`, or record it)"
-    } else if pair("load_friction", "deadtime") || pair("load_friction", "saturation") {
-        "voltage steps down while the rotor turns fast (signal d): load-dependent friction acts only while the drive brakes the rotor, dead time follows the sign of the current whether braking or not"
-    } else if pair("cogging", "position_load") || pair("cogging", "theta") {
-        "a slow run at constant speed over several revolutions: count the periods of the error per revolution (one: a position load; the number of magnet/slot periods: cogging)"
-    } else if pair("stribeck", "presliding") || pair("presliding", "reversal") {
-        "slow reversals of small amplitude (a fraction of a revolution) against steady low speeds: presliding shows as a deflection before breakaway at each reversal, a Stribeck dip as a function of speed"
-    } else if pair("coulomb", "stribeck")
-        || pair("coulomb", "viscous")
-        || pair("viscous", "stribeck")
-        || pair("stribeck", "omega")
-    {
-        "steady speeds at several levels, low ones included (`motorid simulate --signal steady`): the static friction curve separates a constant, a dip at low speed and a slope"
-    } else if pair("current_offset", "offset") || pair("current_offset", "deadtime") {
-        "a run at zero voltage with the rotor still: a current-sensor offset reads a current where there is none"
-    } else if pair("thermal", "time") || a == "thermal" || b == "thermal" {
-        "a long run at high current followed by a rest with the same excitation: heating grows and decays with its time constant, wear or a supply sag does not"
-    } else if pair("backlash", "compliance") {
-        "a slow reversal at low speed (`motorid simulate --signal ramp`, or `motorid record --signal ramp`: slow ramps from rest in each direction), then steps (signal d): a gap shows as a dead band after each change of direction, in which the rotor travels the gap's angle freely with no torque passed to the load; a compliant coupling passes torque at once and shows as a resonance that the steps excite and the rotor's angle rings at"
-    } else if pair("reversal", "frequency") {
-        "steps in one direction only, without reversals: a resonance still rings after each step, backlash does not show"
-    } else if pair("acceleration", "current") || pair("saturation", "acceleration") {
-        "slow ramps at high current (a locked or heavily loaded rotor): a falling torque constant shows at high current without acceleration, an inertia error only with acceleration"
-    } else if pair("viscous", "asymmetry") {
-        "steady speeds in both directions: the friction curve of each direction on its own"
-    } else {
-        "a log that excites one and not the other: steady speeds, slow reversals and braking steps, each on its own"
-    };
-    text.to_string()
+    effects::experiment(a, b)
+        .unwrap_or(
+            "a log that excites one and not the other: steady speeds, slow reversals and braking steps, each on its own",
+        )
+        .to_string()
 }
 
 /// Look-alikes of the kept findings among the effects tested beside them (first round),

@@ -10,7 +10,7 @@
 //!    velocity, thermal time constant, bristle stiffness). Presliding is tested apart, on
 //!    every window of the torque equation (the reversals and standstills where it lives
 //!    included), on top of a model with Coulomb or Stribeck friction; see
-//!    [`candidates::PRESLIDING_DEFLECTION_GRID`] and [`PRESLIDING_GAIN`].
+//!    [`crate::effects::presliding::DEFLECTION_GRID`] and [`PRESLIDING_GAIN`].
 //! 3. Forward selection: the candidate that explains most of the residual is tested beyond
 //!    the base with the jackknifed cluster-robust Wald test on disjoint windows, clustered by
 //!    held input ([`statistics::robust_wald_test`]), so that a few noisy windows or the
@@ -35,6 +35,7 @@ pub mod regions;
 pub mod verdict;
 
 use crate::effect_spec::EffectSpec;
+use crate::effects::presliding;
 use crate::log::{MotorLog, Plant};
 use crate::numerics::least_squares;
 use crate::numerics::statistics;
@@ -303,23 +304,16 @@ impl Column {
     /// The names of an effect's present columns ([`candidates::present_columns`]), in order.
     pub(super) fn of_effect(e: &Effect<f64>, eq: Equation, k: usize, of: usize) -> Column {
         let kind = e.kind();
-        let name = match (kind, k) {
-            (EffectKind::Coulomb, 0) => "fc (Coulomb)".to_string(),
-            (EffectKind::Coulomb, _) => "Coulomb at standstill".to_string(),
-            (EffectKind::Viscous, _) => "b (viscous)".to_string(),
-            (EffectKind::Stribeck, _) => "fs − fc (Stribeck)".to_string(),
-            _ if of > 1 => format!("{} [{}]", kind.name(), k + 1),
-            _ => kind.name().to_string(),
+        let d = &crate::effects::of(kind).diagnose;
+        let name = match d.column_names.get(k) {
+            Some(name) => name.to_string(),
+            None if of > 1 => format!("{} [{}]", kind.name(), k + 1),
+            None => kind.name().to_string(),
         };
         if eq == Equation::Electrical {
             return Column::new(name, "V", false);
         }
-        let unit = match kind {
-            EffectKind::Viscous | EffectKind::Asymmetry => "N·m·s/rad",
-            EffectKind::Compliance | EffectKind::Backlash => "kg·m²",
-            _ => "N·m",
-        };
-        Column::new(name, unit, true)
+        Column::new(name, d.torque_unit, true)
     }
 }
 
@@ -992,7 +986,7 @@ fn weigh_refit_by_free_run(log: &MotorLog, st: &Structure, own: &MotorLog, verdi
 /// Presliding candidates: only on top of a static friction law (a model without Coulomb or
 /// Stribeck friction has no breakaway for bristles to soften). The law is the model's: its
 /// Coulomb friction (refitted when it states none), Stribeck and viscous friction; σ1 follows
-/// from the refitted inertia ([`candidates::presliding_variants`]).
+/// from the refitted inertia ([`presliding::variants`]).
 fn presliding_candidates(s: &Signals, st: &Structure) -> (Vec<Vec<f64>>, Vec<Variant>) {
     if !(st.has(EffectKind::Coulomb) || st.has(EffectKind::Stribeck)) {
         return (vec![], vec![]);
@@ -1028,14 +1022,13 @@ fn presliding_candidates(s: &Signals, st: &Structure) -> (Vec<Vec<f64>>, Vec<Var
     if law.alpha0 <= 0.0 {
         law.alpha0 = fc_fit.max(0.0);
     }
-    let nuisance =
-        candidates::presliding_variants(s, &law, j, &[candidates::PRESLIDING_NUISANCE_STEPS])
-            .into_iter()
-            .flat_map(|v| v.columns)
-            .collect();
+    let nuisance = presliding::variants(s, &law, j, &[presliding::NUISANCE_STEPS])
+        .into_iter()
+        .flat_map(|v| v.columns)
+        .collect();
     (
         nuisance,
-        candidates::presliding_variants(s, &law, j, &candidates::PRESLIDING_DEFLECTION_GRID),
+        presliding::variants(s, &law, j, &presliding::DEFLECTION_GRID),
     )
 }
 
@@ -1160,23 +1153,12 @@ pub const PRESLIDING_GAIN: f64 = 2.0;
 /// 2–10 %). A larger fitted value means the column is standing in for something else.
 pub const MAX_LOAD_FRICTION: f64 = 0.5;
 
-/// Physical plausibility of a finding's parameters: dissipative terms must dissipate
-/// (Coulomb, viscous, Stribeck, dead time, heating ≥ 0) and load-dependent friction must stay
-/// below [`MAX_LOAD_FRICTION`]. An implausible best fit is not reported.
+/// Physical plausibility of a finding's parameters, by its effect's descriptor
+/// ([`crate::effects::Diagnose::plausible`]): dissipative terms must dissipate (Coulomb,
+/// viscous, Stribeck, dead time, heating ≥ 0) and load-dependent friction must stay below
+/// [`MAX_LOAD_FRICTION`]. An implausible best fit is not reported.
 pub fn plausible(spec: &EffectSpec) -> bool {
-    let g = |k: &str| spec.get(k);
-    match spec.kind {
-        EffectKind::Coulomb => g("fc") > 0.0,
-        EffectKind::Viscous => g("b") > 0.0,
-        EffectKind::Stribeck => g("fs") > 0.0,
-        EffectKind::Deadtime => g("vd") > 0.0,
-        EffectKind::Thermal => g("k") > 0.0,
-        EffectKind::LoadFriction => (0.0..=MAX_LOAD_FRICTION).contains(&g("mu")),
-        EffectKind::Saturation => g("k") > 0.0,
-        EffectKind::Compliance | EffectKind::Backlash => g("j2") > 0.0,
-        EffectKind::Presliding => true,
-        _ => true,
-    }
+    (crate::effects::of(spec.kind).diagnose.plausible)(spec)
 }
 
 /// A current-sensor offset `i0` also shows in the torque equation as a constant `K_t·i0`;
@@ -1198,82 +1180,11 @@ fn resolve_offsets(findings: &mut Vec<Finding>, kt: f64) {
     }
 }
 
-/// One sentence of physics for a finding.
+/// One sentence of physics for a finding: its effect's clause
+/// ([`crate::effects::Diagnose::explain`]) and the share it explains.
 pub fn explain(spec: &EffectSpec, score: f64, eq: Equation) -> String {
     let pct = 100.0 * score;
-    let g = |k: &str| spec.get(k);
-    let what = match spec.kind {
-        EffectKind::Coulomb => format!(
-            "a constant friction of {:.3} N·m opposes the motion in either direction (Coulomb)",
-            g("fc")
-        ),
-        EffectKind::Viscous => format!(
-            "friction grows in proportion to speed, {:.2e} N·m per rad/s (viscous)",
-            g("b")
-        ),
-        EffectKind::Stribeck => format!(
-            "friction is {:.3} N·m higher at low speed and falls off above about {} rad/s (Stribeck)",
-            g("fs"),
-            g("vs")
-        ),
-        EffectKind::Presliding => format!(
-            "friction builds up over a deflection after each reversal and breakaway instead of switching at once (presliding, the LuGre bristle state, stiffness about {:.3} N·m/rad: `fit --model lugre` has it)",
-            g("sigma0")
-        ),
-        EffectKind::Cogging => format!(
-            "a torque of {:.3} N·m repeats {} times per revolution (cogging between magnets and stator teeth)",
-            g("amp"),
-            g("harmonic")
-        ),
-        EffectKind::PositionLoad => format!(
-            "a torque of {:.3} N·m repeats once per revolution (gravity on an arm or an unbalanced load)",
-            g("amp")
-        ),
-        EffectKind::Offset => format!(
-            "a constant load torque of {:.3} N·m pulls in one direction",
-            g("t0")
-        ),
-        EffectKind::Asymmetry => format!(
-            "friction differs by direction: viscous friction {:+.2e} N·m per rad/s going forward against backward",
-            2.0 * g("dv")
-        ),
-        EffectKind::Deadtime => format!(
-            "the inverter loses {:.3} V with the sign of the current (dead time)",
-            g("vd")
-        ),
-        EffectKind::CurrentOffset => format!(
-            "the current sensor reads {:.3} A too much at zero current (offset)",
-            g("i0")
-        ),
-        EffectKind::Thermal => format!(
-            "the winding resistance rises as the current heats the motor ({:.1e} per A², time constant {} s)",
-            g("k"),
-            g("tau")
-        ),
-        EffectKind::LoadFriction => format!(
-            "friction grows with the transmitted torque, {:.3} N·m per N·m (gears, screws)",
-            g("mu")
-        ),
-        EffectKind::Compliance => format!(
-            "a second inertia of {:.2e} kg·m² follows the rotor through a compliant coupling resonating near {:.2} Hz against a fixed rotor (a flexible coupling, a long shaft, a belt)",
-            g("j2"),
-            (g("k") / g("j2")).sqrt() / (2.0 * std::f64::consts::PI)
-        ),
-        EffectKind::Backlash => format!(
-            "a load of {:.2e} kg·m² is dragged along only after the rotor has turned {:.3} rad alone past each reversal (backlash in a gear or coupling)",
-            g("j2"),
-            g("gap")
-        ),
-        EffectKind::Table => format!(
-            "a torque that depends on {} as the fitted lookup table describes",
-            spec.table_var().name()
-        ),
-        EffectKind::Saturation => format!(
-            "the torque constant falls at high current (magnetic saturation, K_t/(1 + k·I²) with k = {:.2e}/A², {:.0}% lower at 20 A)",
-            g("k"),
-            100.0 * (1.0 - 1.0 / (1.0 + g("k") * 400.0))
-        ),
-    };
+    let what = (crate::effects::of(spec.kind).diagnose.explain)(spec);
     format!(
         "{}{}; it explains {:.0}% of the {} residual.",
         what[..1].to_uppercase(),

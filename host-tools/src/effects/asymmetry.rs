@@ -36,6 +36,36 @@ pub static D: Descriptor = Descriptor {
     voltage: None,
     on_residual: false,
     sindy: |_| terms(&[(Term::AbsXdot, IN_ACCEL), (Term::AbsSgnXdot, IN_ACCEL)]),
+    diagnose: Diagnose {
+        variants: |s| {
+            let columns = vec![s.omega.iter().map(|w| w.abs()).collect()];
+            vec![Variant::new(
+                EffectKind::Asymmetry,
+                Equation::Mechanical,
+                vec![],
+                columns,
+            )]
+        },
+        present: |_, s| {
+            vec![(
+                Equation::Mechanical,
+                s.omega.iter().map(|w| w.abs()).collect(),
+            )]
+        },
+        keys: |b, _, v| {
+            put(v, "dv", b[0]);
+            put(v, "dc", 0.0)
+        },
+        column_names: &[],
+        torque_unit: "N·m·s/rad",
+        plausible: always_plausible,
+        explain: |s| {
+            format!(
+                "friction differs by direction: viscous friction {:+.2e} N·m per rad/s going forward against backward",
+                2.0 * s.get("dv")
+            )
+        },
+    },
 };
 
 pub(super) fn key_mut<'a, D>(e: &'a mut Effect<D>, key: &str) -> Option<&'a mut D> {

@@ -64,7 +64,44 @@ pub static D: Descriptor = Descriptor {
         let h = s.get("harmonic").round().clamp(1.0, u16::MAX as f64) as u16;
         terms(&[(Term::SinTheta(h), IN_ACCEL), (Term::CosTheta(h), IN_ACCEL)])
     },
+    diagnose: Diagnose {
+        variants: |s| {
+            let hmax = crate::diagnose::harmonics::resolvable(s.hall_resolution);
+            (2..=hmax)
+                .map(|h| {
+                    let [a, b] = s.angle_pair(h);
+                    let fixed = vec![("harmonic", h as f64)];
+                    Variant::new(EffectKind::Cogging, Equation::Mechanical, fixed, vec![a, b])
+                })
+                .collect()
+        },
+        present: |e, s| {
+            let Effect::Cogging { harmonic, .. } = *e else {
+                return vec![];
+            };
+            let [a, b] = s.angle_pair(harmonic as u32);
+            vec![(Equation::Mechanical, a), (Equation::Mechanical, b)]
+        },
+        keys: amp_phase,
+        column_names: &[],
+        torque_unit: "N·m",
+        plausible: always_plausible,
+        explain: |s| {
+            format!(
+                "a torque of {:.3} N·m repeats {} times per revolution (cogging between magnets and stator teeth)",
+                s.get("amp"),
+                s.get("harmonic")
+            )
+        },
+    },
 };
+
+/// [`Diagnose::keys`] of a sine and a cosine column of an angle harmonic: amplitude and phase.
+pub(super) fn amp_phase(b: &[f64], _: Units, v: &mut BTreeMap<String, f64>) {
+    let (amp, phase) = crate::diagnose::harmonics::amp_phase(b[0], b[1]);
+    put(v, "amp", amp);
+    put(v, "phase", phase);
+}
 
 pub(super) fn key_mut<'a, D>(e: &'a mut Effect<D>, key: &str) -> Option<&'a mut D> {
     match (e, key) {

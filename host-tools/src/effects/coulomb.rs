@@ -25,6 +25,31 @@ pub static D: Descriptor = Descriptor {
     voltage: None,
     on_residual: false,
     sindy: |_| terms(&[(Term::SgnXdot, IN_ACCEL)]),
+    diagnose: Diagnose {
+        variants: |s| {
+            let columns = vec![s.sgn_omega(), s.stick_column()];
+            vec![Variant::new(
+                EffectKind::Coulomb,
+                Equation::Mechanical,
+                vec![],
+                columns,
+            )]
+        },
+        present: |_, s| {
+            let mech = Equation::Mechanical;
+            vec![(mech, s.sgn_omega()), (mech, s.stick_column())]
+        },
+        keys: |b, _, v| put(v, "fc", b[0]),
+        column_names: &["fc (Coulomb)", "Coulomb at standstill"],
+        torque_unit: "N·m",
+        plausible: |s| s.get("fc") > 0.0,
+        explain: |s| {
+            format!(
+                "a constant friction of {:.3} N·m opposes the motion in either direction (Coulomb)",
+                s.get("fc")
+            )
+        },
+    },
 };
 
 pub(super) fn key_mut<'a, D>(e: &'a mut Effect<D>, key: &str) -> Option<&'a mut D> {

@@ -31,6 +31,34 @@ pub static D: Descriptor = Descriptor {
     }),
     on_residual: false,
     sindy: |_| terms(&[(Term::One, IN_CURRENT)]),
+    diagnose: Diagnose {
+        variants: |s| match s.current() {
+            Some(_) => {
+                let columns = vec![vec![1.0; s.len()]];
+                let kind = EffectKind::CurrentOffset;
+                vec![Variant::new(kind, Equation::Electrical, vec![], columns)]
+            }
+            None => vec![],
+        },
+        // A constant in the voltage equation, and `K_t·i0` in the torque equation.
+        present: |_, s| match s.current() {
+            Some(_) => vec![
+                (Equation::Electrical, vec![1.0; s.len()]),
+                (Equation::Mechanical, vec![1.0; s.len()]),
+            ],
+            None => vec![],
+        },
+        keys: |b, units, v| put(v, "i0", -b[0] / units.r),
+        column_names: &[],
+        torque_unit: "N·m",
+        plausible: always_plausible,
+        explain: |s| {
+            format!(
+                "the current sensor reads {:.3} A too much at zero current (offset)",
+                s.get("i0")
+            )
+        },
+    },
 };
 
 pub(super) fn key_mut<'a, D>(e: &'a mut Effect<D>, key: &str) -> Option<&'a mut D> {

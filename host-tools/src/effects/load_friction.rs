@@ -35,6 +35,32 @@ pub static D: Descriptor = Descriptor {
     voltage: None,
     on_residual: false,
     sindy: |_| terms(&[(Term::AbsISgnXdot, IN_ACCEL)]),
+    diagnose: Diagnose {
+        variants: |s| {
+            let columns = vec![s.load_friction_column()];
+            let kind = EffectKind::LoadFriction;
+            vec![Variant {
+                torque: Some(s.load_friction_torque()),
+                ..Variant::new(kind, Equation::Mechanical, vec![], columns)
+            }]
+        },
+        // Its column needs the fitted K_b and R: `diagnose` adds it to the torque equation's
+        // base itself (`Signals::load_friction_intervals`).
+        present: no_columns,
+        // The braking column's coefficient is μ/(1 − μ): the motoring part μ·drive of the
+        // friction scales the whole base by 1/(1 − μ) (a lower K_t), the braking part then
+        // enters with μ/(1 − μ).
+        keys: |b, _, v| put(v, "mu", b[0] / (1.0 + b[0])),
+        column_names: &[],
+        torque_unit: "N·m",
+        plausible: |s| (0.0..=crate::diagnose::MAX_LOAD_FRICTION).contains(&s.get("mu")),
+        explain: |s| {
+            format!(
+                "friction grows with the transmitted torque, {:.3} N·m per N·m (gears, screws)",
+                s.get("mu")
+            )
+        },
+    },
 };
 
 pub(super) fn key_mut<'a, D>(e: &'a mut Effect<D>, key: &str) -> Option<&'a mut D> {

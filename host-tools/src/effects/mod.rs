@@ -4,13 +4,16 @@
 //! keys in, and the regressor columns and library terms the identification code builds from
 //! it. This file is the registry: the list of every descriptor and the lookup by kind or name.
 //!
-//! The spec parser ([`crate::effect_spec`]), the free parameters, the weak-form regressions
-//! and the SINDYc library read an effect only through its [`Descriptor`].
+//! The spec parser ([`crate::effect_spec`]), the free parameters, the weak-form regressions,
+//! the SINDYc library and `diagnose`'s candidates read an effect only through its
+//! [`Descriptor`].
+use crate::diagnose::candidates::{Equation, Signals, Units, Variant};
 use crate::effect_spec::EffectSpec;
 use crate::ident::library::ACCEL;
 use anyhow::Result;
 use control::effects::{Effect, EffectKind, TableVar, TABLE_MAX_BINS};
 use control::sindy::Term;
+use std::collections::BTreeMap;
 
 mod asymmetry;
 mod backlash;
@@ -22,7 +25,7 @@ mod deadtime;
 mod load_friction;
 mod offset;
 mod position_load;
-mod presliding;
+pub mod presliding;
 mod saturation;
 mod stribeck;
 pub mod table;
@@ -205,6 +208,38 @@ pub struct Descriptor {
     pub on_residual: bool,
     /// Its SINDYc library terms, or why it has none.
     pub sindy: fn(&EffectSpec) -> Result<SindyTerms>,
+    /// What `diagnose` tries and says about it.
+    pub diagnose: Diagnose,
+}
+
+/// Sample-level columns, each with the equation it belongs to.
+pub type Columns = Vec<(Equation, Vec<f64>)>;
+
+/// What `diagnose` knows about an effect: the variants it tries when a model lacks the
+/// effect, the columns that stand for it when the model has it, and how a variant's fitted
+/// coefficients become the effect's keys.
+pub struct Diagnose {
+    /// The variants tried when the model lacks the effect, one per point of its grid over
+    /// the keys that enter nonlinearly (a harmonic, a Stribeck velocity, a time constant);
+    /// empty where the effect cannot show in these signals or is not a candidate.
+    pub variants: fn(&Signals) -> Vec<Variant>,
+    /// The columns that stand for the effect when the model has it (its nonlinear keys taken
+    /// from the model), each in its equation.
+    pub present: fn(&Effect<f64>, &Signals) -> Columns,
+    /// The keys a variant's fitted coefficients `b` set (torque-equation ones in N·m; at
+    /// least two, zero beyond the variant's columns), into `values` beside the variant's
+    /// fixed keys.
+    pub keys: fn(b: &[f64], units: Units, values: &mut BTreeMap<String, f64>),
+    /// Names of its present columns in the base, where they have their own (else the
+    /// effect's name, numbered when it has several).
+    pub column_names: &'static [&'static str],
+    /// Unit of a present column's coefficient in the torque equation.
+    pub torque_unit: &'static str,
+    /// Whether a finding's fitted keys are physical: a dissipation dissipates, a load has an
+    /// inertia. An implausible best fit is not reported.
+    pub plausible: fn(&EffectSpec) -> bool,
+    /// What a finding means physically, as a clause for `diagnose`'s sentence (lower case).
+    pub explain: fn(&EffectSpec) -> String,
 }
 
 /// Every descriptor, in [`EffectKind::ALL`]'s order.
@@ -291,6 +326,29 @@ pub(crate) fn no_sindy_term(spec: &EffectSpec) -> Result<SindyTerms> {
     )
 }
 
+/// [`Diagnose::variants`] of effects `diagnose` does not try by themselves.
+pub(crate) fn no_variants(_: &Signals) -> Vec<Variant> {
+    vec![]
+}
+
+/// [`Diagnose::present`] of effects without a column of their own in the base.
+pub(crate) fn no_columns(_: &Effect<f64>, _: &Signals) -> Columns {
+    vec![]
+}
+
+/// [`Diagnose::keys`] of effects whose keys all come from the variant's grid.
+pub(crate) fn no_keys(_: &[f64], _: Units, _: &mut BTreeMap<String, f64>) {}
+
+/// [`Diagnose::plausible`] of effects whose every fitted value is physical.
+pub(crate) fn always_plausible(_: &EffectSpec) -> bool {
+    true
+}
+
+/// [`Diagnose::keys`] helper: set `key` to `x`.
+pub(crate) fn put(values: &mut BTreeMap<String, f64>, key: &str, x: f64) {
+    values.insert(key.to_string(), x);
+}
+
 /// SINDYc terms without a Stribeck velocity.
 pub(crate) fn terms(t: &[(Term, [bool; 3])]) -> Result<SindyTerms> {
     Ok(SindyTerms {
@@ -309,6 +367,76 @@ pub(crate) fn table_var_code(var: TableVar) -> f64 {
     TableVar::ALL.iter().position(|x| *x == var).unwrap_or(0) as f64
 }
 
+/// Effects, or `diagnose`'s carrier variables (`theta`, `omega`, `reversal`, ...), that one
+/// log can leave looking alike, and an experiment in which they differ.
+pub struct LookAlikes {
+    /// The pairs this experiment separates, in either order; `"*"` pairs an effect with
+    /// anything no other row pairs it with.
+    pub pairs: &'static [(&'static str, &'static str)],
+    /// The experiment (a log to record or simulate) and what tells them apart there.
+    pub experiment: &'static str,
+}
+
+/// Every look-alike pair with the experiment that separates it (see decision 0025 for why a
+/// table names both sides rather than one effect's file holding the pair).
+#[rustfmt::skip]
+pub static LOOK_ALIKES: &[LookAlikes] = &[
+    LookAlikes {
+        pairs: &[("offset", "asymmetry")],
+        experiment: "hold the rotor near standstill with a small voltage in each direction, and run steady speeds both ways: a constant load pulls the same way at rest, a direction-dependent friction acts only while moving (`motorid simulate --signal steady`, or record it)",
+    },
+    LookAlikes {
+        pairs: &[("load_friction", "deadtime"), ("load_friction", "saturation")],
+        experiment: "voltage steps down while the rotor turns fast (signal d): load-dependent friction acts only while the drive brakes the rotor, dead time follows the sign of the current whether braking or not",
+    },
+    LookAlikes {
+        pairs: &[("cogging", "position_load"), ("cogging", "theta")],
+        experiment: "a slow run at constant speed over several revolutions: count the periods of the error per revolution (one: a position load; the number of magnet/slot periods: cogging)",
+    },
+    LookAlikes {
+        pairs: &[("stribeck", "presliding"), ("presliding", "reversal")],
+        experiment: "slow reversals of small amplitude (a fraction of a revolution) against steady low speeds: presliding shows as a deflection before breakaway at each reversal, a Stribeck dip as a function of speed",
+    },
+    LookAlikes {
+        pairs: &[("coulomb", "stribeck"), ("coulomb", "viscous"), ("viscous", "stribeck"), ("stribeck", "omega")],
+        experiment: "steady speeds at several levels, low ones included (`motorid simulate --signal steady`): the static friction curve separates a constant, a dip at low speed and a slope",
+    },
+    LookAlikes {
+        pairs: &[("current_offset", "offset"), ("current_offset", "deadtime")],
+        experiment: "a run at zero voltage with the rotor still: a current-sensor offset reads a current where there is none",
+    },
+    LookAlikes {
+        pairs: &[("thermal", "time"), ("thermal", "*")],
+        experiment: "a long run at high current followed by a rest with the same excitation: heating grows and decays with its time constant, wear or a supply sag does not",
+    },
+    LookAlikes {
+        pairs: &[("backlash", "compliance")],
+        experiment: "a slow reversal at low speed (`motorid simulate --signal ramp`, or `motorid record --signal ramp`: slow ramps from rest in each direction), then steps (signal d): a gap shows as a dead band after each change of direction, in which the rotor travels the gap's angle freely with no torque passed to the load; a compliant coupling passes torque at once and shows as a resonance that the steps excite and the rotor's angle rings at",
+    },
+    LookAlikes {
+        pairs: &[("reversal", "frequency")],
+        experiment: "steps in one direction only, without reversals: a resonance still rings after each step, backlash does not show",
+    },
+    LookAlikes {
+        pairs: &[("acceleration", "current"), ("saturation", "acceleration")],
+        experiment: "slow ramps at high current (a locked or heavily loaded rotor): a falling torque constant shows at high current without acceleration, an inertia error only with acceleration",
+    },
+    LookAlikes {
+        pairs: &[("viscous", "asymmetry")],
+        experiment: "steady speeds in both directions: the friction curve of each direction on its own",
+    },
+];
+
+/// The experiment of [`LOOK_ALIKES`] that tells `a` from `b` (either order): a row naming
+/// both, else a row pairing either with `"*"`.
+pub fn experiment(a: &str, b: &str) -> Option<&'static str> {
+    let both = |(x, y): &(&str, &str)| (a == *x && b == *y) || (a == *y && b == *x);
+    let any = |(x, y): &(&str, &str)| *y == "*" && (a == *x || b == *x);
+    let row =
+        |m: &dyn Fn(&(&str, &str)) -> bool| LOOK_ALIKES.iter().find(|r| r.pairs.iter().any(m));
+    row(&both).or_else(|| row(&any)).map(|r| r.experiment)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -322,6 +450,35 @@ mod tests {
             assert!(!d.meaning.is_empty() && !d.keys.is_empty());
         }
         assert!(by_name("gravity").is_none());
+    }
+
+    /// Every name of the look-alike table is an effect or a carrier variable, and no pair
+    /// is listed twice (in either order), so the row found does not depend on the order.
+    #[test]
+    fn look_alike_pairs_name_effects_or_carriers_once() {
+        let carriers = [
+            "theta",
+            "omega",
+            "acceleration",
+            "current",
+            "time",
+            "reversal",
+            "frequency",
+        ];
+        let known = |n: &str| by_name(n).is_some() || carriers.contains(&n) || n == "*";
+        let mut seen = Vec::new();
+        for row in LOOK_ALIKES {
+            assert!(!row.experiment.is_empty());
+            for &(a, b) in row.pairs {
+                assert!(known(a) && known(b) && a != "*", "{a}, {b}");
+                let key = if a < b { (a, b) } else { (b, a) };
+                assert!(!seen.contains(&key), "{a}, {b} twice");
+                seen.push(key);
+                assert_eq!(experiment(a, b), Some(row.experiment));
+                assert_eq!(experiment(b, a), Some(row.experiment));
+            }
+        }
+        assert!(experiment("cogging", "offset").is_none());
     }
 
     #[test]

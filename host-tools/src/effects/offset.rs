@@ -25,6 +25,28 @@ pub static D: Descriptor = Descriptor {
     voltage: None,
     on_residual: true,
     sindy: |_| terms(&[(Term::One, IN_ACCEL)]),
+    diagnose: Diagnose {
+        variants: |s| {
+            let columns = vec![vec![1.0; s.len()]];
+            vec![Variant::new(
+                EffectKind::Offset,
+                Equation::Mechanical,
+                vec![],
+                columns,
+            )]
+        },
+        present: |_, s| vec![(Equation::Mechanical, vec![1.0; s.len()])],
+        keys: |b, _, v| put(v, "t0", b[0]),
+        column_names: &[],
+        torque_unit: "N·m",
+        plausible: always_plausible,
+        explain: |s| {
+            format!(
+                "a constant load torque of {:.3} N·m pulls in one direction",
+                s.get("t0")
+            )
+        },
+    },
 };
 
 pub(super) fn key_mut<'a, D>(e: &'a mut Effect<D>, key: &str) -> Option<&'a mut D> {

@@ -33,6 +33,27 @@ pub static D: Descriptor = Descriptor {
     voltage: None,
     on_residual: true,
     sindy: |_| terms(&[(Term::SinTheta(1), IN_ACCEL), (Term::CosTheta(1), IN_ACCEL)]),
+    diagnose: Diagnose {
+        variants: |s| {
+            let [a, b] = s.angle_pair(1);
+            let kind = EffectKind::PositionLoad;
+            vec![Variant::new(kind, Equation::Mechanical, vec![], vec![a, b])]
+        },
+        present: |_, s| {
+            let [a, b] = s.angle_pair(1);
+            vec![(Equation::Mechanical, a), (Equation::Mechanical, b)]
+        },
+        keys: super::cogging::amp_phase,
+        column_names: &[],
+        torque_unit: "N·m",
+        plausible: always_plausible,
+        explain: |s| {
+            format!(
+                "a torque of {:.3} N·m repeats once per revolution (gravity on an arm or an unbalanced load)",
+                s.get("amp")
+            )
+        },
+    },
 };
 
 pub(super) fn key_mut<'a, D>(e: &'a mut Effect<D>, key: &str) -> Option<&'a mut D> {

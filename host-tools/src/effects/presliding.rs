@@ -37,7 +37,80 @@ pub static D: Descriptor = Descriptor {
     on_residual: false,
     // The z terms are already in the library.
     sindy: in_paper_library,
+    // Its columns depend on the model's static friction law and the refitted inertia:
+    // `diagnose` builds them itself with [`variants`], on every window.
+    diagnose: Diagnose {
+        variants: no_variants,
+        present: |e, s| {
+            let Effect::Presliding { sigma0, sigma1 } = *e else {
+                return vec![];
+            };
+            let tau = if sigma0 > 0.0 && sigma1 > 0.0 {
+                sigma1 / sigma0
+            } else {
+                0.07
+            };
+            vec![(Equation::Mechanical, s.breakaway_column(tau))]
+        },
+        keys: no_keys,
+        column_names: &[],
+        torque_unit: "N·m",
+        plausible: always_plausible,
+        explain: |s| {
+            format!(
+                "friction builds up over a deflection after each reversal and breakaway instead of switching at once (presliding, the LuGre bristle state, stiffness about {:.3} N·m/rad: `fit --model lugre` has it)",
+                s.get("sigma0")
+            )
+        },
+    },
 };
+
+/// Grid of breakaway deflections `s(0)/σ0` of a missing presliding, in angle steps (Hall
+/// steps): from two steps to 8, a factor of 2 apart (the estimated σ0 is then within a factor
+/// √2 of the best grid point). Where a sharp friction switch falls between two Hall edges is
+/// uncertain by up to a full step of travel (the quantisation error spans ±½ step), so a
+/// bristle that deflects one step cannot be told from ordinary stick-slip friction seen
+/// through the sensor: on a plant with Karnopp stick-slip friction and no bristles at all,
+/// a one-step variant was named on most seeds (`tests/tests/diagnose_verdict.rs`).
+pub const DEFLECTION_GRID: [f64; 3] = [2.0, 4.0, 8.0];
+/// Breakaway deflection [angle steps] of the nuisance term in the presliding test's base.
+pub const NUISANCE_STEPS: f64 = 0.5;
+/// Grid of breakaway time constants σ1/σ0 [s] for the breakaway column of a model that has
+/// presliding: the paper's 22.2/317 = 70 ms, and a factor of about 2.5 either way.
+pub const BREAKAWAY_GRID: [f64; 3] = [0.03, 0.07, 0.18];
+
+/// Variants of a missing presliding on top of a static friction law `law` (its α0, α1, v0,
+/// α2; σ0 and σ1 are set here): one per breakaway deflection of `grid` (in angle steps,
+/// [`DEFLECTION_GRID`]), σ0 = s(0)/deflection, σ1 = 2·√(σ0·J) (critical damping of the rotor
+/// inertia `inertia` on the bristle spring). The column is [`Signals::presliding_column`]:
+/// the friction the bristles take away from (or add to) the static law after each reversal
+/// and breakaway.
+pub fn variants(
+    s: &Signals,
+    law: &control::lugre::LugreParams<f64>,
+    inertia: f64,
+    grid: &[f64],
+) -> Vec<Variant> {
+    let s0 = law.s(0.0);
+    if !(s0 > 0.0 && s0.is_finite()) {
+        return vec![];
+    }
+    let step = s.angle_step();
+    grid.iter()
+        .map(|&d| {
+            let sigma0 = s0 / (d * step);
+            let sigma1 = 2.0 * (sigma0 * inertia.max(0.0)).sqrt();
+            let p = control::lugre::LugreParams {
+                sigma0,
+                sigma1,
+                ..*law
+            };
+            let fixed = vec![("sigma0", sigma0), ("sigma1", sigma1)];
+            let columns = vec![s.presliding_column(&p)];
+            Variant::new(EffectKind::Presliding, Equation::Mechanical, fixed, columns)
+        })
+        .collect()
+}
 
 pub(super) fn key_mut<'a, D>(e: &'a mut Effect<D>, key: &str) -> Option<&'a mut D> {
     match (e, key) {

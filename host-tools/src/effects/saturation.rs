@@ -34,6 +34,28 @@ pub static D: Descriptor = Descriptor {
     voltage: None,
     on_residual: false,
     sindy: |_| terms(&[(Term::ICubed, IN_ACCEL)]),
+    // Not a candidate yet: the weak form sees I³ only through each interval's mean, and the
+    // current's fall inside an interval after a voltage step biases that column (on a correct
+    // model it estimated k ≈ 1.7e-4/A², the size of a real saturation) and makes it collide
+    // with load friction. A falling K_t is reported through the `current` and `acceleration`
+    // carriers (`diagnose/carriers.rs`) and fitted by `fit --add saturation`. Its present
+    // column needs the fitted K_b and R: `diagnose` adds it to the torque equation's base
+    // itself (`Signals::saturation_intervals`).
+    diagnose: Diagnose {
+        variants: no_variants,
+        present: no_columns,
+        keys: |b, _, v| put(v, "k", b[0]),
+        column_names: &[],
+        torque_unit: "N·m",
+        plausible: |s| s.get("k") > 0.0,
+        explain: |s| {
+            format!(
+                "the torque constant falls at high current (magnetic saturation, K_t/(1 + k·I²) with k = {:.2e}/A², {:.0}% lower at 20 A)",
+                s.get("k"),
+                100.0 * (1.0 - 1.0 / (1.0 + s.get("k") * 400.0))
+            )
+        },
+    },
 };
 
 pub(super) fn key_mut<'a, D>(e: &'a mut Effect<D>, key: &str) -> Option<&'a mut D> {

@@ -48,7 +48,52 @@ pub static D: Descriptor = Descriptor {
             vs: Some(s.get("vs")),
         })
     },
+    diagnose: Diagnose {
+        variants: |s| {
+            GRID.iter()
+                .map(|&vs0| {
+                    let vs = vs0 * s.vscale;
+                    let columns = vec![column(s, vs)];
+                    let fixed = vec![("vs", vs)];
+                    Variant::new(EffectKind::Stribeck, Equation::Mechanical, fixed, columns)
+                })
+                .collect()
+        },
+        present: |e, s| {
+            let Effect::Stribeck { vs, .. } = *e else {
+                return vec![];
+            };
+            let vs = if vs > 0.0 { vs } else { 3.5 };
+            vec![(Equation::Mechanical, column(s, vs))]
+        },
+        keys: |b, _, v| put(v, "fs", b[0]),
+        column_names: &["fs − fc (Stribeck)"],
+        torque_unit: "N·m",
+        plausible: |s| s.get("fs") > 0.0,
+        explain: |s| {
+            format!(
+                "friction is {:.3} N·m higher at low speed and falls off above about {} rad/s (Stribeck)",
+                s.get("fs"),
+                s.get("vs")
+            )
+        },
+    },
 };
+
+/// Grid of Stribeck velocities [rad/s] `diagnose` tries (times [`Signals::vscale`]): around
+/// the paper's v0 = 3.7 rad/s, from the velocity resolution (≈1 rad/s) up to where Stribeck
+/// merges with viscous friction.
+pub const GRID: [f64; 6] = [1.0, 2.0, 3.5, 5.0, 8.0, 12.0];
+
+/// `diagnose`'s column: `exp(−(ω/vs)²)·sgn(ω)` on the smoothed velocity.
+fn column(s: &Signals, vs: f64) -> Vec<f64> {
+    let sgn = s.sgn_omega();
+    s.omega
+        .iter()
+        .zip(&sgn)
+        .map(|(w, g)| (-(w / vs) * (w / vs)).exp() * g)
+        .collect()
+}
 
 pub(super) fn key_mut<'a, D>(e: &'a mut Effect<D>, key: &str) -> Option<&'a mut D> {
     match (e, key) {

@@ -159,6 +159,22 @@ pub static D: Descriptor = Descriptor {
     voltage: None,
     on_residual: false,
     sindy: no_sindy_term,
+    // Not a named physics: `diagnose` offers a table where an `unexplained` carrier (θ, ω,
+    // I) holds structure no named effect explains (`diagnose/carriers.rs`).
+    diagnose: Diagnose {
+        variants: no_variants,
+        present: no_columns,
+        keys: no_keys,
+        column_names: &[],
+        torque_unit: "N·m",
+        plausible: always_plausible,
+        explain: |s| {
+            format!(
+                "a torque that depends on {} as the fitted lookup table describes",
+                s.table_var().name()
+            )
+        },
+    },
 };
 
 pub(super) fn key_mut<'a, D>(e: &'a mut Effect<D>, key: &str) -> Option<&'a mut D> {

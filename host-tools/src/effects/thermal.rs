@@ -38,7 +38,44 @@ pub static D: Descriptor = Descriptor {
     // The library's term inputs carry no heat state: the instantaneous I² stands in for
     // the running mean of I² that heats the winding (the proxy at thermal equilibrium).
     sindy: |_| terms(&[(Term::ISquared, IN_CURRENT)]),
+    diagnose: Diagnose {
+        variants: |s| {
+            if s.current().is_none() {
+                return vec![];
+            }
+            let duration = s.t.last().copied().unwrap_or(0.0) - s.t.first().copied().unwrap_or(0.0);
+            GRID.iter()
+                .filter(|&&tau| tau <= 2.0 * duration.max(5.0))
+                .map(|&tau| {
+                    let columns = vec![s.thermal_column(tau)];
+                    let fixed = vec![("tau", tau)];
+                    Variant::new(EffectKind::Thermal, Equation::Electrical, fixed, columns)
+                })
+                .collect()
+        },
+        present: |e, s| match *e {
+            Effect::Thermal { tau, .. } if s.current().is_some() => {
+                vec![(Equation::Electrical, s.thermal_column(tau.max(0.1)))]
+            }
+            _ => vec![],
+        },
+        keys: |b, units, v| put(v, "k", b[0] / units.r),
+        column_names: &[],
+        torque_unit: "N·m",
+        plausible: |s| s.get("k") > 0.0,
+        explain: |s| {
+            format!(
+                "the winding resistance rises as the current heats the motor ({:.1e} per A², time constant {} s)",
+                s.get("k"),
+                s.get("tau")
+            )
+        },
+    },
 };
+
+/// Grid of thermal time constants [s] `diagnose` tries: small motors heat in 5 s (winding)
+/// to minutes (case).
+pub const GRID: [f64; 6] = [5.0, 10.0, 20.0, 40.0, 80.0, 160.0];
 
 pub(super) fn key_mut<'a, D>(e: &'a mut Effect<D>, key: &str) -> Option<&'a mut D> {
     match (e, key) {

@@ -26,6 +26,28 @@ pub static D: Descriptor = Descriptor {
     on_residual: false,
     // ẋ is already in the library.
     sindy: in_paper_library,
+    diagnose: Diagnose {
+        variants: |s| {
+            let columns = vec![s.omega.clone()];
+            vec![Variant::new(
+                EffectKind::Viscous,
+                Equation::Mechanical,
+                vec![],
+                columns,
+            )]
+        },
+        present: |_, s| vec![(Equation::Mechanical, s.omega.clone())],
+        keys: |b, _, v| put(v, "b", b[0]),
+        column_names: &["b (viscous)"],
+        torque_unit: "N·m·s/rad",
+        plausible: |s| s.get("b") > 0.0,
+        explain: |s| {
+            format!(
+                "friction grows in proportion to speed, {:.2e} N·m per rad/s (viscous)",
+                s.get("b")
+            )
+        },
+    },
 };
 
 pub(super) fn key_mut<'a, D>(e: &'a mut Effect<D>, key: &str) -> Option<&'a mut D> {
