@@ -518,7 +518,7 @@ fn deadtime_on_d() {
 }
 
 #[test]
-#[ignore = "called adequate on every seed: +1-2 % of resistance on the multisine; the parameter check rejects the given R, but its refit (with an unidentifiable L) does not run closer to the log, and the thermal candidate misses the Bonferroni level (docs/decisions/0024-significance-not-size.md)"]
+#[ignore = "not named: +1-2 % of resistance on the multisine; the thermal candidate misses the Bonferroni level, and the model is not adequate by the voltage equation's parameter drift instead (docs/decisions/0028-significant-means-not-adequate.md)"]
 fn thermal_on_a() {
     check("thermal", SignalKind::A);
 }
@@ -663,10 +663,10 @@ const TABLE_TAIL: &str = "\nHow to read it. On the voltage steps d a correct mod
      `tests/tests/diagnose_other_plant.rs` hold each effect to the promise (never adequate, \
      named on at least 2 of 3 seeds) and keep the cases that fall short `#[ignore]`d with \
      their cause. Causes seen here: a winding that warms by up to 5 K over a minute of the \
-     multisine raises R by up to 2 %: the parameter check of the voltage equation rejects the \
-     given R, but the refitted model's free run is no closer to the log, so the given \
-     parameters stand, and the thermal candidate misses the Bonferroni level \
-     (docs/decisions/0024-significance-not-size.md). Gear tooth \
+     multisine raises R by up to 2 %: the thermal candidate misses the Bonferroni level, and \
+     the model is not adequate because the voltage equation's parameter check sees its \
+     parameters drift along the log, not by a name \
+     (docs/decisions/0028-significant-means-not-adequate.md). Gear tooth \
      friction proportional to a transmitted torque that is mostly inertial looks like wrong \
      constants (the refit raises J and the friction). On steps, the cluster-robust entry test \
      has some 30 held inputs and names dead time or load friction on one seed of three. A \

@@ -297,6 +297,7 @@ pub(super) fn electrical_pass(
         instruments: elec.base_inst.clone(),
         names: elec.base_names.clone(),
         input: f.wf.integral(&f.s.u),
+        small: out.small.clone(),
     });
     acc.findings.extend(out.findings);
     acc.tested.extend(out.first_round);
@@ -473,10 +474,14 @@ pub(super) fn mechanical_pass(
         cols: mech.base_cols.clone(),
         instruments: mech.base_inst.clone(),
         names: mech.base_names.clone(),
+        small: out.small.clone(),
     });
     if !pre.cand.is_empty() {
         let data = presliding_pass(&mech, &out.findings, all_rows, pre.cand, &f.wf_m, &f.s);
         let pout = pass.select(&data);
+        if let Some(j) = pass.acc.judged.last_mut() {
+            j.small.extend(pout.small);
+        }
         pass.acc.findings.extend(pout.findings);
         pass.acc.tested.extend(pout.first_round);
     }

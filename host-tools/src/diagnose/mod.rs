@@ -20,7 +20,9 @@
 //!    least [`MIN_EXPLAINED`] of the model's own residual sum of squares; a second inertia on
 //!    a coupling, whose column shares the angle's reading with the inertia's, also a torque of
 //!    at least [`MIN_TORQUE_FRACTION`] of the Coulomb friction); it then joins the base and
-//!    the next one is tested, until none passes.
+//!    the next one is tested, until none passes. A candidate left that passes every rule but
+//!    the share is not named, and fails the verdict's `small effects` check: the model
+//!    misses something the data show, too small to estimate.
 //! 4. Each finding's coefficients become a spec (`cogging:harmonic=7,amp=0.03,phase=0.2`) that
 //!    `fit --add` accepts; its score is the fraction of the base residual it explains.
 pub mod candidates;
@@ -619,6 +621,9 @@ struct Judged {
     instruments: Vec<Option<Vec<f64>>>,
     /// The input at each kept window's centre.
     input: Vec<f64>,
+    /// Effects left significant but below the share a finding must explain
+    /// ([`forward_select::Small`]).
+    small: Vec<forward_select::Small>,
 }
 
 /// The verdict on the model as given ([`verdict`], [`carriers`]).
@@ -650,7 +655,17 @@ fn judge(
             .map(|(c, _)| *c)
             .collect();
         if let Some(given) = &j.given {
-            let c = parameter_check(j, given, &cluster, level_per_test);
+            let mut c = parameter_check(j, given, &cluster, level_per_test);
+            if !c.passed && c.p_value.is_finite() {
+                let times: Vec<f64> = select_rows(
+                    &wf.centres.iter().map(|&k| s.t[k]).collect::<Vec<f64>>(),
+                    &j.keep,
+                );
+                c.drift = parameter_drift(j, given, &times, &cluster, level_per_test);
+                if let Some(d) = &c.drift {
+                    c.detail = format!("{}; {}", c.detail, d.words());
+                }
+            }
             if !c.passed {
                 let r = electrical_constant(judged, "R");
                 let kb = electrical_constant(judged, "K_b");
@@ -664,6 +679,11 @@ fn judge(
             }
             checks.push(c);
         }
+        checks.extend(verdict::small_effects_check(
+            j.eq.label(),
+            &j.small,
+            opts.min_explained,
+        ));
         checks.extend(residual_checks(j, &cluster, level_per_test));
         let rows = carriers::Rows {
             wf,
@@ -704,6 +724,7 @@ fn too_few_windows(j: &Judged) -> verdict::Check {
         share: 0.0,
         passed: false,
         note: None,
+        drift: None,
         detail: format!(
             "{} equation: only {} usable windows (at least {MIN_VERDICT_ROWS} are needed to test the residual); record a longer log with more motion",
             j.eq.label(),
@@ -751,6 +772,28 @@ fn parameter_check(
     c
 }
 
+/// Do the parameters of one equation's check drift along the log? The test of
+/// [`verdict::parameter_drift`] on the check's residual and instruments, where it rejects at
+/// `level` (`times`: each kept row's time). Asked only once the check's Wald test has
+/// rejected, so that a check failed by a drift is never more likely than one failed by that
+/// test alone.
+fn parameter_drift(
+    j: &Judged,
+    given: &[f64],
+    times: &[f64],
+    cluster: &[usize],
+    level: f64,
+) -> Option<verdict::Drift> {
+    let (_, tested, nuisance) = tested_columns(j);
+    let (t, share) = verdict::parameter_drift(given, &j.base, (&tested, &nuisance), times, cluster);
+    let t = t.filter(|t| t.p_value < level)?;
+    Some(verdict::Drift {
+        statistic: t.t2,
+        p_value: t.p_value,
+        share,
+    })
+}
+
 /// Adequate: an equation was judged, nothing is missing or carried, and every check passed.
 fn adequate(
     judged: &[Judged],
@@ -795,6 +838,7 @@ fn untested_carriers(j: &Judged, untested: &[&str]) -> Option<verdict::Check> {
         share: 0.0,
         passed: false,
         note: None,
+        drift: None,
         detail: format!(
             "{} equation: cannot judge what {} carry: too few windows or held inputs for the test to reject anything",
             j.eq.label(),
@@ -962,6 +1006,12 @@ fn weigh_refit_by_free_run(log: &MotorLog, st: &Structure, own: &MotorLog, verdi
     for c in verdict.checks.iter_mut().filter(|c| failed(c)) {
         if better {
             c.detail = format!("{}; {words}", c.detail);
+        } else if let Some(d) = &c.drift {
+            c.detail = format!(
+                "{}: the refit reads the equations better, but {words}, so a refit is no cure; {}",
+                c.detail.split(':').next().unwrap_or(""),
+                d.words()
+            );
         } else {
             c.passed = true;
             c.detail = format!(

@@ -8,6 +8,9 @@
 //!    [`parameter_check`]), and the refitted values of the parameters that moved
 //!    ([`moved_columns`]) make a free run closer to the log ([`free_run_gain`]), the
 //!    parameters are off: the finding lists those values and the advice to refit first.
+//!    Once the Wald test has rejected, the same residual is also tested for the parameters
+//!    drifting along the log ([`parameter_drift`]); a drift fails the check whatever the
+//!    free run shows, since no constant value follows it.
 //! 2. **Whiteness** of the structure's residual: the Breusch–Godfrey regression of the
 //!    residual on its own past values, on every other weak-form window, so that no two
 //!    windows share a sample and a correct model's residual is independent; tested with the
@@ -55,7 +58,8 @@ pub const LAGS: usize = 4;
 /// One adequacy check.
 #[derive(Debug, Clone, Serialize)]
 pub struct Check {
-    /// `parameters`, `whiteness` or `input`.
+    /// `parameters`, `whiteness`, `input`, `small effects` (an effect left significant but
+    /// below the share a finding must explain), `carriers` or `data` (cannot judge).
     pub name: &'static str,
     /// Test statistic (F for the parameters, Hotelling's T² for the others; NaN when the
     /// test cannot decide on this log).
@@ -70,6 +74,21 @@ pub struct Check {
     /// fewer than [`CLUSTER_SPAN`] correlation times ([`short_clusters_note`]).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub note: Option<String>,
+    /// The parameter check only, when its Wald test rejected: the test of the same
+    /// parameters drifting along the log ([`parameter_drift`]), where it rejected too.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub drift: Option<Drift>,
+}
+
+/// A drift of the model's parameters along the log ([`parameter_drift`]).
+#[derive(Debug, Clone, Serialize)]
+pub struct Drift {
+    /// Hotelling's `T²` and p-value of the test.
+    pub statistic: f64,
+    pub p_value: f64,
+    /// Share of the model's equation error (beyond its own run's and the columns) the
+    /// columns times time explain.
+    pub share: f64,
 }
 
 /// The residual of every other row (disjoint windows when the stride is half the window).
@@ -189,6 +208,7 @@ pub fn whiteness_check(resid: &[f64], cluster: &[usize], level: f64) -> Check {
         share: r2,
         passed,
         note: None,
+        drift: None,
         detail: format!(
             "the residual's own past explains {:.0}% of it (Breusch–Godfrey, {} lags of disjoint windows, robust p = {:.1e}; white at level {:.1e}: {})",
             100.0 * r2,
@@ -198,6 +218,45 @@ pub fn whiteness_check(resid: &[f64], cluster: &[usize], level: f64) -> Check {
             if passed { "yes" } else { "no" }
         ),
     }
+}
+
+/// The failed check of an equation in which forward selection left effects that are
+/// significant at the findings' per-test level but explain less than `min_explained` of the
+/// model's residual ([`super::forward_select::Small`]); `None` when it left none. The model
+/// misses something the data show, so it is not adequate; no effect is named, as the column
+/// that caught it need not be the physics behind it. Its statistic and p-value are those of
+/// the most significant one, its share their largest.
+pub(super) fn small_effects_check(
+    label: &str,
+    small: &[super::forward_select::Small],
+    min_explained: f64,
+) -> Option<Check> {
+    let first = small.first()?;
+    let each: Vec<String> = small
+        .iter()
+        .map(|e| {
+            format!(
+                "{}, p = {:.1e} ({:.1}% of the residual)",
+                e.name,
+                e.p_value,
+                100.0 * e.share
+            )
+        })
+        .collect();
+    Some(Check {
+        name: "small effects",
+        statistic: first.t2,
+        p_value: first.p_value,
+        share: small.iter().map(|e| e.share).fold(0.0, f64::max),
+        passed: false,
+        note: None,
+        drift: None,
+        detail: format!(
+            "{label}: a significant but small effect (< {:.0}% of the residual) is left: {}; the column of the list that caught it need not be its physics, so none is named",
+            100.0 * min_explained,
+            each.join("; ")
+        ),
+    })
 }
 
 /// A check its test cannot decide on this log (too few rows or held inputs): not passed, its
@@ -210,6 +269,7 @@ fn cannot_judge(name: &'static str, rows: usize) -> Check {
         share: 0.0,
         passed: false,
         note: None,
+        drift: None,
         detail: format!("cannot judge the {name} of the residual on {rows} disjoint windows: too few windows or held inputs for the test to reject anything"),
     }
 }
@@ -230,6 +290,7 @@ pub fn input_check(resid: &[f64], input: &[f64], cluster: &[usize], level: f64) 
         share,
         passed,
         note: None,
+        drift: None,
         detail: format!(
             "the input over the last {} windows explains {:.0}% of the residual (robust T² = {:.2}, p = {:.1e}; independent at level {:.1e}: {})",
             LAGS + 1,
@@ -316,6 +377,7 @@ pub fn parameter_check(
             share: 1.0,
             passed: false,
             note: None,
+            drift: None,
             detail: "the model's own equations give a non-finite residual on this log (a zero or non-finite constant): refit first".to_string(),
         };
     }
@@ -343,6 +405,7 @@ pub fn parameter_check(
         share,
         passed,
         note: short_clusters_note(block, statistics::correlation_time(refit)),
+        drift: None,
         detail: if passed {
             format!(
                 "the model's own parameters are as good as a refit of its structure (its columns explain {:.0}% of the model's equation error beyond its own run's; robust T² = {:.1}, p = {:.1e} on {} clusters, {:.0} effective)",
@@ -364,6 +427,59 @@ pub fn parameter_check(
             )
         },
     }
+}
+
+impl Drift {
+    /// One clause for a person.
+    pub fn words(&self) -> String {
+        format!(
+            "the parameters drift along the log: their columns times time explain {:.1}% of the model's equation error beyond the columns themselves (robust T² = {:.1}, p = {:.1e}), which no constant value follows (a winding warming, friction wearing in or warming up)",
+            100.0 * self.share,
+            self.statistic,
+            self.p_value
+        )
+    }
+}
+
+/// Does a parameter of the model drift over the log? The same residual and instruments as
+/// [`parameter_check`], each tested column `cols[k]` multiplied by the row's time `times`
+/// (centred on the log's middle, in units of its length), tested beyond every column
+/// itself and the `nuisance` columns: a parameter that differs from the given value by the
+/// same amount all along is taken by its own column and leaves no trend; one that changes
+/// along the log (a winding warming, friction wearing in) leaves its column times the
+/// change. Returns the test (`None` when it cannot decide) and the share of `given`, beyond
+/// the columns, the trends explain.
+pub fn parameter_drift(
+    given: &[f64],
+    refit: &[f64],
+    (cols, nuisance): (&[Vec<f64>], &[Vec<f64>]),
+    times: &[f64],
+    hold: &[usize],
+) -> (Option<statistics::RobustTest>, f64) {
+    let n = given.len();
+    if times.len() != n || cols.is_empty() || n < 2 {
+        return (None, 0.0);
+    }
+    let (lo, hi) = (times[0], times[n - 1]);
+    let (mid, span) = (0.5 * (lo + hi), (hi - lo).max(f64::MIN_POSITIVE));
+    let tested: Vec<Vec<f64>> = cols
+        .iter()
+        .map(|c| {
+            c.iter()
+                .zip(times)
+                .map(|(x, t)| x * (t - mid) / span)
+                .collect()
+        })
+        .collect();
+    let null: Vec<&[f64]> = cols.iter().chain(nuisance).map(|c| c.as_slice()).collect();
+    let cluster = block_clusters(hold, cluster_block(refit, tested.len()));
+    statistics::small_sample_test_beyond(
+        given,
+        &null,
+        &tested,
+        &cluster,
+        statistics::CLUSTER_LEVERAGE_CAP,
+    )
 }
 
 /// The caveat of a parameter check whose blocks of `block` rows ([`cluster_block`]) are

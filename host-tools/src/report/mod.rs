@@ -224,6 +224,8 @@ fn findings_section(page: &mut Page, d: &Diagnosis) {
             "No missing effect is significant: the model explains the data down to its noise."
         } else if !v.judged {
             "No missing effect is significant, but the log cannot judge the model: too little motion or too few held inputs for the tests to reject."
+        } else if v.checks.iter().any(|c| c.name == "small effects" && !c.passed) {
+            "No missing effect is named: the ones left significant explain less of the residual than a finding must, too little to estimate them (see the verdict's failed checks)."
         } else {
             "No named missing effect is significant, but the model leaves structure in the residual (see the verdict's failed checks)."
         });
