@@ -62,8 +62,7 @@
 //!   `[0, 1.5·V_d]`): the current at `V = V_b + x` is `(x − c)/(¾·R)`. The ramp starts at
 //!   `x₀ = ¾·`[`RAMP_R_MIN`]`·i_t`, with `i_t = `[`RAMP_TARGET`]`·i_limit`, which drives
 //!   at most `i_t` through any R from [`RAMP_R_MIN`] up. Each voltage is held two periods;
-//!   from the two currents sampled `i₁ ≤ i₂` (no Hall edge meanwhile: a falling current or
-//!   an edge is a turning rotor's back-EMF, and the ramp waits) the steady current is at most
+//!   from the two currents sampled `i₁, i₂` the steady current of a resting rotor is at most
 //!   `i_s = i₂ + `[`RAMP_LAG_PERIODS`]`·max(i₂ − i₁, 0)` for L/R up to that many periods
 //!   (the remaining rise of an exponential is `Δ/(e^(T·R/L) − 1) ≤ Δ·L/(R·T)`). Growing `x` by
 //!   `g` moves the steady current to `g·i_s + (g − 1)·c/(¾·R)`; with
@@ -421,9 +420,6 @@ impl Commissioner {
         } else {
             i_vector
         };
-        // A Hall edge: the rotor turned (its back-EMF moved the current).
-        let mut edges = edges.into_iter().peekable();
-        let moved = overflow || edges.peek().is_some();
         if (3..6).contains(&self.hold) {
             // The second forward pass: one electrical revolution, from the state the first
             // pass ended in (the motion into sector 0 of the second pass counts).
@@ -467,14 +463,8 @@ impl Commissioner {
         let high = level != Some(false);
         let v_hi = match self.ramp {
             Some(x) => {
-                // Two samples at the ramp's voltage, the current not falling and no Hall edge
-                // (a resting rotor: the current rises to its steady value as a first-order
-                // lag): step on from the second.
-                let pair = self.last_ramp
-                    && i_vector.is_finite()
-                    && self.ramp_prev.is_finite()
-                    && i_vector.abs() >= self.ramp_prev.abs()
-                    && !moved;
+                // Two samples at the ramp's voltage: step on from the second.
+                let pair = self.last_ramp && i_vector.is_finite() && self.ramp_prev.is_finite();
                 let step = if self.hold >= 6 {
                     // The backward pass holds one voltage.
                     None
@@ -519,7 +509,7 @@ impl Commissioner {
             && !(3 * HOLD_PERIODS / 4..3 * HOLD_PERIODS / 4 + 2).contains(&p);
         let ramp_now = self.ramp.is_some() && high;
         // A sample of the ramp's voltage now pairs with the next only if it is held again.
-        self.ramp_prev = if ramp_now && self.last_ramp && self.last.0 == volts && !moved {
+        self.ramp_prev = if ramp_now && self.last_ramp && self.last.0 == volts {
             i_vector
         } else {
             f32::NAN
