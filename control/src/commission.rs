@@ -61,8 +61,16 @@
 //!   drop allowed for (the true drop `V_t` lies in `[V_d/2, 2·V_d]`, so `c = V_t − V_b` in
 //!   `[0, 1.5·V_d]`): the current at `V = V_b + x` is `(x − c)/(¾·R)`. The ramp starts at
 //!   `x₀ = ¾·`[`RAMP_R_MIN`]`·i_t`, with `i_t = `[`RAMP_TARGET`]`·i_limit`, which drives
-//!   at most `i_t` through any R from [`RAMP_R_MIN`] up. Each voltage is held two periods;
-//!   from the two currents sampled `i₁, i₂` the steady current of a resting rotor is at most
+//!   at most `i_t` through any R from [`RAMP_R_MIN`] up. Each voltage is held at least two
+//!   periods, and the ramp steps only from samples of a resting rotor (a turning rotor's
+//!   back-EMF lowers them, and a step taken from them overshoots once it stops): no Hall
+//!   edge over the two periods, the last three samples `i₀, i₁, i₂` moving as a resting
+//!   first-order lag does (`i₂ − i₁ = q·(i₁ − i₀)`, `q = e^(−T·R/L)` in
+//!   `[0, e^(−1/`[`RAMP_LAG_PERIODS`]`)]`, within [`RAMP_SENSE_NOISE`]), and the current at
+//!   least any earlier sample at a ramp voltage scaled by the voltages (a drop of at least
+//!   0 makes the resting current grow at least in proportion to the voltage); otherwise the
+//!   voltage is held. From the two currents sampled `i₁, i₂` the steady current of a resting
+//!   rotor is at most
 //!   `i_s = i₂ + `[`RAMP_LAG_PERIODS`]`·max(i₂ − i₁, 0)` for L/R up to that many periods
 //!   (the remaining rise of an exponential is `Δ/(e^(T·R/L) − 1) ≤ Δ·L/(R·T)`). Growing `x` by
 //!   `g` moves the steady current to `g·i_s + (g − 1)·c/(¾·R)`; with
@@ -110,6 +118,12 @@ pub const RAMP_DROP_ERROR: f32 = 2.0;
 /// Largest winding time constant L/R the ramp is designed for, in control periods: a
 /// current still rising this slowly is extrapolated to its end (module docs).
 pub const RAMP_LAG_PERIODS: f32 = 5.0;
+/// How far two current samples of a resting rotor may differ by the current sense's noise
+/// alone [A], for the ramp's rest test: several times the tens of mA of a shunt amplifier's
+/// noise, so that a resting rotor passes the test nearly always (a sense noisier than this
+/// holds the ramp lower, not higher), while a turning rotor's back-EMF, amperes on a winding
+/// of tens of mΩ, fails it.
+pub const RAMP_SENSE_NOISE: f32 = 0.1;
 /// Share of the limit the ramp's steps aim at: the rest covers the current sense's noise
 /// in the samples the steps are computed from.
 pub const RAMP_TARGET: f32 = 0.9;
@@ -217,6 +231,20 @@ fn between(a: u8, b: u8) -> Option<u8> {
         .find(|&s| s != 0 && s != 7)
 }
 
+/// Whether three successive current magnitudes `[i₀, i₁, i₂]` [A], the last two driven by one
+/// voltage, move as the current of a resting rotor does (module docs): a first-order lag from
+/// `i₀` closes the same share `q = e^(−T·R/L)` of its remaining gap each period, so
+/// `i₂ − i₁ = q·(i₁ − i₀)` with `q` in `[0, e^(−1/`[`RAMP_LAG_PERIODS`]`)]`, within
+/// [`RAMP_SENSE_NOISE`] either way. A turning rotor's back-EMF makes the current fall, or rise
+/// faster than the lag lets it as the rotor slows.
+fn at_rest([i0, i1, i2]: [f32; 3]) -> bool {
+    let q = libm::expf(-1.0 / RAMP_LAG_PERIODS);
+    let (d1, d2) = (i1 - i0, i2 - i1);
+    d1 >= -RAMP_SENSE_NOISE
+        && d2 >= -RAMP_SENSE_NOISE
+        && d2 <= q * d1.max(0.0) + (1.0 + q) * RAMP_SENSE_NOISE
+}
+
 /// Mean of the current samples at one voltage level.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 struct LevelMean {
@@ -270,14 +298,20 @@ pub struct Commissioner {
     /// The first hold's ramp: the voltage above the smallest drop it holds now [V]
     /// (`None`: done).
     ramp: Option<f32>,
-    /// The current sampled a period before the last, when the drive then was the ramp's
-    /// voltage now (NaN otherwise): with the last sample, the current's trend at it.
-    ramp_prev: f32,
+    /// The last three current samples [A], oldest first (NaN: none), for the rest test.
+    ramp_i: [f32; 3],
+    /// Of the currents [A] sampled at the ramp's voltages, the one largest against its
+    /// voltage [V]: (voltage, current) ((0, 0): none yet).
+    ramp_anchor: (f32, f32),
+    /// Periods in a row, up to the last one, driven at the ramp's voltage now.
+    ramp_run: u8,
+    /// Periods in a row, up to the last one, without a Hall edge or a change of state.
+    still: u8,
+    /// The Hall state read last period.
+    last_hall: u8,
     /// The drive returned last period: its voltage, and the level its current samples
     /// (`None`: not sampled).
     last: (f32, Option<bool>),
-    /// The drive returned last period was the ramp's voltage (the higher level).
-    last_ramp: bool,
 }
 
 /// What the sequencer wants this period.
@@ -318,9 +352,12 @@ impl Commissioner {
             },
             r_model,
             ramp: None,
-            ramp_prev: f32::NAN,
+            ramp_i: [f32::NAN; 3],
+            ramp_anchor: (0.0, 0.0),
+            ramp_run: 0,
+            still: 0,
+            last_hall: 0,
             last: (0.0, None),
-            last_ramp: false,
         }
         .with_ramp()
     }
@@ -364,6 +401,18 @@ impl Commissioner {
         } else {
             Some(1.0 + (target - i_ss) / (i_ss + i_c))
         }
+    }
+
+    /// Whether the last two samples at the ramp's voltage `x` above [`Self::ramp_base`] [V]
+    /// reach what a resting rotor draws there (module docs): at least any earlier sample at
+    /// a ramp voltage scaled by the voltages, `i_a·V/V_a`, with `i_a` less the sense's noise
+    /// ([`RAMP_SENSE_NOISE`]). The steady current of the samples is taken as large as the
+    /// winding's lag allows.
+    fn not_below_anchor(&self, x: f32) -> bool {
+        let (v_a, i_a) = self.ramp_anchor;
+        let [_, i1, i2] = self.ramp_i;
+        let i_ss = i2 + RAMP_LAG_PERIODS * (i2 - i1).max(0.0);
+        v_a <= 0.0 || i_ss >= (i_a - RAMP_SENSE_NOISE) * (self.ramp_base() + x) / v_a
     }
 
     /// The voltage a fraction `x` of the way from `base` [V] to `v_hi` [V] (from 0 when
@@ -420,11 +469,13 @@ impl Commissioner {
         } else {
             i_vector
         };
-        if (3..6).contains(&self.hold) {
-            // The second forward pass: one electrical revolution, from the state the first
-            // pass ended in (the motion into sector 0 of the second pass counts).
-            self.path_full |= overflow;
-            for e in edges {
+        let counted = (3..6).contains(&self.hold);
+        let mut moved = overflow || hall != self.last_hall;
+        for e in edges {
+            moved = true;
+            if counted {
+                // The second forward pass: one electrical revolution, from the state the
+                // first pass ended in (the motion into sector 0 of the second pass counts).
                 let n = self.path.len();
                 if n >= 2 && self.path[n - 2] == e {
                     self.path.pop();
@@ -432,6 +483,19 @@ impl Commissioner {
                     self.path_full = true;
                 }
             }
+        }
+        self.path_full |= counted && overflow;
+        self.last_hall = hall;
+        self.still = if moved {
+            0
+        } else {
+            self.still.saturating_add(1)
+        };
+        self.ramp_i = [self.ramp_i[1], self.ramp_i[2], i_vector.abs()];
+        let (v_a, i_a) = self.ramp_anchor;
+        let v = self.last.0;
+        if self.ramp_run > 0 && v > 0.0 && i_vector.is_finite() && i_vector.abs() * v_a >= i_a * v {
+            self.ramp_anchor = (v, i_vector.abs());
         }
         self.measured(i_vector);
         self.period = self.period.wrapping_add(1);
@@ -463,13 +527,17 @@ impl Commissioner {
         let high = level != Some(false);
         let v_hi = match self.ramp {
             Some(x) => {
-                // Two samples at the ramp's voltage: step on from the second.
-                let pair = self.last_ramp && i_vector.is_finite() && self.ramp_prev.is_finite();
+                // Two samples at the ramp's voltage from a resting rotor: step on from the
+                // second.
+                let rest = self.ramp_run >= 2
+                    && self.still >= 2
+                    && at_rest(self.ramp_i)
+                    && self.not_below_anchor(x);
                 let step = if self.hold >= 6 {
                     // The backward pass holds one voltage.
                     None
-                } else if pair && high {
-                    Some(self.ramp_growth(x, self.ramp_prev.abs(), i_vector.abs()))
+                } else if rest && high {
+                    Some(self.ramp_growth(x, self.ramp_i[1], self.ramp_i[2]))
                 } else {
                     Some(Some(1.0))
                 };
@@ -508,15 +576,16 @@ impl Commissioner {
         let settled = !(HOLD_PERIODS / 2..HOLD_PERIODS / 2 + 2).contains(&p)
             && !(3 * HOLD_PERIODS / 4..3 * HOLD_PERIODS / 4 + 2).contains(&p);
         let ramp_now = self.ramp.is_some() && high;
-        // A sample of the ramp's voltage now pairs with the next only if it is held again.
-        self.ramp_prev = if ramp_now && self.last_ramp && self.last.0 == volts {
-            i_vector
+        // The ramp's samples pair only while one voltage is held.
+        self.ramp_run = if !ramp_now {
+            0
+        } else if self.ramp_run > 0 && self.last.0 == volts {
+            self.ramp_run.saturating_add(1)
         } else {
-            f32::NAN
+            1
         };
         // Nor are the ramp's: their voltage is not the level's.
         self.last = (volts, level.filter(|_| settled && self.ramp.is_none()));
-        self.last_ramp = ramp_now;
         CommissionStep::Hold {
             low: CENTRES[Self::centre_of(self.hold)].1,
             volts,
@@ -900,6 +969,97 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn the_rest_test_passes_a_resting_lag_and_fails_a_turning_rotor() {
+        // A resting first-order lag from 1 A towards 5 A, for L/R up to the designed lag,
+        // with the sense's noise at its bound either way.
+        let q_max = libm::expf(-1.0 / RAMP_LAG_PERIODS);
+        for q in [0.0, 0.3, 0.6, q_max] {
+            let lag = |k: i32| 5.0 - 4.0 * libm::powf(q, k as f32);
+            for n in [-RAMP_SENSE_NOISE, 0.0, RAMP_SENSE_NOISE] {
+                let s = [lag(0) - 0.45 * n, lag(1) + 0.45 * n, lag(2) - 0.45 * n];
+                assert!(at_rest(s), "q {q}, noise {n}: {s:?}");
+            }
+        }
+        // A falling current (the back-EMF of a rotor speeding up), and one rising faster in
+        // the second period than the lag lets it (a rotor slowing down).
+        assert!(!at_rest([3.0, 2.5, 2.0]));
+        assert!(!at_rest([1.0, 1.5, 2.5]));
+        // No sample yet.
+        assert!(!at_rest([f32::NAN, 1.0, 1.0]));
+    }
+
+    /// The largest current [A] of a whole run on a winding as [`resting_rl`], whose rotor
+    /// rests for the first four periods (two of the ramp's voltages), breaks away once the
+    /// current then exceeds `i_break` [A] and turns for `turn` periods, its back-EMF taking
+    /// a share `emf` of the voltage left after the drop (the samples fall to `1 − emf` of
+    /// the resting current), within one Hall sector.
+    fn turning_rl(
+        c: &mut Commissioner,
+        (r, lag, vd): (f64, f64, f64),
+        (i_break, turn, emf): (f64, usize, f64),
+    ) -> f64 {
+        let mut i = 0.0f64;
+        let mut peak = 0.0f64;
+        let mut turning: Option<usize> = None;
+        let decay = if lag > 0.0 { (-1.0 / lag).exp() } else { 0.0 };
+        for k in 0..10_000 {
+            match c.tick(1, [], false, i as f32) {
+                CommissionStep::Done(_) => return peak,
+                CommissionStep::Hold { volts, .. } => {
+                    let left = (f64::from(volts) - vd).max(0.0);
+                    let e = match turning {
+                        Some(n) if n < turn => emf * left,
+                        _ => 0.0,
+                    };
+                    let ss = (left - e) / (0.75 * r);
+                    i = ss + (i - ss) * decay;
+                    peak = peak.max(i);
+                    turning = match turning {
+                        None if k >= 4 && i > i_break => Some(0),
+                        Some(n) => Some(n + 1),
+                        None => None,
+                    };
+                }
+            }
+        }
+        panic!("never finished");
+    }
+
+    #[test]
+    fn a_rotor_turning_during_the_ramp_does_not_take_it_past_the_limit() {
+        // The default blob's run (9 A) on windings from the smallest designed R, the rotor
+        // breaking away at a third or two thirds of the limit and turning for a few periods
+        // or most of a hold at up to nine tenths of the voltage in back-EMF. L/R up to 3
+        // periods: near the designed 5 a short turn's fall hides in the lag (decision 0023).
+        let vd = crate::board::dead_time_drop(22.2);
+        let r_blob = 24.0f32 / 111.0;
+        let i_lim = 9.0f32;
+        let v_run = vd + i_lim * PATH_R_SHARE * r_blob;
+        let mut peaks = Vec::new();
+        for r in [0.01, 0.02, 0.05, 0.2] {
+            for lag in [0.0, 1.0, 3.0] {
+                for vd_ratio in [0.5, 1.0, 2.0] {
+                    for (i_break, turn, emf) in [(3.0, 3, 0.5), (3.0, 10, 0.9), (6.0, 10, 0.9)] {
+                        let mut c = Commissioner::new(v_run, i_lim, vd, r_blob);
+                        let plant = (r, lag, vd_ratio * f64::from(vd));
+                        let peak = turning_rl(&mut c, plant, (i_break, turn, emf));
+                        assert!(
+                            peak <= f64::from(i_lim),
+                            "{peak} A > {i_lim} A: {r} Ω, L/R {lag} periods, drop \
+                             {vd_ratio}× the estimate, break at {i_break} A, {turn} periods \
+                             at {emf} of the voltage"
+                        );
+                        peaks.push(peak);
+                    }
+                }
+            }
+        }
+        // The ramp still gets near the limit (the test could fail by a ramp that never moves).
+        let top = peaks.iter().copied().fold(0.0, f64::max);
+        assert!(top > 0.5 * f64::from(i_lim), "largest peak {top} A");
     }
 
     #[test]
