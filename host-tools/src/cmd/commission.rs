@@ -89,7 +89,13 @@ pub fn run(args: Args) -> Result<()> {
         CommissionOutcome::Failed(e) => {
             bail!("{}: commissioning failed: {}", args.port, error_text(e))
         }
-        CommissionOutcome::NotRun => bail!("{}: no commissioning result on the board", args.port),
+        CommissionOutcome::NotRun => bail!(
+            "{}: no commissioning result on the board (none was run, or the stored one came \
+             from an older firmware that numbered the Hall sectors otherwise and is not used): \
+             run `motorid commission --port {}`",
+            args.port,
+            args.port
+        ),
         CommissionOutcome::Running => bail!("{}: commissioning is still running", args.port),
     };
     if args.json {
