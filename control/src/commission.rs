@@ -19,7 +19,9 @@
 //!   rotor by 60..120° (the torque angle centred on 90°) and the decoded angle counts up for
 //!   a positive voltage;
 //! - the direction: whether the learned state sequence is the default 1-3-2-6-4-5 order
-//!   forward or backward (`reversed`), or another order (a permuted Hall connector);
+//!   forward or backward (`reversed`). No other order exists: the only Gray-coded cycle
+//!   of the six valid states is 1-3-2-6-4-5, either way round, and a Hall connector with
+//!   two sensors swapped gives it backward (`permuted` is always false);
 //! - a pole-pair check: the net Hall edges over one electrical revolution of the field (the
 //!   second forward pass; an edge back to the state before cancels the edge that left it,
 //!   so a rotor that overshoots and settles back counts once) must be the sequence's six
@@ -145,8 +147,10 @@ pub struct Commissioning {
     /// The sequence is the default 1-3-2-6-4-5 order backward (motor phases or Hall
     /// sensors wired for the other direction).
     pub reversed: bool,
-    /// The sequence is neither the default order nor its reverse (a permuted Hall
-    /// connector); the learned table covers it all the same.
+    /// The sequence is neither the default order nor its reverse: never true for a result
+    /// (its sequence is a Gray-coded cycle of the six valid states, which is the default
+    /// order or its reverse; a permuted Hall connector gives `reversed`). Kept in the
+    /// stored layout.
     pub permuted: bool,
     /// Sign to apply to the measured current (+1 or −1).
     pub current_sign: i8,
@@ -186,7 +190,8 @@ pub enum CommissionError {
     /// Two vectors 120° apart gave states other than two sensors apart (the sequence
     /// would not step one sensor at a time).
     NotAdjacent,
-    /// The backward pass read other states than the forward pass.
+    /// The backward pass read other states than the counted forward pass, or the first
+    /// forward pass another state at the last centre.
     Inconsistent,
     /// The Hall edges over one electrical revolution were not the sequence's six, one each
     /// (pole pairs differ).
@@ -435,9 +440,15 @@ impl Commissioner {
         self.volts
     }
 
-    /// Index into [`CENTRES`] of hold `h`: 0, 1, 2 twice, then 2, 1, 0.
+    /// Index into [`CENTRES`] of hold `h`: 0, 1, 2 twice, then 1, 0, 2 (the backward pass
+    /// moves at every hold, so each centre is also approached from the other side).
     fn centre_of(h: u8) -> usize {
-        usize::from(if h < 6 { h % 3 } else { 8 - h.min(8) })
+        const BACKWARD: [u8; 3] = [1, 0, 2];
+        usize::from(if h < 6 {
+            h % 3
+        } else {
+            BACKWARD[usize::from(h.min(8) - 6)]
+        })
     }
 
     /// Net Hall edges of the counted revolution.
@@ -677,7 +688,9 @@ impl Commissioner {
 
     fn result(&self) -> Result<Commissioning, CommissionError> {
         let seq = self.sequence()?;
-        if self.bwd != self.fwd {
+        // The last centre is read at the end of both forward passes: a difference there is
+        // an inconsistency, not a pole-pair count.
+        if self.bwd != self.fwd || self.path.first() != Some(&self.fwd[2]) {
             return Err(CommissionError::Inconsistent);
         }
         // The counted revolution runs from the last centre (sector 4) round to it again.
@@ -793,7 +806,7 @@ mod tests {
     }
 
     #[test]
-    fn learns_default_reversed_and_permuted_sequences_from_any_sector() {
+    fn learns_default_reversed_and_swapped_sequences_from_any_sector() {
         let mut rev = DEFAULT_SEQUENCE;
         rev.reverse();
         // Hall bits A and B swapped.
@@ -846,7 +859,7 @@ mod tests {
                 }
             }
         };
-        assert!(res.is_err(), "{res:?}");
+        assert_eq!(res, Err(CommissionError::PolePairs));
     }
 
     #[test]
@@ -866,6 +879,55 @@ mod tests {
                     let mut e = Vec::new();
                     let down = (to + 6 - rotor.sector) % 6 > 3;
                     rotor.turn_to(if down { (to + 1) % 6 } else { to }, &mut e);
+                    edges.extend(e);
+                }
+            }
+        };
+        assert_eq!(res, Err(CommissionError::Inconsistent));
+    }
+
+    #[test]
+    fn every_gray_cycle_of_the_valid_states_is_the_default_order_either_way() {
+        // All orders of the six valid states starting at state 1: the Gray-coded ones are
+        // the default order and its reverse, so `permuted` is never set.
+        let mut rev = DEFAULT_SEQUENCE;
+        rev.reverse();
+        let rot =
+            |seq: &[u8; 6], s: &[u8; 6]| (0..6).any(|o| (0..6).all(|k| seq[k] == s[(k + o) % 6]));
+        let mut gray_cycles = 0;
+        for code in 0..5u32.pow(5) {
+            let digits: Vec<u8> = (0..5).map(|k| 2 + (code / 5u32.pow(k) % 5) as u8).collect();
+            let mut seq = [1u8; 6];
+            seq[1..].copy_from_slice(&digits);
+            if (2..=6).any(|s| !seq.contains(&s)) || !gray(&seq) {
+                continue;
+            }
+            gray_cycles += 1;
+            assert!(rot(&seq, &DEFAULT_SEQUENCE) || rot(&seq, &rev), "{seq:?}");
+        }
+        assert_eq!(gray_cycles, 2);
+    }
+
+    #[test]
+    fn two_reads_of_the_last_centre_that_differ_are_inconsistent() {
+        // The rotor stops one sector short of the last centre at the end of the first pass
+        // only: the counted revolution then starts elsewhere, but the fault is the read.
+        let mut c = Commissioner::new(2.0, 10.0, 0.4, 0.2);
+        let mut rotor = Rotor {
+            seq: DEFAULT_SEQUENCE,
+            sector: 0,
+        };
+        let mut edges = Vec::new();
+        let mut n = 0usize;
+        let res = loop {
+            match c.tick(rotor.hall(), edges.drain(..), false, 5.0) {
+                CommissionStep::Done(r) => break r,
+                CommissionStep::Hold { low, .. } => {
+                    let to = centre_sector(low);
+                    let hold = n / usize::from(HOLD_PERIODS);
+                    n += 1;
+                    let mut e = Vec::new();
+                    rotor.turn_to(if hold == 2 { to - 1 } else { to }, &mut e);
                     edges.extend(e);
                 }
             }

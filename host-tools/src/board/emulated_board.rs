@@ -811,6 +811,16 @@ mod tests {
                 last = s;
             }
         }
+        // The quotient needs the rotor turning: a mean speed of a hundredth of the no-load
+        // speed at `volts` (a stalled rotation would give NaN or a huge quotient, which the
+        // ranking would take for the best).
+        let w_mean = w / n as f64;
+        let w_no_load = f64::from(volts) / kb;
+        assert!(
+            w_mean.abs() >= 0.01 * w_no_load,
+            "the rotor stalled under this table (mean speed {w_mean} rad/s against the \
+             no-load {w_no_load} rad/s): no torque per amp"
+        );
         // The board's forward direction in the motor's: the sign of the sector count per
         // turn of the rotor.
         let forward = if (sectors as f64) * w > 0.0 {

@@ -102,9 +102,8 @@ pub fn run(args: Args) -> Result<()> {
         println!("{}", serde_json::to_string_pretty(&to_json(&c, seq))?);
         return Ok(());
     }
-    let dir = if c.permuted {
-        "permuted Hall order"
-    } else if c.reversed {
+    // `permuted` is never set: a swapped Hall connector reads as the default order reversed.
+    let dir = if c.reversed {
         "reversed (default Hall order backward)"
     } else {
         "default"
