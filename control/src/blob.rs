@@ -5,7 +5,7 @@
 //! | offset | size | field |
 //! |---|---|---|
 //! | 0 | 4 | magic `b"MIDC"` |
-//! | 4 | 2 | format version ([`VERSION`]; versions 1 and 2 are still read, see [`VERSION`]) |
+//! | 4 | 2 | format version ([`VERSION`]; versions 1 to 4 are still read, see [`VERSION`]) |
 //! | 6 | 2 | payload length `n` |
 //! | 8 | n | postcard encoding of [`Coefficients`] |
 //! | 8+n | 4 | CRC-32 (ISO-HDLC, the zip/Ethernet CRC) of bytes `0..8+n` |
@@ -43,7 +43,12 @@ pub const MAGIC: [u8; 4] = *b"MIDC";
 /// their positive gains as 1.
 /// 4: adds [`Coefficients::motor_identified`] at the end; older blobs read as not
 /// identified (their motor constants may be the defaults commissioning stored).
-pub const VERSION: u16 = 4;
+/// 5: [`Commissioning::sequence`] numbers sector `k` as the one centred between the fields
+/// of bridge steps `k − 1` and `k`; versions 2 to 4 stored sectors numbered by the single
+/// step vector holding the rotor on a boundary, which can be one sector off. [`decode`]
+/// drops an older commissioning result and the Hall table it set (the default table
+/// stands, the board reports no result): the motor needs a new commissioning run.
+pub const VERSION: u16 = 5;
 /// The oldest format version [`decode`] reads.
 pub const OLDEST_VERSION: u16 = 1;
 /// Header size: magic, version, payload length.
@@ -591,6 +596,11 @@ pub fn decode(bytes: &[u8]) -> Result<Coefficients, BlobError> {
         // Before version 3 any positive gain meant full compensation.
         c.pi.comp_gain = 1.0;
     }
+    if version < 5 && c.commission.is_some() {
+        // Another sector numbering ([`VERSION`]): neither the result nor its table is used.
+        c.commission = None;
+        c.hall_table = DEFAULT_HALL_TABLE;
+    }
     c.validate()?;
     Ok(c)
 }
@@ -769,13 +779,14 @@ mod tests {
         let mut buf = [0u8; MAX_BLOB_LEN];
         let blob = encode(&Coefficients::default(), &mut buf).unwrap().to_vec();
         let mut b = blob.clone();
-        b[4] = 5;
-        assert_eq!(decode(&b), Err(BlobError::UnsupportedVersion(5)));
+        let next = VERSION + 1;
+        b[4..6].copy_from_slice(&next.to_le_bytes());
+        assert_eq!(decode(&b), Err(BlobError::UnsupportedVersion(next)));
         b[4] = 0;
         assert_eq!(decode(&b), Err(BlobError::UnsupportedVersion(0)));
     }
 
-    /// `c` encoded as a blob of an older `version`: the version-4 payload without the
+    /// `c` encoded as a blob of an older `version`: the current payload without the
     /// trailing fields that version lacks (each a zero byte for `None` / `false`).
     fn older(c: &Coefficients, version: u16) -> std::vec::Vec<u8> {
         let mut buf = [0u8; MAX_BLOB_LEN];
@@ -851,6 +862,33 @@ mod tests {
         let crc = CRC32.checksum(&w[..end]);
         w[end..].copy_from_slice(&crc.to_le_bytes());
         assert_eq!(decode(&w), Err(BlobError::Payload));
+    }
+
+    /// A commissioning result stored by versions 2 to 4 numbered the sectors otherwise: it
+    /// and its Hall table are dropped; the current version keeps them.
+    #[test]
+    fn an_older_commissioning_result_is_not_used() {
+        let mut buf = [0u8; MAX_BLOB_LEN];
+        let mut c = Coefficients::default();
+        // The default sequence one sector on: a table that is not the default one.
+        let mut seq = crate::commission::DEFAULT_SEQUENCE;
+        seq.rotate_left(1);
+        c.apply_commissioning(Commissioning {
+            sequence: seq,
+            reversed: false,
+            permuted: false,
+            current_sign: 1,
+            edges_per_elec_rev: 6,
+            volts: 1.5,
+        });
+        assert_ne!(c.hall_table, DEFAULT_HALL_TABLE);
+        assert_eq!(decode(encode(&c, &mut buf).unwrap()).unwrap(), c);
+        for version in 2..VERSION {
+            let d = decode(&older(&c, version)).unwrap();
+            assert_eq!(d.commission, None, "version {version}");
+            assert_eq!(d.hall_table, DEFAULT_HALL_TABLE, "version {version}");
+            assert_eq!(d.motor, c.motor, "version {version}");
+        }
     }
 
     proptest! {

@@ -19,7 +19,9 @@
 //!   rotor by 60..120° (the torque angle centred on 90°) and the decoded angle counts up for
 //!   a positive voltage;
 //! - the direction: whether the learned state sequence is the default 1-3-2-6-4-5 order
-//!   forward or backward (`reversed`), or another order (a permuted Hall connector);
+//!   forward or backward (`reversed`). No other order exists: the only Gray-coded cycle
+//!   of the six valid states is 1-3-2-6-4-5, either way round, and a Hall connector with
+//!   two sensors swapped gives it backward (`permuted` is always false);
 //! - a pole-pair check: the net Hall edges over one electrical revolution of the field (the
 //!   second forward pass; an edge back to the state before cancels the edge that left it,
 //!   so a rotor that overshoots and settles back counts once) must be the sequence's six
@@ -57,13 +59,33 @@
 //! The voltage is chosen by the caller (the board logic limits it to a fraction of `u_max`
 //! and to the voltage that drives a fraction of `i_max` through the path's share of the
 //! blob's R, which may not be the motor's); the measured current then bounds it:
-//! - the first hold starts at [`RAMP_START`] of the way from `V_d/2` to `V_hi` and grows by
-//!   [`RAMP_GROWTH`] a period, so the current approaches the limit from below whatever the
-//!   winding's R and even when the drop `V_d` is overestimated twofold (starting at `V_d`
-//!   itself would drive `(V_d − V_d,true)/R` at once: 12 A through 20 mΩ); once the current
-//!   passes [`RAMP_NEAR`] of the limit the growth slows to [`RAMP_GROWTH_NEAR`] and the
-//!   voltage goes no further than the one extrapolated to drive [`RAMP_TARGET`] of the limit,
-//!   `V_d + (V − V_d)·RAMP_TARGET·i_limit/|I|`, where the ramp ends;
+//! - the first holds ramp the voltage up from `V_b = V_d/`[`RAMP_DROP_ERROR`], the smallest
+//!   drop allowed for (the true drop `V_t` lies in `[V_d/2, 2·V_d]`, so `c = V_t − V_b` in
+//!   `[0, 1.5·V_d]`): the current at `V = V_b + x` is `(x − c)/(¾·R)`. The ramp starts at
+//!   `x₀ = ¾·`[`RAMP_R_MIN`]`·i_t`, with `i_t = `[`RAMP_TARGET`]`·i_limit`, which drives
+//!   at most `i_t` through any R from [`RAMP_R_MIN`] up. Each voltage is held at least two
+//!   periods, and the ramp steps only from samples of a resting rotor (a turning rotor's
+//!   back-EMF lowers them, and a step taken from them overshoots once it stops): no Hall
+//!   edge over the two periods, the last three samples `i₀, i₁, i₂` moving as a resting
+//!   first-order lag does (`i₂ − i₁ = q·(i₁ − i₀)`, `q = e^(−T·R/L)` in
+//!   `[0, e^(−1/`[`RAMP_LAG_PERIODS`]`)]`, within [`RAMP_SENSE_NOISE`]), and the current at
+//!   least any earlier sample at a ramp voltage scaled by the voltages (a drop of at least
+//!   0 makes the resting current grow at least in proportion to the voltage); otherwise the
+//!   voltage is held. From the two currents sampled `i₁, i₂` the steady current of a resting
+//!   rotor is at most
+//!   `i_s = i₂ + `[`RAMP_LAG_PERIODS`]`·max(i₂ − i₁, 0)` for L/R up to that many periods
+//!   (the remaining rise of an exponential is `Δ/(e^(T·R/L) − 1) ≤ Δ·L/(R·T)`). Growing `x` by
+//!   `g` moves the steady current to `g·i_s + (g − 1)·c/(¾·R)`; with
+//!   `g − 1 = (i_t − i_s)/(i_s + 1.5·V_d/(¾·R_min))` that is at most `i_t` for every
+//!   `R ≥ R_min` and drop in the range, so the current approaches the target from below.
+//!   Once `x > 1.5·V_d`, a current `i_s` bounds the path R from below by `(x − 1.5·V_d)/i_s`,
+//!   and `c/(¾·R) ≤ i_s·1.5·V_d/(x − 1.5·V_d)` where that is smaller. The
+//!   ramp ends once `i_s` reaches [`RAMP_END`] of the target, at the run's voltage, or at the
+//!   backward pass; only the higher level's periods step it (the lower level's quarter holds
+//!   the voltage before it and returns to it), and no level samples are taken meanwhile.
+//!   Below [`RAMP_R_MIN`], with a drop outside the range, or with a current sense off by
+//!   more than the target's margin the ramp may pass `i_limit`; the limit below then cuts
+//!   the voltage at the next period;
 //! - whenever `|I|` exceeds the run's current limit `i_limit`, `V_hi` falls to the voltage
 //!   that drives the limit, `V_d + (V − V_d)·i_limit/|I|` for the voltage `V` that drove
 //!   `I` (the current at rest is `(V − V_d)/R`), and stays there for the rest of the run.
@@ -88,24 +110,29 @@ pub const PATH_R_SHARE: f32 = 0.75;
 /// time's drop: the current's difference between them is half the higher level's, enough
 /// against the sense's noise, and the lower level's current keeps its sign.
 pub const LOW_LEVEL: f32 = 0.5;
-/// Where the first hold's voltage starts, as a fraction of the way from half the dead time's
-/// drop to the run's voltage.
-pub const RAMP_START: f32 = 1.0 / 16.0;
-/// Growth of the first hold's voltage above half the dead time's drop per period, while the
-/// current is below [`RAMP_NEAR`] of the limit: a quarter through the line-to-line R,
-/// scaled by [`PATH_R_SHARE`] so that the current through the centre vector's smaller R
-/// grows no faster a period (`1 + ¼·¾`).
-pub const RAMP_GROWTH: f32 = 1.1875;
-/// Share of the limit the current passes where the ramp slows to [`RAMP_GROWTH_NEAR`].
-pub const RAMP_NEAR: f32 = 0.25;
-/// Growth per period once the current has passed [`RAMP_NEAR`] of the limit: the last
-/// steps towards the limit are small against the winding's L/R lag (15 ms at 0.3 mH and
-/// 20 mΩ).
-pub const RAMP_GROWTH_NEAR: f32 = 1.05;
-/// Where the ramp ends: at the voltage extrapolated to drive this fraction of the limit (the
-/// current measured at a period's end still lags the voltage by `e^(−T·R/L)` of its last
-/// step when L/R is long).
+/// Smallest line-to-line winding resistance the first hold's ramp is designed for [Ω]
+/// (module docs): below it the ramp's steps may overshoot the run's current limit.
+pub const RAMP_R_MIN: f32 = 0.01;
+/// Largest factor by which the caller's dead-time drop `V_d` may be off either way: the
+/// ramp keeps below the limit for a true drop between `V_d/RAMP_DROP_ERROR` and
+/// `RAMP_DROP_ERROR·V_d`. The ramp's voltages are measured from the smallest of these.
+pub const RAMP_DROP_ERROR: f32 = 2.0;
+/// Largest winding time constant L/R the ramp is designed for, in control periods: a
+/// current still rising this slowly is extrapolated to its end (module docs).
+pub const RAMP_LAG_PERIODS: f32 = 5.0;
+/// How far two current samples of a resting rotor may differ by the current sense's noise
+/// alone [A], for the ramp's rest test: several times the tens of mA of a shunt amplifier's
+/// noise, so that a resting rotor passes the test nearly always (a sense noisier than this
+/// holds the ramp lower, not higher), while a turning rotor's back-EMF, amperes on a winding
+/// of tens of mΩ, fails it.
+pub const RAMP_SENSE_NOISE: f32 = 0.1;
+/// Share of the limit the ramp's steps aim at: the rest covers the current sense's noise
+/// in the samples the steps are computed from.
 pub const RAMP_TARGET: f32 = 0.9;
+/// The ramp ends once the steady current it estimates reaches this share of its target
+/// (the last steps are short where the drop's error range dominates the current), and at
+/// the start of the backward pass at the latest, so that it samples one voltage.
+pub const RAMP_END: f32 = 0.9;
 
 /// The default Hall state sequence of [`HallTable::DEFAULT_120`] (sectors 0..5).
 pub const DEFAULT_SEQUENCE: [u8; 6] = [1, 3, 2, 6, 4, 5];
@@ -120,8 +147,10 @@ pub struct Commissioning {
     /// The sequence is the default 1-3-2-6-4-5 order backward (motor phases or Hall
     /// sensors wired for the other direction).
     pub reversed: bool,
-    /// The sequence is neither the default order nor its reverse (a permuted Hall
-    /// connector); the learned table covers it all the same.
+    /// The sequence is neither the default order nor its reverse: never true for a result
+    /// (its sequence is a Gray-coded cycle of the six valid states, which is the default
+    /// order or its reverse; a permuted Hall connector gives `reversed`). Kept in the
+    /// stored layout.
     pub permuted: bool,
     /// Sign to apply to the measured current (+1 or −1).
     pub current_sign: i8,
@@ -161,7 +190,8 @@ pub enum CommissionError {
     /// Two vectors 120° apart gave states other than two sensors apart (the sequence
     /// would not step one sensor at a time).
     NotAdjacent,
-    /// The backward pass read other states than the forward pass.
+    /// The backward pass read other states than the counted forward pass, or the first
+    /// forward pass another state at the last centre.
     Inconsistent,
     /// The Hall edges over one electrical revolution were not the sequence's six, one each
     /// (pole pairs differ).
@@ -204,6 +234,20 @@ fn between(a: u8, b: u8) -> Option<u8> {
     [a ^ low, a ^ (d ^ low)]
         .into_iter()
         .find(|&s| s != 0 && s != 7)
+}
+
+/// Whether three successive current magnitudes `[i₀, i₁, i₂]` [A], the last two driven by one
+/// voltage, move as the current of a resting rotor does (module docs): a first-order lag from
+/// `i₀` closes the same share `q = e^(−T·R/L)` of its remaining gap each period, so
+/// `i₂ − i₁ = q·(i₁ − i₀)` with `q` in `[0, e^(−1/`[`RAMP_LAG_PERIODS`]`)]`, within
+/// [`RAMP_SENSE_NOISE`] either way. A turning rotor's back-EMF makes the current fall, or rise
+/// faster than the lag lets it as the rotor slows.
+fn at_rest([i0, i1, i2]: [f32; 3]) -> bool {
+    let q = libm::expf(-1.0 / RAMP_LAG_PERIODS);
+    let (d1, d2) = (i1 - i0, i2 - i1);
+    d1 >= -RAMP_SENSE_NOISE
+        && d2 >= -RAMP_SENSE_NOISE
+        && d2 <= q * d1.max(0.0) + (1.0 + q) * RAMP_SENSE_NOISE
 }
 
 /// Mean of the current samples at one voltage level.
@@ -256,10 +300,20 @@ pub struct Commissioner {
     v_dead: f32,
     /// The blob's line-to-line winding resistance [Ω] (what the current is expected from).
     r_model: f32,
-    /// Fraction of the way from `v_dead/2` to `volts` the ramp has reached (1: done).
-    ramp: f32,
-    /// The current has passed [`RAMP_NEAR`] of the limit (the ramp slows).
-    near: bool,
+    /// The first hold's ramp: the voltage above the smallest drop it holds now [V]
+    /// (`None`: done).
+    ramp: Option<f32>,
+    /// The last three current samples [A], oldest first (NaN: none), for the rest test.
+    ramp_i: [f32; 3],
+    /// Of the currents [A] sampled at the ramp's voltages, the one largest against its
+    /// voltage [V]: (voltage, current) ((0, 0): none yet).
+    ramp_anchor: (f32, f32),
+    /// Periods in a row, up to the last one, driven at the ramp's voltage now.
+    ramp_run: u8,
+    /// Periods in a row, up to the last one, without a Hall edge or a change of state.
+    still: u8,
+    /// The Hall state read last period.
+    last_hall: u8,
     /// The drive returned last period: its voltage, and the level its current samples
     /// (`None`: not sampled).
     last: (f32, Option<bool>),
@@ -302,10 +356,68 @@ impl Commissioner {
                 0.0
             },
             r_model,
-            ramp: RAMP_START,
-            near: false,
+            ramp: None,
+            ramp_i: [f32::NAN; 3],
+            ramp_anchor: (0.0, 0.0),
+            ramp_run: 0,
+            still: 0,
+            last_hall: 0,
             last: (0.0, None),
         }
+        .with_ramp()
+    }
+
+    /// Starts the ramp at the voltage that drives [`RAMP_TARGET`] of the limit through
+    /// [`RAMP_R_MIN`] when the true drop is the smallest (module docs).
+    fn with_ramp(mut self) -> Self {
+        let room = self.volts - self.ramp_base();
+        let start = PATH_R_SHARE * RAMP_R_MIN * RAMP_TARGET * self.i_limit;
+        self.ramp = (room > 0.0 && start < room).then_some(start);
+        self
+    }
+
+    /// The smallest dead-time drop the ramp allows for [V].
+    fn ramp_base(&self) -> f32 {
+        self.v_dead / RAMP_DROP_ERROR
+    }
+
+    /// The ramp's growth factor of `x`, its voltage above [`Self::ramp_base`] [V], from the current
+    /// `i1` then `i2` [A] sampled at the end of two periods of one voltage (module docs): the
+    /// steady current at the grown voltage stays below [`RAMP_TARGET`] of the limit for any
+    /// winding R from [`RAMP_R_MIN`] and L/R up to [`RAMP_LAG_PERIODS`], and a true drop up
+    /// to [`RAMP_DROP_ERROR`] times `v_dead`; `None` when the ramp is done ([`RAMP_END`]).
+    fn ramp_growth(&self, x: f32, i1: f32, i2: f32) -> Option<f32> {
+        // The steady current at this voltage: the last sample plus at most L/R/T times the
+        // last period's rise (an exponential's remaining rise is `Δ/(e^(T·R/L) − 1)`).
+        let i_ss = i2 + RAMP_LAG_PERIODS * (i2 - i1).max(0.0);
+        // The current the drop's error range `c` drives through the path: at most through
+        // the smallest path R, and, once `x` exceeds `c`, at most `i_s·c/(x − c)` (the path R
+        // is at least `(x − c)/i_s`).
+        let c = (RAMP_DROP_ERROR - 1.0 / RAMP_DROP_ERROR) * self.v_dead;
+        let i_c = c / (PATH_R_SHARE * RAMP_R_MIN);
+        let i_c = if x > c {
+            i_c.min(i_ss * c / (x - c))
+        } else {
+            i_c
+        };
+        let target = RAMP_TARGET * self.i_limit;
+        if i_ss >= RAMP_END * target {
+            None
+        } else {
+            Some(1.0 + (target - i_ss) / (i_ss + i_c))
+        }
+    }
+
+    /// Whether the last two samples at the ramp's voltage `x` above [`Self::ramp_base`] [V]
+    /// reach what a resting rotor draws there (module docs): at least any earlier sample at
+    /// a ramp voltage scaled by the voltages, `i_a·V/V_a`, with `i_a` less the sense's noise
+    /// ([`RAMP_SENSE_NOISE`]). The steady current of the samples is taken as large as the
+    /// winding's lag allows.
+    fn not_below_anchor(&self, x: f32) -> bool {
+        let (v_a, i_a) = self.ramp_anchor;
+        let [_, i1, i2] = self.ramp_i;
+        let i_ss = i2 + RAMP_LAG_PERIODS * (i2 - i1).max(0.0);
+        v_a <= 0.0 || i_ss >= (i_a - RAMP_SENSE_NOISE) * (self.ramp_base() + x) / v_a
     }
 
     /// The voltage a fraction `x` of the way from `base` [V] to `v_hi` [V] (from 0 when
@@ -328,9 +440,15 @@ impl Commissioner {
         self.volts
     }
 
-    /// Index into [`CENTRES`] of hold `h`: 0, 1, 2 twice, then 2, 1, 0.
+    /// Index into [`CENTRES`] of hold `h`: 0, 1, 2 twice, then 1, 0, 2 (the backward pass
+    /// moves at every hold, so each centre is also approached from the other side).
     fn centre_of(h: u8) -> usize {
-        usize::from(if h < 6 { h % 3 } else { 8 - h.min(8) })
+        const BACKWARD: [u8; 3] = [1, 0, 2];
+        usize::from(if h < 6 {
+            h % 3
+        } else {
+            BACKWARD[usize::from(h.min(8) - 6)]
+        })
     }
 
     /// Net Hall edges of the counted revolution.
@@ -362,11 +480,13 @@ impl Commissioner {
         } else {
             i_vector
         };
-        if (3..6).contains(&self.hold) {
-            // The second forward pass: one electrical revolution, from the state the first
-            // pass ended in (the motion into sector 0 of the second pass counts).
-            self.path_full |= overflow;
-            for e in edges {
+        let counted = (3..6).contains(&self.hold);
+        let mut moved = overflow || hall != self.last_hall;
+        for e in edges {
+            moved = true;
+            if counted {
+                // The second forward pass: one electrical revolution, from the state the
+                // first pass ended in (the motion into sector 0 of the second pass counts).
                 let n = self.path.len();
                 if n >= 2 && self.path[n - 2] == e {
                     self.path.pop();
@@ -374,6 +494,19 @@ impl Commissioner {
                     self.path_full = true;
                 }
             }
+        }
+        self.path_full |= counted && overflow;
+        self.last_hall = hall;
+        self.still = if moved {
+            0
+        } else {
+            self.still.saturating_add(1)
+        };
+        self.ramp_i = [self.ramp_i[1], self.ramp_i[2], i_vector.abs()];
+        let (v_a, i_a) = self.ramp_anchor;
+        let v = self.last.0;
+        if self.ramp_run > 0 && v > 0.0 && i_vector.is_finite() && i_vector.abs() * v_a >= i_a * v {
+            self.ramp_anchor = (v, i_vector.abs());
         }
         self.measured(i_vector);
         self.period = self.period.wrapping_add(1);
@@ -402,25 +535,48 @@ impl Commissioner {
             p if p < 3 * HOLD_PERIODS / 4 => Some(false),
             _ => Some(true),
         };
-        self.near |= i_vector.is_finite() && i_vector.abs() > RAMP_NEAR * self.i_limit;
-        let near = self.near;
-        let v_hi = if self.ramp < 1.0 {
-            let v = Self::above(0.5 * self.v_dead, self.volts, self.ramp);
-            // Near the limit, no further than the voltage extrapolated to drive it.
-            let cap = self.above_drop(self.last.0, RAMP_TARGET * self.i_limit / i_vector.abs());
-            if near && i_vector.abs() > 0.0 && cap < v {
-                // The ramp ends there.
-                self.volts = cap;
-                self.ramp = 1.0;
-                cap
-            } else {
-                v
+        let high = level != Some(false);
+        let v_hi = match self.ramp {
+            Some(x) => {
+                // Two samples at the ramp's voltage from a resting rotor: step on from the
+                // second.
+                let rest = self.ramp_run >= 2
+                    && self.still >= 2
+                    && at_rest(self.ramp_i)
+                    && self.not_below_anchor(x);
+                let step = if self.hold >= 6 {
+                    // The backward pass holds one voltage.
+                    None
+                } else if rest && high {
+                    Some(self.ramp_growth(x, self.ramp_i[1], self.ramp_i[2]))
+                } else {
+                    Some(Some(1.0))
+                };
+                let base = self.ramp_base();
+                let x = match step {
+                    None | Some(None) => {
+                        // The ramp ends at the voltage held now.
+                        self.volts = self.volts.min(base + x);
+                        self.ramp = None;
+                        None
+                    }
+                    Some(Some(g)) if base + g * x >= self.volts => {
+                        // The ramp ends at the run's voltage.
+                        self.ramp = None;
+                        None
+                    }
+                    Some(Some(g)) => {
+                        self.ramp = Some(g * x);
+                        Some(g * x)
+                    }
+                };
+                match x {
+                    Some(x) => self.ramp_base() + x,
+                    None => self.volts,
+                }
             }
-        } else {
-            self.volts
+            None => self.volts,
         };
-        let growth = if near { RAMP_GROWTH_NEAR } else { RAMP_GROWTH };
-        self.ramp = (self.ramp * growth).min(1.0);
         let volts = if level == Some(false) {
             self.above_drop(v_hi, LOW_LEVEL)
         } else {
@@ -430,7 +586,17 @@ impl Commissioner {
         let p = self.period;
         let settled = !(HOLD_PERIODS / 2..HOLD_PERIODS / 2 + 2).contains(&p)
             && !(3 * HOLD_PERIODS / 4..3 * HOLD_PERIODS / 4 + 2).contains(&p);
-        self.last = (volts, level.filter(|_| settled));
+        let ramp_now = self.ramp.is_some() && high;
+        // The ramp's samples pair only while one voltage is held.
+        self.ramp_run = if !ramp_now {
+            0
+        } else if self.ramp_run > 0 && self.last.0 == volts {
+            self.ramp_run.saturating_add(1)
+        } else {
+            1
+        };
+        // Nor are the ramp's: their voltage is not the level's.
+        self.last = (volts, level.filter(|_| settled && self.ramp.is_none()));
         CommissionStep::Hold {
             low: CENTRES[Self::centre_of(self.hold)].1,
             volts,
@@ -447,8 +613,8 @@ impl Commissioner {
             let v_limit = self.above_drop(v, self.i_limit / i.abs());
             if v_limit < self.volts {
                 self.volts = v_limit;
-                self.ramp = 1.0;
             }
+            self.ramp = None;
         }
         match level {
             Some(true) => self.hi.add(v, i),
@@ -522,7 +688,9 @@ impl Commissioner {
 
     fn result(&self) -> Result<Commissioning, CommissionError> {
         let seq = self.sequence()?;
-        if self.bwd != self.fwd {
+        // The last centre is read at the end of both forward passes: a difference there is
+        // an inconsistency, not a pole-pair count.
+        if self.bwd != self.fwd || self.path.first() != Some(&self.fwd[2]) {
             return Err(CommissionError::Inconsistent);
         }
         // The counted revolution runs from the last centre (sector 4) round to it again.
@@ -638,7 +806,7 @@ mod tests {
     }
 
     #[test]
-    fn learns_default_reversed_and_permuted_sequences_from_any_sector() {
+    fn learns_default_reversed_and_swapped_sequences_from_any_sector() {
         let mut rev = DEFAULT_SEQUENCE;
         rev.reverse();
         // Hall bits A and B swapped.
@@ -691,7 +859,7 @@ mod tests {
                 }
             }
         };
-        assert!(res.is_err(), "{res:?}");
+        assert_eq!(res, Err(CommissionError::PolePairs));
     }
 
     #[test]
@@ -711,6 +879,55 @@ mod tests {
                     let mut e = Vec::new();
                     let down = (to + 6 - rotor.sector) % 6 > 3;
                     rotor.turn_to(if down { (to + 1) % 6 } else { to }, &mut e);
+                    edges.extend(e);
+                }
+            }
+        };
+        assert_eq!(res, Err(CommissionError::Inconsistent));
+    }
+
+    #[test]
+    fn every_gray_cycle_of_the_valid_states_is_the_default_order_either_way() {
+        // All orders of the six valid states starting at state 1: the Gray-coded ones are
+        // the default order and its reverse, so `permuted` is never set.
+        let mut rev = DEFAULT_SEQUENCE;
+        rev.reverse();
+        let rot =
+            |seq: &[u8; 6], s: &[u8; 6]| (0..6).any(|o| (0..6).all(|k| seq[k] == s[(k + o) % 6]));
+        let mut gray_cycles = 0;
+        for code in 0..5u32.pow(5) {
+            let digits: Vec<u8> = (0..5).map(|k| 2 + (code / 5u32.pow(k) % 5) as u8).collect();
+            let mut seq = [1u8; 6];
+            seq[1..].copy_from_slice(&digits);
+            if (2..=6).any(|s| !seq.contains(&s)) || !gray(&seq) {
+                continue;
+            }
+            gray_cycles += 1;
+            assert!(rot(&seq, &DEFAULT_SEQUENCE) || rot(&seq, &rev), "{seq:?}");
+        }
+        assert_eq!(gray_cycles, 2);
+    }
+
+    #[test]
+    fn two_reads_of_the_last_centre_that_differ_are_inconsistent() {
+        // The rotor stops one sector short of the last centre at the end of the first pass
+        // only: the counted revolution then starts elsewhere, but the fault is the read.
+        let mut c = Commissioner::new(2.0, 10.0, 0.4, 0.2);
+        let mut rotor = Rotor {
+            seq: DEFAULT_SEQUENCE,
+            sector: 0,
+        };
+        let mut edges = Vec::new();
+        let mut n = 0usize;
+        let res = loop {
+            match c.tick(rotor.hall(), edges.drain(..), false, 5.0) {
+                CommissionStep::Done(r) => break r,
+                CommissionStep::Hold { low, .. } => {
+                    let to = centre_sector(low);
+                    let hold = n / usize::from(HOLD_PERIODS);
+                    n += 1;
+                    let mut e = Vec::new();
+                    rotor.turn_to(if hold == 2 { to - 1 } else { to }, &mut e);
                     edges.extend(e);
                 }
             }
@@ -759,11 +976,177 @@ mod tests {
         let mut c = Commissioner::new(2.0, 7.5, 0.5, 0.2);
         let peak = resting_winding(&mut c, 0.05, 0.5);
         assert!(peak <= 7.5 + 1e-3, "peak {peak} A");
-        // The ramp ends at the voltage that drives its target share of the limit through
-        // the path: 0.5 V + 0.9 · 7.5 A · ¾ · 0.05 Ω.
-        let want = 0.5 + RAMP_TARGET * 7.5 * PATH_R_SHARE * 0.05;
-        assert!((c.volts() - want).abs() < 1e-3, "{} V", c.volts());
+        let i_end = (c.volts() - 0.5) / (PATH_R_SHARE * 0.05);
+        let target = RAMP_TARGET * 7.5;
+        // Where the drop's error range dominates the current the steps are short, and the
+        // ramp may stop at the backward pass below its end share; never above the target.
+        assert!(
+            i_end > 0.0 && i_end <= target + 1e-3,
+            "{i_end} A at {} V",
+            c.volts()
+        );
         assert!((c.resistance().unwrap() - 0.05).abs() < 1e-4);
+    }
+
+    /// The largest current [A] of a whole run on a resting winding: a path of ¾ of the
+    /// line-to-line `r` [Ω] with time constant `lag` control periods behind a true drop of
+    /// `vd` [V], sampled at each period's end (under a constant voltage a first-order
+    /// current is monotone, so its largest value is at a period's end).
+    fn resting_rl(c: &mut Commissioner, r: f64, lag: f64, vd: f64) -> f64 {
+        let mut i = 0.0f64;
+        let mut peak = 0.0f64;
+        let decay = if lag > 0.0 { (-1.0 / lag).exp() } else { 0.0 };
+        for _ in 0..10_000 {
+            match c.tick(1, [], false, i as f32) {
+                CommissionStep::Done(_) => return peak,
+                CommissionStep::Hold { volts, .. } => {
+                    let ss = (f64::from(volts) - vd).max(0.0) / (0.75 * r);
+                    i = ss + (i - ss) * decay;
+                    peak = peak.max(i);
+                }
+            }
+        }
+        panic!("never finished");
+    }
+
+    #[test]
+    fn the_ramp_stays_below_the_limit_over_the_designed_range() {
+        // A board at 22.2 V; blobs (R, i_max) as the board logic sizes the run: the limit
+        // 0.3·i_max, the voltage that drives it through the blob's path behind the drop.
+        let vd = crate::board::dead_time_drop(22.2);
+        for (r_blob, i_max) in [(24.0f32 / 111.0, 30.0f32), (0.05, 40.0), (1.0, 40.0)] {
+            let i_lim = 0.3 * i_max;
+            let v_run = (vd + i_lim * PATH_R_SHARE * r_blob).min(0.25 * 0.95 * 22.2);
+            for r in [0.01, 0.02, 0.031, 0.05, 0.5, 10.0] {
+                for lag in [0.0, 0.1, 1.0, 3.0, 5.0] {
+                    for vd_ratio in [0.5, 1.0, 2.0] {
+                        let mut c = Commissioner::new(v_run, i_lim, vd, r_blob);
+                        let peak = resting_rl(&mut c, r, lag, vd_ratio * f64::from(vd));
+                        assert!(
+                            peak <= f64::from(i_lim),
+                            "{peak} A > {i_lim} A: blob {r_blob} Ω, {r} Ω, L/R {lag} periods, \
+                             drop {vd_ratio}× the estimate"
+                        );
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn the_rest_test_passes_a_resting_lag_and_fails_a_turning_rotor() {
+        // A resting first-order lag from 1 A towards 5 A, for L/R up to the designed lag,
+        // with the sense's noise at its bound either way.
+        let q_max = libm::expf(-1.0 / RAMP_LAG_PERIODS);
+        for q in [0.0, 0.3, 0.6, q_max] {
+            let lag = |k: i32| 5.0 - 4.0 * libm::powf(q, k as f32);
+            for n in [-RAMP_SENSE_NOISE, 0.0, RAMP_SENSE_NOISE] {
+                let s = [lag(0) - 0.45 * n, lag(1) + 0.45 * n, lag(2) - 0.45 * n];
+                assert!(at_rest(s), "q {q}, noise {n}: {s:?}");
+            }
+        }
+        // A falling current (the back-EMF of a rotor speeding up), and one rising faster in
+        // the second period than the lag lets it (a rotor slowing down).
+        assert!(!at_rest([3.0, 2.5, 2.0]));
+        assert!(!at_rest([1.0, 1.5, 2.5]));
+        // No sample yet.
+        assert!(!at_rest([f32::NAN, 1.0, 1.0]));
+    }
+
+    /// The largest current [A] of a whole run on a winding as [`resting_rl`], whose rotor
+    /// rests for the first four periods (two of the ramp's voltages), breaks away once the
+    /// current then exceeds `i_break` [A] and turns for `turn` periods, its back-EMF taking
+    /// a share `emf` of the voltage left after the drop (the samples fall to `1 − emf` of
+    /// the resting current), within one Hall sector.
+    fn turning_rl(
+        c: &mut Commissioner,
+        (r, lag, vd): (f64, f64, f64),
+        (i_break, turn, emf): (f64, usize, f64),
+    ) -> f64 {
+        let mut i = 0.0f64;
+        let mut peak = 0.0f64;
+        let mut turning: Option<usize> = None;
+        let decay = if lag > 0.0 { (-1.0 / lag).exp() } else { 0.0 };
+        for k in 0..10_000 {
+            match c.tick(1, [], false, i as f32) {
+                CommissionStep::Done(_) => return peak,
+                CommissionStep::Hold { volts, .. } => {
+                    let left = (f64::from(volts) - vd).max(0.0);
+                    let e = match turning {
+                        Some(n) if n < turn => emf * left,
+                        _ => 0.0,
+                    };
+                    let ss = (left - e) / (0.75 * r);
+                    i = ss + (i - ss) * decay;
+                    peak = peak.max(i);
+                    turning = match turning {
+                        None if k >= 4 && i > i_break => Some(0),
+                        Some(n) => Some(n + 1),
+                        None => None,
+                    };
+                }
+            }
+        }
+        panic!("never finished");
+    }
+
+    #[test]
+    fn a_rotor_turning_during_the_ramp_does_not_take_it_past_the_limit() {
+        // The default blob's run (9 A) on windings from the smallest designed R, the rotor
+        // breaking away at a third or two thirds of the limit and turning for a few periods
+        // or most of a hold at up to nine tenths of the voltage in back-EMF. L/R up to 3
+        // periods: near the designed 5 a short turn's fall hides in the lag (decision 0023).
+        let vd = crate::board::dead_time_drop(22.2);
+        let r_blob = 24.0f32 / 111.0;
+        let i_lim = 9.0f32;
+        let v_run = vd + i_lim * PATH_R_SHARE * r_blob;
+        let mut peaks = Vec::new();
+        for r in [0.01, 0.02, 0.05, 0.2] {
+            for lag in [0.0, 1.0, 3.0] {
+                for vd_ratio in [0.5, 1.0, 2.0] {
+                    for (i_break, turn, emf) in [(3.0, 3, 0.5), (3.0, 10, 0.9), (6.0, 10, 0.9)] {
+                        let mut c = Commissioner::new(v_run, i_lim, vd, r_blob);
+                        let plant = (r, lag, vd_ratio * f64::from(vd));
+                        let peak = turning_rl(&mut c, plant, (i_break, turn, emf));
+                        assert!(
+                            peak <= f64::from(i_lim),
+                            "{peak} A > {i_lim} A: {r} Ω, L/R {lag} periods, drop \
+                             {vd_ratio}× the estimate, break at {i_break} A, {turn} periods \
+                             at {emf} of the voltage"
+                        );
+                        peaks.push(peak);
+                    }
+                }
+            }
+        }
+        // The ramp still gets near the limit (the test could fail by a ramp that never moves).
+        let top = peaks.iter().copied().fold(0.0, f64::max);
+        assert!(top > 0.5 * f64::from(i_lim), "largest peak {top} A");
+    }
+
+    #[test]
+    fn the_ramp_does_not_grow_while_the_low_level_is_held() {
+        // The default blob's run on 31 mΩ behind twice the expected drop: the low quarter
+        // of the first hold falls inside the ramp.
+        let vd = crate::board::dead_time_drop(22.2);
+        let r_blob = 24.0f32 / 111.0;
+        let v_run = vd + 9.0 * PATH_R_SHARE * r_blob;
+        let mut c = Commissioner::new(v_run, 9.0, vd, r_blob);
+        let mut i = 0.0f32;
+        let mut highs = Vec::new();
+        for k in 0..usize::from(HOLD_PERIODS) {
+            let CommissionStep::Hold { volts, .. } = c.tick(1, [], false, i) else {
+                panic!("done early");
+            };
+            i = (volts - 2.0 * vd).max(0.0) / (PATH_R_SHARE * 0.031);
+            let p = k as u16;
+            if !(HOLD_PERIODS / 2..3 * HOLD_PERIODS / 4).contains(&p) {
+                highs.push(volts);
+            }
+        }
+        // The first higher period after the low quarter repeats the one before it.
+        let back = usize::from(HOLD_PERIODS / 2);
+        assert_eq!(highs[back], highs[back - 1], "{highs:?}");
     }
 
     #[test]

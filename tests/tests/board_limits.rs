@@ -779,11 +779,16 @@ fn commission(emu: &mut EmulatedBoard, n: usize) -> f64 {
 
 #[test]
 fn commissioning_holds_its_current_on_a_winding_far_below_the_blobs_r() {
-    // The default blob's R is 0.22 Ω; windings of a quarter of it and of 20 mΩ would take
-    // four and eleven times the commissioning current at the voltage sized from the blob.
-    // The first hold's ramp meets the measured current from below and stops at the voltage
-    // that drives the limit: the run still learns the wiring and R.
-    for r_true in [0.25 * control::motor::MotorParams::<f64>::paper().r, 0.02] {
+    // The default blob's R is 0.22 Ω; windings of a quarter of it, of 20 mΩ and of the
+    // ramp's smallest designed R would take four, eleven and twenty-two times the
+    // commissioning current at the voltage sized from the blob. The first hold's ramp steps
+    // only while the rotor rests, meets the measured current from below and stops short of
+    // the limit: the run still learns the wiring and R.
+    for r_true in [
+        0.25 * control::motor::MotorParams::<f64>::paper().r,
+        0.02,
+        f64::from(control::commission::RAMP_R_MIN),
+    ] {
         let mut plant = EmulatorConfig::paper();
         plant.motor.r = r_true;
         plant.effects.push(Effect::Deadtime {
@@ -795,10 +800,14 @@ fn commissioning_holds_its_current_on_a_winding_far_below_the_blobs_r() {
         let co = emu.coefficients().clone();
         let r = f64::from(co.motor.r);
         eprintln!("{r_true} Ω winding: commissioning peak {peak:.2} A (its limit {i_comm:.1} A), R {r:.4} Ω");
-        assert!(co.commission.is_some(), "{r_true} Ω: commissioning failed");
-        // 10 %: R is the slope between two held levels of the noisy current sense; its
-        // uses (the current window, sized experiments) need it to about that.
-        assert!((r - r_true).abs() < 0.1 * r_true, "R {r} vs {r_true}");
+        // At the ramp's smallest designed R only the current is checked: this motor's
+        // back-EMF then holds the rotor to a creep through whole holds (decision 0023).
+        if r_true > f64::from(control::commission::RAMP_R_MIN) {
+            assert!(co.commission.is_some(), "{r_true} Ω: commissioning failed");
+            // 10 %: R is the slope between two held levels of the noisy current sense; its
+            // uses (the current window, sized experiments) need it to about that.
+            assert!((r - r_true).abs() < 0.1 * r_true, "R {r} vs {r_true}");
+        }
         assert!(
             peak <= i_comm,
             "{r_true} Ω: peak {peak} A, limit {i_comm} A"

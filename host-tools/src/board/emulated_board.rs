@@ -738,6 +738,91 @@ mod tests {
         commission_result(&mut emu, &[])
     }
 
+    /// What a board wired `wiring` should learn: sector k is the motor's sector the board's
+    /// centre k points at.
+    fn wanted_sequence(wiring: Wiring) -> [u8; 6] {
+        std::array::from_fn(|k| {
+            let motor = wiring.aligned_sector(k as u8);
+            wiring.hall(control::commission::DEFAULT_SEQUENCE[usize::from(motor)])
+        })
+    }
+
+    /// A fresh board wired `wiring`, its Hall sensors `offset` [° electrical] off the
+    /// six-step positions with `hysteresis` [°], commissioned from rotor angle `theta` [rad].
+    fn commission_with_halls(
+        wiring: Wiring,
+        theta: f64,
+        (offset, hysteresis): (f64, f64),
+    ) -> CommissionOutcome {
+        let mut emu =
+            EmulatedBoard::new(EmulatorConfig::paper(), wiring, RamFlash::new(None)).unwrap();
+        emu.hardware_mut().place_rotor(theta);
+        emu.hardware_mut().set_hall_placement(offset, hysteresis);
+        replies(&mut emu);
+        emu.receive(&frame(&HostMsg::Commission));
+        commission_result(&mut emu, &[])
+    }
+
+    /// Hysteresis of the emulated Hall sensors [° electrical]: ±5° around each boundary, a
+    /// generous figure for a latching Hall sensor's switching band on a multi-pole magnet.
+    const HALL_HYSTERESIS_DEG: f64 = 10.0;
+
+    #[test]
+    fn commissioning_learns_the_table_with_halls_fifteen_degrees_off() {
+        // The centre vectors hold the rotor 30° from both boundaries, less the angle its
+        // friction stops it short of the centre: sensors placed 15° off, with hysteresis,
+        // still read the sector's state from either side (decision 0023).
+        let step: f64 = control::hall::step_angle(EmulatorConfig::paper().pole_pairs);
+        let mut bad = Vec::new();
+        for offset in [-15.0, 15.0] {
+            for w in SCAN_WIRINGS {
+                let wiring = Wiring {
+                    hall_order: w.0,
+                    phase_order: w.1,
+                    current_inverted: false,
+                };
+                for theta in [0.0, 1.25 * step, 3.5 * step] {
+                    let r = commission_with_halls(wiring, theta, (offset, HALL_HYSTERESIS_DEG));
+                    if !matches!(r, CommissionOutcome::Done(c)
+                        if c.edges_per_elec_rev == 6 && c.sequence == wanted_sequence(wiring))
+                    {
+                        bad.push((offset, w, theta, r));
+                    }
+                }
+            }
+        }
+        assert!(bad.is_empty(), "{} failed: {bad:?}", bad.len());
+    }
+
+    #[test]
+    fn halls_twenty_or_thirty_degrees_off_end_in_an_error_not_a_wrong_table() {
+        // Sensors 30° off put the held rotor on a boundary again, and 20° off often within
+        // the band friction leaves it in: the backward pass comes to every centre from the
+        // other side, and the hysteresis makes it read the other state.
+        let step: f64 = control::hall::step_angle(EmulatorConfig::paper().pole_pairs);
+        for offset in [-30.0, -20.0, 20.0, 30.0] {
+            for w in SCAN_WIRINGS {
+                let wiring = Wiring {
+                    hall_order: w.0,
+                    phase_order: w.1,
+                    current_inverted: false,
+                };
+                for theta in [0.0, 1.25 * step, 3.5 * step] {
+                    let r = commission_with_halls(wiring, theta, (offset, HALL_HYSTERESIS_DEG));
+                    // At 20° a run may still read right; a wrong table is never stored.
+                    let ok = match r {
+                        CommissionOutcome::Failed(_) => true,
+                        CommissionOutcome::Done(c) => {
+                            offset.abs() < 30.0 && c.sequence == wanted_sequence(wiring)
+                        }
+                        _ => false,
+                    };
+                    assert!(ok, "{offset}°, {w:?} from {theta}: {r:?}");
+                }
+            }
+        }
+    }
+
     #[test]
     fn commissioning_succeeds_whenever_it_starts() {
         // The rotor rests until `Commission` arrives: the idle periods change only the
@@ -752,16 +837,12 @@ mod tests {
         for (idle, theta) in starts {
             for w in SCAN_WIRINGS {
                 let r = commission_from(w, idle, theta);
-                // Sector k is the motor's sector the board's centre k points at.
                 let wiring = Wiring {
                     hall_order: w.0,
                     phase_order: w.1,
                     current_inverted: false,
                 };
-                let want: [u8; 6] = std::array::from_fn(|k| {
-                    let motor = wiring.aligned_sector(k as u8);
-                    wiring.hall(control::commission::DEFAULT_SEQUENCE[usize::from(motor)])
-                });
+                let want = wanted_sequence(wiring);
                 if !matches!(r, CommissionOutcome::Done(c)
                     if c.edges_per_elec_rev == 6 && c.sequence == want)
                 {
@@ -811,6 +892,16 @@ mod tests {
                 last = s;
             }
         }
+        // The quotient needs the rotor turning: a mean speed of a hundredth of the no-load
+        // speed at `volts` (a stalled rotation would give NaN or a huge quotient, which the
+        // ranking would take for the best).
+        let w_mean = w / n as f64;
+        let w_no_load = f64::from(volts) / kb;
+        assert!(
+            w_mean.abs() >= 0.01 * w_no_load,
+            "the rotor stalled under this table (mean speed {w_mean} rad/s against the \
+             no-load {w_no_load} rad/s): no torque per amp"
+        );
         // The board's forward direction in the motor's: the sign of the sector count per
         // turn of the rotor.
         let forward = if (sectors as f64) * w > 0.0 {

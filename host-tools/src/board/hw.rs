@@ -18,7 +18,8 @@
 //! Bridge off: g = 0 and no voltage (the winding current decays, no braking).
 //!
 //! The Hall connector may permute the three sensors, and the current sense may be
-//! inverted: [`Wiring`].
+//! inverted: [`Wiring`]. The Hall sensors are ideal (at the six-step positions, no
+//! hysteresis) unless [`Hardware::set_hall_placement`] moves them and gives them hysteresis.
 //!
 //! The hardware over-current stop (the firmware's comparators on the shunts into TIM1's
 //! break input) is checked at every fine integration step: a winding current above
@@ -170,6 +171,38 @@ fn ticks_at(t: f64) -> u32 {
     ((t * TICK_HZ).round() as u64 & u64::from(u32::MAX)) as u32
 }
 
+/// Hall sensors placed off the six-step positions, with hysteresis: the sector index
+/// moves on only once the rotor is past a boundary by half the hysteresis.
+#[derive(Debug, Clone, Copy)]
+struct HallPlacement {
+    /// How far the sensors sit behind the six-step positions [sectors of 60° electrical].
+    offset: f64,
+    /// Width of the hysteresis band around each boundary [sectors].
+    hysteresis: f64,
+    /// Sector index the sensors read now (as [`crate::emulator::sensors::sector_index`]).
+    sector: i64,
+}
+
+impl HallPlacement {
+    /// Follows the rotor to `a` [sectors]; the states entered, in order.
+    fn track(&mut self, a: f64, entered: &mut Vec<u8>) {
+        let x = a - self.offset;
+        let half = 0.5 + 0.5 * self.hysteresis;
+        while x > self.sector as f64 + half {
+            self.sector += 1;
+            entered.push(crate::emulator::sensors::hall_code(self.sector));
+        }
+        while x < self.sector as f64 - half {
+            self.sector -= 1;
+            entered.push(crate::emulator::sensors::hall_code(self.sector));
+        }
+    }
+
+    fn state(&self) -> u8 {
+        crate::emulator::sensors::hall_code(self.sector)
+    }
+}
+
 /// The emulated hardware.
 pub struct Hardware {
     plant: Plant,
@@ -189,6 +222,8 @@ pub struct Hardware {
     stop_armed: bool,
     /// Gain of the current sense (1: working; 0: dead, only its offset and noise).
     sense_gain: f64,
+    /// Hall sensors off the six-step positions (`None`: the emulator's ideal ones).
+    halls: Option<HallPlacement>,
 }
 
 impl Hardware {
@@ -208,6 +243,7 @@ impl Hardware {
             v_bus: f32::NAN,
             stop_armed: true,
             sense_gain: 1.0,
+            halls: None,
         })
     }
 
@@ -220,6 +256,36 @@ impl Hardware {
     pub fn place_rotor(&mut self, theta: f64) {
         self.plant.set_truth(theta, 0.0, 0.0, 0.0);
         self.plant.take_hall_edges();
+        if let Some(h) = self.halls {
+            self.set_hall_placement(h.offset * 60.0, h.hysteresis * 60.0);
+        }
+    }
+
+    /// The rotor angle [sectors of 60° electrical].
+    fn rotor_sectors(&self) -> f64 {
+        let step = std::f64::consts::TAU / (6.0 * f64::from(self.plant.config().pole_pairs));
+        self.plant.truth().theta / step
+    }
+
+    /// Places the Hall sensors `offset_deg` [° electrical] behind the six-step positions,
+    /// each switching `hysteresis_deg` [° electrical] apart in the two directions (both 0:
+    /// as ideal as the emulator's own).
+    pub fn set_hall_placement(&mut self, offset_deg: f64, hysteresis_deg: f64) {
+        let (offset, hysteresis) = (offset_deg / 60.0, hysteresis_deg / 60.0);
+        let x = self.rotor_sectors() - offset;
+        self.halls = Some(HallPlacement {
+            offset,
+            hysteresis,
+            sector: (x + 0.5).floor() as i64,
+        });
+    }
+
+    /// The Hall state the motor's sensors give now.
+    fn motor_hall(&self) -> u8 {
+        match self.halls {
+            Some(h) => h.state(),
+            None => self.plant.hall_state(),
+        }
     }
 
     /// What the board's inputs read now.
@@ -237,7 +303,7 @@ impl Hardware {
             i = -i;
         }
         let mut m = Measurements {
-            hall: self.wiring.hall(self.plant.hall_state()),
+            hall: self.wiring.hall(self.motor_hall()),
             now_ticks: ticks_at(truth.t),
             i_vector: i as f32,
             v_bus: self.v_bus,
@@ -304,7 +370,7 @@ impl Hardware {
             let (v, g, path) = match drive {
                 Drive::Off => (0.0, 0.0, 1.0),
                 Drive::SixStep { volts, table } => {
-                    let hall = self.wiring.hall(self.plant.hall_state());
+                    let hall = self.wiring.hall(self.motor_hall());
                     match table.sector_of(hall) {
                         Some(sec) => {
                             let k = commutation_step(sec, volts < 0.0);
@@ -324,12 +390,25 @@ impl Hardware {
             self.plant.set_winding_path(path);
             self.plant.apply(v, h);
             self.peak_current = self.peak_current.max(self.plant.truth().i.abs());
+            if let Some(mut halls) = self.halls {
+                let mut entered = Vec::new();
+                halls.track(self.rotor_sectors(), &mut entered);
+                self.halls = Some(halls);
+                let ticks = ticks_at(self.plant.truth().t);
+                for state in entered {
+                    self.pending.push(HallEdge {
+                        ticks,
+                        state: self.wiring.hall(state),
+                    });
+                }
+            }
         }
         self.last_sign = match drive {
             Drive::SixStep { volts, .. } | Drive::Centre { volts, .. } if volts < 0.0 => -1.0,
             _ => 1.0,
         };
-        for e in self.plant.take_hall_edges() {
+        let ideal = self.plant.take_hall_edges();
+        for e in ideal.into_iter().filter(|_| self.halls.is_none()) {
             self.pending.push(HallEdge {
                 ticks: ticks_at(e.t),
                 state: self.wiring.hall(e.state),

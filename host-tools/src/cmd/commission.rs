@@ -89,16 +89,21 @@ pub fn run(args: Args) -> Result<()> {
         CommissionOutcome::Failed(e) => {
             bail!("{}: commissioning failed: {}", args.port, error_text(e))
         }
-        CommissionOutcome::NotRun => bail!("{}: no commissioning result on the board", args.port),
+        CommissionOutcome::NotRun => bail!(
+            "{}: no commissioning result on the board (none was run, or the stored one came \
+             from an older firmware that numbered the Hall sectors otherwise and is not used): \
+             run `motorid commission --port {}`",
+            args.port,
+            args.port
+        ),
         CommissionOutcome::Running => bail!("{}: commissioning is still running", args.port),
     };
     if args.json {
         println!("{}", serde_json::to_string_pretty(&to_json(&c, seq))?);
         return Ok(());
     }
-    let dir = if c.permuted {
-        "permuted Hall order"
-    } else if c.reversed {
+    // `permuted` is never set: a swapped Hall connector reads as the default order reversed.
+    let dir = if c.reversed {
         "reversed (default Hall order backward)"
     } else {
         "default"
