@@ -600,6 +600,9 @@ pub fn decode(bytes: &[u8]) -> Result<Coefficients, BlobError> {
         // Another sector numbering ([`VERSION`]): neither the result nor its table is used.
         c.commission = None;
         c.hall_table = DEFAULT_HALL_TABLE;
+        // Speed mode would run on the default table, never checked on this motor: refused
+        // until the motor is commissioned and its model uploaded again.
+        c.motor_identified = false;
     }
     c.validate()?;
     Ok(c)

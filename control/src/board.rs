@@ -386,8 +386,8 @@ impl Board {
     }
 
     /// Whether the transport's hardware over-current stop is armed (`armed`; the board
-    /// starts out assuming it is). While it is not, speed and experiment runs are refused
-    /// (`Nack::NoHardwareStop`; commissioning, at its limited current, stays allowed) unless
+    /// starts out assuming it is not). While it is not, commissioning, speed and experiment
+    /// runs are refused (`Nack::NoHardwareStop`) unless
     /// `run_without` says to run on the 12 ms software limit alone. `Identify` reports it.
     pub fn set_hardware_stop(&mut self, armed: bool, run_without: bool) {
         self.hw_stop_armed = armed;
@@ -572,6 +572,16 @@ impl Board {
                 // A retry of the request that started the run (its Ack was late or lost):
                 // the run goes on, restarting it mid-hold would learn from a moving rotor.
                 BoardMsg::Ack
+            }
+            // Commissioning drives an unknown winding from a ramp that samples once a
+            // period: the hardware stop bounds what a period can do.
+            HostMsg::SetMode {
+                mode: Mode::Commission,
+            }
+            | HostMsg::Commission
+                if !(self.hw_stop_armed || self.run_without_hw_stop) =>
+            {
+                BoardMsg::Nack(Nack::NoHardwareStop)
             }
             HostMsg::SetMode {
                 mode: Mode::Commission,

@@ -381,25 +381,22 @@ impl Commissioner {
         self.v_dead / RAMP_DROP_ERROR
     }
 
-    /// The ramp's growth factor of `x`, its voltage above [`Self::ramp_base`] [V], from the current
+    /// The ramp's growth factor of its voltage above [`Self::ramp_base`], from the current
     /// `i1` then `i2` [A] sampled at the end of two periods of one voltage (module docs): the
     /// steady current at the grown voltage stays below [`RAMP_TARGET`] of the limit for any
     /// winding R from [`RAMP_R_MIN`] and L/R up to [`RAMP_LAG_PERIODS`], and a true drop up
     /// to [`RAMP_DROP_ERROR`] times `v_dead`; `None` when the ramp is done ([`RAMP_END`]).
-    fn ramp_growth(&self, x: f32, i1: f32, i2: f32) -> Option<f32> {
+    fn ramp_growth(&self, i1: f32, i2: f32) -> Option<f32> {
         // The steady current at this voltage: the last sample plus at most L/R/T times the
-        // last period's rise (an exponential's remaining rise is `Δ/(e^(T·R/L) − 1)`).
-        let i_ss = i2 + RAMP_LAG_PERIODS * (i2 - i1).max(0.0);
-        // The current the drop's error range `c` drives through the path: at most through
-        // the smallest path R, and, once `x` exceeds `c`, at most `i_s·c/(x − c)` (the path R
-        // is at least `(x − c)/i_s`).
+        // last period's rise (an exponential's remaining rise is `Δ/(e^(T·R/L) − 1)`); a
+        // negative reading counts as none.
+        let i_ss = (i2 + RAMP_LAG_PERIODS * (i2 - i1).max(0.0)).max(0.0);
+        // The current the drop's error range `c` drives through the path, at most through
+        // the smallest path R. (Not the smaller `i_s·c/(x − c)` the samples would suggest
+        // once `x` exceeds `c`: a creeping rotor's back-EMF holds the samples low whatever
+        // the voltage, and that bound then lets one step jump to the run's voltage.)
         let c = (RAMP_DROP_ERROR - 1.0 / RAMP_DROP_ERROR) * self.v_dead;
         let i_c = c / (PATH_R_SHARE * RAMP_R_MIN);
-        let i_c = if x > c {
-            i_c.min(i_ss * c / (x - c))
-        } else {
-            i_c
-        };
         let target = RAMP_TARGET * self.i_limit;
         if i_ss >= RAMP_END * target {
             None
@@ -548,7 +545,7 @@ impl Commissioner {
                     // The backward pass holds one voltage.
                     None
                 } else if rest && high {
-                    Some(self.ramp_growth(x, self.ramp_i[1], self.ramp_i[2]))
+                    Some(self.ramp_growth(self.ramp_i[1], self.ramp_i[2]))
                 } else {
                     Some(Some(1.0))
                 };

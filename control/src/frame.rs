@@ -36,8 +36,8 @@
 //! | `ReadTelemetry` | `Telemetry(..)`: the last complete window of [`crate::telemetry`] |
 //! | (nothing) | `Sample { .. }` every 12 ms while running, `Telemetry(..)` every second while running, `Fault`, `Warning` |
 //!
-//! Refusals: `SetMode { Speed }` and experiments while the hardware over-current stop is
-//! not armed (`Nack(NoHardwareStop)`, unless the firmware was built to run without it);
+//! Refusals: `SetMode { Speed }`, commissioning and experiments while the hardware
+//! over-current stop is not armed (`Nack(NoHardwareStop)`, unless the firmware was built to run without it);
 //! `SetMode { Speed }` while the coefficients' motor constants are not identified
 //! (`Nack(MotorNotIdentified)`); a `SetSpeed` beyond `speed_max` (`Nack(OutOfRange)`);
 //! `SetMode { Speed }` and `StartExperiment` without valid coefficients
@@ -170,8 +170,8 @@ pub enum Nack {
     NoCoefficients,
     /// A parameter is outside what the board allows (duration, voltage).
     OutOfRange,
-    /// The hardware over-current stop is not armed (speed and experiment runs need it;
-    /// commissioning, at its limited current, does not).
+    /// The hardware over-current stop is not armed (commissioning, speed and experiment
+    /// runs need it).
     NoHardwareStop,
     /// The coefficients' motor constants are defaults, not identified for this motor
     /// ([`crate::blob::Coefficients::motor_identified`]): speed mode needs an identified
