@@ -607,7 +607,11 @@ impl Commissioner {
         }
         let (v, level) = self.last;
         if i.abs() > self.i_limit {
-            let v_limit = self.above_drop(v, self.i_limit / i.abs());
+            // Scaled from the smallest drop the ramp allows for, not the estimate: with a
+            // true drop `V_t` at or above that base `V_b`, the cut drives
+            // `(V_b + r·(v − V_b) − V_t)/R ≤ r·(v − V_t)/R`, so one cut lands at or below the
+            // limit whatever the drop's error.
+            let v_limit = Self::above(self.ramp_base(), v, self.i_limit / i.abs());
             if v_limit < self.volts {
                 self.volts = v_limit;
             }
@@ -983,6 +987,27 @@ mod tests {
             c.volts()
         );
         assert!((c.resistance().unwrap() - 0.05).abs() < 1e-4);
+    }
+
+    #[test]
+    fn one_cut_lands_at_the_limit_when_the_drop_is_below_its_estimate() {
+        // A sample far over the limit at a voltage well above the drop's estimate (a
+        // winding far below the ramp's smallest R, 2 mΩ, behind a true drop of a third or
+        // half the estimate, the smallest the ramp allows for): the cut must bring the
+        // resting current to the limit, not leave the drop's error driving it.
+        let (i_lim, vd_est) = (7.5f32, 0.5f32);
+        let r_path = PATH_R_SHARE * 0.002;
+        for (v, vd) in [(2.0f32, 0.25f32), (1.0, 0.25), (0.8, 0.3)] {
+            let mut c = Commissioner::new(2.0, i_lim, vd_est, 0.2);
+            c.last = (v, None);
+            c.measured((v - vd) / r_path);
+            let i_next = (c.volts() - vd).max(0.0) / r_path;
+            // 1e-3: f32 rounding of the cut's ratio, far below the drop's error.
+            assert!(
+                i_next <= i_lim * (1.0 + 1e-3),
+                "{i_next} A after a cut from {v} V (drop {vd})"
+            );
+        }
     }
 
     /// The largest current [A] of a whole run on a resting winding: a path of ¾ of the
