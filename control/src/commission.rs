@@ -250,6 +250,13 @@ fn at_rest([i0, i1, i2]: [f32; 3]) -> bool {
         && d2 <= q * d1.max(0.0) + (1.0 + q) * RAMP_SENSE_NOISE
 }
 
+/// The largest steady current [A] that samples `i1` then `i2` at one voltage allow: the
+/// last sample plus at most L/R/T times the last period's rise, for L/R up to
+/// [`RAMP_LAG_PERIODS`] (an exponential's remaining rise is `Δ/(e^(T·R/L) − 1) ≤ Δ·τ/T`).
+fn steady_bound(i1: f32, i2: f32) -> f32 {
+    i2 + RAMP_LAG_PERIODS * (i2 - i1).max(0.0)
+}
+
 /// Mean of the current samples at one voltage level.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 struct LevelMean {
@@ -387,10 +394,8 @@ impl Commissioner {
     /// winding R from [`RAMP_R_MIN`] and L/R up to [`RAMP_LAG_PERIODS`], and a true drop up
     /// to [`RAMP_DROP_ERROR`] times `v_dead`; `None` when the ramp is done ([`RAMP_END`]).
     fn ramp_growth(&self, i1: f32, i2: f32) -> Option<f32> {
-        // The steady current at this voltage: the last sample plus at most L/R/T times the
-        // last period's rise (an exponential's remaining rise is `Δ/(e^(T·R/L) − 1)`); a
-        // negative reading counts as none.
-        let i_ss = (i2 + RAMP_LAG_PERIODS * (i2 - i1).max(0.0)).max(0.0);
+        // A negative reading counts as none.
+        let i_ss = steady_bound(i1, i2).max(0.0);
         // The current the drop's error range `c` drives through the path, at most through
         // the smallest path R. (Not the smaller `i_s·c/(x − c)` the samples would suggest
         // once `x` exceeds `c`: a creeping rotor's back-EMF holds the samples low whatever
@@ -413,7 +418,7 @@ impl Commissioner {
     fn not_below_anchor(&self, x: f32) -> bool {
         let (v_a, i_a) = self.ramp_anchor;
         let [_, i1, i2] = self.ramp_i;
-        let i_ss = i2 + RAMP_LAG_PERIODS * (i2 - i1).max(0.0);
+        let i_ss = steady_bound(i1, i2);
         v_a <= 0.0 || i_ss >= (i_a - RAMP_SENSE_NOISE) * (self.ramp_base() + x) / v_a
     }
 
