@@ -144,6 +144,12 @@ impl OtherPlant {
         }
     }
 
+    /// The torque constant [N·m/A] at current `i` [A]: K_t, or on a [`Extra::FallingKt`]
+    /// plant its tabulated value.
+    pub fn torque_constant_at(&self, i: f64) -> f64 {
+        self.kt_at(i)
+    }
+
     /// Derivative of the state [θ, ω, I, θ2, ω2, ΔT] at time `t` with voltage `v`.
     fn deriv(&self, t: f64, x: &[f64; 6], v: f64) -> [f64; 6] {
         let [_, w, i, _, w2, heat] = *x;

@@ -386,8 +386,12 @@ pub static LOOK_ALIKES: &[LookAlikes] = &[
         experiment: "hold the rotor near standstill with a small voltage in each direction, and run steady speeds both ways: a constant load pulls the same way at rest, a direction-dependent friction acts only while moving (`motorid simulate --signal steady`, or record it)",
     },
     LookAlikes {
-        pairs: &[("load_friction", "deadtime"), ("load_friction", "saturation")],
+        pairs: &[("load_friction", "deadtime")],
         experiment: "voltage steps down while the rotor turns fast (signal d): load-dependent friction acts only while the drive brakes the rotor, dead time follows the sign of the current whether braking or not",
+    },
+    LookAlikes {
+        pairs: &[("load_friction", "saturation")],
+        experiment: "voltage steps to several levels, from rest and braking from speed, over several minutes (signal d): a saturating torque constant loses torque as the cube of the current, nothing at low current and fast growing at high current, whether the drive motors or brakes; friction growing with the transmitted torque takes the same share of it at every level, and only against the motion; a torque constant off by a constant share loses the same share at every level and is taken by a refit",
     },
     LookAlikes {
         pairs: &[("cogging", "position_load"), ("cogging", "theta")],

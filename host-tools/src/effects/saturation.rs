@@ -34,13 +34,13 @@ pub static D: Descriptor = Descriptor {
     voltage: None,
     on_residual: false,
     sindy: |_| terms(&[(Term::ICubed, IN_ACCEL)]),
-    // Not a candidate yet: the weak form sees I³ only through each interval's mean, and the
-    // current's fall inside an interval after a voltage step biases that column (on a correct
-    // model it estimated k ≈ 1.7e-4/A², the size of a real saturation) and makes it collide
-    // with load friction. A falling K_t is reported through the `current` and `acceleration`
-    // carriers (`diagnose/carriers.rs`) and fitted by `fit --add saturation`. Its present
-    // column needs the fitted K_b and R: `diagnose` adds it to the torque equation's base
-    // itself (`Signals::saturation_intervals`).
+    // Not a candidate: its column, `K_t·I³` per sample interval, is the drive times `I²`,
+    // and where the current's magnitude holds still (steady speeds) it is the drive
+    // itself, which takes up any error of the model that follows the drive as a
+    // saturation (docs/decisions/0031-thermal-and-saturation-candidates.md). A falling K_t is
+    // reported through the `current` and `acceleration` carriers (`diagnose/carriers.rs`)
+    // and fitted by `fit --add saturation`. Its present column needs the fitted K_b and R:
+    // `diagnose` adds it to the torque equation's base itself (`Signals::saturation_intervals`).
     diagnose: Diagnose {
         variants: no_variants,
         present: no_columns,

@@ -73,9 +73,12 @@ pub static D: Descriptor = Descriptor {
     },
 };
 
-/// Grid of thermal time constants [s] `diagnose` tries: small motors heat in 5 s (winding)
-/// to minutes (case).
-pub const GRID: [f64; 6] = [5.0, 10.0, 20.0, 40.0, 80.0, 160.0];
+/// Grid of thermal time constants [s] `diagnose` tries, doubling from a small motor's
+/// winding (10 s: tens of grams of copper, a few J/K, on a few K/W to the stator) to its case
+/// (10 min: the frame's heat capacity on its path to ambient). A log shows a time constant up
+/// to about twice its own length; beyond that the heat state rises along the log as
+/// `∫I²·dt/τ` whatever `τ`, one column shape, so longer values add no variant.
+pub const GRID: [f64; 7] = [10.0, 20.0, 40.0, 80.0, 160.0, 320.0, 640.0];
 
 pub(super) fn key_mut<'a, D>(e: &'a mut Effect<D>, key: &str) -> Option<&'a mut D> {
     match (e, key) {
