@@ -342,7 +342,7 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
     resolve_offsets(&mut findings, st.kt);
     findings.sort_by(|a, b| b.score.total_cmp(&a.score));
     findings.truncate(MAX_FINDINGS);
-    let mut verdict = judge(&f.s, &f.wf, st, &judged, &findings, opts);
+    let mut verdict = judge(&f.s, &f.wf, st, &judged, &findings, (opts, alpha_per_test));
     if let Some(own) = &own_run {
         weigh_refit_by_free_run(log, st, own, &mut verdict);
         verdict.adequate = adequate(&judged, &findings, &verdict.unexplained, &verdict.checks);
@@ -699,7 +699,7 @@ fn judge(
     st: &Structure,
     judged: &[Judged],
     findings: &[Finding],
-    opts: &Options,
+    (opts, findings_level): (&Options, f64),
 ) -> Verdict {
     let per_eq = 3 + carriers::test_count();
     let level = verdict::ADEQUACY_ALPHA;
@@ -749,6 +749,7 @@ fn judge(
             j.eq.label(),
             &j.small,
             opts.min_explained,
+            findings_level,
         ));
         checks.extend(residual_checks(j, &cluster, level_per_test));
         let rows = carriers::Rows {
