@@ -465,7 +465,7 @@ impl Drift {
     /// One clause for a person.
     pub fn words(&self) -> String {
         format!(
-            "the parameters drift along the log: their columns times time explain {:.1}% of the model's equation error beyond the columns themselves (robust T² = {:.1}, p = {:.1e}), which no constant value follows (a winding warming, friction wearing in or warming up)",
+            "the parameters drift along the log: their columns times time explain {:.1}% of the model's equation error beyond the columns themselves (robust T² = {:.1}, p = {:.1e}), which no constant value follows (a winding warming, friction wearing in or warming up, or a mismatch that changes with the input along the log)",
             100.0 * self.share,
             self.statistic,
             self.p_value
@@ -479,8 +479,9 @@ impl Drift {
 /// itself and the `nuisance` columns: a parameter that differs from the given value by the
 /// same amount all along is taken by its own column and leaves no trend; one that changes
 /// along the log (a winding warming, friction wearing in) leaves its column times the
-/// change. Returns the test (`None` when it cannot decide) and the share of `given`, beyond
-/// the columns, the trends explain.
+/// change. Clustered as the check, in blocks of [`CLUSTER_SPAN`] correlation times of the
+/// slower of `refit` and the test's own null residual. Returns the test (`None` when it
+/// cannot decide) and the share of `given`, beyond the columns, the trends explain.
 pub fn parameter_drift(
     given: &[f64],
     refit: &[f64],
@@ -504,7 +505,17 @@ pub fn parameter_drift(
         })
         .collect();
     let null: Vec<&[f64]> = cols.iter().chain(nuisance).map(|c| c.as_slice()).collect();
-    let cluster = block_clusters(hold, cluster_block(refit, tested.len()));
+    // The clusters span the correlation time of the test's own null residual, `given` less
+    // its fit on the columns: under a constant error δ of the parameters it keeps the
+    // columns' difference between the log and the model's run times δ, as slow as the run's
+    // tracking error, which the refit's residual does not hold.
+    let own = crate::numerics::least_squares::lstsq(&null, given).resid;
+    let slowest = if statistics::correlation_time(&own) > statistics::correlation_time(refit) {
+        own.as_slice()
+    } else {
+        refit
+    };
+    let cluster = block_clusters(hold, cluster_block(slowest, tested.len()));
     statistics::small_sample_test_beyond(
         given,
         &null,
