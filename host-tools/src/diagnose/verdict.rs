@@ -558,9 +558,11 @@ pub struct FreeRunGain {
 /// of each run at each sample is the sum over those signals of its squared error over the
 /// measured signal's variance, `d_k` the model's loss less the refit's. The runs' errors
 /// drift slowly, so the variance of the mean of `d` is taken from the sums of `d` over
-/// consecutive blocks of [`CLUSTER_SPAN`] correlation times of `d` (at least 2 samples,
-/// at least 20 blocks), read against Student's t with one less degree of freedom than
-/// blocks. `None` when the runs and the log differ in length or there is no loss.
+/// consecutive blocks of [`CLUSTER_SPAN`] correlation times of `d` (at least 2 samples, at
+/// most half the log), read against Student's t with one less degree of freedom than
+/// blocks: a slowly drifting loss gives few long blocks, whose fewer degrees of freedom the
+/// t reference pays for, rather than blocks shorter than its correlation. `None` when the
+/// runs and the log differ in length or there is no loss.
 pub fn free_run_gain(log: &MotorLog, own: &MotorLog, refit: &MotorLog) -> Option<FreeRunGain> {
     let n = log.len();
     if own.len() != n || refit.len() != n || n < 40 {
@@ -591,7 +593,7 @@ pub fn free_run_gain(log: &MotorLog, own: &MotorLog, refit: &MotorLog) -> Option
         return None;
     }
     let block = ((CLUSTER_SPAN * statistics::correlation_time(&d)).ceil() as usize)
-        .min(n / 20)
+        .min(n / 2)
         .max(2);
     let mean = d.iter().sum::<f64>() / n as f64;
     let sums: Vec<f64> = d
