@@ -5,9 +5,9 @@
 use super::candidates::{self, Equation, Signals, Units, Variant};
 use super::forward_select::{select, Selection};
 use super::{
-    bristle_moves, min_torque, modelled_drive, presliding_candidates, presliding_pass, row_scale,
-    select_rows, signals_of, viscous_of, weak_torque, Column, EqData, EquationResidual, Finding,
-    Judged, Options, SampleColumn, Structure, Tested,
+    min_torque, modelled_drive, presliding_candidates, presliding_pass, row_scale, select_rows,
+    signals_of, viscous_of, weak_torque, Column, EqData, EquationResidual, Finding, Judged,
+    Options, SampleColumn, Structure, Tested,
 };
 use crate::effect_spec::EffectSpec;
 use crate::log::{MotorLog, Plant};
@@ -287,7 +287,6 @@ pub(super) fn electrical_pass(
         .push(residual_of(f, Equation::Electrical, &out, "V·s", None));
     acc.judged.push(Judged {
         eq: Equation::Electrical,
-        bristle_moves: vec![],
         scale: None,
         keep: vec![true; f.wf.rows()],
         given,
@@ -463,10 +462,8 @@ pub(super) fn mechanical_pass(
             None => x,
         }
     };
-    let bristle_moves = bristle_moves(f, st, &mech, &keep, scale.as_deref());
     pass.acc.judged.push(Judged {
         eq: Equation::Mechanical,
-        bristle_moves,
         scale: scale.clone(),
         given: given.map(|g| scaled(select_rows(&g, &keep))),
         input: scaled(select_rows(&f.wf_m.integral(&f.s.u), &keep)),

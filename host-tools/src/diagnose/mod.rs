@@ -342,7 +342,7 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
     resolve_offsets(&mut findings, st.kt);
     findings.sort_by(|a, b| b.score.total_cmp(&a.score));
     findings.truncate(MAX_FINDINGS);
-    let mut verdict = judge(&f.s, &f.wf, st, &judged, &findings, (opts, alpha_per_test));
+    let mut verdict = judge(&f, st, &judged, &findings, (opts, alpha_per_test));
     if let Some(own) = &own_run {
         weigh_refit_by_free_run(log, st, own, &mut verdict);
         verdict.adequate = adequate(&judged, &findings, &verdict.unexplained, &verdict.checks);
@@ -624,9 +624,6 @@ struct Judged {
     /// Effects left significant but below the share a finding must explain
     /// ([`forward_select::Small`]).
     small: Vec<forward_select::Small>,
-    /// The model's bristles scaled by each factor c, and how far that moves the presliding
-    /// column's coefficient in the model's residual ([`bristle_moves`]; empty without one).
-    bristle_moves: Vec<(f64, f64)>,
 }
 
 /// Factors by which [`bristle_moves`] scales the model's bristles: 2^(m/2), m = −16..=16.
@@ -634,22 +631,17 @@ fn bristle_factors() -> impl Iterator<Item = f64> {
     (-16..=16).map(|m| 2f64.powf(0.5 * f64::from(m)))
 }
 
-/// For the torque equation `mech` (its columns on the kept rows `keep`, weighted by
-/// `scale`): the model's bristles (σ0, σ1) scaled together by each factor c of
+/// For the torque equation `j` (its columns on its kept rows, weighted as its residual):
+/// the model's bristles (σ0, σ1) scaled together by each factor c of
 /// [`bristle_factors`], and the coefficient on the presliding column of the change this
 /// makes to the model's residual (its friction, from the LuGre observer along the measured
 /// speed as in [`verdict::model_torque`], in the equation's units, regressed on all the
 /// columns). Scaling both keeps σ1/σ0, the time constant the column is built with. Empty
 /// when the model has no bristles or no presliding column.
-fn bristle_moves(
-    f: &equations::Forms,
-    st: &Structure,
-    mech: &EqData,
-    keep: &[bool],
-    scale: Option<&[f64]>,
-) -> Vec<(f64, f64)> {
-    let Some(k) = mech
-        .base_names
+fn bristle_moves(f: &equations::Forms, st: &Structure, j: &Judged) -> Vec<(f64, f64)> {
+    let (keep, scale) = (&j.keep, j.scale.as_deref());
+    let Some(k) = j
+        .names
         .iter()
         .position(|c| c.name == EffectKind::Presliding.name())
     else {
@@ -673,7 +665,7 @@ fn bristle_moves(
         s.omega.iter().map(|w| o.step(*w, s.dt)).collect()
     };
     let own = friction(law);
-    let cols: Vec<&[f64]> = mech.base_cols.iter().map(|c| c.as_slice()).collect();
+    let cols: Vec<&[f64]> = j.cols.iter().map(|c| c.as_slice()).collect();
     bristle_factors()
         .filter_map(|c| {
             let p = control::lugre::LugreParams {
@@ -694,13 +686,13 @@ fn bristle_moves(
 
 /// The verdict on the model as given ([`verdict`], [`carriers`]).
 fn judge(
-    s: &Signals,
-    wf: &weak_form::WeakForm,
+    f: &equations::Forms,
     st: &Structure,
     judged: &[Judged],
     findings: &[Finding],
     (opts, findings_level): (&Options, f64),
 ) -> Verdict {
+    let (s, wf) = (&f.s, &f.wf);
     let per_eq = 3 + carriers::test_count();
     let level = verdict::ADEQUACY_ALPHA;
     let level_per_test = level / (per_eq * judged.len()).max(1) as f64;
@@ -736,7 +728,7 @@ fn judge(
                 let r = electrical_constant(judged, "R");
                 let kb = electrical_constant(judged, "K_b");
                 refit.extend(refitted_constants(
-                    j,
+                    (f, j),
                     st,
                     given,
                     &cluster,
@@ -930,7 +922,7 @@ fn merge_carriers(unexplained: &mut Vec<carriers::Carrier>, found: Vec<carriers:
 /// one equation's base coefficients ([`verdict::moved_columns`] at the check's level); all
 /// of them when none moved alone (the error is shared among correlated parameters).
 fn refitted_constants(
-    j: &Judged,
+    (f, j): (&equations::Forms, &Judged),
     st: &Structure,
     given: &[f64],
     cluster: &[usize],
@@ -942,7 +934,7 @@ fn refitted_constants(
     if !moved.contains(&true) {
         moved.iter_mut().for_each(|m| *m = true);
     }
-    refit_values(j, st, given, r_refit, kb_refit)
+    refit_values((f, j), st, given, r_refit, kb_refit)
         .into_iter()
         .filter(|(t, _)| moved.get(*t).copied().unwrap_or(false))
         .map(|(_, v)| v)
@@ -957,7 +949,7 @@ fn refitted_constants(
 /// parameters whose friction moves it as far as the refit did ([`bristles_of_refit`]),
 /// where some do; `given` is the model's residual with its own numbers.
 fn refit_values(
-    j: &Judged,
+    (f, j): (&equations::Forms, &Judged),
     st: &Structure,
     given: &[f64],
     r_refit: Option<f64>,
@@ -993,7 +985,7 @@ fn refit_values(
         let bristles = (col.name == EffectKind::Presliding.name())
             .then(|| delta.get(k).copied())
             .flatten()
-            .and_then(|d| bristles_of_refit(st, &j.bristle_moves, d));
+            .and_then(|d| bristles_of_refit(st, &bristle_moves(f, st, j), d));
         match bristles {
             Some((sigma0, sigma1)) => {
                 out.push((t, (SIGMA0.to_string(), sigma0, "N·m/rad".to_string())));
