@@ -540,6 +540,14 @@ pub fn short_clusters_note(block: usize, tau: f64) -> Option<String> {
     })
 }
 
+/// Fewest blocks of the free-run gate ([`free_run_gain`]): 20, so that a model whose run
+/// drifts off (a missing friction term) still leaves the gate blocks to decide on. Where the
+/// loss difference stays correlated over more than a hundredth of the log the blocks are
+/// then shorter than [`CLUSTER_SPAN`] correlation times and the gate's own level is not
+/// kept; the check's is, since the gate only turns a rejection of the Wald test into a
+/// pass (`docs/decisions/0019-parameter-check-instruments.md`).
+pub const MIN_GATE_BLOCKS: usize = 20;
+
 /// The free-run comparison of a refit with the model as given ([`free_run_gain`]).
 #[derive(Debug, Clone, Copy)]
 pub struct FreeRunGain {
@@ -559,10 +567,9 @@ pub struct FreeRunGain {
 /// measured signal's variance, `d_k` the model's loss less the refit's. The runs' errors
 /// drift slowly, so the variance of the mean of `d` is taken from the sums of `d` over
 /// consecutive blocks of [`CLUSTER_SPAN`] correlation times of `d` (at least 2 samples, at
-/// most half the log), read against Student's t with one less degree of freedom than
-/// blocks: a slowly drifting loss gives few long blocks, whose fewer degrees of freedom the
-/// t reference pays for, rather than blocks shorter than its correlation. `None` when the
-/// runs and the log differ in length or there is no loss.
+/// least [`MIN_GATE_BLOCKS`] blocks), read against Student's t with one less degree of
+/// freedom than blocks. `None` when the runs and the log differ in length or there is no
+/// loss.
 pub fn free_run_gain(log: &MotorLog, own: &MotorLog, refit: &MotorLog) -> Option<FreeRunGain> {
     let n = log.len();
     if own.len() != n || refit.len() != n || n < 40 {
@@ -593,7 +600,7 @@ pub fn free_run_gain(log: &MotorLog, own: &MotorLog, refit: &MotorLog) -> Option
         return None;
     }
     let block = ((CLUSTER_SPAN * statistics::correlation_time(&d)).ceil() as usize)
-        .min(n / 2)
+        .min(n / MIN_GATE_BLOCKS)
         .max(2);
     let mean = d.iter().sum::<f64>() / n as f64;
     let sums: Vec<f64> = d
