@@ -342,7 +342,7 @@ pub fn diagnose(log: &MotorLog, st: &Structure, opts: &Options) -> Diagnosis {
     resolve_offsets(&mut findings, st.kt);
     findings.sort_by(|a, b| b.score.total_cmp(&a.score));
     findings.truncate(MAX_FINDINGS);
-    let mut verdict = judge(&f.s, &f.wf, st, &judged, &findings, opts);
+    let mut verdict = judge(&f, st, &judged, &findings, (opts, alpha_per_test));
     if let Some(own) = &own_run {
         weigh_refit_by_free_run(log, st, own, &mut verdict);
         verdict.adequate = adequate(&judged, &findings, &verdict.unexplained, &verdict.checks);
@@ -626,15 +626,73 @@ struct Judged {
     small: Vec<forward_select::Small>,
 }
 
+/// Factors by which [`bristle_moves`] scales the model's bristles: 2^(m/2), m = −16..=16.
+fn bristle_factors() -> impl Iterator<Item = f64> {
+    (-16..=16).map(|m| 2f64.powf(0.5 * f64::from(m)))
+}
+
+/// For the torque equation `j` (its columns on its kept rows, weighted as its residual):
+/// the model's bristles (σ0, σ1) scaled together by each factor c of
+/// [`bristle_factors`], and the coefficient on the presliding column of the change this
+/// makes to the model's residual (its friction, from the LuGre observer along the measured
+/// speed as in [`verdict::model_torque`], in the equation's units, regressed on all the
+/// columns). Scaling both keeps σ1/σ0, the time constant the column is built with. Empty
+/// when the model has no bristles or no presliding column.
+fn bristle_moves(f: &equations::Forms, st: &Structure, j: &Judged) -> Vec<(f64, f64)> {
+    let (keep, scale) = (&j.keep, j.scale.as_deref());
+    let Some(k) = j
+        .names
+        .iter()
+        .position(|c| c.name == EffectKind::Presliding.name())
+    else {
+        return vec![];
+    };
+    let Some(m) = st.motor else {
+        return vec![];
+    };
+    let law = control::lugre::LugreParams::friction_law(&st.effects);
+    if !(law.is_valid() && law.sigma1 > 0.0) {
+        return vec![];
+    }
+    let ratio = if f.voltage && m.kt != 0.0 {
+        m.r / m.kt
+    } else {
+        1.0
+    };
+    let s = &f.s;
+    let friction = |p: control::lugre::LugreParams<f64>| -> Vec<f64> {
+        let mut o = control::lugre::LugreObserver::new(p);
+        s.omega.iter().map(|w| o.step(*w, s.dt)).collect()
+    };
+    let own = friction(law);
+    let cols: Vec<&[f64]> = j.cols.iter().map(|c| c.as_slice()).collect();
+    bristle_factors()
+        .filter_map(|c| {
+            let p = control::lugre::LugreParams {
+                sigma0: c * law.sigma0,
+                sigma1: c * law.sigma1,
+                ..law
+            };
+            let d: Vec<f64> = friction(p).iter().zip(&own).map(|(a, b)| a - b).collect();
+            let mut y = select_rows(&f.wf_m.integral(&d), keep);
+            for (r, v) in y.iter_mut().enumerate() {
+                *v *= ratio * scale.and_then(|w| w.get(r)).copied().unwrap_or(1.0);
+            }
+            let b = least_squares::lstsq(&cols, &y).beta.get(k).copied()?;
+            b.is_finite().then_some((c, b))
+        })
+        .collect()
+}
+
 /// The verdict on the model as given ([`verdict`], [`carriers`]).
 fn judge(
-    s: &Signals,
-    wf: &weak_form::WeakForm,
+    f: &equations::Forms,
     st: &Structure,
     judged: &[Judged],
     findings: &[Finding],
-    opts: &Options,
+    (opts, findings_level): (&Options, f64),
 ) -> Verdict {
+    let (s, wf) = (&f.s, &f.wf);
     let per_eq = 3 + carriers::test_count();
     let level = verdict::ADEQUACY_ALPHA;
     let level_per_test = level / (per_eq * judged.len()).max(1) as f64;
@@ -670,7 +728,7 @@ fn judge(
                 let r = electrical_constant(judged, "R");
                 let kb = electrical_constant(judged, "K_b");
                 refit.extend(refitted_constants(
-                    j,
+                    (f, j),
                     st,
                     given,
                     &cluster,
@@ -683,6 +741,7 @@ fn judge(
             j.eq.label(),
             &j.small,
             opts.min_explained,
+            findings_level,
         ));
         checks.extend(residual_checks(j, &cluster, level_per_test));
         let rows = carriers::Rows {
@@ -863,7 +922,7 @@ fn merge_carriers(unexplained: &mut Vec<carriers::Carrier>, found: Vec<carriers:
 /// one equation's base coefficients ([`verdict::moved_columns`] at the check's level); all
 /// of them when none moved alone (the error is shared among correlated parameters).
 fn refitted_constants(
-    j: &Judged,
+    (f, j): (&equations::Forms, &Judged),
     st: &Structure,
     given: &[f64],
     cluster: &[usize],
@@ -875,7 +934,7 @@ fn refitted_constants(
     if !moved.contains(&true) {
         moved.iter_mut().for_each(|m| *m = true);
     }
-    refit_values(j, st, r_refit, kb_refit)
+    refit_values((f, j), st, given, r_refit, kb_refit)
         .into_iter()
         .filter(|(t, _)| moved.get(*t).copied().unwrap_or(false))
         .map(|(_, v)| v)
@@ -886,10 +945,13 @@ fn refitted_constants(
 /// column is not all zero, with its position among the tested columns. A torque term of a
 /// voltage plant's torque equation, written in volts, is its coefficient times `K_t/R`,
 /// with R and K_t = K_b the refitted ones when the voltage equation gave them (the refitted
-/// model runs with them).
+/// model runs with them). The presliding column's coefficient becomes the bristle
+/// parameters whose friction moves it as far as the refit did ([`bristles_of_refit`]),
+/// where some do; `given` is the model's residual with its own numbers.
 fn refit_values(
-    j: &Judged,
+    (f, j): (&equations::Forms, &Judged),
     st: &Structure,
+    given: &[f64],
     r_refit: Option<f64>,
     kb_refit: Option<f64>,
 ) -> Vec<(usize, (String, f64, String))> {
@@ -901,63 +963,148 @@ fn refit_values(
         .unwrap_or(m.kt);
     let voltage = st.plant == Plant::Voltage;
     let scale = if voltage && r > 0.0 { kt / r } else { 1.0 };
-    idx.iter()
-        .enumerate()
-        .filter(|(_, &k)| j.cols[k].iter().any(|v| *v != 0.0))
-        .filter_map(|(t, &k)| {
-            let (b, col) = (j.beta.get(k)?, j.names.get(k)?);
-            let (value, unit) = match (col.torque, voltage) {
-                (true, true) => (b * scale, col.unit.to_string()),
-                (true, false) => (*b, format!("u per ({})", col.unit)),
-                (false, _) => (*b, col.unit.to_string()),
-            };
-            Some((t, (col.name.clone(), value, unit)))
-        })
-        .collect()
+    // How far the refit moved each coefficient: that of the model's residual on the same
+    // columns.
+    let delta = {
+        let cols: Vec<&[f64]> = j.cols.iter().map(|c| c.as_slice()).collect();
+        least_squares::lstsq(&cols, given).beta
+    };
+    let mut out = Vec::new();
+    for (t, &k) in idx.iter().enumerate() {
+        if !j.cols[k].iter().any(|v| *v != 0.0) {
+            continue;
+        }
+        let (Some(b), Some(col)) = (j.beta.get(k), j.names.get(k)) else {
+            continue;
+        };
+        let (value, unit) = match (col.torque, voltage) {
+            (true, true) => (b * scale, col.unit.to_string()),
+            (true, false) => (*b, format!("u per ({})", col.unit)),
+            (false, _) => (*b, col.unit.to_string()),
+        };
+        let bristles = (col.name == EffectKind::Presliding.name())
+            .then(|| delta.get(k).copied())
+            .flatten()
+            .and_then(|d| bristles_of_refit(st, &bristle_moves(f, st, j), d));
+        match bristles {
+            Some((sigma0, sigma1)) => {
+                out.push((t, (SIGMA0.to_string(), sigma0, "N·m/rad".to_string())));
+                out.push((t, (SIGMA1.to_string(), sigma1, "N·m·s/rad".to_string())));
+            }
+            None => out.push((t, (col.name.clone(), value, unit))),
+        }
+    }
+    out
 }
 
-/// The model with the refit's values `refit` (name, value) of its motor constants and its
-/// static friction law, every other parameter as given; values that are not finite, or not
-/// positive for the motor constants and negative for the friction, stay as given.
-/// Returns `None` when a refitted parameter cannot be put into the model (a parameter the
-/// run does not take, or a value out of its range): a run could then not show what the
-/// refit changes.
-fn refitted_structure(st: &Structure, refit: &[(String, f64, String)]) -> Option<Structure> {
+/// Names of the refitted bristle parameters ([`bristles_of_refit`]).
+const SIGMA0: &str = "sigma0 (presliding)";
+const SIGMA1: &str = "sigma1 (presliding)";
+
+/// The bristle stiffness and damping (σ0, σ1) the refit's move `delta` of the presliding
+/// column's coefficient stands for: the model's own scaled by the factor c whose change to
+/// the model's residual has that coefficient ([`bristle_moves`], interpolated in log c
+/// between the two factors around it, the crossing nearest c = 1). `None` when the model
+/// has no bristles or no factor within 2^±8 reaches `delta`: no bristles of this kind give
+/// the refit, which then cannot be run.
+fn bristles_of_refit(st: &Structure, moves: &[(f64, f64)], delta: f64) -> Option<(f64, f64)> {
+    let (sigma0, sigma1) = st.effects.iter().find_map(|e| match *e {
+        Effect::Presliding { sigma0, sigma1 } => Some((sigma0, sigma1)),
+        _ => None,
+    })?;
+    if !(delta.is_finite() && sigma0 > 0.0 && sigma1 > 0.0) {
+        return None;
+    }
+    let mid = moves.iter().position(|(c, _)| *c == 1.0)?;
+    // Outward from c = 1 on either side; the crossing at the smaller distance.
+    let crossing = |pair: (&(f64, f64), &(f64, f64))| {
+        let ((c0, b0), (c1, b1)) = (*pair.0, *pair.1);
+        ((b0 - delta) * (b1 - delta) <= 0.0 && b0 != b1).then(|| {
+            let w = (delta - b0) / (b1 - b0);
+            (c0.ln() + w * (c1.ln() - c0.ln())).exp()
+        })
+    };
+    let up = moves[mid..]
+        .iter()
+        .zip(&moves[mid + 1..])
+        .position(|p| crossing(p).is_some());
+    let down = moves[..=mid]
+        .iter()
+        .rev()
+        .zip(moves[..mid].iter().rev())
+        .position(|p| crossing(p).is_some());
+    let c = match (up, down) {
+        (Some(u), Some(d)) if d < u => crossing((&moves[mid - d], &moves[mid - d - 1])),
+        (Some(u), _) => crossing((&moves[mid + u], &moves[mid + u + 1])),
+        (None, Some(d)) => crossing((&moves[mid - d], &moves[mid - d - 1])),
+        (None, None) => None,
+    }?;
+    (c.is_finite() && c > 0.0).then_some((c * sigma0, c * sigma1))
+}
+
+/// The model with the refit's values `refit` (name, value) of its motor constants, its
+/// static friction law and its bristles ([`bristles_of_refit`]), every other parameter as
+/// given, and the names of the refitted parameters it leaves as given: those whose refitted
+/// value is out of the range a run takes (not positive for the motor constants and the
+/// bristles, negative for the friction), a column standing in for something else rather
+/// than a value the model could have. Returns `None` when a refitted parameter is one the
+/// run does not take at all, or not finite, or every one is out of range: a run could then
+/// not show what the refit changes.
+fn refitted_structure(
+    st: &Structure,
+    refit: &[(String, f64, String)],
+) -> Option<(Structure, Vec<String>)> {
     let mut out = st.clone();
     let mut m = st.motor?;
+    let mut as_given = Vec::new();
     for (name, v, _) in refit {
         let v = *v;
         if !v.is_finite() {
             return None;
         }
         let positive = v > 0.0;
-        let mut placed = true;
-        match name.as_str() {
-            "R" if positive => m.r = v,
-            "K_b" if positive => (m.kb, m.kt) = (v, v),
-            "J" if positive => m.j = v,
-            "L" if positive => m.l = v,
-            _ if v < 0.0 => placed = false,
-            _ => {
-                placed = false;
-                for e in out.effects.iter_mut() {
-                    match (e, name.as_str()) {
-                        (Effect::Coulomb { fc }, "fc (Coulomb)") => *fc = v,
-                        (Effect::Viscous { b }, "b (viscous)") => *b = v,
-                        (Effect::Stribeck { fs, .. }, "fs − fc (Stribeck)") => *fs = v,
-                        _ => continue,
-                    }
-                    placed = true;
+        let motor = matches!(name.as_str(), "R" | "J" | "L" | "K_b");
+        if motor {
+            if positive {
+                match name.as_str() {
+                    "R" => m.r = v,
+                    "J" => m.j = v,
+                    "L" => m.l = v,
+                    _ => (m.kb, m.kt) = (v, v),
                 }
+            } else {
+                as_given.push(name.clone());
+            }
+            continue;
+        }
+        let mut known = false;
+        for e in out.effects.iter_mut() {
+            let (x, in_range) = match (e, name.as_str()) {
+                (Effect::Coulomb { fc }, "fc (Coulomb)") => (fc, v >= 0.0),
+                (Effect::Viscous { b }, "b (viscous)") => (b, v >= 0.0),
+                (Effect::Stribeck { fs, .. }, "fs − fc (Stribeck)") => (fs, v >= 0.0),
+                (Effect::Presliding { sigma0, .. }, SIGMA0) => (sigma0, positive),
+                (Effect::Presliding { sigma1, .. }, SIGMA1) => (sigma1, positive),
+                _ => continue,
+            };
+            known = true;
+            if in_range {
+                *x = v;
+            } else {
+                as_given.push(name.clone());
             }
         }
-        if !placed {
+        if !known {
             return None;
         }
     }
+    // Every refitted value out of range: the run would be the model's own.
+    if as_given.len() == refit.len() {
+        return None;
+    }
     out.kt = m.kt;
     out.motor = Some(m);
-    Some(out)
+    Some((out, as_given))
 }
 
 /// A failed parameter check stands only when the refitted values of the parameters that
@@ -976,7 +1123,7 @@ fn weigh_refit_by_free_run(log: &MotorLog, st: &Structure, own: &MotorLog, verdi
         return;
     }
     // A refit the model cannot run keeps the Wald test's result: no run could show it.
-    let Some(refitted) = refitted_structure(st, &verdict.refit) else {
+    let Some((refitted, as_given)) = refitted_structure(st, &verdict.refit) else {
         for c in verdict.checks.iter_mut().filter(|c| failed(c)) {
             c.detail = format!(
                 "{}; the refit moves a parameter a free run of this model cannot take, so the test's result stands",
@@ -995,8 +1142,16 @@ fn weigh_refit_by_free_run(log: &MotorLog, st: &Structure, own: &MotorLog, verdi
     // rejecting the Wald test alone, so the check keeps its level whatever the gate's.
     let level = verdict.level;
     let better = gain.p_value < level;
+    let kept = if as_given.is_empty() {
+        String::new()
+    } else {
+        format!(
+            " (with the model's own {}: the refit's value is out of its range)",
+            as_given.join(", ")
+        )
+    };
     let words = format!(
-        "the refit's free run is {} the log's angle and current by {:.1}% of the model's own squared error (one-sided p = {:.1e} on {} blocks, level {:.1e})",
+        "the refit's free run{kept} is {} the log's angle and current by {:.1}% of the model's own squared error (one-sided p = {:.1e} on {} blocks, level {:.1e})",
         if gain.gain >= 0.0 { "closer to" } else { "further from" },
         100.0 * gain.gain.abs(),
         gain.p_value,
