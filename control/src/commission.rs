@@ -145,7 +145,7 @@ pub const RAMP_END: f32 = 0.9;
 /// has not yet measured a resting current above [`RAMP_CURRENT_FLOOR`]: its steps from
 /// such samples wait for a window without Hall edges (module docs), and a drop near the top
 /// of its range takes about two passes to cross at the smallest R.
-pub const RAMP_ALIGN_REPEATS: u8 = 2;
+pub const RAMP_ALIGN_REPEATS: u8 = 4;
 
 /// The default Hall state sequence of [`HallTable::DEFAULT_120`] (sectors 0..5).
 pub const DEFAULT_SEQUENCE: [u8; 6] = [1, 3, 2, 6, 4, 5];
@@ -331,9 +331,9 @@ pub struct Commissioner {
     ramp: Option<f32>,
     /// The last three current samples [A], oldest first (NaN: none), for the rest test.
     ramp_i: [f32; 3],
-    /// Of the currents [A] sampled at the ramp's voltages from a resting rotor and above
-    /// [`RAMP_CURRENT_FLOOR`], the one largest against its voltage [V]: (voltage, current)
-    /// ((0, 0): none yet).
+    /// Of the currents [A] above [`RAMP_CURRENT_FLOOR`] sampled at the ramp's voltages that
+    /// passed the rest test (without its window), the one largest against its voltage [V]:
+    /// (voltage, current) ((0, 0): none yet).
     ramp_anchor: (f32, f32),
     /// Periods in a row, up to the last one, driven at the ramp's voltage now.
     ramp_run: u8,
@@ -348,6 +348,9 @@ pub struct Commissioner {
     ramp_hidden: f32,
     /// The ramp was still running at the backward pass.
     ramp_stalled: bool,
+    /// A current above [`RAMP_CURRENT_FLOOR`] passed the rest test with the window
+    /// ([`Self::ramp_window`]): the ramp's steps from such currents need no window.
+    ramp_seen: bool,
     /// Aligning passes repeated for the ramp.
     aligns: u8,
     /// Periods in a row, up to the last one, without a Hall edge or a change of state.
@@ -407,6 +410,7 @@ impl Commissioner {
             ramp_window: 0,
             ramp_hidden: 0.0,
             ramp_stalled: false,
+            ramp_seen: false,
             aligns: 0,
             still: 0,
             last_hall: 0,
@@ -629,7 +633,7 @@ impl Commissioner {
         // Before the ramp has measured a resting current above the floor its steps wait for
         // a window without Hall edges at one voltage, and nothing samples the lower level:
         // the higher one is held through the hold.
-        let blind = self.ramp.is_some() && self.ramp_anchor.0 <= 0.0;
+        let blind = self.ramp.is_some() && !self.ramp_seen;
         let level = match self.period {
             p if p < HOLD_PERIODS / 2 => None,
             _ if blind => None,
@@ -640,23 +644,23 @@ impl Commissioner {
         let v_hi = match self.ramp {
             Some(x) => {
                 // Two samples at the ramp's voltage from a resting rotor: step on from the
-                // second. Below the current floor, or before any resting current above it,
-                // the samples are also those of a rotor creeping at the speed where its
-                // back-EMF takes the voltage: then only a window without a Hall edge bounds
-                // what the creep hides (module docs).
+                // second. Below the current floor, or before a current above it has passed
+                // that test, the samples are also those of a rotor creeping at the speed
+                // where its back-EMF takes the voltage: then only a window without a Hall
+                // edge bounds what the creep hides (module docs).
                 let [_, i1, i2] = self.ramp_i;
-                let blind =
-                    self.ramp_anchor.0 <= 0.0 || steady_bound(i1, i2) < RAMP_CURRENT_FLOOR;
-                let rest = self.ramp_run >= 2
+                let blind = !self.ramp_seen || steady_bound(i1, i2) < RAMP_CURRENT_FLOOR;
+                let lag = self.ramp_run >= 2
                     && self.still >= 2
                     && at_rest(self.ramp_i)
-                    && self.not_below_anchor(x)
-                    && (!blind || self.ramp_still >= self.ramp_window);
+                    && self.not_below_anchor(x);
+                let rest = lag && (!blind || self.ramp_still >= self.ramp_window);
                 let v = self.ramp_base() + x;
                 let (v_a, i_a) = self.ramp_anchor;
-                if rest && i2 >= RAMP_CURRENT_FLOOR && i2 * v_a >= i_a * v {
+                if lag && i2 >= RAMP_CURRENT_FLOOR && i2 * v_a >= i_a * v {
                     self.ramp_anchor = (v, i2);
                 }
+                self.ramp_seen |= rest && i2 >= RAMP_CURRENT_FLOOR;
                 let step = if self.hold >= 6 {
                     // The backward pass holds one voltage.
                     self.ramp_stalled = self.ramp_short();
