@@ -1070,3 +1070,4 @@ fn a_rotor_creeping_below_the_current_floor_keeps_the_commissioning_current_at_r
     // never moves).
     assert!(top > 0.5 * i_comm, "largest current at rest {top} A");
 }
+

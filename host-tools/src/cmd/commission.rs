@@ -27,7 +27,8 @@ pub struct Args {
     pub json: bool,
 }
 
-/// Longest wait for the result after the start: the run itself is 9 holds of 0.3 s.
+/// Longest wait for the result after the start: the run itself is 9 holds of 0.3 s, and up
+/// to 12 more while the first holds' current ramp is slow.
 const RESULT_TIMEOUT: Duration = Duration::from_secs(60);
 
 fn error_text(e: CommissionError) -> &'static str {
