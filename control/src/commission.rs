@@ -114,7 +114,8 @@ pub const HOLD_PERIODS: u16 = 25;
 /// Smallest share of the expected current the higher level's mean must reach, and of that
 /// mean the two levels' difference must reach ([`CommissionError::NoCurrent`], module docs).
 pub const CURRENT_SHARE: f32 = 0.25;
-/// Holds in a run: two forward passes and one backward pass over [`CENTRES`].
+/// Holds in a run: two forward passes and one backward pass over [`CENTRES`] (and the
+/// first pass again while the current ramp runs, [`RAMP_ALIGN_REPEATS`]).
 pub const HOLDS: u8 = 9;
 /// The sectors whose middles the held vectors point at, in the forward order, with the
 /// phase each holds low ([`crate::board::centre_sector`]): 120° apart, every other sector.
@@ -1451,7 +1452,11 @@ mod tests {
         let holds = usize::from(HOLDS) + 3 * repeats;
         assert_eq!(lows.len(), holds * usize::from(HOLD_PERIODS));
         for (h, hold) in lows.chunks(usize::from(HOLD_PERIODS)).enumerate() {
-            let h = if h < 3 * (repeats + 1) { h % 3 } else { h - 3 * repeats };
+            let h = if h < 3 * (repeats + 1) {
+                h % 3
+            } else {
+                h - 3 * repeats
+            };
             let want = CENTRES[Commissioner::centre_of(h as u8)].1;
             assert!(hold.iter().all(|&l| l == want), "{h}");
         }

@@ -1046,8 +1046,12 @@ fn a_rotor_creeping_below_the_current_floor_keeps_the_commissioning_current_at_r
     // unstable point, behind the estimated drop and the ends of the drop's range. The
     // current a resting rotor draws at every voltage held stays within the limit.
     let i_comm = {
-        let emu = EmulatedBoard::new(EmulatorConfig::paper(), Wiring::default(), RamFlash::new(None))
-            .unwrap();
+        let emu = EmulatedBoard::new(
+            EmulatorConfig::paper(),
+            Wiring::default(),
+            RamFlash::new(None),
+        )
+        .unwrap();
         f64::from(emu.board().commission_current())
     };
     let mut top = 0.0f64;
@@ -1070,4 +1074,3 @@ fn a_rotor_creeping_below_the_current_floor_keeps_the_commissioning_current_at_r
     // never moves).
     assert!(top > 0.5 * i_comm, "largest current at rest {top} A");
 }
-
