@@ -72,8 +72,8 @@
 //!   least any earlier sample above [`RAMP_CURRENT_FLOOR`] that passed these tests, scaled
 //!   by the voltages (a drop of at least 0 makes the resting current grow at least in
 //!   proportion to the voltage; a single noisy reading passes no lag test, so it cannot
-//!   hold the ramp); otherwise the voltage is held. From the two currents sampled `i₁, i₂` the steady current of a resting
-//!   rotor is at most
+//!   hold the ramp); otherwise the voltage is held. From the two currents sampled `i₁, i₂`
+//!   the steady current of a resting rotor is at most
 //!   `i_s = i₂ + `[`RAMP_LAG_PERIODS`]`·max(i₂ − i₁, 0)` for L/R up to that many periods
 //!   (the remaining rise of an exponential is `Δ/(e^(T·R/L) − 1) ≤ Δ·L/(R·T)`). Growing `x` by
 //!   `g` moves the steady current to `g·i_s + (g − 1)·c/(¾·R)`; with
@@ -94,13 +94,14 @@
 //!   `floor + h_w + (i_t − floor − h_w) = i_t`. `k` is the blob's back-EMF constant over its
 //!   pole pairs; a motor with a larger one may hide more. While these steps run the lower
 //!   level is not driven, and the first (aligning) pass is repeated up to
-//!   [`RAMP_ALIGN_REPEATS`] times while the ramp runs. The ramp ends once `i_s` reaches [`RAMP_END`] of the target, at the run's
-//!   voltage, or at the backward pass (short of [`CURRENT_SHARE`] of its target:
-//!   [`CommissionError::RampStalled`] if the run fails); only the higher level's periods step it (the lower level's quarter
-//!   holds the voltage before it and returns to it), and no level samples are taken
-//!   meanwhile. Below [`RAMP_R_MIN`], with a drop outside the range, or with a current
-//!   sense off by more than the target's margin the ramp may pass `i_limit`; the limit
-//!   below then cuts the voltage at the next period;
+//!   [`RAMP_ALIGN_REPEATS`] times while the ramp runs. The ramp ends once `i_s` reaches
+//!   [`RAMP_END`] of the target, at the run's voltage, or at the backward pass (short of
+//!   [`CURRENT_SHARE`] of its target: [`CommissionError::RampStalled`] if the run fails);
+//!   only the higher level's periods step it (the lower level's quarter holds the voltage
+//!   before it and returns to it), and no level samples are taken meanwhile. Below
+//!   [`RAMP_R_MIN`], with a drop outside the range, or with a current sense off by more
+//!   than the target's margin the ramp may pass `i_limit`; the limit below then cuts the
+//!   voltage at the next period;
 //! - whenever `|I|` exceeds the run's current limit `i_limit`, `V_hi` falls to
 //!   `V_b + (V − V_b)·i_limit/|I|` for the voltage `V` that drove `I`, which drives at most
 //!   the limit through a resting winding for any drop from `V_b` up, and stays there for
@@ -364,7 +365,8 @@ pub struct Commissioner {
     /// (its back-EMF over the path's R) and still cross no Hall edge in
     /// [`Self::ramp_window`] periods, at [`RAMP_R_MIN`].
     ramp_hidden: f32,
-    /// The ramp was still running at the backward pass.
+    /// The ramp was still running at the backward pass, short of [`CURRENT_SHARE`] of its
+    /// target.
     ramp_stalled: bool,
     /// A current above [`RAMP_CURRENT_FLOOR`] passed the rest test with the window
     /// ([`Self::ramp_window`]): the ramp's steps from such currents need no window.
@@ -465,8 +467,8 @@ impl Commissioner {
     }
 
     /// Whether the ramp is running and has not measured, from a resting rotor, the share
-    /// [`CURRENT_SHARE`] of its target a hold's current must reach ([`CommissionError::NoCurrent`]):
-    /// its anchor's current scaled to the voltage now.
+    /// [`CURRENT_SHARE`] of its target a hold's current must reach
+    /// ([`CommissionError::NoCurrent`]): its anchor's current scaled to the voltage now.
     fn ramp_short(&self) -> bool {
         let Some(x) = self.ramp else {
             return false;
