@@ -591,8 +591,9 @@ impl Board {
                 let i_limit = self.commission_current();
                 let v_dead = dead_time_drop(self.v_bus);
                 let r = self.coeffs.motor.r;
+                let k_emf = self.coeffs.motor.kb / f32::from(self.coeffs.pole_pairs.max(1));
                 self.start(Run::Commission(Commissioner::new(
-                    volts, i_limit, v_dead, r,
+                    volts, i_limit, v_dead, r, k_emf,
                 )));
                 self.commission = CommissionOutcome::Running;
                 BoardMsg::Ack

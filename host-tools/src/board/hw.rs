@@ -224,6 +224,8 @@ pub struct Hardware {
     sense_gain: f64,
     /// Hall sensors off the six-step positions (`None`: the emulator's ideal ones).
     halls: Option<HallPlacement>,
+    /// Voltage of the drive applied last [V] (0: off).
+    last_volts: f64,
 }
 
 impl Hardware {
@@ -244,6 +246,7 @@ impl Hardware {
             stop_armed: true,
             sense_gain: 1.0,
             halls: None,
+            last_volts: 0.0,
         })
     }
 
@@ -327,6 +330,12 @@ impl Hardware {
         self.peak_current
     }
 
+    /// Voltage of the drive the board applied last [V] (0: bridge off), as commanded,
+    /// before the over-current stop.
+    pub fn last_volts(&self) -> f64 {
+        self.last_volts
+    }
+
     /// Sets the bus voltage the board measures [V] (NaN: not measured, the board's nominal
     /// one). The emulated motor takes the board's voltage command as it is; the board
     /// bounds it by the bus.
@@ -403,6 +412,10 @@ impl Hardware {
                 }
             }
         }
+        self.last_volts = match drive {
+            Drive::Off => 0.0,
+            Drive::SixStep { volts, .. } | Drive::Centre { volts, .. } => f64::from(volts),
+        };
         self.last_sign = match drive {
             Drive::SixStep { volts, .. } | Drive::Centre { volts, .. } if volts < 0.0 => -1.0,
             _ => 1.0,

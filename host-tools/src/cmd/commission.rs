@@ -27,7 +27,8 @@ pub struct Args {
     pub json: bool,
 }
 
-/// Longest wait for the result after the start: the run itself is 9 holds of 0.3 s.
+/// Longest wait for the result after the start: the run itself is 9 holds of 0.3 s, and up
+/// to 12 more while the first holds' current ramp is slow.
 const RESULT_TIMEOUT: Duration = Duration::from_secs(60);
 
 fn error_text(e: CommissionError) -> &'static str {
@@ -45,6 +46,9 @@ fn error_text(e: CommissionError) -> &'static str {
         CommissionError::Aborted => "stopped before the end (a stop command or a fault)",
         CommissionError::NoCurrent => {
             "the board measured little or no current while it held the voltage (current sense not working, motor phases not connected, or a winding resistance over four times the coefficients' R); nothing was stored"
+        }
+        CommissionError::RampStalled => {
+            "the board raises the voltage slowly at the start until it measures a current, and it never measured enough (a quarter of the commissioning current) with the rotor at rest, so the voltage stayed low and the run failed; check that the current sense works and the motor's three phases are connected, that the rotor turns freely and is not held or driven, and that the coefficients' dead time suits the bridge (a drop over twice the expected one needs a higher voltage); nothing was stored"
         }
     }
 }
