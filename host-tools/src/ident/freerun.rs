@@ -219,14 +219,18 @@ fn substep_residual<D: RunScalar, const N: usize>(
 ) -> (D, [D; N]) {
     let m = &p.motor;
     let hd = D::constant(h);
-    let current = match p.plant {
-        Plant::Torque => D::constant(u),
+    // The winding's current at the end of the sub-step and its mean over it (what the
+    // rotor's torque integrates), for a velocity changing linearly over the sub-step.
+    let (current, mean_current) = match p.plant {
+        Plant::Torque => (D::constant(u), D::constant(u)),
         Plant::Voltage => {
             let r = m.r * (D::one() + h_th);
-            let a = m.l / hd + r;
-            let rhs = m.l / hd * x[2] + D::constant(u) - m.kb * w;
+            let w8 = winding_weights(m.l, r, h);
+            let a = w8.inductance + r;
+            let emf_speed = w8.start * x[1] + (D::one() - w8.start) * w;
+            let rhs = w8.inductance * x[2] + D::constant(u) - m.kb * emf_speed;
             let vloss_max: f64 = re.effects.iter().map(|e| e.voltage_loss(1e9).abs()).sum();
-            if vloss_max == 0.0 {
+            let end = if vloss_max == 0.0 {
                 rhs / a
             } else {
                 let (ar, rr) = (a.re(), rhs.re());
@@ -246,7 +250,17 @@ fn substep_residual<D: RunScalar, const N: usize>(
                 let ic = D::constant(i);
                 let g = a * ic + effects::total_voltage_loss(&p.effects, ic) - rhs;
                 D::root(i, g, ar + dloss)
-            }
+            };
+            // The winding's charge balance over the sub-step: h·R·Ī = ∫(u − K_b·ω) dt −
+            // L·(I' − I) − h·(voltage loss), the loss held at its end value as above.
+            let mean = if w8.fast {
+                let emf = m.kb * (x[1] + w) / D::constant(2.0);
+                let loss = effects::total_voltage_loss(&p.effects, end);
+                (D::constant(u) - emf - loss - m.l / hd * (end - x[2])) / r
+            } else {
+                (x[2] + end) / D::constant(2.0)
+            };
+            (end, mean)
         }
     };
     let (z, fric) = match &p.lugre {
@@ -260,7 +274,7 @@ fn substep_residual<D: RunScalar, const N: usize>(
     let inputs = EffectInputs {
         theta,
         omega: w,
-        current,
+        current: mean_current,
         kt: m.kt,
     };
     let mut load = effects::total_torque_with_width(&p.effects, &inputs, p.sign_width);
@@ -282,8 +296,46 @@ fn substep_residual<D: RunScalar, const N: usize>(
             slot += 2;
         }
     }
-    let resid = m.j * (w - x[1]) / hd - m.kt * current + fric + load;
+    let resid = m.j * (w - x[1]) / hd - m.kt * mean_current + fric + load;
     (resid, next)
+}
+
+/// The weights of a sub-step's winding equation `c·(I' − I) + R·I' = u − K_b·ω_e`, exact
+/// for a held voltage `u` and a velocity changing linearly from `ω` to `ω'`.
+struct WindingWeights<D> {
+    /// `c` [Ω]: `R / (e^a − 1)` with `a = hR/L`, so that with a constant velocity the step is
+    /// the winding's exact response `I' = I·e^(−a) + (1 − e^(−a))·I∞` (backward Euler's
+    /// `L/h` is its first-order approximation).
+    inductance: D,
+    /// `β = 1/a − 1/(e^a − 1)`: the back-EMF's velocity is `ω_e = β·ω + (1 − β)·ω'` (½ each
+    /// for a slow winding, the end velocity for a fast one), the same weights as those of
+    /// the start and end currents in the current's mean when the velocity is constant.
+    start: D,
+    /// Whether `a` is large enough for the mean current from the winding's charge balance
+    /// (which divides by `R`); below, the trapezoid of the two currents, exact to `O(a)`.
+    fast: bool,
+}
+
+/// [`WindingWeights`] of a winding `l` [H], `r` [Ω] over a sub-step of `h` [s]: the current
+/// follows its held voltage exactly, so a sub-step longer than `L/R` keeps the current's
+/// lag and the torque's impulse right where backward Euler's would smear them.
+fn winding_weights<D: RunScalar>(l: D, r: D, h: f64) -> WindingWeights<D> {
+    let hd = D::constant(h);
+    let a = hd * r / l;
+    let em1 = a.exp_m1();
+    // `R/(e^a − 1)` is `L/h` at a = 0; `1/a − 1/(e^a − 1)` cancels for small |a|: its
+    // series, with an error below a⁵/30240.
+    let inductance = if a.re() == 0.0 { l / hd } else { r / em1 };
+    let start = if a.re().abs() < 1e-2 {
+        D::constant(0.5) - a / D::constant(12.0) + a * a * a / D::constant(720.0)
+    } else {
+        D::one() / a - D::one() / em1
+    };
+    WindingWeights {
+        inductance,
+        start,
+        fast: a.re().abs() >= 1e-6,
+    }
 }
 
 /// The model's numbers in the one-lane dual number of the sub-step's Newton iteration (the
