@@ -7,10 +7,12 @@
 //! Each sample is split into [`SUBSTEPS`] implicit sub-steps: backward Euler for (θ, ω), the
 //! bristle state updated *exactly* for the new velocity (`control::lugre::z_step`), and the
 //! winding's current exact for the held voltage with the velocity linear over the sub-step
-//! ([`WindingWeights`]; the rotor integrates the current's mean). L-stable at any step and
-//! exact at equilibria (stiction). Backward Euler's current would read the back-EMF half a
-//! sub-step early, an extra inertia `K_t·K_b/R·h/2` (4 % of the paper motor's J at 1 ms) that
-//! a fit takes out of J (decision 0030). The unknown of a sub-step is the new velocity: the
+//! ([`WindingWeights`]; the rotor integrates the current's mean). Stable at any step for a
+//! rotor whose electrical braking takes longer than a sub-step (`R·J/(K_t·K_b) ≥ h`; below
+//! that, backward Euler's weights, L-stable), and exact at equilibria (stiction). Backward
+//! Euler's current would read the back-EMF half a sub-step early, an extra inertia
+//! `K_t·K_b/R·h/2` (4 % of the paper motor's J at 1 ms) that a fit takes out of J
+//! (decision 0030). The unknown of a sub-step is the new velocity: the
 //! residual `J·(ω' − ω)/h − K_t·Ī(ω') + F_f(ω') + loads(ω')` increases with ω', so Newton's
 //! method on its exact slope, kept in a bracket, finds it in two or three evaluations. An exponential
 //! Rosenbrock scheme would diverge at LuGre breakaway, where the bilinear |ω|·z term changes
@@ -257,15 +259,11 @@ fn substep_residual<D: RunScalar, const N: usize>(
                 let g = a * ic + effects::total_voltage_loss(&p.effects, ic) - rhs;
                 D::root(i, g, ar + dloss)
             };
-            // The winding's charge balance over the sub-step: h·R·Ī = ∫(u − K_b·ω) dt −
-            // L·(I' − I) − h·(voltage loss), the loss held at its end value as above.
-            let mean = if w8.fast {
-                let emf = m.kb * (x[1] + w) / D::constant(2.0);
-                let loss = effects::total_voltage_loss(&p.effects, end);
-                (D::constant(u) - emf - loss - m.l / hd * (end - x[2])) / r
-            } else {
-                (x[2] + end) / D::constant(2.0)
-            };
+            // The mean over the sub-step: the weights of the two currents, and the
+            // velocity's change through the back-EMF (exact for the held voltage and linear
+            // velocity; with a voltage loss, the loss held at its end value as above).
+            let mean =
+                w8.start * x[2] + (D::one() - w8.start) * end + m.kb * (w - x[1]) * w8.emf_change;
             (end, mean)
         }
     };
@@ -310,17 +308,35 @@ fn substep_residual<D: RunScalar, const N: usize>(
 /// `h_th` (its resistance `R·(1 + h_th)`); unused by a torque plant.
 fn winding_of<D: RunScalar>(p: &RunParams<D>, h_th: D, h: f64) -> WindingWeights<D> {
     match p.plant {
-        Plant::Voltage => winding_weights(p.motor.l, p.motor.r * (D::one() + h_th), h),
+        Plant::Voltage => {
+            let m = &p.motor;
+            let r = m.r * (D::one() + h_th);
+            // The scheme's own limit: the rotor sees the back-EMF with the start velocity's
+            // weight β while its inertia takes backward Euler's step, which a rotor whose
+            // electrical braking settles it within a sub-step (`R·J/(K_t·K_b) < h`) can turn
+            // into a growing oscillation. There backward Euler's weights, stable for any step.
+            let braking = (m.kt * m.kb).re();
+            if braking > 0.0 && (r * m.j).re() < h * braking {
+                let hd = D::constant(h);
+                return WindingWeights {
+                    inductance: m.l / hd,
+                    start: D::zero(),
+                    emf_change: D::zero(),
+                };
+            }
+            winding_weights(m.l, r, h)
+        }
         Plant::Torque => WindingWeights {
             inductance: D::zero(),
             start: D::zero(),
-            fast: false,
+            emf_change: D::zero(),
         },
     }
 }
 
-/// The weights of a sub-step's winding equation `c·(I' − I) + R·I' = u − K_b·ω_e`, exact
-/// for a held voltage `u` and a velocity changing linearly from `ω` to `ω'`.
+/// The weights of a sub-step's winding equation `c·(I' − I) + R·I' = u − K_b·ω_e` and of
+/// the current's mean, exact for a held voltage `u` and a velocity changing linearly from
+/// `ω` to `ω'`.
 #[derive(Debug, Clone, Copy)]
 struct WindingWeights<D> {
     /// `c` [Ω]: `R / (e^a − 1)` with `a = hR/L`, so that with a constant velocity the step is
@@ -331,9 +347,9 @@ struct WindingWeights<D> {
     /// for a slow winding, the end velocity for a fast one), the same weights as those of
     /// the start and end currents in the current's mean when the velocity is constant.
     start: D,
-    /// Whether `a` is large enough for the mean current from the winding's charge balance
-    /// (which divides by `R`); below, the trapezoid of the two currents, exact to `O(a)`.
-    fast: bool,
+    /// `(h/L)·(½ − β)/a` [1/Ω]: the mean current's share of the back-EMF's change over the
+    /// sub-step, `Ī = β·I + (1 − β)·I' + K_b·(ω' − ω)·emf_change`.
+    emf_change: D,
 }
 
 impl<D: RunScalar> WindingWeights<D> {
@@ -342,7 +358,7 @@ impl<D: RunScalar> WindingWeights<D> {
         WindingWeights {
             inductance: self.inductance.re(),
             start: self.start.re(),
-            fast: self.fast,
+            emf_change: self.emf_change.re(),
         }
     }
 }
@@ -353,7 +369,7 @@ impl WindingWeights<f64> {
         WindingWeights {
             inductance: E::constant(self.inductance),
             start: E::constant(self.start),
-            fast: self.fast,
+            emf_change: E::constant(self.emf_change),
         }
     }
 }
@@ -365,8 +381,9 @@ fn winding_weights<D: RunScalar>(l: D, r: D, h: f64) -> WindingWeights<D> {
     let hd = D::constant(h);
     let a = hd * r / l;
     // In `e^(−a)` (no overflow, nor an infinite slope, for a winding far faster than the
-    // step): `R/(e^a − 1) = R·e^(−a)/(1 − e^(−a))`, `L/h` at a = 0; `1/a − 1/(e^a − 1)`
-    // cancels for small |a|: its series, with an error below a⁵/30240.
+    // step): `R/(e^a − 1) = R·e^(−a)/(1 − e^(−a))`, `L/h` at a = 0. `1/a − 1/(e^a − 1)` and
+    // `(½ − β)/a` cancel for small |a|: their series, with errors below a⁵/30240 and
+    // a⁶/1.2e6.
     let decay = (-a).exp();
     let rest = -(-a).exp_m1();
     let inductance = if a.re() == 0.0 {
@@ -379,10 +396,16 @@ fn winding_weights<D: RunScalar>(l: D, r: D, h: f64) -> WindingWeights<D> {
     } else {
         D::one() / a - decay / rest
     };
+    let a2 = a * a;
+    let half_less_start = if a.re().abs() < 0.1 {
+        D::constant(1.0 / 12.0) - a2 / D::constant(720.0) + a2 * a2 / D::constant(30240.0)
+    } else {
+        (D::constant(0.5) - start) / a
+    };
     WindingWeights {
         inductance,
         start,
-        fast: a.re().abs() >= 1e-6,
+        emf_change: hd / l * half_less_start,
     }
 }
 

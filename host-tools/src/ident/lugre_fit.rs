@@ -355,7 +355,9 @@ pub fn fit(req: &FitRequest) -> Result<Model> {
     };
     super::progress::report("static friction curve", 0, f64::NAN);
     let pts: Vec<SteadyPoint> = all_steady_points(&m, req.logs);
-    let other_start = start_dynamics(&mut m, req.logs, &pts, init)?;
+    // A fit with added effects refines from its own two starts (the weak form's and the
+    // base structure's, itself fitted from two bristle starts).
+    let other_start = start_dynamics(&mut m, req.logs, &pts, init, req.adds.is_empty())?;
     let free = free_parameters(req.plant);
     let mut dyn_rows = refine_from_starts(&mut m, other_start, &free, req)?;
     // The refinement can end where the inductance and inertia mimic a Stribeck bump (L
@@ -416,9 +418,6 @@ fn refine_from_starts(
     free: &[Free],
     req: &FitRequest,
 ) -> Result<Vec<crate::model::Parameter>> {
-    // A fit with added effects refines from its own two starts (the weak form's and the
-    // base structure's, itself fitted from two bristle starts).
-    let other = other.filter(|_| req.adds.is_empty());
     let Some((sigma0, sigma1)) = other else {
         return super::refine_free_run(m, free, req);
     };
@@ -426,31 +425,42 @@ fn refine_from_starts(
     if let Some(l) = second.lugre.as_mut() {
         (l.sigma0, l.sigma1) = (sigma0, sigma1);
     }
-    let (first_rows, second_rows) = rayon::join(
-        || super::refine_free_run(m, free, req),
-        || super::refine_free_run(&mut second, free, req),
-    );
+    // The first on this thread (its progress is the one shown), the second beside it.
+    let (first_rows, second_rows) = std::thread::scope(|s| {
+        let other = s.spawn(|| super::refine_free_run(&mut second, free, req));
+        let first = super::refine_free_run(m, free, req);
+        let other = other
+            .join()
+            .unwrap_or_else(|_| Err(anyhow::anyhow!("the second refinement panicked")));
+        (first, other)
+    });
     let res = sim_error::Residuals::new(req.logs, m.sensor.velocity_window);
-    let first_rows = first_rows?;
-    match second_rows {
-        Ok(rows) if sim_error::cost(&res, &second) < sim_error::cost(&res, m) => {
-            tracing::debug!("the second bristle start ends cheaper: σ0 {sigma0}, σ1 {sigma1}");
-            *m = second;
-            Ok(rows)
-        }
-        _ => Ok(first_rows),
+    let second_cost = |rows: &Result<_>| match rows {
+        Ok(_) => sim_error::cost(&res, &second),
+        Err(_) => f64::INFINITY,
+    };
+    let take_second = match &first_rows {
+        Ok(_) => second_cost(&second_rows) < sim_error::cost(&res, m),
+        Err(_) => second_rows.is_ok(),
+    };
+    if take_second {
+        tracing::debug!("the second bristle start ends cheaper: σ0 {sigma0}, σ1 {sigma1}");
+        *m = second;
+        return second_rows;
     }
+    first_rows
 }
 
 /// The start of the base structure's refinement: the static curve fitted to the steady
-/// points `pts` from `init`, then the bristles from a grid (below). Returns a second start
-/// (σ0, σ1) of another stiffness: the cheapest stiff start with another σ0 than the one
-/// taken.
+/// points `pts` from `init`, then the bristles from a grid (below). Returns, when
+/// `second` asks for it, a second start (σ0, σ1) of another stiffness: the cheapest stiff
+/// start with another σ0 than the one taken.
 fn start_dynamics(
     m: &mut Model,
     logs: &[MotorLog],
     pts: &[SteadyPoint],
     init: LugreParams,
+    second: bool,
 ) -> Result<Option<(f64, f64)>> {
     let (lugre, _static_se) = fit_static(pts, init, false)?;
     m.lugre = Some(lugre);
@@ -517,7 +527,7 @@ fn start_dynamics(
         let others: Vec<usize> = stiff
             .iter()
             .copied()
-            .filter(|&k| starts[k].0 != best.1)
+            .filter(|&k| second && starts[k].0 != best.1)
             .collect();
         let other_costs = sim_error::lowest_costs(&res, &in_order(&others), f64::INFINITY, |k| {
             trial(others[k])
