@@ -4,12 +4,17 @@
 //! the log's input alone, `u` held constant between samples (zero-order hold), as the board
 //! applies it. The plant is stiff at the 12 ms sample period (L/R ≈ 1.4 ms, LuGre σ0 ≈ 300
 //! N·m/rad; the paper's σ1 = 22 N·m·s/rad damps the rotor in presliding with J/σ1 ≈ 14 µs).
-//! Each sample is split into [`SUBSTEPS`] sub-steps of backward Euler for (θ, ω, I) with the
-//! bristle state updated *exactly* for the new velocity (`control::lugre::z_step`) — the
-//! scheme of the emulator (`emulator::plant`), L-stable at any step and exact at equilibria
-//! (stiction). The unknown of a sub-step is the new velocity: the residual
-//! `J·(ω' − ω)/h − K_t·I'(ω') + F_f(ω') + loads(ω')` increases with ω', so Newton's method on
-//! its exact slope, kept in a bracket, finds it in two or three evaluations. An exponential
+//! Each sample is split into [`SUBSTEPS`] implicit sub-steps: backward Euler for (θ, ω), the
+//! bristle state updated *exactly* for the new velocity (`control::lugre::z_step`), and the
+//! winding's current exact for the held voltage with the velocity linear over the sub-step
+//! ([`WindingWeights`]; the rotor integrates the current's mean). Stable at any step for a
+//! rotor whose electrical braking takes longer than a sub-step (`R·J/(K_t·K_b) ≥ h`; below
+//! that, backward Euler's weights, L-stable), and exact at equilibria (stiction). Backward
+//! Euler's current would read the back-EMF half a sub-step early, an extra inertia
+//! `K_t·K_b/R·h/2` (4 % of the paper motor's J at 1 ms) that a fit takes out of J
+//! (decision 0030). The unknown of a sub-step is the new velocity: the
+//! residual `J·(ω' − ω)/h − K_t·Ī(ω') + F_f(ω') + loads(ω')` increases with ω', so Newton's
+//! method on its exact slope, kept in a bracket, finds it in two or three evaluations. An exponential
 //! Rosenbrock scheme would diverge at LuGre breakaway, where the bilinear |ω|·z term changes
 //! within a step.
 //!
@@ -55,9 +60,9 @@ pub struct Prediction {
     pub z: Option<Vec<f64>>,
 }
 
-/// Number of backward-Euler sub-steps per sample: 1 ms at 12 ms. Against the emulator's
-/// 0.2 ms steps the velocity fit of the true model stays within ~1 point (tests), at 1/5 of
-/// the cost, which the parameter search needs.
+/// Number of implicit sub-steps per sample: 1 ms at 12 ms. Against the emulator's 0.2 ms
+/// steps the velocity fit of the true model stays within ~1 point (tests), at 1/5 of the
+/// cost, which the parameter search needs.
 pub const SUBSTEPS: usize = 12;
 
 /// Most loads behind a coupling (`compliance`, `backlash`) a free run carries.
@@ -204,10 +209,13 @@ impl RunParams<f64> {
 }
 
 /// The residual of a sub-step of length `h` from state `x` (input `u`, heat state `h_th`)
-/// at the new velocity `w`, and the new state: `J·(w − ω)/h − K_t·I(w) + F_f(w) + loads(w)`,
-/// with `I(w)` from the backward-Euler winding equation and the bristle state updated
+/// at the new velocity `w`, and the new state: `J·(w − ω)/h − K_t·Ī(w) + F_f(w) + loads(w)`,
+/// with the current's mean `Ī(w)` over the sub-step from the winding's exact step
+/// ([`WindingWeights`]) and the bristle state updated
 /// exactly for `w` (`control::lugre::z_step`). `re` holds the values of `p` (for the
-/// winding's scalar root with a voltage loss, solved in `f64`).
+/// winding's scalar root with a voltage loss, solved in `f64`); `w8` the winding's weights
+/// over the sub-step ([`winding_of`]).
+#[allow(clippy::too_many_arguments)]
 fn substep_residual<D: RunScalar, const N: usize>(
     p: &RunParams<D>,
     re: &RunParams<f64>,
@@ -215,18 +223,22 @@ fn substep_residual<D: RunScalar, const N: usize>(
     u: f64,
     h_th: D,
     h: f64,
+    w8: &WindingWeights<D>,
     w: D,
 ) -> (D, [D; N]) {
     let m = &p.motor;
     let hd = D::constant(h);
-    let current = match p.plant {
-        Plant::Torque => D::constant(u),
+    // The winding's current at the end of the sub-step and its mean over it (what the
+    // rotor's torque integrates), for a velocity changing linearly over the sub-step.
+    let (current, mean_current) = match p.plant {
+        Plant::Torque => (D::constant(u), D::constant(u)),
         Plant::Voltage => {
             let r = m.r * (D::one() + h_th);
-            let a = m.l / hd + r;
-            let rhs = m.l / hd * x[2] + D::constant(u) - m.kb * w;
+            let a = w8.inductance + r;
+            let emf_speed = w8.start * x[1] + (D::one() - w8.start) * w;
+            let rhs = w8.inductance * x[2] + D::constant(u) - m.kb * emf_speed;
             let vloss_max: f64 = re.effects.iter().map(|e| e.voltage_loss(1e9).abs()).sum();
-            if vloss_max == 0.0 {
+            let end = if vloss_max == 0.0 {
                 rhs / a
             } else {
                 let (ar, rr) = (a.re(), rhs.re());
@@ -246,7 +258,13 @@ fn substep_residual<D: RunScalar, const N: usize>(
                 let ic = D::constant(i);
                 let g = a * ic + effects::total_voltage_loss(&p.effects, ic) - rhs;
                 D::root(i, g, ar + dloss)
-            }
+            };
+            // The mean over the sub-step: the weights of the two currents, and the
+            // velocity's change through the back-EMF (exact for the held voltage and linear
+            // velocity; with a voltage loss, the loss held at its end value as above).
+            let mean =
+                w8.start * x[2] + (D::one() - w8.start) * end + m.kb * (w - x[1]) * w8.emf_change;
+            (end, mean)
         }
     };
     let (z, fric) = match &p.lugre {
@@ -260,7 +278,7 @@ fn substep_residual<D: RunScalar, const N: usize>(
     let inputs = EffectInputs {
         theta,
         omega: w,
-        current,
+        current: mean_current,
         kt: m.kt,
     };
     let mut load = effects::total_torque_with_width(&p.effects, &inputs, p.sign_width);
@@ -282,8 +300,113 @@ fn substep_residual<D: RunScalar, const N: usize>(
             slot += 2;
         }
     }
-    let resid = m.j * (w - x[1]) / hd - m.kt * current + fric + load;
+    let resid = m.j * (w - x[1]) / hd - m.kt * mean_current + fric + load;
     (resid, next)
+}
+
+/// The winding's weights over a sub-step of `h` [s] of the model `p` at the heat state
+/// `h_th` (its resistance `R·(1 + h_th)`); unused by a torque plant.
+fn winding_of<D: RunScalar>(p: &RunParams<D>, h_th: D, h: f64) -> WindingWeights<D> {
+    match p.plant {
+        Plant::Voltage => {
+            let m = &p.motor;
+            let r = m.r * (D::one() + h_th);
+            // The scheme's own limit: the rotor sees the back-EMF with the start velocity's
+            // weight β while its inertia takes backward Euler's step, which a rotor whose
+            // electrical braking settles it within a sub-step (`R·J/(K_t·K_b) < h`) can turn
+            // into a growing oscillation. There backward Euler's weights, stable for any step.
+            let braking = (m.kt * m.kb).re();
+            if braking > 0.0 && (r * m.j).re() < h * braking {
+                let hd = D::constant(h);
+                return WindingWeights {
+                    inductance: m.l / hd,
+                    start: D::zero(),
+                    emf_change: D::zero(),
+                };
+            }
+            winding_weights(m.l, r, h)
+        }
+        Plant::Torque => WindingWeights {
+            inductance: D::zero(),
+            start: D::zero(),
+            emf_change: D::zero(),
+        },
+    }
+}
+
+/// The weights of a sub-step's winding equation `c·(I' − I) + R·I' = u − K_b·ω_e` and of
+/// the current's mean, exact for a held voltage `u` and a velocity changing linearly from
+/// `ω` to `ω'`.
+#[derive(Debug, Clone, Copy)]
+struct WindingWeights<D> {
+    /// `c` [Ω]: `R / (e^a − 1)` with `a = hR/L`, so that with a constant velocity the step is
+    /// the winding's exact response `I' = I·e^(−a) + (1 − e^(−a))·I∞` (backward Euler's
+    /// `L/h` is its first-order approximation).
+    inductance: D,
+    /// `β = 1/a − 1/(e^a − 1)`: the back-EMF's velocity is `ω_e = β·ω + (1 − β)·ω'` (½ each
+    /// for a slow winding, the end velocity for a fast one), the same weights as those of
+    /// the start and end currents in the current's mean when the velocity is constant.
+    start: D,
+    /// `(h/L)·(½ − β)/a` [1/Ω]: the mean current's share of the back-EMF's change over the
+    /// sub-step, `Ī = β·I + (1 − β)·I' + K_b·(ω' − ω)·emf_change`.
+    emf_change: D,
+}
+
+impl<D: RunScalar> WindingWeights<D> {
+    /// Their values.
+    fn values(&self) -> WindingWeights<f64> {
+        WindingWeights {
+            inductance: self.inductance.re(),
+            start: self.start.re(),
+            emf_change: self.emf_change.re(),
+        }
+    }
+}
+
+impl WindingWeights<f64> {
+    /// The same weights as constants of another number type.
+    fn lift<E: RunScalar>(&self) -> WindingWeights<E> {
+        WindingWeights {
+            inductance: E::constant(self.inductance),
+            start: E::constant(self.start),
+            emf_change: E::constant(self.emf_change),
+        }
+    }
+}
+
+/// [`WindingWeights`] of a winding `l` [H], `r` [Ω] over a sub-step of `h` [s]: the current
+/// follows its held voltage exactly, so a sub-step longer than `L/R` keeps the current's
+/// lag and the torque's impulse right where backward Euler's would smear them.
+fn winding_weights<D: RunScalar>(l: D, r: D, h: f64) -> WindingWeights<D> {
+    let hd = D::constant(h);
+    let a = hd * r / l;
+    // In `e^(−a)` (no overflow, nor an infinite slope, for a winding far faster than the
+    // step): `R/(e^a − 1) = R·e^(−a)/(1 − e^(−a))`, `L/h` at a = 0. `1/a − 1/(e^a − 1)` and
+    // `(½ − β)/a` cancel for small |a|: their series, with errors below a⁵/30240 and
+    // a⁶/1.2e6.
+    let decay = (-a).exp();
+    let rest = -(-a).exp_m1();
+    let inductance = if a.re() == 0.0 {
+        l / hd
+    } else {
+        r * decay / rest
+    };
+    let start = if a.re().abs() < 1e-2 {
+        D::constant(0.5) - a / D::constant(12.0) + a * a * a / D::constant(720.0)
+    } else {
+        D::one() / a - decay / rest
+    };
+    let a2 = a * a;
+    let half_less_start = if a.re().abs() < 0.1 {
+        D::constant(1.0 / 12.0) - a2 / D::constant(720.0) + a2 * a2 / D::constant(30240.0)
+    } else {
+        (D::constant(0.5) - start) / a
+    };
+    WindingWeights {
+        inductance,
+        start,
+        emf_change: hd / l * half_less_start,
+    }
 }
 
 /// The model's numbers in the one-lane dual number of the sub-step's Newton iteration (the
@@ -299,7 +422,7 @@ struct RunModel<'a, D> {
     slope: &'a RunParams<Slope>,
 }
 
-/// One backward-Euler sub-step of length `h` (z exact) of the model `m`, from state x with
+/// One implicit sub-step of length `h` (z and the winding exact) of the model `m`, from state x with
 /// input u and heat state h_th. The new velocity is the root of [`substep_residual`]
 /// (increasing in it), found in `f64` by [`substep_velocity`] from `w_guess`; in dual
 /// numbers the new state then carries the implicit function's derivatives
@@ -313,16 +436,17 @@ fn implicit_step<D: RunScalar, const N: usize>(
     w_guess: f64,
     roots: &mut SubstepRoots,
 ) -> [D; N] {
+    let w8 = winding_of(m.p, h_th, h);
     let w = match roots.replay() {
         Some(w) => w,
         None => {
             let xr = x.map(|v| v.re());
-            let w = substep_velocity(m.re, m.slope, &xr, u, h_th.re(), h, w_guess);
+            let w = substep_velocity(m.re, m.slope, &xr, u, h_th.re(), h, &w8.values(), w_guess);
             roots.record(w);
             w
         }
     };
-    let (g, s) = substep_residual(m.p, m.re, x, u, h_th, h, D::unknown(w));
+    let (g, s) = substep_residual(m.p, m.re, x, u, h_th, h, &w8, D::unknown(w));
     s.map(|v| D::on_root(v, g))
 }
 
@@ -368,6 +492,7 @@ impl SubstepRoots<'_> {
 /// sub-steps' extrapolation. Where the slope is not positive (a residual that is not
 /// increasing there) and no bracket is known, the bracketing search of the emulator
 /// ([`find_root`]) takes over.
+#[allow(clippy::too_many_arguments)]
 fn substep_velocity<const N: usize>(
     re: &RunParams<f64>,
     slope: &RunParams<Slope>,
@@ -375,13 +500,15 @@ fn substep_velocity<const N: usize>(
     u: f64,
     h_th: f64,
     h: f64,
+    w8: &WindingWeights<f64>,
     w_guess: f64,
 ) -> f64 {
     let xtol = 1e-11 * (1.0 + x[1].abs());
     let xs = x.map(Slope::constant);
     let hs = Slope::constant(h_th);
+    let w8s = w8.lift::<Slope>();
     let eval = |w: f64| {
-        let g = substep_residual(slope, re, &xs, u, hs, h, Slope::unknown(w)).0;
+        let g = substep_residual(slope, re, &xs, u, hs, h, &w8s, Slope::unknown(w)).0;
         (g.re, g.eps[0])
     };
     let (mut lo, mut hi) = (f64::NEG_INFINITY, f64::INFINITY);
@@ -421,7 +548,7 @@ fn substep_velocity<const N: usize>(
         }
         w = next;
     }
-    let g = |w: f64| substep_residual(re, re, x, u, h_th, h, w).0;
+    let g = |w: f64| substep_residual(re, re, x, u, h_th, h, w8, w).0;
     let step0 = g(w_guess).abs() * h / re.motor.j + 1e-9;
     find_root(g, w_guess, step0, xtol)
 }
