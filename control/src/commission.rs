@@ -931,6 +931,18 @@ mod tests {
         r: f32,
         sense: impl Fn(f32, usize) -> f32,
     ) -> (Result<Commissioning, CommissionError>, Option<f32>) {
+        run_to(seq, start, r, sense, |_, centre, _| centre)
+    }
+
+    /// [`run_with`] on a rotor that turns to `to(commissioner, held centre's sector, its own
+    /// sector)` instead of the held centre.
+    fn run_to(
+        seq: [u8; 6],
+        start: u8,
+        r: f32,
+        sense: impl Fn(f32, usize) -> f32,
+        to: impl Fn(&Commissioner, u8, u8) -> u8,
+    ) -> (Result<Commissioning, CommissionError>, Option<f32>) {
         let mut c = Commissioner::new(2.0, 10.0, 0.4, 0.2, K_EMF);
         let mut rotor = Rotor { seq, sector: start };
         // Edges arrive with the next period's measurement.
@@ -943,7 +955,8 @@ mod tests {
                     i = (volts - 0.4).max(0.0) / (PATH_R_SHARE * r);
                     if i > BREAKAWAY {
                         let mut e = Vec::new();
-                        rotor.turn_to(centre_sector(low), &mut e);
+                        let target = to(&c, centre_sector(low), rotor.sector);
+                        rotor.turn_to(target, &mut e);
                         edges.extend(e);
                     }
                 }
@@ -1042,29 +1055,20 @@ mod tests {
     #[test]
     fn a_backward_pass_that_reads_otherwise_is_inconsistent() {
         // The rotor stops one sector short of the centre when it comes from above.
-        let mut c = Commissioner::new(2.0, 10.0, 0.4, 0.2, K_EMF);
-        let mut rotor = Rotor {
-            seq: DEFAULT_SEQUENCE,
-            sector: 0,
-        };
-        let mut edges = Vec::new();
-        let mut i = 0.0;
-        let res = loop {
-            match c.tick(rotor.hall(), edges.drain(..), false, i) {
-                CommissionStep::Done(r) => break r,
-                CommissionStep::Hold { low, volts } => {
-                    i = winding(volts);
-                    if i <= BREAKAWAY {
-                        continue;
-                    }
-                    let to = centre_sector(low);
-                    let mut e = Vec::new();
-                    let down = (to + 6 - rotor.sector) % 6 > 3;
-                    rotor.turn_to(if down { (to + 1) % 6 } else { to }, &mut e);
-                    edges.extend(e);
+        let (res, _) = run_to(
+            DEFAULT_SEQUENCE,
+            0,
+            0.2,
+            |i, _| i,
+            |_, to, sector| {
+                let down = (to + 6 - sector) % 6 > 3;
+                if down {
+                    (to + 1) % 6
+                } else {
+                    to
                 }
-            }
-        };
+            },
+        );
         assert_eq!(res, Err(CommissionError::Inconsistent));
     }
 
@@ -1094,28 +1098,19 @@ mod tests {
     fn two_reads_of_the_last_centre_that_differ_are_inconsistent() {
         // The rotor stops one sector short of the last centre at the end of the first pass
         // only: the counted revolution then starts elsewhere, but the fault is the read.
-        let mut c = Commissioner::new(2.0, 10.0, 0.4, 0.2, K_EMF);
-        let mut rotor = Rotor {
-            seq: DEFAULT_SEQUENCE,
-            sector: 0,
-        };
-        let mut edges = Vec::new();
-        let mut i = 0.0;
-        let res = loop {
-            match c.tick(rotor.hall(), edges.drain(..), false, i) {
-                CommissionStep::Done(r) => break r,
-                CommissionStep::Hold { low, volts } => {
-                    i = winding(volts);
-                    if i <= BREAKAWAY {
-                        continue;
-                    }
-                    let to = centre_sector(low);
-                    let mut e = Vec::new();
-                    rotor.turn_to(if c.hold == 2 { to - 1 } else { to }, &mut e);
-                    edges.extend(e);
+        let (res, _) = run_to(
+            DEFAULT_SEQUENCE,
+            0,
+            0.2,
+            |i, _| i,
+            |c, to, _| {
+                if c.hold == 2 {
+                    to - 1
+                } else {
+                    to
                 }
-            }
-        };
+            },
+        );
         assert_eq!(res, Err(CommissionError::Inconsistent));
     }
 

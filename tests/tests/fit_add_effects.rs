@@ -219,20 +219,9 @@ fn the_loop_adds_position_load_and_closes_half_the_gap() {
 /// least three.
 #[test]
 fn the_loop_adds_cogging_on_most_draws() {
-    let queue = std::sync::Mutex::new((1..=5u64).collect::<Vec<_>>());
-    let rows = std::sync::Mutex::new(Vec::new());
-    std::thread::scope(|s| {
-        for _ in 0..2 {
-            s.spawn(|| loop {
-                let Some(seed) = queue.lock().unwrap().pop() else {
-                    break;
-                };
-                let r = case_with_seed(EffectKind::Cogging, Some(seed));
-                rows.lock().unwrap().push((seed, r));
-            });
-        }
+    let mut rows = on_two_threads((1..=5u64).collect(), |seed| {
+        (seed, case_with_seed(EffectKind::Cogging, Some(seed)))
     });
-    let mut rows = rows.into_inner().unwrap();
     rows.sort_by_key(|r| r.0);
     let mut good = 0;
     for (seed, r) in &rows {
@@ -256,37 +245,45 @@ fn the_loop_adds_cogging_on_most_draws() {
     );
 }
 
-fn check(effects: Vec<EffectKind>) {
-    // Two worker threads (the effects are independent fits).
-    let queue = std::sync::Mutex::new(effects.clone());
+/// `f` of every item on two worker threads (the cases are independent fits), in the order
+/// they finish.
+fn on_two_threads<T: Send, R: Send>(items: Vec<T>, f: impl Fn(T) -> R + Sync) -> Vec<R> {
+    let queue = std::sync::Mutex::new(items);
     let rows = std::sync::Mutex::new(Vec::new());
     std::thread::scope(|s| {
         for _ in 0..2 {
             s.spawn(|| loop {
-                let Some(k) = queue.lock().unwrap().pop() else {
+                let Some(item) = queue.lock().unwrap().pop() else {
                     break;
                 };
-                let r = case(k);
-                eprintln!(
-                    "{:<14} base {:7.2}  refit {}  truth {:7.2}  added {:?}, refitted {}; \
-                     gap closed on the selection log {}; look-alikes {:?}; stop {:?}",
-                    r.effect,
-                    r.base.0,
-                    r.refit
-                        .map_or("   none".to_string(), |x| format!("{:7.2}", x.0)),
-                    r.truth.0,
-                    r.added,
-                    r.refitted,
-                    r.closed_on_selection
-                        .map_or("none".to_string(), |c| format!("{:.0} %", 100.0 * c)),
-                    r.look_alikes,
-                    r.stop
-                );
+                let r = f(item);
                 rows.lock().unwrap().push(r);
             });
         }
     });
-    let rows = rows.into_inner().unwrap();
+    rows.into_inner().unwrap()
+}
+
+fn check(effects: Vec<EffectKind>) {
+    let rows = on_two_threads(effects, |k| {
+        let r = case(k);
+        eprintln!(
+            "{:<14} base {:7.2}  refit {}  truth {:7.2}  added {:?}, refitted {}; \
+             gap closed on the selection log {}; look-alikes {:?}; stop {:?}",
+            r.effect,
+            r.base.0,
+            r.refit
+                .map_or("   none".to_string(), |x| format!("{:7.2}", x.0)),
+            r.truth.0,
+            r.added,
+            r.refitted,
+            r.closed_on_selection
+                .map_or("none".to_string(), |c| format!("{:.0} %", 100.0 * c)),
+            r.look_alikes,
+            r.stop
+        );
+        r
+    });
     println!(
         "velocity fit % on a test draw of signal b: free run vs the true velocity | through \
          the sensor chain vs the measured one"
