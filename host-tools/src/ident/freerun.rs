@@ -427,16 +427,17 @@ struct RunModel<'a, D> {
 /// (increasing in it), found in `f64` by [`substep_velocity`] from `w_guess`; in dual
 /// numbers the new state then carries the implicit function's derivatives
 /// ([`RunScalar::on_root`]). The new velocity is taken from `roots` when it replays a tape.
+#[allow(clippy::too_many_arguments)]
 fn implicit_step<D: RunScalar, const N: usize>(
     m: &RunModel<D>,
     x: &[D; N],
     u: f64,
     h_th: D,
     h: f64,
+    w8: &WindingWeights<D>,
     w_guess: f64,
     roots: &mut SubstepRoots,
 ) -> [D; N] {
-    let w8 = winding_of(m.p, h_th, h);
     let w = match roots.replay() {
         Some(w) => w,
         None => {
@@ -446,7 +447,7 @@ fn implicit_step<D: RunScalar, const N: usize>(
             w
         }
     };
-    let (g, s) = substep_residual(m.p, m.re, x, u, h_th, h, &w8, D::unknown(w));
+    let (g, s) = substep_residual(m.p, m.re, x, u, h_th, h, w8, D::unknown(w));
     s.map(|v| D::on_root(v, g))
 }
 
@@ -939,6 +940,14 @@ impl<D: RunScalar> RangeRun<'_, D> {
             load: Vec::with_capacity(if loads > 0 { n } else { 0 }),
         };
         let sub = substeps.max(1);
+        // The winding's weights over a sub-step change with its length and, through the
+        // resistance, with the heat state: without a thermal effect they are kept for the
+        // next sub-step of the same length.
+        let heats = p
+            .effects
+            .iter()
+            .any(|e| matches!(e, Effect::Thermal { .. }));
+        let mut winding_at: Option<(f64, WindingWeights<D>)> = None;
         for k in 0..n {
             out.theta.push(x[0]);
             out.omega.push(x[1]);
@@ -972,7 +981,17 @@ impl<D: RunScalar> RangeRun<'_, D> {
                 let w = x[1].re();
                 let guess = w + (w - w_prev);
                 w_prev = w;
-                x = implicit_step(&model, &x, u, h, dt, guess, roots);
+                let w8 = match winding_at {
+                    Some((at, w8)) if at == dt => w8,
+                    _ => {
+                        let w8 = winding_of(p, h, dt);
+                        if !heats {
+                            winding_at = Some((dt, w8));
+                        }
+                        w8
+                    }
+                };
+                x = implicit_step(&model, &x, u, h, dt, &w8, guess, roots);
                 for e in &p.effects {
                     h = e.heat_step(h, x[2], D::constant(dt));
                 }
