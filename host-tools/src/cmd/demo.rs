@@ -34,8 +34,9 @@ pub const DEFAULT_EFFECT: EffectKind = EffectKind::Offset;
 /// the variable that carries it.
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Unnamed {
-    /// A fan or pump on the shaft: an aerodynamic drag `c·ω·|ω|` ([`FAN_DRAG`]), quadratic in
-    /// the speed where the list's friction laws are constant or linear in it.
+    /// A fan or pump on the shaft: an aerodynamic drag c·ω·|ω| with c = 1e-5 N·m·s²/rad²
+    /// (0.016 N·m at 40 rad/s), quadratic in the speed where the list's friction laws are
+    /// constant or linear in it.
     Fan,
 }
 
