@@ -370,9 +370,10 @@ fn passes(
     opts: &Options,
 ) -> (equations::Outcome, f64) {
     // The model's own equations with its own numbers, for the verdict.
+    let run_current = run.and_then(|g| g.s.i.as_deref());
     let (mut given_mech, mut given_elec) = match st
         .motor
-        .map(|m| verdict::given_residuals(&f.s, &f.wf, &f.wf_m, &st.effects, &m))
+        .map(|m| verdict::given_residuals(&f.s, &f.wf, &f.wf_m, &st.effects, &m, run_current))
     {
         Some((m, e)) => (Some(m), e),
         None => (None, None),
@@ -380,7 +381,8 @@ fn passes(
     // Less the same residual on the model's own noise-free run: what the discrete equations
     // leave of a perfect model's motion, which a correct model's data leave too.
     if let (Some(g), Some(m)) = (run, st.motor) {
-        let (on_run, on_run_elec) = verdict::given_residuals(&g.s, &g.wf, &g.wf_m, &st.effects, &m);
+        let (on_run, on_run_elec) =
+            verdict::given_residuals(&g.s, &g.wf, &g.wf_m, &st.effects, &m, None);
         less_own_run(&mut given_mech, Some(on_run));
         less_own_run(&mut given_elec, on_run_elec);
     }
@@ -420,7 +422,7 @@ fn less_own_run(given: &mut Option<Vec<f64>>, on_run: Option<Vec<f64>>) {
 
 /// The model as given, run by the emulator on the log's input ([`extrapolated_run`];
 /// voltage plant, motor constants and a measured current only): the log with its angle and current replaced by
-/// the run's true, noise-free ones. The parameter check takes its instruments from it
+/// the run's noise-free ones (the current as the model's sensor reads it). The parameter check takes its instruments from it
 /// ([`verdict::parameter_check`]): columns computed from the measured angle carry the
 /// angle's rounding error, which the model's residual carries too, and their correlation
 /// is an errors-in-variables bias that a refit reads as wrong parameters (an inertia 20-40 %
@@ -459,9 +461,11 @@ fn simulated_log(log: &MotorLog, st: &Structure) -> Option<MotorLog> {
     if theta.len() != log.len() || i.len() != log.len() {
         return None;
     }
+    // The log holds the current as the model's sensor reads it: its offset included.
+    let i0 = control::effects::total_sensor_offset(&cfg.effects);
     let mut out = log.clone();
     out.theta = theta;
-    out.i = Some(i);
+    out.i = Some(i.into_iter().map(|c| c + i0).collect());
     Some(out)
 }
 
@@ -785,7 +789,7 @@ fn too_few_windows(j: &Judged) -> verdict::Check {
         note: None,
         drift: None,
         detail: format!(
-            "{} equation: only {} usable windows (at least {MIN_VERDICT_ROWS} are needed to test the residual); record a longer log with more motion",
+            "{}: only {} usable windows (at least {MIN_VERDICT_ROWS} are needed to test the residual); record a longer log with more motion",
             j.eq.label(),
             j.base.len()
         ),
@@ -899,7 +903,7 @@ fn untested_carriers(j: &Judged, untested: &[&str]) -> Option<verdict::Check> {
         note: None,
         drift: None,
         detail: format!(
-            "{} equation: cannot judge what {} carry: too few windows or held inputs for the test to reject anything",
+            "{}: cannot judge what {} carry: too few windows or held inputs for the test to reject anything",
             j.eq.label(),
             untested.join(", ")
         ),
