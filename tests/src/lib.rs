@@ -120,3 +120,4 @@ sigma1 = 22.2464
 "#;
 pub mod false_alarms;
 pub mod other_plant;
+pub mod plant_cases;

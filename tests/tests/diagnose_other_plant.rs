@@ -15,6 +15,7 @@
 use control::effects::Effect;
 use control::motor::MotorParams;
 use e2e::other_plant::{Extra, OtherPlant};
+use e2e::plant_cases::{case, Case, NAMES};
 use motorid::emulator::{signal, SignalKind};
 use motorid::log::{MotorLog, Plant};
 use motorid::model::{Model, ModelKind};
@@ -25,111 +26,6 @@ const SECONDS: f64 = 60.0;
 const SEEDS: [u64; 3] = [1, 2, 3];
 /// Seeds of 3 on which the name must be reported (see the file's doc).
 const NAMED_AT_LEAST: usize = 2;
-
-/// One hidden effect: the plant's physics, whether the given model keeps the plant's
-/// viscous friction, and the signals it is judged on.
-struct Case {
-    extra: Extra,
-    viscous_in_model: bool,
-    signals: &'static [SignalKind],
-}
-
-/// The multisine a for all; the voltage steps d (braking from speed, held voltages) where
-/// the effect shows in braking, at rest or in heat.
-const A: &[SignalKind] = &[SignalKind::A];
-const AD: &[SignalKind] = &[SignalKind::A, SignalKind::D];
-
-/// The cases, with the sizes a real motor of this plant's class (R 0.22 Ω, K_t 0.071 N·m/A,
-/// J 3.1e-4 kg·m², Coulomb 0.085 N·m; rated torque about 0.4 N·m, a 24 V bridge) shows.
-fn case(name: &str) -> Case {
-    let (extra, viscous_in_model, signals) = match name {
-        // A slotted motor's cogging is 1-5 % of its rated torque: 10 mN·m (2.5 %) at the
-        // slot frequency of a 6-slot stator, its second harmonic 4 mN·m.
-        "cogging" => (
-            Extra::SlotCogging {
-                slots: 6,
-                a1: 0.010,
-                p1: 0.7,
-                a2: 0.004,
-                p2: 2.1,
-            },
-            true,
-            A,
-        ),
-        // 0.5 µs dead time per edge at 20 kHz on a 24 V bus loses 24·0.5e-6·20e3 = 0.24 V;
-        // the sign of the current passes through zero across the PWM ripple, ±0.3 A.
-        "deadtime" => (
-            Extra::DeadTime {
-                vd: 0.24,
-                band: 0.3,
-            },
-            true,
-            AD,
-        ),
-        // A small motor's winding: about 16 g of copper (6 J/K) and 10 K/W to still air
-        // without a heatsink (a one-minute time constant); copper's 0.393 %/K.
-        "thermal" => (
-            Extra::Heating {
-                r_th: 10.0,
-                c_th: 6.0,
-            },
-            true,
-            AD,
-        ),
-        // Three counts of a 12-bit ADC on a 3 mΩ shunt with gain 9 (29 mA a count) left by
-        // an offset calibration done cold.
-        "current_offset" => (Extra::SensorOffset { i0: 0.09 }, true, AD),
-        // A constant load of a quarter of the Coulomb friction: a spring's preload, a
-        // vertical axis not quite balanced.
-        "offset" => (Extra::ConstantLoad { t0: 0.02 }, true, AD),
-        // 50 g out of balance at 4 cm under gravity (0.0196 N·m) and a second harmonic of a
-        // quarter of it from the mount's eccentricity.
-        "position_load" => (
-            Extra::Unbalance {
-                a1: 0.0196,
-                p1: 1.1,
-                a2: 0.005,
-                p2: -0.4,
-            },
-            true,
-            A,
-        ),
-        // A two-stage planetary gearhead passes 75 % of the torque it transmits (catalogue
-        // efficiencies of 70-80 %); the gearhead and its load are two thirds of the inertia.
-        "load_friction" => (
-            Extra::GearFriction {
-                mu: 0.25,
-                j_load: 2.0e-4,
-            },
-            true,
-            AD,
-        ),
-        // Static friction 30 % above Coulomb (lubricated contacts: 1.1-1.5 times), falling
-        // by half at 2.5 rad/s.
-        "stribeck" => (Extra::Breakaway { fs: 0.025, vs: 2.5 }, true, AD),
-        // The plant's own viscous friction (1.5e-3 N·m·s/rad), left out of the model.
-        "viscous" => (Extra::None, false, A),
-        _ => unreachable!("no case {name}"),
-    };
-    Case {
-        extra,
-        viscous_in_model,
-        signals,
-    }
-}
-
-/// Every hidden effect, in the order of the table.
-const NAMES: [&str; 9] = [
-    "cogging",
-    "deadtime",
-    "thermal",
-    "current_offset",
-    "offset",
-    "position_load",
-    "load_friction",
-    "stribeck",
-    "viscous",
-];
 
 /// What `diagnose --json` said on one log.
 struct Outcome {

@@ -7,6 +7,7 @@
 use control::effects::Effect;
 use e2e::false_alarms::{correct_structure, Maker};
 use e2e::other_plant::{Extra, OtherPlant};
+use e2e::plant_cases::verdict_cases;
 use motorid::diagnose::{diagnose, Diagnosis, Options, Structure};
 use motorid::emulator::{signal, SignalKind};
 
@@ -296,43 +297,6 @@ fn write_verdict_table() {
     let path = e2e::root().join("docs").join("diagnose-verdict.md");
     std::fs::write(&path, md).unwrap();
     eprintln!("wrote {}", path.display());
-}
-
-/// The cases of the verdict table: a name, the plant's extra physics and the signal.
-fn verdict_cases() -> [(&'static str, Extra, SignalKind); 7] {
-    [
-        ("correct model", Extra::None, SignalKind::A),
-        ("correct model", Extra::None, SignalKind::D),
-        (
-            "compliant coupling (5 Hz two-mass resonance), load 2× rotor",
-            Extra::Coupling {
-                j2: 6e-4,
-                k: 0.2,
-                c: 6e-4,
-            },
-            SignalKind::A,
-        ),
-        (
-            "gap 0.5 rad, load 2× rotor",
-            Extra::Gap { j2: 6e-4, gap: 0.5 },
-            SignalKind::A,
-        ),
-        (
-            "K_t falling with current (table)",
-            Extra::FallingKt,
-            SignalKind::D,
-        ),
-        (
-            "K_t falling with current (table)",
-            Extra::FallingKt,
-            SignalKind::A,
-        ),
-        (
-            "Coulomb friction +100 %/min",
-            Extra::CreepingCoulomb { per_minute: 1.0 },
-            SignalKind::A,
-        ),
-    ]
 }
 
 const VERDICT_TABLE_HEAD: &str = "# What `diagnose` says on a plant it did not make\n\n\
