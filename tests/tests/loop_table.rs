@@ -100,10 +100,15 @@ fn said(d: &Diagnosis) -> String {
             .map(|c| format!("failed {}", c.name)),
     );
     parts.dedup();
-    if d.verdict.judged {
-        format!("not adequate: {}", parts.join(", "))
+    let verdict = if d.verdict.judged {
+        "not adequate"
     } else {
-        format!("cannot judge: {}", parts.join(", "))
+        "cannot judge"
+    };
+    if parts.is_empty() {
+        verdict.to_string()
+    } else {
+        format!("{verdict}: {}", parts.join(", "))
     }
 }
 
