@@ -1013,11 +1013,9 @@ fn commission_on(
     replies(&mut emu);
     emu.handle(&HostMsg::Commission);
     let (mut at_rest, mut peak) = (0.0f64, 0.0f64);
-    // The longest run: every aligning pass repeated, and then some.
-    let periods = usize::from(control::commission::HOLD_PERIODS)
-        * (usize::from(control::commission::HOLDS)
-            + 3 * usize::from(control::commission::RAMP_ALIGN_REPEATS)
-            + 1);
+    // The longest run, and then some.
+    let periods = usize::from(control::commission::RUN_PERIODS_MAX)
+        + usize::from(control::commission::HOLD_PERIODS);
     for _ in 0..periods {
         emu.tick();
         peak = peak.max(emu.hardware().peak_current());
