@@ -1539,6 +1539,16 @@ mod tests {
     }
 
     #[test]
+    fn the_stated_back_emf_constant_is_the_default_blobs() {
+        let co = crate::blob::Coefficients::default();
+        let k = co.motor.kb / f32::from(co.pole_pairs);
+        assert!(
+            (k - RAMP_K_EMF).abs() <= 1e-6 * RAMP_K_EMF,
+            "{k} vs {RAMP_K_EMF}"
+        );
+    }
+
+    #[test]
     fn a_step_never_grows_the_voltage_by_more_than_the_cap() {
         // No dead time to allow for, a current at the floor at 1 V (a winding of several
         // ohms) and a long window: the bound through the winding's R alone would grow the
