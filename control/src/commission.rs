@@ -424,7 +424,7 @@ impl Commissioner {
     /// (the expected current, through [`PATH_R_SHARE`] of it) and whose back-EMF per
     /// electrical radian and second it gives as `k_emf` [V·s/rad] (the back-EMF constant
     /// over the pole pairs: how slowly a rotor hiding a current from the samples may creep,
-    /// module docs; not finite or below 0: 0).
+    /// module docs; not finite or below 0: 0; [`RAMP_K_EMF`] where that is larger).
     pub fn new(volts: f32, i_limit: f32, v_dead: f32, r_model: f32, k_emf: f32) -> Self {
         Commissioner {
             hold: 0,
