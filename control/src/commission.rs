@@ -47,7 +47,8 @@
 //!   legs alike: about 0.24 V at 500 ns, 20 kHz and 24 V), and the difference cancels it, as
 //!   it does the current sense's offset ([`Commissioner::resistance`]).
 //!
-//! Each hold lasts [`HOLD_PERIODS`] control periods: the first half at the run's voltage
+//! Each hold lasts [`HOLD_PERIODS`] control periods (the first longer while the current ramp
+//! below runs, at the higher level throughout): the first half at the run's voltage
 //! `V_hi` (the rotor turns up to 120° and settles), then a quarter at the lower level
 //! `V_lo = V_d + `[`LOW_LEVEL`]`·(V_hi − V_d)` and the last quarter at `V_hi` again (the Hall
 //! state is read at the end, under full torque); the current is averaged over each of the
@@ -59,49 +60,61 @@
 //! The voltage is chosen by the caller (the board logic limits it to a fraction of `u_max`
 //! and to the voltage that drives a fraction of `i_max` through the path's share of the
 //! blob's R, which may not be the motor's); the measured current then bounds it:
-//! - the first holds ramp the voltage up from `V_b = V_d/`[`RAMP_DROP_ERROR`], the smallest
+//! - the first hold ramps the voltage up from `V_b = V_d/`[`RAMP_DROP_ERROR`], the smallest
 //!   drop allowed for (the true drop `V_t` lies in `[V_d/2, 2·V_d]`, so `c = V_t − V_b` in
-//!   `[0, 1.5·V_d]`): the current at `V = V_b + x` is `(x − c)/(¾·R)`. The ramp starts at
-//!   `x₀ = ¾·`[`RAMP_R_MIN`]`·i_t`, with `i_t = `[`RAMP_TARGET`]`·i_limit`, which drives
-//!   at most `i_t` through any R from [`RAMP_R_MIN`] up. Each voltage is held at least two
-//!   periods, and the ramp steps only from samples of a resting rotor (a turning rotor's
-//!   back-EMF lowers them, and a step taken from them overshoots once it stops): no Hall
-//!   edge over the two periods, the last three samples `i₀, i₁, i₂` moving as a resting
-//!   first-order lag does (`i₂ − i₁ = q·(i₁ − i₀)`, `q = e^(−T·R/L)` in
-//!   `[0, e^(−1/`[`RAMP_LAG_PERIODS`]`)]`, within [`RAMP_SENSE_NOISE`]), and the current at
-//!   least any earlier sample above [`RAMP_CURRENT_FLOOR`] that passed these tests, scaled
-//!   by the voltages (a drop of at least 0 makes the resting current grow at least in
-//!   proportion to the voltage; a single noisy reading passes no lag test, so it cannot
-//!   hold the ramp); otherwise the voltage is held. From the two currents sampled `i₁, i₂`
-//!   the steady current of a resting rotor is at most
-//!   `i_s = i₂ + `[`RAMP_LAG_PERIODS`]`·max(i₂ − i₁, 0)` for L/R up to that many periods
-//!   (the remaining rise of an exponential is `Δ/(e^(T·R/L) − 1) ≤ Δ·L/(R·T)`). Growing `x` by
-//!   `g` moves the steady current to `g·i_s + (g − 1)·c/(¾·R)`; with
-//!   `g − 1 = (i_t − i_s)/(i_s + 1.5·V_d/(¾·R_min))` that is at most `i_t` for every
-//!   `R ≥ R_min` and drop in the range, so the current approaches the target from below.
-//!   All of this is the current of a resting rotor; the ramp bounds nothing else (a rotor
-//!   swinging past a centre adds its back-EMF for a moment).
-//!   Below [`RAMP_CURRENT_FLOOR`] (and until a current above it has passed the rest test as
-//!   below) the samples cannot tell rest from a rotor creeping at the speed where its
-//!   back-EMF `k·g·ω` (`k` the back-EMF per electrical radian and second, `g ≤ 1` the
-//!   vector's torque factor) takes the voltage: it draws only its friction's current and
-//!   hides `h = k·g·ω/(¾·R)`. Such a rotor turns at `ω ≥ ¾·R·h/k` and so crosses a Hall
-//!   edge (60° electrical) within `(π/3)·k/(¾·R·h)`, unless it arrives at the centre and
-//!   rests. The ramp steps from these samples only after a window of `W` periods at its
-//!   voltage without a Hall edge, `W·T = (π/3)·k/(¾·R_min·h_w)` with
-//!   `h_w = (i_t − floor)/2`, and by `Δx = ¾·R_min·(i_t − floor − h_w)`: a step adds at most
-//!   `Δx/(¾·R)` to a resting current whatever the drop, so the current at rest stays below
-//!   `floor + h_w + (i_t − floor − h_w) = i_t`. `k` is the blob's back-EMF constant over its
-//!   pole pairs; a motor with a larger one may hide more. While these steps run the lower
-//!   level is not driven, and the first (aligning) pass is repeated up to
-//!   [`RAMP_ALIGN_REPEATS`] times while the ramp runs. The ramp ends once `i_s` reaches
-//!   [`RAMP_END`] of the target, at the run's voltage, or at the backward pass (short of
-//!   [`CURRENT_SHARE`] of its target: [`CommissionError::RampStalled`] if the run fails);
-//!   only the higher level's periods step it (the lower level's quarter holds the voltage
-//!   before it and returns to it), and no level samples are taken meanwhile. Below
-//!   [`RAMP_R_MIN`], with a drop outside the range, or with a current sense off by more
-//!   than the target's margin the ramp may pass `i_limit`; the limit below then cuts the
-//!   voltage at the next period;
+//!   `[0, c_m]`, `c_m = 1.5·V_d`): the current at `V = V_b + x` is `(x − c − e)/R'` for a
+//!   path resistance `R' = ¾·R` and a rotor back-EMF `e`. The ramp starts at
+//!   `x₀ = R'_min·i_t` (`R'_min = ¾·`[`RAMP_R_MIN`], `i_t = `[`RAMP_TARGET`]`·i_limit`),
+//!   which drives at most `i_t` through any R from [`RAMP_R_MIN`] up. The first hold lasts
+//!   until the ramp ends, at one level (no lower level: nothing samples it), so that the
+//!   rotor rests under its field and every later hold runs at the voltage it ends at. A step
+//!   is taken from two samples `i₁, i₂` at one voltage, and only when:
+//!   - they look like a resting winding: no Hall edge over the two periods, the last three
+//!     samples `i₀, i₁, i₂` moving as a resting first-order lag does
+//!     (`i₂ − i₁ = q·(i₁ − i₀)`, `q = e^(−T·R/L)` in `[0, e^(−1/`[`RAMP_LAG_PERIODS`]`)]`,
+//!     within [`RAMP_SENSE_NOISE`]), and the current at least that of the earlier step's
+//!     sample above [`RAMP_CURRENT_FLOOR`] largest against its voltage, scaled by the
+//!     voltages (a drop of at least 0 makes a resting current grow at least in proportion
+//!     to the voltage, so a rotor at a constant creep falls below it);
+//!   - and the voltage has been held `n` periods without a Hall edge, `n` the window below.
+//!     A rotor whose back-EMF `e = k·g·ω` (`k` the back-EMF per electrical radian and
+//!     second, `g ≤ 1` the vector's torque factor) hides `e/R'` from the samples turns at
+//!     `ω ≥ e/k` and crosses 60° electrical, a Hall edge, within `(π/3)·k/e`, unless it
+//!     comes to rest (a creep at one voltage slows as it nears the field's centre, so its
+//!     speed over the window is at least its last): after `n` periods without an edge
+//!     `e ≤ E_n = (π/3)·k_w/(n·T)`, with `k_w` the blob's `k` or [`RAMP_K_EMF`], the
+//!     larger.
+//!
+//!   From the samples, `i_s = i₂ + `[`RAMP_LAG_PERIODS`]`·max(i₂ − i₁, 0)` bounds the steady
+//!   current for L/R up to that many periods (the remaining rise of an exponential is
+//!   `Δ/(e^(T·R/L) − 1) ≤ Δ·L/(R·T)`), and `j = max(i_s, floor) + `[`RAMP_SENSE_NOISE`]
+//!   bounds what a sense off by up to that much reads for it. The resting current at `x`
+//!   is then at most `j + E_n/R'_min`, and the ramp steps to the larger of
+//!   - `x + R'_min·(i_t − j − E_n/R'_min)`: a step of `Δx` adds at most `Δx/R'_min` to a
+//!     resting current whatever the drop;
+//!   - `c_m + i_t·(x − c_m − E_n)/j`, but at most [`RAMP_STEP_MAX`]`·x`: the samples bound
+//!     the path's R from below, `R' ≥ (x − c − E_n)/j`, so the resting current at `x'`,
+//!     `(x' − c)/R'`, stays below `i_t` for every drop in the range once
+//!     `x − c_m − E_n ≥ j·R'_min` (below that the first is the larger).
+//!
+//!   Either keeps the resting current at the new voltage at or below `i_t` for every R from
+//!   [`RAMP_R_MIN`], L/R up to [`RAMP_LAG_PERIODS`], drop in the range, back-EMF constant up
+//!   to `k_w` and a sense error up to [`RAMP_SENSE_NOISE`]; the rest of the target's margin
+//!   covers larger errors. The window is `n = 2·(π/3)·k_w/(T·R'_min·(i_t − j))`, which
+//!   leaves half the room below the target to what a creep may hide and half to the step
+//!   (the fastest climb where the first step rules), at most [`RAMP_WINDOW_MAX`]. The ramp
+//!   ends once `i_s` reaches [`RAMP_END`] of the target, where the window would be longer
+//!   than [`RAMP_WINDOW_MAX`], at the run's voltage, or after [`RAMP_PERIODS`]; short of
+//!   [`CURRENT_SHARE`] of its target a failed run reports
+//!   [`CommissionError::RampStalled`]. A voltage past `c_m + E_n + ¾·R_blob·floor/`
+//!   [`CURRENT_SHARE`] drives more than the floor through any winding the run admits (up
+//!   to four times the blob's R, as for [`CommissionError::NoCurrent`]): a window that ends
+//!   there with no resting sample above the floor yet ends the run with
+//!   [`CommissionError::RampStalled`] (a dead current sense). All of this is the current of a
+//!   resting rotor; the ramp bounds nothing else (a rotor swinging past a centre adds its
+//!   back-EMF for a moment). Below [`RAMP_R_MIN`], with a drop outside the range, a larger
+//!   back-EMF constant or a current sense off by more than the target's margin the ramp
+//!   may pass `i_limit`; the limit below then cuts the voltage at the next period;
 //! - whenever `|I|` exceeds the run's current limit `i_limit`, `V_hi` falls to
 //!   `V_b + (V − V_b)·i_limit/|I|` for the voltage `V` that drove `I`, which drives at most
 //!   the limit through a resting winding for any drop from `V_b` up, and stays there for
@@ -115,8 +128,7 @@ pub const HOLD_PERIODS: u16 = 25;
 /// Smallest share of the expected current the higher level's mean must reach, and of that
 /// mean the two levels' difference must reach ([`CommissionError::NoCurrent`], module docs).
 pub const CURRENT_SHARE: f32 = 0.25;
-/// Holds in a run: two forward passes and one backward pass over [`CENTRES`] (and the
-/// first pass again while the current ramp runs, [`RAMP_ALIGN_REPEATS`]).
+/// Holds in a run: two forward passes and one backward pass over [`CENTRES`].
 pub const HOLDS: u8 = 9;
 /// The sectors whose middles the held vectors point at, in the forward order, with the
 /// phase each holds low ([`crate::board::centre_sector`]): 120° apart, every other sector.
@@ -149,22 +161,38 @@ pub const RAMP_SENSE_NOISE: f32 = 0.1;
 pub const RAMP_TARGET: f32 = 0.9;
 /// Smallest current [A] the ramp reads as a winding's current rather than the sense's noise
 /// and offset: twice the noise two samples may differ by ([`RAMP_SENSE_NOISE`]), about seven
-/// steps of a 12-bit ADC at 29 mA a step. A rotor creeping at the speed where its back-EMF
-/// takes the voltage draws only its friction's current, which may lie below it: samples
-/// below it neither anchor the rest test nor step the ramp faster than a creep can hide
-/// (module docs).
+/// steps of a 12-bit ADC at 29 mA a step. Samples below it do not anchor the rest test and
+/// count as the floor in a step (module docs).
 pub const RAMP_CURRENT_FLOOR: f32 = 2.0 * RAMP_SENSE_NOISE;
 /// The ramp ends once the steady current it estimates reaches this share of its target
-/// (the last steps are short where the drop's error range dominates the current), and at
-/// the start of the backward pass at the latest, so that it samples one voltage.
+/// (the last steps are short where the drop's error range dominates the current), and after
+/// [`RAMP_PERIODS`] at the latest.
 pub const RAMP_END: f32 = 0.9;
 
-/// How many times the first (aligning) pass over [`CENTRES`] is repeated while the ramp
-/// runs, so that the counted pass turns the rotor at the voltage it ends at: its steps
-/// below [`RAMP_CURRENT_FLOOR`] wait for a window without Hall edges (module docs), and a
-/// drop at the top of its range takes about three passes to cross (0.33 V at 30 mV a
-/// window).
-pub const RAMP_ALIGN_REPEATS: u8 = 4;
+/// Largest back-EMF constant per electrical radian and second [V·s/rad] the ramp's windows
+/// are sized for unless the blob gives a larger one: the default blob's motor, the paper's
+/// (`K_b` = 7.91/111 V·s/rad over 11 pole pairs). With [`RAMP_R_MIN`] it states the bound
+/// `k/R ≤ max(k_blob, RAMP_K_EMF)/R_min` the ramp keeps a creeping rotor within (module
+/// docs); a blob's small or wrong `k` does not shrink the window.
+pub const RAMP_K_EMF: f32 = 7.91 / 111.0 / 11.0;
+/// Longest window without a Hall edge the ramp waits for before a step [periods] (three
+/// holds): near the target a creep may hide only a little, which takes a long window to
+/// rule out, and the ramp ends where the window it needs would be longer.
+pub const RAMP_WINDOW_MAX: u16 = 3 * HOLD_PERIODS;
+/// Longest the ramp runs [periods] (7.2 s at 12 ms): it holds the first vector that long at
+/// most, and ends there; short of [`CURRENT_SHARE`] of its target, a run that then fails
+/// reports [`CommissionError::RampStalled`].
+pub const RAMP_PERIODS: u16 = 600;
+/// Longest run [periods]: the ramp's longest and then every hold (the first, which the ramp
+/// extends, among them).
+pub const RUN_PERIODS_MAX: u16 = RAMP_PERIODS + HOLDS as u16 * HOLD_PERIODS;
+/// Largest factor one step may grow the ramp's voltage (above the smallest drop) by. The
+/// step's bound through the winding's R scales what the samples missed by the target over
+/// the sampled current (module docs); the cap keeps a reading error of the current sense
+/// beyond [`RAMP_SENSE_NOISE`] from being carried further than a quarter up (with no drop
+/// to allow for, a step from a sample at the floor would otherwise grow the voltage
+/// forty-fold).
+pub const RAMP_STEP_MAX: f32 = 1.25;
 
 /// The default Hall state sequence of [`HallTable::DEFAULT_120`] (sectors 0..5).
 pub const DEFAULT_SEQUENCE: [u8; 6] = [1, 3, 2, 6, 4, 5];
@@ -235,11 +263,12 @@ pub enum CommissionError {
     /// R is over four times the blob's, or the hold voltage does not exceed the dead
     /// time's drop). Neither a current sign nor an R is stored.
     NoCurrent,
-    /// The first holds' current ramp did not reach its target current before the backward
-    /// pass, and the run failed: the held voltage may have been too low to turn the rotor
-    /// or to measure (no current above [`RAMP_CURRENT_FLOOR`] from a resting rotor, a rotor
-    /// that kept moving, a dead-time drop far above the estimate, or a dead current sense).
-    /// Replaces the error the low voltage led to.
+    /// The first hold's current ramp ended short of [`CURRENT_SHARE`] of its target current
+    /// and the run failed: the held voltage may have been too low to turn the rotor or to
+    /// measure (no current above [`RAMP_CURRENT_FLOOR`] from a resting rotor, a rotor that
+    /// kept moving, a dead-time drop far above the estimate). Replaces the error the low
+    /// voltage led to. Also a dead current sense: no resting current above the floor at a
+    /// voltage that drives more through any winding the run admits (the run ends there).
     RampStalled,
 }
 
@@ -351,28 +380,25 @@ pub struct Commissioner {
     /// The last three current samples [A], oldest first (NaN: none), for the rest test.
     ramp_i: [f32; 3],
     /// Of the currents [A] above [`RAMP_CURRENT_FLOOR`] sampled at the ramp's voltages that
-    /// passed the rest test (without its window), the one largest against its voltage [V]:
+    /// passed the rest test with its window, the one largest against its voltage [V]:
     /// (voltage, current) ((0, 0): none yet).
     ramp_anchor: (f32, f32),
     /// Periods in a row, up to the last one, driven at the ramp's voltage now.
     ramp_run: u8,
-    /// Periods at the ramp's voltage now (the lower level's not counted) without a Hall edge.
+    /// Periods at the ramp's voltage now without a Hall edge.
     ramp_still: u16,
-    /// Periods without a Hall edge at one voltage before a step from samples that cannot
-    /// tell a creeping rotor from a resting one (module docs).
-    ramp_window: u16,
-    /// The largest current [A] a rotor creeping at one voltage can hide from the samples
-    /// (its back-EMF over the path's R) and still cross no Hall edge in
-    /// [`Self::ramp_window`] periods, at [`RAMP_R_MIN`].
-    ramp_hidden: f32,
-    /// The ramp was still running at the backward pass, short of [`CURRENT_SHARE`] of its
-    /// target.
+    /// The back-EMF [V] a rotor may have and still cross no Hall edge in a window of `n`
+    /// periods at one voltage is at most this over `n` ([V·periods], module docs).
+    ramp_emf: f32,
+    /// Periods the ramp has run.
+    ramp_periods: u16,
+    /// The ramp ended short of [`CURRENT_SHARE`] of its target.
     ramp_stalled: bool,
-    /// A current above [`RAMP_CURRENT_FLOOR`] passed the rest test with the window
-    /// ([`Self::ramp_window`]): the ramp's steps from such currents need no window.
-    ramp_seen: bool,
-    /// Aligning passes repeated for the ramp.
-    aligns: u8,
+    /// The ramp ran in this hold (its levels are not sampled).
+    ramped: bool,
+    /// The ramp's voltage passed what drives a current above [`RAMP_CURRENT_FLOOR`] through
+    /// any winding the run admits, and no resting sample reached it: the sense is dead.
+    sense_dead: bool,
     /// Periods in a row, up to the last one, without a Hall edge or a change of state.
     still: u8,
     /// The Hall state read last period.
@@ -398,7 +424,7 @@ impl Commissioner {
     /// (the expected current, through [`PATH_R_SHARE`] of it) and whose back-EMF per
     /// electrical radian and second it gives as `k_emf` [V·s/rad] (the back-EMF constant
     /// over the pole pairs: how slowly a rotor hiding a current from the samples may creep,
-    /// module docs; not finite or below 0: 0).
+    /// module docs; not finite or below 0: 0; [`RAMP_K_EMF`] where that is larger).
     pub fn new(volts: f32, i_limit: f32, v_dead: f32, r_model: f32, k_emf: f32) -> Self {
         Commissioner {
             hold: 0,
@@ -427,11 +453,11 @@ impl Commissioner {
             ramp_anchor: (0.0, 0.0),
             ramp_run: 0,
             ramp_still: 0,
-            ramp_window: 0,
-            ramp_hidden: 0.0,
+            ramp_emf: 0.0,
+            ramp_periods: 0,
             ramp_stalled: false,
-            ramp_seen: false,
-            aligns: 0,
+            ramped: false,
+            sense_dead: false,
             still: 0,
             last_hall: 0,
             last: (0.0, None),
@@ -444,26 +470,65 @@ impl Commissioner {
     }
 
     /// Starts the ramp at the voltage that drives [`RAMP_TARGET`] of the limit through
-    /// [`RAMP_R_MIN`] when the true drop is the smallest, and sizes the window of its steps
-    /// from samples that cannot tell a creeping rotor from a resting one, for a back-EMF of
-    /// `k_emf` [V·s/rad electrical] (module docs).
+    /// [`RAMP_R_MIN`] when the true drop is the smallest, and bounds the back-EMF of a rotor
+    /// that crosses no Hall edge, for a back-EMF constant of `k_emf` [V·s/rad electrical]
+    /// or [`RAMP_K_EMF`], the larger (module docs): a rotor with back-EMF `e ≤ k·ω` turns at
+    /// `ω ≥ e/k` and so crosses 60° electrical within `(π/3)·k/e`.
     fn with_ramp(mut self, k_emf: f32) -> Self {
         let room = self.volts - self.ramp_base();
         let target = RAMP_TARGET * self.i_limit;
         let start = PATH_R_SHARE * RAMP_R_MIN * target;
         self.ramp = (room > 0.0 && start < room).then_some(start);
-        // Half of what the target leaves above the floor may hide in a creep, the other half
-        // is the step: a rotor that hides `h` over the path's R turns at `ω ≥ R'·h/k` and so
-        // crosses 60° electrical (a Hall edge) within `(π/3)·k/(R'·h)`.
-        self.ramp_hidden = 0.5 * (target - RAMP_CURRENT_FLOOR);
-        let periods = core::f32::consts::FRAC_PI_3 * k_emf
-            / (PATH_R_SHARE * RAMP_R_MIN * self.ramp_hidden * crate::CONTROL_PERIOD_S);
-        self.ramp_window = if periods.is_finite() && periods >= 0.0 {
+        let k = if k_emf > RAMP_K_EMF {
+            k_emf
+        } else {
+            RAMP_K_EMF
+        };
+        self.ramp_emf = core::f32::consts::FRAC_PI_3 * k / crate::CONTROL_PERIOD_S;
+        self
+    }
+
+    /// Ends the ramp at the voltage it holds, and notes whether it ended short of
+    /// [`CURRENT_SHARE`] of its target.
+    fn ramp_end(&mut self) {
+        if let Some(x) = self.ramp {
+            self.ramp_stalled = self.ramp_short();
+            self.volts = self.volts.min(self.ramp_base() + x);
+            self.ramp = None;
+        }
+    }
+
+    /// The largest current [A] the samples of a resting rotor with steady current bound
+    /// `i_ss` [A] may miss by the sense's noise: the floor below which a reading is noise,
+    /// plus [`RAMP_SENSE_NOISE`].
+    fn ramp_resting(i_ss: f32) -> f32 {
+        i_ss.max(RAMP_CURRENT_FLOOR) + RAMP_SENSE_NOISE
+    }
+
+    /// The window without a Hall edge [periods] a step from the steady current bound `i_ss`
+    /// [A] waits for: the one that leaves half the room below the target to what a creep
+    /// may hide at [`RAMP_R_MIN`] and half to the step (the fastest climb), at most
+    /// [`RAMP_WINDOW_MAX`].
+    fn ramp_window(&self, i_ss: f32) -> u16 {
+        let half = 0.5 * (RAMP_TARGET * self.i_limit - Self::ramp_resting(i_ss));
+        let periods = self.ramp_emf / (PATH_R_SHARE * RAMP_R_MIN * half);
+        if half > 0.0 && periods < f32::from(RAMP_WINDOW_MAX) {
             (libm::ceilf(periods) as u16).max(2)
         } else {
-            u16::MAX
-        };
-        self
+            RAMP_WINDOW_MAX
+        }
+    }
+
+    /// Whether the ramp's voltage `x` above [`Self::ramp_base`] [V], held `n` periods without
+    /// a Hall edge, drives more than [`RAMP_CURRENT_FLOOR`] through any resting winding the
+    /// run admits (up to [`CURRENT_SHARE`]`⁻¹` times the blob's R, as for
+    /// [`CommissionError::NoCurrent`]) behind any drop in the range, less the back-EMF a
+    /// rotor may have and cross no edge in `n` periods.
+    fn ramp_past_floor(&self, x: f32, n: u16) -> bool {
+        let c = (RAMP_DROP_ERROR - 1.0 / RAMP_DROP_ERROR) * self.v_dead;
+        let e = self.ramp_emf / f32::from(n.max(1));
+        let r_max = PATH_R_SHARE * self.r_model / CURRENT_SHARE;
+        x > c + e + r_max * RAMP_CURRENT_FLOOR
     }
 
     /// Whether the ramp is running and has not measured, from a resting rotor, the share
@@ -487,35 +552,41 @@ impl Commissioner {
         self.v_dead / RAMP_DROP_ERROR
     }
 
-    /// The ramp's next voltage above [`Self::ramp_base`] [V] from `x` [V], from the current
-    /// `i1` then `i2` [A] sampled at the end of two periods of `x` (module docs): the steady
-    /// current at the grown voltage stays below [`RAMP_TARGET`] of the limit for any winding
-    /// R from [`RAMP_R_MIN`] and L/R up to [`RAMP_LAG_PERIODS`], and a true drop up to
-    /// [`RAMP_DROP_ERROR`] times `v_dead`, if the rotor rests. `blind`: the samples cannot
-    /// tell a creeping rotor from a resting one, and the step also leaves room for the
-    /// current a creep may hide ([`Self::ramp_hidden`]). `None` when the ramp is done
-    /// ([`RAMP_END`]).
-    fn ramp_next(&self, x: f32, i1: f32, i2: f32, blind: bool) -> Option<f32> {
-        // A negative reading counts as none.
-        let i_ss = steady_bound(i1, i2).max(0.0);
-        // The current the drop's error range `c` drives through the path, at most through
-        // the smallest path R. (Not the smaller `i_s·c/(x − c)` the samples would suggest
-        // once `x` exceeds `c`: a creeping rotor's back-EMF holds the samples low whatever
-        // the voltage, and that bound then lets one step jump to the run's voltage.)
-        let c = (RAMP_DROP_ERROR - 1.0 / RAMP_DROP_ERROR) * self.v_dead;
-        let r_min = PATH_R_SHARE * RAMP_R_MIN;
-        let i_c = c / r_min;
+    /// The ramp's next voltage above [`Self::ramp_base`] [V] from `x` [V], from the steady
+    /// current bound `i_ss` [A] of two samples at `x` taken after `n` periods at `x` without
+    /// a Hall edge (module docs): the steady current at the grown voltage stays below
+    /// [`RAMP_TARGET`] of the limit for any winding R from [`RAMP_R_MIN`], L/R up to
+    /// [`RAMP_LAG_PERIODS`], a true drop up to [`RAMP_DROP_ERROR`] times `v_dead`, a sense
+    /// error up to [`RAMP_SENSE_NOISE`] and a back-EMF constant up to the window's, if the
+    /// rotor then rests. `None` when the ramp is done: at [`RAMP_END`] of the target, or
+    /// where the next step would need a window over [`RAMP_WINDOW_MAX`].
+    fn ramp_next(&self, x: f32, i_ss: f32, n: u16) -> Option<f32> {
         let target = RAMP_TARGET * self.i_limit;
-        if i_ss >= RAMP_END * target {
+        let j = Self::ramp_resting(i_ss);
+        let r_min = PATH_R_SHARE * RAMP_R_MIN;
+        if i_ss >= RAMP_END * target
+            || 0.5 * (target - j) * r_min * f32::from(RAMP_WINDOW_MAX) <= self.ramp_emf
+        {
             return None;
         }
-        if !blind {
-            return Some(x * (1.0 + (target - i_ss) / (i_ss + i_c)));
+        // The back-EMF the samples may miss, and the drop's error range.
+        let e = self.ramp_emf / f32::from(n.max(1));
+        let c = (RAMP_DROP_ERROR - 1.0 / RAMP_DROP_ERROR) * self.v_dead;
+        let room = target - j - e / r_min;
+        if room <= 0.0 {
+            return None;
         }
         // A step of `Δx` adds at most `Δx/R'_min` to the steady current of a resting rotor
-        // whatever the drop; with the current a creep may hide it stays below the target.
-        let room = target - i_ss.max(RAMP_CURRENT_FLOOR) - self.ramp_hidden;
-        Some(x + r_min * room.max(0.0))
+        // whatever the drop.
+        let add = x + r_min * room;
+        // The samples bound the path's R from below, `R' ≥ (x − c − e)/j`, and through it
+        // the current at the grown voltage for every drop in the range.
+        let through_r = c + target * (x - c - e) / j;
+        Some(if through_r > add {
+            through_r.min(RAMP_STEP_MAX * x).max(add)
+        } else {
+            add
+        })
     }
 
     /// Whether the last two samples at the ramp's voltage `x` above [`Self::ramp_base`] [V]
@@ -623,7 +694,14 @@ impl Commissioner {
         };
         self.measured(i_vector);
         self.period = self.period.wrapping_add(1);
-        if self.period >= HOLD_PERIODS {
+        if self.ramp.is_some() {
+            self.ramp_periods = self.ramp_periods.saturating_add(1);
+            if self.ramp_periods >= RAMP_PERIODS {
+                self.ramp_end();
+            }
+        }
+        // The ramp holds its vector until it ends (module docs).
+        if self.period >= HOLD_PERIODS && self.ramp.is_none() {
             // The hold is over: the state now is that vector's sector.
             let c = Self::centre_of(self.hold);
             match self.hold {
@@ -638,81 +716,68 @@ impl Commissioner {
             }
             self.hold += 1;
             self.period = 0;
-            if self.hold == 3 && self.ramp.is_some() && self.aligns < RAMP_ALIGN_REPEATS {
-                // The ramp is still running: another aligning pass, so that the counted one
-                // and the backward one hold the voltage it ends at (module docs).
-                self.aligns += 1;
-                self.hold = 0;
-            }
+            self.ramped = false;
             if self.hold >= HOLDS {
                 return CommissionStep::Done(self.result());
             }
         }
-        // Settle, then a quarter at the lower level and a quarter at the higher one.
-        // Before the ramp has measured a resting current above the floor its steps wait for
-        // a window without Hall edges at one voltage, and nothing samples the lower level:
-        // the higher one is held through the hold.
-        let blind = self.ramp.is_some() && !self.ramp_seen;
+        // Settle, then a quarter at the lower level and a quarter at the higher one; a hold
+        // in which the ramp ran holds the higher level throughout, and nothing samples it.
+        self.ramped |= self.ramp.is_some();
         let level = match self.period {
+            _ if self.ramped => None,
             p if p < HOLD_PERIODS / 2 => None,
-            _ if blind => None,
             p if p < 3 * HOLD_PERIODS / 4 => Some(false),
             _ => Some(true),
         };
         let high = level != Some(false);
         let v_hi = match self.ramp {
             Some(x) => {
-                // Two samples at the ramp's voltage from a resting rotor: step on from the
-                // second. Below the current floor, or before a current above it has passed
-                // that test, the samples are also those of a rotor creeping at the speed
-                // where its back-EMF takes the voltage: then only a window without a Hall
-                // edge bounds what the creep hides (module docs).
+                // Two samples at the ramp's voltage that move as a resting winding's current
+                // does, after a window without a Hall edge long enough to bound what a
+                // creeping rotor hides from them: step on from the second (module docs).
                 let [_, i1, i2] = self.ramp_i;
-                let blind = !self.ramp_seen || steady_bound(i1, i2) < RAMP_CURRENT_FLOOR;
+                let i_ss = steady_bound(i1, i2).max(0.0);
                 let lag = self.ramp_run >= 2
                     && self.still >= 2
                     && at_rest(self.ramp_i)
                     && self.not_below_anchor(x);
-                let rest = lag && (!blind || self.ramp_still >= self.ramp_window);
-                let v = self.ramp_base() + x;
+                let rest = lag && self.ramp_still >= self.ramp_window(i_ss);
+                let base = self.ramp_base();
+                let v = base + x;
                 let (v_a, i_a) = self.ramp_anchor;
-                if lag && i2 >= RAMP_CURRENT_FLOOR && i2 * v_a >= i_a * v {
+                if rest && i2 >= RAMP_CURRENT_FLOOR && i2 * v_a >= i_a * v {
                     self.ramp_anchor = (v, i2);
                 }
-                self.ramp_seen |= rest && i2 >= RAMP_CURRENT_FLOOR;
-                let step = if self.hold >= 6 {
-                    // The backward pass holds one voltage.
-                    self.ramp_stalled = self.ramp_short();
-                    None
-                } else if rest && high {
-                    Some(self.ramp_next(x, i1, i2, blind))
+                if rest && self.ramp_anchor.0 <= 0.0 && self.ramp_past_floor(x, self.ramp_still) {
+                    // No resting sample above the floor where any working sense has one.
+                    self.sense_dead = true;
+                    self.ramp = None;
+                    self.hold = HOLDS;
+                    return CommissionStep::Done(self.result());
+                }
+                let next = if rest {
+                    self.ramp_next(x, i_ss, self.ramp_still)
                 } else {
-                    Some(Some(x))
+                    Some(x)
                 };
-                let base = self.ramp_base();
-                let x = match step {
-                    None | Some(None) => {
-                        // The ramp ends at the voltage held now.
-                        self.volts = self.volts.min(base + x);
-                        self.ramp = None;
-                        None
+                match next {
+                    None => {
+                        self.ramp_end();
+                        self.volts
                     }
-                    Some(Some(next)) if base + next >= self.volts => {
+                    Some(next) if base + next >= self.volts => {
                         // The ramp ends at the run's voltage.
                         self.ramp = None;
-                        None
+                        self.volts
                     }
-                    Some(Some(next)) => {
+                    Some(next) => {
                         if next != x {
                             self.ramp_still = 0;
                         }
                         self.ramp = Some(next);
-                        Some(next)
+                        base + next
                     }
-                };
-                match x {
-                    Some(x) => self.ramp_base() + x,
-                    None => self.volts,
                 }
             }
             None => self.volts,
@@ -834,6 +899,9 @@ impl Commissioner {
     /// [`CommissionError::RampStalled`] (the voltage it held may be what failed), but for
     /// a Hall state 000 or 111, which no voltage explains.
     fn result(&self) -> Result<Commissioning, CommissionError> {
+        if self.sense_dead {
+            return Err(CommissionError::RampStalled);
+        }
         match self.learned() {
             Err(e) if self.ramp_stalled && e != CommissionError::InvalidState => {
                 Err(CommissionError::RampStalled)
@@ -1357,28 +1425,26 @@ mod tests {
     }
 
     #[test]
-    fn the_ramp_does_not_grow_while_the_low_level_is_held() {
-        // The default blob's run on 31 mΩ behind twice the expected drop: the low quarter
-        // of the first hold falls inside the ramp.
+    fn the_ramp_never_lowers_its_voltage() {
+        // The default blob's run on 31 mΩ behind twice the expected drop: no lower level
+        // while the ramp runs, so a voltage is never followed by a lower one until it ends.
         let vd = crate::board::dead_time_drop(22.2);
         let r_blob = 24.0f32 / 111.0;
         let v_run = vd + 9.0 * PATH_R_SHARE * r_blob;
         let mut c = Commissioner::new(v_run, 9.0, vd, r_blob, K_EMF);
         let mut i = 0.0f32;
-        let mut highs = Vec::new();
-        for k in 0..usize::from(HOLD_PERIODS) {
+        let mut last = 0.0f32;
+        let mut k = 0;
+        while c.ramp.is_some() {
             let CommissionStep::Hold { volts, .. } = c.tick(1, [], false, i) else {
                 panic!("done early");
             };
             i = (volts - 2.0 * vd).max(0.0) / (PATH_R_SHARE * 0.031);
-            let p = k as u16;
-            if !(HOLD_PERIODS / 2..3 * HOLD_PERIODS / 4).contains(&p) {
-                highs.push(volts);
-            }
+            assert!(volts >= last, "period {k}: {volts} V after {last} V");
+            last = volts;
+            k += 1;
         }
-        // The first higher period after the low quarter repeats the one before it.
-        let back = usize::from(HOLD_PERIODS / 2);
-        assert_eq!(highs[back], highs[back - 1], "{highs:?}");
+        assert!(k > 2, "the ramp ran {k} periods");
     }
 
     #[test]
@@ -1437,25 +1503,62 @@ mod tests {
     }
 
     #[test]
-    fn each_hold_lasts_hold_periods() {
+    fn the_ramp_holds_the_first_vector_until_it_ends_and_each_later_hold_lasts_hold_periods() {
         // A flat 1 A does not grow with the ramp's voltage: the ramp never measures the
-        // current a hold must reach, and the aligning pass is repeated the most times.
+        // current a hold must reach and runs its longest.
         let mut c = Commissioner::new(2.0, 10.0, 0.4, 0.2, K_EMF);
         let mut lows = Vec::new();
         while let CommissionStep::Hold { low, .. } = c.tick(1, [], false, 1.0) {
             lows.push(low);
         }
-        let repeats = usize::from(RAMP_ALIGN_REPEATS);
-        let holds = usize::from(HOLDS) + 3 * repeats;
-        assert_eq!(lows.len(), holds * usize::from(HOLD_PERIODS));
-        for (h, hold) in lows.chunks(usize::from(HOLD_PERIODS)).enumerate() {
-            let h = if h < 3 * (repeats + 1) {
-                h % 3
-            } else {
-                h - 3 * repeats
-            };
-            let want = CENTRES[Commissioner::centre_of(h as u8)].1;
+        let later = (usize::from(HOLDS) - 1) * usize::from(HOLD_PERIODS);
+        let first = lows.len() - later;
+        assert!(
+            (usize::from(RAMP_PERIODS) - 1..usize::from(RAMP_PERIODS + HOLD_PERIODS))
+                .contains(&first),
+            "first hold {first} periods"
+        );
+        assert!(lows[..first].iter().all(|&l| l == CENTRES[0].1));
+        for (h, hold) in lows[first..].chunks(usize::from(HOLD_PERIODS)).enumerate() {
+            let want = CENTRES[Commissioner::centre_of(h as u8 + 1)].1;
             assert!(hold.iter().all(|&l| l == want), "{h}");
         }
+        assert_eq!(c.result(), Err(CommissionError::RampStalled));
+    }
+
+    #[test]
+    fn the_ramp_sizes_its_window_from_the_larger_back_emf_constant() {
+        // A blob's tiny back-EMF constant does not shorten the window; a larger one than
+        // the stated bound lengthens it in proportion.
+        let vd = crate::board::dead_time_drop(22.2);
+        let window = |k: f32| Commissioner::new(2.0, 9.0, vd, 0.2, k).ramp_window(0.0);
+        assert_eq!(window(1e-6), window(RAMP_K_EMF));
+        assert_eq!(window(0.0), window(RAMP_K_EMF));
+        let (w1, w2) = (window(RAMP_K_EMF), window(2.0 * RAMP_K_EMF));
+        assert!(w1 > 2 && w2 >= 2 * w1 - 1 && w2 <= 2 * w1, "{w1} {w2}");
+    }
+
+    #[test]
+    fn the_stated_back_emf_constant_is_the_default_blobs() {
+        let co = crate::blob::Coefficients::default();
+        let k = co.motor.kb / f32::from(co.pole_pairs);
+        assert!(
+            (k - RAMP_K_EMF).abs() <= 1e-6 * RAMP_K_EMF,
+            "{k} vs {RAMP_K_EMF}"
+        );
+    }
+
+    #[test]
+    fn a_step_never_grows_the_voltage_by_more_than_the_cap() {
+        // No dead time to allow for, a current at the floor at 1 V (a winding of several
+        // ohms) and a long window: the bound through the winding's R alone would grow the
+        // voltage over twenty-fold, the step at the smallest R by a twentieth.
+        let c = Commissioner::new(5.0, 9.0, 0.0, 0.2, K_EMF);
+        let x = 1.0;
+        let next = c.ramp_next(x, RAMP_CURRENT_FLOOR, RAMP_WINDOW_MAX).unwrap();
+        assert!(
+            next > 1.2 * x && next <= RAMP_STEP_MAX * x * (1.0 + 1e-6),
+            "{next}"
+        );
     }
 }

@@ -992,14 +992,20 @@ fn a_speed_asked_during_an_experiment_is_dropped_when_it_ends() {
 /// One commissioning run on the emulated board without coefficients (the default blob),
 /// the rotor resting `start` Hall sectors from the first centre vector's field, on the
 /// paper's motor with the winding's line-to-line `r` [Ω] and `l` [H], a true dead-time drop
-/// of `drop` times the board's estimate and Coulomb friction `friction` [N·m] alone.
+/// of `drop` times the board's estimate and Coulomb friction `friction` [N·m] alone, its
+/// current sense with noise of standard deviation `noise` [A] and an offset `offset` [A].
 /// Returns the largest current [A] a resting rotor would draw at the voltages held,
 /// `(V − V_t)/(¾·R)`, the largest true current [A] and the outcome.
 fn commission_on(
     (r, l, drop, friction): (f64, f64, f64, f64),
     start: f64,
+    (noise, offset): (f64, f64),
 ) -> (f64, f64, CommissionOutcome) {
     let mut plant = EmulatorConfig::paper();
+    plant.current_noise = noise;
+    if offset != 0.0 {
+        plant.effects.push(Effect::CurrentOffset { i0: offset });
+    }
     plant.motor.r = r;
     plant.motor.l = l;
     plant.lugre.alpha0 = friction;
@@ -1013,11 +1019,9 @@ fn commission_on(
     replies(&mut emu);
     emu.handle(&HostMsg::Commission);
     let (mut at_rest, mut peak) = (0.0f64, 0.0f64);
-    // The longest run: every aligning pass repeated, and then some.
-    let periods = usize::from(control::commission::HOLD_PERIODS)
-        * (usize::from(control::commission::HOLDS)
-            + 3 * usize::from(control::commission::RAMP_ALIGN_REPEATS)
-            + 1);
+    // The longest run, and then some.
+    let periods = usize::from(control::commission::RUN_PERIODS_MAX)
+        + usize::from(control::commission::HOLD_PERIODS);
     for _ in 0..periods {
         emu.tick();
         peak = peak.max(emu.hardware().peak_current());
@@ -1057,7 +1061,8 @@ fn a_rotor_creeping_below_the_current_floor_keeps_the_commissioning_current_at_r
     let mut top = 0.0f64;
     for drop in [0.5, 1.0, 2.0] {
         for start in [0.0, 1.0, 2.0, 2.9, 4.0] {
-            let (at_rest, peak, out) = commission_on((0.01, 0.05e-3, drop, 0.005), start);
+            let sense = (EmulatorConfig::paper().current_noise, 0.0);
+            let (at_rest, peak, out) = commission_on((0.01, 0.05e-3, drop, 0.005), start, sense);
             eprintln!(
                 "drop {drop}x, start {start} sectors: {at_rest:.2} A at rest, true peak {peak:.2} A \
                  (limit {i_comm:.1} A), {out:?}"
@@ -1067,10 +1072,142 @@ fn a_rotor_creeping_below_the_current_floor_keeps_the_commissioning_current_at_r
                 at_rest <= i_comm * (1.0 + 1e-3),
                 "drop {drop}x, start {start}: {at_rest} A at rest > {i_comm} A"
             );
+            assert!(
+                peak <= PEAK_SHARE * i_comm,
+                "drop {drop}x, start {start}: true peak {peak} A"
+            );
             top = top.max(at_rest);
         }
     }
     // The ramp does not buy the bound by never driving (the test could fail by a ramp that
     // never moves).
     assert!(top > 0.5 * i_comm, "largest current at rest {top} A");
+}
+
+/// Largest true current over the commissioning limit a run may reach, as a share of it: the
+/// ramp bounds the current of a resting rotor only, and a rotor swinging past a centre adds
+/// its back-EMF for a moment (decision 0023: up to 1.14 times on the reviewer's physical
+/// model). Loose, so that it catches a ramp that overshoots, not the swing.
+const PEAK_SHARE: f64 = 1.25;
+
+/// The default blob's commissioning limit [A] on the emulated board.
+fn commission_limit() -> f64 {
+    let emu = EmulatedBoard::new(
+        EmulatorConfig::paper(),
+        Wiring::default(),
+        RamFlash::new(None),
+    )
+    .unwrap();
+    f64::from(emu.board().commission_current())
+}
+
+/// Runs `cases` of (R [Ω], drop ratio, friction [N·m], start [sectors], sense noise [A],
+/// sense offset [A]) at L/R of one control period and checks the current at rest against
+/// the limit and the true peak against [`PEAK_SHARE`] of it; returns the largest current at
+/// rest [A].
+fn check_commission_cases(cases: &[(f64, f64, f64, f64, f64, f64)]) -> f64 {
+    let i_comm = commission_limit();
+    let mut top = 0.0f64;
+    for &(r, drop, friction, start, noise, offset) in cases {
+        let l = r * f64::from(control::CONTROL_PERIOD_S);
+        let (at_rest, peak, out) = commission_on((r, l, drop, friction), start, (noise, offset));
+        let case = format!(
+            "{r} Ω, drop {drop}x, {friction} N·m, start {start}, sense σ {noise} A + {offset} A"
+        );
+        eprintln!("{case}: {at_rest:.2} A at rest, true peak {peak:.2} A, {out:?}");
+        // 1e-3: the f32 voltages' rounding. The target's 10 % margin covers a sense reading
+        // up to (1 − 0.9)·limit/1.25 = 0.72 A low (decision 0023), seven times the largest σ.
+        assert!(
+            at_rest <= i_comm * (1.0 + 1e-3),
+            "{case}: {at_rest} A at rest > {i_comm} A"
+        );
+        assert!(peak <= PEAK_SHARE * i_comm, "{case}: true peak {peak} A");
+        top = top.max(at_rest);
+    }
+    top
+}
+
+#[test]
+fn a_rotor_creeping_above_the_current_floor_keeps_the_commissioning_current_at_rest() {
+    // Friction 0.01-0.05 N·m: at 10-20 mΩ a creep draws 0.2 A or more, above the ramp's
+    // current floor, while the back-EMF hides amperes; the rotor starts near the first
+    // field's unstable point (2.9 sectors) or half-way (1.5).
+    let noise = EmulatorConfig::paper().current_noise;
+    let mut cases = Vec::new();
+    for r in [0.01, 0.02] {
+        for drop in [0.5, 2.0] {
+            for friction in [0.01, 0.03, 0.05] {
+                for start in [1.5, 2.9] {
+                    cases.push((r, drop, friction, start, noise, 0.0));
+                }
+            }
+        }
+    }
+    let top = check_commission_cases(&cases);
+    assert!(
+        top > 0.5 * commission_limit(),
+        "largest current at rest {top} A"
+    );
+}
+
+#[test]
+fn a_noisy_or_offset_current_sense_keeps_the_commissioning_current_at_rest() {
+    // A sense with 0.05 and 0.1 A of noise (two and five times the emulator's), and one
+    // reading 0.15 A high, on 10-20 mΩ with little and mid-band friction.
+    let mut cases = Vec::new();
+    for r in [0.01, 0.02] {
+        for (noise, offset) in [(0.05, 0.0), (0.1, 0.0), (0.02, 0.15)] {
+            for (drop, friction) in [(1.0, 0.005), (2.0, 0.03)] {
+                cases.push((r, drop, friction, 2.9, noise, offset));
+            }
+        }
+    }
+    let top = check_commission_cases(&cases);
+    assert!(
+        top > 0.5 * commission_limit(),
+        "largest current at rest {top} A"
+    );
+}
+
+#[test]
+#[ignore = "a sweep of minutes: run with COMMISSION_SWEEP=1 and --ignored"]
+fn commissioning_sweep_over_r_lag_drop_friction_and_start() {
+    // Decision 0023's figures: R 10-200 mΩ, L/R 0.42, 1 and 3 periods, drops 0.5-2x,
+    // friction 0.005-0.08 N·m, six starts; prints one line a run and a summary.
+    if std::env::var_os("COMMISSION_SWEEP").is_none() {
+        return;
+    }
+    let i_comm = commission_limit();
+    let (mut worst, mut peak_worst, mut stalled, mut learned, mut n) = (0.0f64, 0.0f64, 0, 0, 0);
+    for r in [0.01, 0.02, 0.05, 0.1, 0.216] {
+        for lag in [0.42, 1.0, 3.0] {
+            for drop in [0.5, 1.0, 2.0] {
+                for friction in [0.005, 0.01, 0.02, 0.03, 0.05, 0.08] {
+                    for start in [0.0, 1.0, 1.5, 2.0, 2.5, 2.9] {
+                        let l = lag * r * f64::from(control::CONTROL_PERIOD_S);
+                        let sense = (EmulatorConfig::paper().current_noise, 0.0);
+                        let (at_rest, peak, out) =
+                            commission_on((r, l, drop, friction), start, sense);
+                        println!(
+                            "{r} {lag} {drop} {friction} {start} {:.3} {:.3} {out:?}",
+                            at_rest / i_comm,
+                            peak / i_comm
+                        );
+                        worst = worst.max(at_rest / i_comm);
+                        peak_worst = peak_worst.max(peak / i_comm);
+                        n += 1;
+                        match out {
+                            CommissionOutcome::Failed(CommissionError::RampStalled) => stalled += 1,
+                            CommissionOutcome::Done(_) => learned += 1,
+                            _ => {}
+                        }
+                    }
+                }
+            }
+        }
+    }
+    println!(
+        "{n} runs: at rest at most {worst:.3}x the limit, true peak {peak_worst:.3}x, \
+         {stalled} RampStalled, {learned} learned"
+    );
 }

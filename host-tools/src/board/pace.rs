@@ -311,10 +311,8 @@ mod tests {
             current_inverted: false,
         };
         let start = [HostMsg::Commission];
-        // The longest run: every aligning pass repeated.
-        let holds = usize::from(control::commission::HOLDS)
-            + 3 * usize::from(control::commission::RAMP_ALIGN_REPEATS);
-        let periods = holds * usize::from(control::commission::HOLD_PERIODS) + 50;
+        // The longest run.
+        let periods = usize::from(control::commission::RUN_PERIODS_MAX) + 50;
         let mut regular = Host::new(|_| true);
         play(50.0, true, |_| true, &mut regular, wiring, &start, periods);
         let mut late = Host::new(|t: f64| (t * 1.0e3).rem_euclid(45.0) < 5.0);

@@ -27,8 +27,9 @@ pub struct Args {
     pub json: bool,
 }
 
-/// Longest wait for the result after the start: the run itself is 9 holds of 0.3 s, and up
-/// to 12 more while the first holds' current ramp is slow.
+/// Longest wait for the result after the start: the run itself is 9 holds of 0.3 s, the
+/// first extended by up to 7.2 s while its current ramp runs
+/// ([`control::commission::RUN_PERIODS_MAX`]: 9.9 s in all).
 const RESULT_TIMEOUT: Duration = Duration::from_secs(60);
 
 fn error_text(e: CommissionError) -> &'static str {
