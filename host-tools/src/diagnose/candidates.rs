@@ -606,6 +606,30 @@ impl Signals {
     }
 }
 
+/// The saturation candidate's columns less their least-squares fit by `instruments`, the
+/// base columns computed on the model's own noise-free run (rows as the test sees them).
+///
+/// Its column is computed on that run too, and where the current's magnitude holds still
+/// it is the run's friction level: a noise-free copy of the speed the base only has as it
+/// was measured (through the angle's rounding). Beside the measured one, such a copy lets a
+/// fit separate the speed from its reading's error, which the torque residual carries, and
+/// names that error a saturation. What the model's own columns make of the run carries no
+/// such copy, so only the part of `K_t·I³` the model cannot produce on its own run is tested.
+pub fn saturation_beyond_run(
+    cand: &mut [(Variant, Vec<Vec<f64>>)],
+    instruments: &[Option<Vec<f64>>],
+) {
+    let inst: Vec<&[f64]> = instruments.iter().flatten().map(|z| z.as_slice()).collect();
+    for (v, cols) in cand.iter_mut() {
+        if v.kind == EffectKind::Saturation && !inst.is_empty() {
+            *cols = cols
+                .iter()
+                .map(|c| crate::numerics::least_squares::lstsq(&inst, c).resid)
+                .collect();
+        }
+    }
+}
+
 /// Value of a grid parameter in a variant (`harmonic=7`, `vs=3`, `tau=20`).
 pub type Fixed = Vec<(&'static str, f64)>;
 
