@@ -74,6 +74,7 @@ fn a_falling_torque_constant_is_named_on_minutes_of_steps() {
             named += 1;
         }
     }
+    eprintln!("table k {k_table:.2e}\n{}", all.join("\n"));
     assert!(
         named >= NAMED_AT_LEAST,
         "named on {named}/3:\n{}",
@@ -118,6 +119,10 @@ fn never_given(kind: SignalKind, seconds: f64, seeds: u64) {
             }
         }
     }
+    eprintln!(
+        "{kind:?} {seconds} s: smallest saturation p {:.1e} on {}",
+        smallest.0, smallest.1
+    );
     assert!(
         alarms.is_empty(),
         "saturation given to a correct model (smallest p {:.1e} on {}):\n{}",
