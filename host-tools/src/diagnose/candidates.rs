@@ -792,6 +792,39 @@ mod tests {
         assert_eq!(torque[205], 0.0, "stuck");
     }
 
+    /// The saturation candidate keeps only what the run's base columns cannot make: a
+    /// column they span (a friction level and a speed, block by block) projects to zero, and
+    /// a part orthogonal to them stays whole; other candidates are left alone.
+    #[test]
+    fn saturation_is_tested_beyond_the_runs_own_columns() {
+        let n = 120;
+        let level: Vec<f64> = (0..n).map(|k| if k < 60 { 1.0 } else { -1.0 }).collect();
+        let speed: Vec<f64> = (0..n).map(|k| 2.0 + (k / 20) as f64).collect();
+        // Orthogonal to both: alternating signs, even within each block of 20.
+        let other: Vec<f64> = (0..n)
+            .map(|k| if k % 2 == 0 { 1.0 } else { -1.0 })
+            .collect();
+        let spanned: Vec<f64> = (0..n).map(|k| 0.3 * level[k] + 0.05 * speed[k]).collect();
+        let with_other: Vec<f64> = (0..n).map(|k| spanned[k] + 0.01 * other[k]).collect();
+        let v = |kind| Variant::new(kind, Equation::Mechanical, vec![], vec![]);
+        let mut cand = vec![
+            (v(EffectKind::Saturation), vec![spanned.clone(), with_other]),
+            (v(EffectKind::Offset), vec![spanned.clone()]),
+        ];
+        let inst = vec![Some(level), None, Some(speed)];
+        saturation_beyond_run(&mut cand, &inst);
+        // The least-squares ridge leaves about 1e-9 of a spanned column.
+        assert!(
+            cand[0].1[0].iter().all(|x| x.abs() < 1e-6),
+            "{:?}",
+            cand[0].1[0]
+        );
+        for (x, o) in cand[0].1[1].iter().zip(&other) {
+            assert!((x - 0.01 * o).abs() < 1e-6, "{x} against {}", 0.01 * o);
+        }
+        assert_eq!(cand[1].1[0], spanned, "not a saturation column");
+    }
+
     /// The interval column of a voltage plant: the interval's mean drive from the held
     /// voltage and the angle increment; braking beyond the velocity resolution counts.
     #[test]
