@@ -606,6 +606,30 @@ impl Signals {
     }
 }
 
+/// The saturation candidate's columns less their least-squares fit by `instruments`, the
+/// base columns computed on the model's own noise-free run (rows as the test sees them).
+///
+/// Its column is computed on that run too, and where the current's magnitude holds still
+/// it is the run's friction level: a noise-free copy of the speed the base only has as it
+/// was measured (through the angle's rounding). Beside the measured one, such a copy lets a
+/// fit separate the speed from its reading's error, which the torque residual carries, and
+/// names that error a saturation. What the model's own columns make of the run carries no
+/// such copy, so only the part of `K_t·I³` the model cannot produce on its own run is tested.
+pub fn saturation_beyond_run(
+    cand: &mut [(Variant, Vec<Vec<f64>>)],
+    instruments: &[Option<Vec<f64>>],
+) {
+    let inst: Vec<&[f64]> = instruments.iter().flatten().map(|z| z.as_slice()).collect();
+    for (v, cols) in cand.iter_mut() {
+        if v.kind == EffectKind::Saturation && !inst.is_empty() {
+            *cols = cols
+                .iter()
+                .map(|c| crate::numerics::least_squares::lstsq(&inst, c).resid)
+                .collect();
+        }
+    }
+}
+
 /// Value of a grid parameter in a variant (`harmonic=7`, `vs=3`, `tau=20`).
 pub type Fixed = Vec<(&'static str, f64)>;
 
@@ -766,6 +790,39 @@ mod tests {
             assert!((mu * torque[k] - effect).abs() < 1e-12);
         }
         assert_eq!(torque[205], 0.0, "stuck");
+    }
+
+    /// The saturation candidate keeps only what the run's base columns cannot make: a
+    /// column they span (a friction level and a speed, block by block) projects to zero, and
+    /// a part orthogonal to them stays whole; other candidates are left alone.
+    #[test]
+    fn saturation_is_tested_beyond_the_runs_own_columns() {
+        let n = 120;
+        let level: Vec<f64> = (0..n).map(|k| if k < 60 { 1.0 } else { -1.0 }).collect();
+        let speed: Vec<f64> = (0..n).map(|k| 2.0 + (k / 20) as f64).collect();
+        // Orthogonal to both: alternating signs, even within each block of 20.
+        let other: Vec<f64> = (0..n)
+            .map(|k| if k % 2 == 0 { 1.0 } else { -1.0 })
+            .collect();
+        let spanned: Vec<f64> = (0..n).map(|k| 0.3 * level[k] + 0.05 * speed[k]).collect();
+        let with_other: Vec<f64> = (0..n).map(|k| spanned[k] + 0.01 * other[k]).collect();
+        let v = |kind| Variant::new(kind, Equation::Mechanical, vec![], vec![]);
+        let mut cand = vec![
+            (v(EffectKind::Saturation), vec![spanned.clone(), with_other]),
+            (v(EffectKind::Offset), vec![spanned.clone()]),
+        ];
+        let inst = vec![Some(level), None, Some(speed)];
+        saturation_beyond_run(&mut cand, &inst);
+        // The least-squares ridge leaves about 1e-9 of a spanned column.
+        assert!(
+            cand[0].1[0].iter().all(|x| x.abs() < 1e-6),
+            "{:?}",
+            cand[0].1[0]
+        );
+        for (x, o) in cand[0].1[1].iter().zip(&other) {
+            assert!((x - 0.01 * o).abs() < 1e-6, "{x} against {}", 0.01 * o);
+        }
+        assert_eq!(cand[1].1[0], spanned, "not a saturation column");
     }
 
     /// The interval column of a voltage plant: the interval's mean drive from the held

@@ -349,10 +349,22 @@ fn complete_torque_equation(
         let (c, z) = both(&|g| g.wf_m.integral_zoh(&g.s.saturation_intervals(r)));
         mech.push_base(Column::new("saturation", "V", false), c, z);
     }
+    // The saturation candidate's column on the model's own run (its descriptor says why);
+    // without a run it is not tested.
+    let sat = run
+        .zip(st.motor)
+        .filter(|_| f.voltage)
+        .map(|(g, m)| g.s.saturation_intervals(m.r));
+    mech.cand
+        .retain(|(v, _)| v.kind != EffectKind::Saturation || sat.is_some());
     for (v, cols) in mech.cand.iter_mut() {
         if v.kind == EffectKind::LoadFriction {
             *cols = vec![wf_m.integral_zoh(&lf_col)];
             v.torque = Some(lf_torque.clone());
+        }
+        if let (EffectKind::Saturation, Some(c)) = (v.kind, &sat) {
+            *cols = vec![wf_m.integral_zoh(c)];
+            v.torque = Some(c.clone());
         }
     }
 }
@@ -447,6 +459,7 @@ pub(super) fn mechanical_pass(
     if let Some(w) = &scale {
         map_rows(&mut mech, |c| c.iter().zip(w).map(|(a, b)| a * b).collect());
     }
+    candidates::saturation_beyond_run(&mut mech.cand, &mech.base_inst);
     let out = pass.select(&mech);
     let unit = if f.voltage { "V·s" } else { "u·s" };
     pass.acc.equations.push(residual_of(

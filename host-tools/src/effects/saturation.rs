@@ -34,15 +34,28 @@ pub static D: Descriptor = Descriptor {
     voltage: None,
     on_residual: false,
     sindy: |_| terms(&[(Term::ICubed, IN_ACCEL)]),
-    // Not a candidate: its column, `K_t·I³` per sample interval, is the drive times `I²`,
-    // and where the current's magnitude holds still (steady speeds) it is the drive
-    // itself, which takes up any error of the model that follows the drive as a
-    // saturation (docs/decisions/0031-thermal-and-saturation-candidates.md). A falling K_t is
-    // reported through the `current` and `acceleration` carriers (`diagnose/carriers.rs`)
-    // and fitted by `fit --add saturation`. Its present column needs the fitted K_b and R:
-    // `diagnose` adds it to the torque equation's base itself (`Signals::saturation_intervals`).
+    // The candidate's column is `K_t·I³` per sample interval of the current the model's own
+    // noise-free run draws from the log's input (`Signals::saturation_intervals` on the run),
+    // less what the model's own columns make of that run
+    // (`diagnose::candidates::saturation_beyond_run`): the measured current is the torque
+    // equation's left side over R, and a column built from it fits the model's residual with
+    // itself wherever the current's magnitude holds still. `diagnose` puts the run's column in
+    // place of this sample column and drops the candidate where there is no run
+    // (docs/decisions/0031-thermal-and-saturation-candidates.md). Its present column needs the
+    // fitted R: `diagnose` adds it to the torque equation's base itself.
     diagnose: Diagnose {
-        variants: no_variants,
+        variants: |s| match s.current() {
+            Some(i) => {
+                let column = i.iter().map(|c| s.kt * c * c * c).collect();
+                vec![Variant::new(
+                    EffectKind::Saturation,
+                    Equation::Mechanical,
+                    vec![],
+                    vec![column],
+                )]
+            }
+            None => vec![],
+        },
         present: no_columns,
         keys: |b, _, v| put(v, "k", b[0]),
         column_names: &[],
