@@ -142,7 +142,9 @@ fn correct_models_are_not_given_saturation_on_minutes_of_steps() {
 
 /// A minute of the fitting multisine, whose currents are lower, and of the steps; and the
 /// steady speeds `fit --model lugre` asks for, where the current's magnitude holds still
-/// for seconds.
+/// for seconds. There the model's own columns on its run nearly span the candidate's
+/// (what is left is dropped or tested at p = 1), so that case shows the candidate is not
+/// taken there, not that its test holds its level.
 #[test]
 fn correct_models_are_not_given_saturation_on_a_minute() {
     never_given(SignalKind::A, 60.0, 20);

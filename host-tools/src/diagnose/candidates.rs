@@ -615,20 +615,45 @@ impl Signals {
 /// fit separate the speed from its reading's error, which the torque residual carries, and
 /// names that error a saturation. What the model's own columns make of the run carries no
 /// such copy, so only the part of `K_t·I³` the model cannot produce on its own run is tested.
+///
+/// A column the run's base columns span (the part left is below [`SPANNED`] of the column)
+/// becomes zero, and a candidate with nothing left is dropped: the test's scaling to unit
+/// norm would otherwise blow the rounding up into a direction of its own.
 pub fn saturation_beyond_run(
-    cand: &mut [(Variant, Vec<Vec<f64>>)],
+    cand: &mut Vec<(Variant, Vec<Vec<f64>>)>,
     instruments: &[Option<Vec<f64>>],
 ) {
     let inst: Vec<&[f64]> = instruments.iter().flatten().map(|z| z.as_slice()).collect();
-    for (v, cols) in cand.iter_mut() {
-        if v.kind == EffectKind::Saturation && !inst.is_empty() {
-            *cols = cols
-                .iter()
-                .map(|c| crate::numerics::least_squares::lstsq(&inst, c).resid)
-                .collect();
-        }
+    if inst.is_empty() {
+        return;
     }
+    let norm = |c: &[f64]| c.iter().map(|x| x * x).sum::<f64>().sqrt();
+    cand.retain_mut(|(v, cols)| {
+        if v.kind != EffectKind::Saturation {
+            return true;
+        }
+        let left: Vec<(Vec<f64>, bool)> = cols
+            .iter()
+            .map(|c| {
+                let r = crate::numerics::least_squares::lstsq(&inst, c).resid;
+                if norm(&r) > SPANNED * norm(c) {
+                    (r, true)
+                } else {
+                    (vec![0.0; r.len()], false)
+                }
+            })
+            .collect();
+        let any = left.iter().any(|(_, k)| *k);
+        *cols = left.into_iter().map(|(r, _)| r).collect();
+        any
+    });
 }
+
+/// The share of a column below which what is left after its least-squares fit by other
+/// columns counts as spanned: the ridge-regularised solve leaves about 1e-9 of a spanned
+/// column, and a coefficient fitted on a part a millionth of the column would carry a
+/// standard error a million times that of the column itself, no estimate at all.
+pub const SPANNED: f64 = 1e-6;
 
 /// Value of a grid parameter in a variant (`harmonic=7`, `vs=3`, `tau=20`).
 pub type Fixed = Vec<(&'static str, f64)>;
@@ -823,6 +848,10 @@ mod tests {
             assert!((x - 0.01 * o).abs() < 1e-6, "{x} against {}", 0.01 * o);
         }
         assert_eq!(cand[1].1[0], spanned, "not a saturation column");
+        // A candidate the run's columns span whole is not tested at all.
+        let mut only_spanned = vec![(v(EffectKind::Saturation), vec![spanned.clone()])];
+        saturation_beyond_run(&mut only_spanned, &inst);
+        assert!(only_spanned.is_empty());
     }
 
     /// The interval column of a voltage plant: the interval's mean drive from the held
