@@ -387,7 +387,7 @@ pub static LOOK_ALIKES: &[LookAlikes] = &[
     },
     LookAlikes {
         pairs: &[("load_friction", "deadtime")],
-        experiment: "voltage steps of either sign, many of them down while the rotor turns fast (signal d, three minutes or more): dead time is a voltage loss of one size at every current, following the sign of the current, and shows in the current's own equation; load friction is a torque in proportion to the current against the motion, which differs from a lower torque constant only while the drive brakes the rotor, right after the steps down",
+        experiment: "voltage steps of either sign, many of them down while the rotor turns fast (signal d, three minutes or more): dead time is a voltage loss of one size at every current, following the sign of the current, and shows in the current's own equation (on any log whose current changes sign, signal a too); load friction is a torque in proportion to the current against the motion, which differs from a lower torque constant only while the drive brakes the rotor, right after the steps down",
     },
     LookAlikes {
         pairs: &[("load_friction", "saturation")],
@@ -419,7 +419,7 @@ pub static LOOK_ALIKES: &[LookAlikes] = &[
     },
     LookAlikes {
         pairs: &[("reversal", "frequency")],
-        experiment: "voltage steps (signal d): a resonance rings at one frequency after every step, reversal or not; what reversals carry (backlash, presliding) comes back only at changes of direction. The steps of d change sign, so the two stay mixed in one log of them; steps that keep the drive in one direction would isolate the resonance, and no built-in signal plays them yet",
+        experiment: "voltage steps (signal d): a resonance rings at one frequency after every step, whether or not the step reverses the rotor; what a velocity reversal carries (a gap, presliding) appears only after the steps that reverse it. Compare the residual after steps that keep the direction with that after reversals: ringing after both is a resonance, a disturbance after reversals only is a gap or presliding",
     },
     LookAlikes {
         pairs: &[("acceleration", "current"), ("saturation", "acceleration")],
