@@ -32,13 +32,16 @@ pub struct Args {
     /// b (up to u_max/4), c (low speed, up to u_max/48), d (steps up to 5/12·u_max), each at
     /// most 0.35·R·i_max (the board's current trip through the winding); steady
     /// (constant levels from 2/3 to all of --amplitude, both signs, 3 s each: the static
-    /// friction curve `fit --model lugre` asks for) and ramp (slow ramps from rest to ±2/3 of
-    /// --amplitude at two slopes: breakaway).
-    #[arg(long, value_parser = ["a", "b", "c", "d", "steady", "ramp"], required_unless_present = "speed_ref", conflicts_with = "speed_ref")]
+    /// friction curve `fit --model lugre` asks for), ramp (slow ramps from rest to ±2/3 of
+    /// --amplitude at two slopes: breakaway) and speeds (12 constant levels from 1/15 of
+    /// --amplitude to all of it, up then down, each sign, 2 s each: the friction curve over a
+    /// wide speed range).
+    #[arg(long, value_parser = ["a", "b", "c", "d", "steady", "ramp", "speeds"], required_unless_present = "speed_ref", conflicts_with = "speed_ref")]
     pub signal: Option<String>,
-    /// Largest voltage of steady and ramp as a fraction of u_max (0 < F <= 1). Default 0.05:
-    /// 0.6 V at u_max = 12 V, the paper's levels for its motor; raise it for a motor with
-    /// more friction.
+    /// Largest voltage of steady, ramp and speeds as a fraction of u_max (0 < F <= 1).
+    /// Default 0.05 for steady and ramp: 0.6 V at u_max = 12 V, the paper's levels for its
+    /// motor; raise it for a motor with more friction. Default 0.5 for speeds: 6 V at
+    /// u_max = 12 V, its lowest level 0.4 V (the emulator's levels).
     #[arg(long, value_name = "F")]
     pub amplitude: Option<f64>,
     /// The board's loop voltage limit u_max [V] as uploaded (`motorid export --u-max`), for
@@ -54,8 +57,8 @@ pub struct Args {
     #[arg(long, value_name = "RAD_S", allow_hyphen_values = true)]
     pub speed_ref: Option<f32>,
     /// Duration [s] of a-d or --speed-ref. Default: the signal's (a, b: 90 s; c, d: see
-    /// `motorid simulate --help`), 10 s with --speed-ref. Steady and ramp are programs of
-    /// fixed length (66 s, 155 s).
+    /// `motorid simulate --help`), 10 s with --speed-ref. Steady, ramp and speeds are
+    /// programs of fixed length (66 s, 155 s, 96 s).
     #[arg(long)]
     pub duration: Option<f64>,
     /// Motor pole pairs, for the log's Hall resolution 2π/(6·pole pairs). Default 11: the
@@ -71,18 +74,31 @@ pub struct Args {
 /// Default largest voltage of steady and ramp as a fraction of u_max: the paper's 0.6 V at
 /// the default u_max of 12 V.
 pub const DEFAULT_AMPLITUDE: f64 = 0.05;
+/// Default largest voltage of speeds as a fraction of u_max: the emulator's 6 V at the
+/// default u_max of 12 V.
+pub const DEFAULT_SPEEDS_AMPLITUDE: f64 = 0.5;
 
 /// Seconds each level of the steady program is held: the emulator's `steady` signal.
 const STEADY_BLOCK_S: f64 = 3.0;
 
-/// The board runs of a steady or ramp program: (excitation, seconds), the voltages those
-/// of the emulator's `steady` and `ramp` signals ([`crate::emulator::signals`]) scaled so
-/// that the largest steady level is `peak` volts.
+/// The board runs of a steady, ramp or speeds program: (excitation, seconds), the voltages
+/// those of the emulator's `steady`, `ramp` and `speeds` signals
+/// ([`crate::emulator::signals`]) scaled so that the largest steady level (the top of the
+/// speeds ladder for speeds) is `peak` volts.
 pub fn program(kind: &str, peak: f64) -> Vec<(Excitation, f64)> {
-    use crate::emulator::signals::{RAMP_END, RAMP_REST, RAMP_SLOPES, STEADY_LEVELS};
+    use crate::emulator::signals::{
+        speeds_blocks, RAMP_END, RAMP_REST, RAMP_SLOPES, SPEEDS_BLOCK, SPEEDS_HIGH, STEADY_LEVELS,
+    };
     let top = STEADY_LEVELS.iter().fold(0.0f64, |a, v| a.max(v.abs()));
     let g = peak / top;
     match kind {
+        "speeds" => speeds_blocks()
+            .into_iter()
+            .map(|v| {
+                let volts = (v * peak / SPEEDS_HIGH) as f32;
+                (Excitation::Steady { volts }, SPEEDS_BLOCK)
+            })
+            .collect(),
         "steady" => STEADY_LEVELS
             .iter()
             .copied()
@@ -228,7 +244,7 @@ impl Plan {
             (None, Some(w)) => format!("speed {w} rad/s"),
             (None, None) => bail!("give --signal or --speed-ref"),
         };
-        let program_kind = matches!(args.signal.as_deref(), Some("steady" | "ramp"));
+        let program_kind = matches!(args.signal.as_deref(), Some("steady" | "ramp" | "speeds"));
         if let Some(w) = args.speed_ref {
             check_speed_ref(
                 w,
@@ -245,10 +261,13 @@ impl Plan {
         }
         if args.amplitude.is_some() && !program_kind {
             bail!(
-                "--amplitude: only for --signal steady or ramp (the board scales a-d to its u_max)"
+                "--amplitude: only for --signal steady, ramp or speeds (the board scales a-d to its u_max)"
             );
         }
-        let amplitude = args.amplitude.unwrap_or(DEFAULT_AMPLITUDE);
+        let amplitude = args.amplitude.unwrap_or(match args.signal.as_deref() {
+            Some("speeds") => DEFAULT_SPEEDS_AMPLITUDE,
+            _ => DEFAULT_AMPLITUDE,
+        });
         if !(amplitude.is_finite() && amplitude > 0.0 && amplitude <= 1.0) {
             bail!(
                 "--amplitude: must be a fraction of u_max above 0 and at most 1 (got {})",
@@ -256,7 +275,7 @@ impl Plan {
             );
         }
         if program_kind && args.duration.is_some() {
-            bail!("--duration: steady and ramp are programs of fixed length; leave it out");
+            bail!("--duration: steady, ramp and speeds are programs of fixed length; leave it out");
         }
         let runs = board_runs(args, amplitude);
         for (_, duration) in &runs {
@@ -282,7 +301,7 @@ impl Plan {
 /// The board runs of the arguments: (excitation or speed control, seconds).
 fn board_runs(args: &Args, amplitude: f64) -> Vec<(Option<Excitation>, f64)> {
     match args.signal.as_deref() {
-        Some(k @ ("steady" | "ramp")) => program(k, amplitude * args.u_max)
+        Some(k @ ("steady" | "ramp" | "speeds")) => program(k, amplitude * args.u_max)
             .into_iter()
             .map(|(e, d)| (Some(e), d))
             .collect(),
@@ -616,6 +635,15 @@ mod tests {
             })
             .collect();
         assert_eq!(slopes, [9.5e-3, -9.5e-3, 12e-3, -12e-3]);
+        // Speeds: the emulator's ladder, scaled so that its top is the peak, both signs.
+        let speeds = program("speeds", 3.0);
+        let blocks = crate::emulator::signals::speeds_blocks();
+        assert_eq!(speeds.len(), blocks.len());
+        for ((e, d), v) in speeds.iter().zip(blocks) {
+            let want = (v * 3.0 / crate::emulator::signals::SPEEDS_HIGH) as f32;
+            assert!(matches!(e, Excitation::Steady { volts } if (volts - want).abs() < 1e-6));
+            assert_eq!(*d, crate::emulator::signals::SPEEDS_BLOCK);
+        }
     }
 
     #[test]

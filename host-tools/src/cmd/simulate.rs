@@ -32,8 +32,8 @@ fn after_help() -> String {
 #[derive(clap::Args, Debug)]
 #[command(after_help = after_help())]
 pub struct Args {
-    /// Excitation (commanded voltage): a, b, c, d (the paper's), steady or ramp (static
-    /// friction experiments); see below.
+    /// Excitation (commanded voltage): a, b, c, d (the paper's), steady, ramp or speeds
+    /// (friction experiments); see below.
     #[arg(long, value_enum)]
     pub signal: SignalKind,
     /// Duration in seconds (default: the signal's own, see below).

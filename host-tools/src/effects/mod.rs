@@ -383,11 +383,11 @@ pub struct LookAlikes {
 pub static LOOK_ALIKES: &[LookAlikes] = &[
     LookAlikes {
         pairs: &[("offset", "asymmetry")],
-        experiment: "hold the rotor near standstill with a small voltage in each direction, and run steady speeds both ways: a constant load pulls the same way at rest, a direction-dependent friction acts only while moving (`motorid simulate --signal steady`, or record it)",
+        experiment: "none of a turning rotor: while it turns, a constant load and a Coulomb friction that differs by direction are one torque, of one sign and size at every speed either way. A viscous part that differs by direction grows with speed, which a constant load does not: constant voltages over a wide speed range each way separate it (`motorid simulate --signal speeds`, or `motorid record --signal speeds`). The Coulomb part shows only at breakaway: in slow ramps from rest each way (signal ramp) a constant load t0 raises the voltage at which the rotor first moves one way and lowers it the other way, by R·t0/K_t each, while a friction that differs by direction leaves the two equal; `diagnose` does not fit breakaway, so read the two voltages in the log. A load that can be disengaged, or a torque sensor, tells them apart directly",
     },
     LookAlikes {
         pairs: &[("load_friction", "deadtime")],
-        experiment: "voltage steps down while the rotor turns fast (signal d): load-dependent friction acts only while the drive brakes the rotor, dead time follows the sign of the current whether braking or not",
+        experiment: "voltage steps of either sign, many of them down while the rotor turns fast (signal d, three minutes or more): dead time is a voltage loss of one size at every current, following the sign of the current, and shows in the current's own equation (on any log whose current changes sign, signal a too); load friction is a torque in proportion to the current against the motion, which differs from a lower torque constant only while the drive brakes the rotor, right after the steps down",
     },
     LookAlikes {
         pairs: &[("load_friction", "saturation")],
@@ -395,39 +395,39 @@ pub static LOOK_ALIKES: &[LookAlikes] = &[
     },
     LookAlikes {
         pairs: &[("cogging", "position_load"), ("cogging", "theta")],
-        experiment: "a slow run at constant speed over several revolutions: count the periods of the error per revolution (one: a position load; the number of magnet/slot periods: cogging)",
+        experiment: "constant speeds over several revolutions (`motorid simulate --signal speeds` or steady, or any log that turns several revolutions each way): count the periods of the torque error per revolution (one: a position load; the number of magnet or slot periods: cogging); a shape over one revolution that neither fits stays with the angle (`table:var=theta` fits it)",
     },
     LookAlikes {
         pairs: &[("stribeck", "presliding"), ("presliding", "reversal")],
-        experiment: "slow reversals of small amplitude (a fraction of a revolution) against steady low speeds: presliding shows as a deflection before breakaway at each reversal, a Stribeck dip as a function of speed",
+        experiment: "slow ramps from rest each way (signal ramp) against constant low speeds (signal speeds): presliding is a deflection that follows the voltage before breakaway, a Stribeck dip is friction falling with speed across the low constant levels. A deflection shows in a motor log only when it spans a Hall step or more (breakaway torque over bristle stiffness, against 2π/(6·pole pairs)); a smaller one needs a finer encoder",
     },
     LookAlikes {
         pairs: &[("coulomb", "stribeck"), ("coulomb", "viscous"), ("viscous", "stribeck"), ("stribeck", "omega")],
-        experiment: "steady speeds at several levels, low ones included (`motorid simulate --signal steady`): the static friction curve separates a constant, a dip at low speed and a slope",
+        experiment: "constant speeds at many levels, low and high, each way (`motorid simulate --signal speeds`, or `motorid record --signal speeds`): the friction at each speed separates a constant (Coulomb), a dip at low speed (Stribeck) and a slope (viscous). Signal steady spans too narrow a range of speeds (2-5 rad/s on the paper's motor) for the slope",
     },
     LookAlikes {
         pairs: &[("current_offset", "offset"), ("current_offset", "deadtime")],
-        experiment: "a run at zero voltage with the rotor still: a current-sensor offset reads a current where there is none",
+        experiment: "rests at zero voltage with the rotor still (signal ramp rests 1 s before each of its ramps): a current-sensor offset reads a current where none flows; a load torque or a dead time leaves the current at zero there",
     },
     LookAlikes {
         pairs: &[("thermal", "time"), ("thermal", "*")],
-        experiment: "a long run at high current followed by a rest with the same excitation: heating grows and decays with its time constant, wear or a supply sag does not",
+        experiment: "minutes of large current (signal d), a rest at zero voltage of several thermal time constants, then the same signal again (two records): heating follows the mean square of the current with its time constant and cools during the rest, so the resistance starts near cold again when the steps resume; wear, a supply sag or a sensor drift goes on with time. The rest itself measures nothing: the resistance shows only while current flows",
     },
     LookAlikes {
         pairs: &[("backlash", "compliance")],
-        experiment: "a slow reversal at low speed (`motorid simulate --signal ramp`, or `motorid record --signal ramp`: slow ramps from rest in each direction), then steps (signal d): a gap shows as a dead band after each change of direction, in which the rotor travels the gap's angle freely with no torque passed to the load; a compliant coupling passes torque at once and shows as a resonance that the steps excite and the rotor's angle rings at",
+        experiment: "voltage steps (signal d): a compliant coupling rings at one frequency after every step, whatever its direction; a gap shows only where the torque on the load changes sign (a step down brakes the rotor, a reversal of the drive): the rotor crosses the gap with its own inertia, then takes up the load with a knock. Slow ramps (signal ramp) show neither: at low speed friction, not inertia, carries the torque. A second encoder on the load side separates them directly",
     },
     LookAlikes {
         pairs: &[("reversal", "frequency")],
-        experiment: "steps in one direction only, without reversals: a resonance still rings after each step, backlash does not show",
+        experiment: "voltage steps (signal d): a resonance rings at one frequency after every step, whether or not the step reverses the rotor; what a velocity reversal carries (a gap, presliding) appears only after the steps that reverse it. Compare the residual after steps that keep the direction with that after reversals: ringing after both is a resonance, a disturbance after reversals only is a gap or presliding",
     },
     LookAlikes {
         pairs: &[("acceleration", "current"), ("saturation", "acceleration")],
-        experiment: "slow ramps at high current (a locked or heavily loaded rotor): a falling torque constant shows at high current without acceleration, an inertia error only with acceleration",
+        experiment: "voltage steps of several sizes (signal d): on a free rotor a large current comes with a large acceleration, so only the shape tells them apart: a torque constant that falls with current loses torque as the cube of the current (nothing on small steps), an inertia error in proportion to the acceleration on every step. A locked rotor shows neither in a motor log, which does not measure torque; a torque sensor on the locked shaft measures the torque constant at each current directly",
     },
     LookAlikes {
         pairs: &[("viscous", "asymmetry")],
-        experiment: "steady speeds in both directions: the friction curve of each direction on its own",
+        experiment: "constant speeds over a wide range each way (`motorid simulate --signal speeds`, or `motorid record --signal speeds`): the friction curve of each direction on its own; a slope equal both ways is viscous friction, a slope or level that differs by direction is asymmetry",
     },
 ];
 

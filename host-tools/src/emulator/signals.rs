@@ -12,9 +12,11 @@
 //! | `d` | validation: steps held 1-3 s, levels between −10 and 10 V | 60 s |
 //! | `steady` | static LuGre parameters: constant 0.40 … 0.60 V in 0.02 V blocks, both signs | 66 s (3 s blocks) |
 //! | `ramp` | dynamic LuGre parameters: slow ramps 0 → ±0.4 V at 9.5 and 12 mV/s | 155 s |
+//! | `speeds` | friction curve over a wide speed range: constant 0.4 … 6 V, up and down each sign | 96 s (2 s blocks) |
 //!
 //! The multisines fade in over the first second, so the motor starts from rest smoothly.
-//! `steady` stretches its blocks to the requested duration; `ramp` is cut or repeated.
+//! `steady` and `speeds` stretch their blocks to the requested duration; `ramp` is cut or
+//! repeated.
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 use std::f64::consts::PI;
@@ -38,17 +40,20 @@ pub enum SignalKind {
     Steady,
     /// Dynamic-friction experiment: slow ramps 0 → ±0.4 V at 9.5 and 12 mV/s.
     Ramp,
+    /// Friction curve over a wide speed range: constant 0.4-6 V blocks, up and down each sign.
+    Speeds,
 }
 
 impl SignalKind {
     /// Every kind, in the order of the paper (then the static-parameter experiments).
-    pub const ALL: [SignalKind; 6] = [
+    pub const ALL: [SignalKind; 7] = [
         SignalKind::A,
         SignalKind::B,
         SignalKind::C,
         SignalKind::D,
         SignalKind::Steady,
         SignalKind::Ramp,
+        SignalKind::Speeds,
     ];
 
     /// Command-line name (`a`, `steady`, ...).
@@ -60,6 +65,7 @@ impl SignalKind {
             SignalKind::D => "d",
             SignalKind::Steady => "steady",
             SignalKind::Ramp => "ramp",
+            SignalKind::Speeds => "speeds",
         }
     }
 
@@ -76,6 +82,7 @@ impl SignalKind {
             SignalKind::C | SignalKind::D => 60.0,
             SignalKind::Steady => STEADY_LEVELS.len() as f64 * 2.0 * 3.0,
             SignalKind::Ramp => ramp_program_duration(),
+            SignalKind::Speeds => speeds_blocks().len() as f64 * SPEEDS_BLOCK,
         }
     }
 
@@ -88,6 +95,7 @@ impl SignalKind {
             SignalKind::D => "validation: voltage steps between -10 and 10 V held 1-3 s (60 s)",
             SignalKind::Steady => "static friction: constant 0.40..0.60 V in 0.02 V blocks, both signs (66 s)",
             SignalKind::Ramp => "dynamic friction: slow ramps 0 -> +-0.4 V at 9.5 and 12 mV/s (155 s)",
+            SignalKind::Speeds => "friction curve over a wide speed range: constant 0.4..6 V in 12 levels, up then down, each sign (96 s)",
         }
     }
 }
@@ -102,6 +110,44 @@ pub const RAMP_SLOPES: [f64; 2] = [9.5e-3, 12e-3];
 pub const RAMP_END: f64 = 0.4;
 /// Rest at 0 V before each ramp [s].
 pub const RAMP_REST: f64 = 1.0;
+
+/// Levels of the `speeds` experiment [V]: 12 levels from [`SPEEDS_LOW`] to [`SPEEDS_HIGH`],
+/// evenly spaced in logarithm (each 28 % above the one before), so that low speeds, where a
+/// Stribeck dip and a Coulomb level show, get as many blocks as high ones, where a viscous
+/// slope does.
+pub fn speeds_levels() -> [f64; SPEEDS_LEVELS] {
+    let ratio = SPEEDS_HIGH / SPEEDS_LOW;
+    core::array::from_fn(|k| SPEEDS_LOW * ratio.powf(k as f64 / (SPEEDS_LEVELS - 1) as f64))
+}
+/// Number of levels of `speeds` per sweep.
+pub const SPEEDS_LEVELS: usize = 12;
+/// Lowest level of `speeds` [V]: above breakaway (about 0.3 V for the paper's motor), the
+/// lowest level of `steady`.
+pub const SPEEDS_LOW: f64 = 0.4;
+/// Highest level of `speeds` [V]: the middle of `d`'s range, about 80 rad/s on the paper's
+/// motor, far into the speeds where viscous friction dominates.
+pub const SPEEDS_HIGH: f64 = 6.0;
+/// Seconds each level of `speeds` is held at its default duration: a hundred mechanical time
+/// constants of the paper's motor (13 ms), several revolutions at the lowest speed.
+pub const SPEEDS_BLOCK: f64 = 2.0;
+
+/// The blocks of `speeds` in order: up through the levels and back down, forward, then the
+/// same backward. Every change of level is one step of the ladder (at most 22 % of the top
+/// level), never a jump from speed to rest or to the other direction at speed: the current a
+/// step draws stays that of one step.
+pub fn speeds_blocks() -> Vec<f64> {
+    let levels = speeds_levels();
+    let sweep: Vec<f64> = levels
+        .iter()
+        .copied()
+        .chain(levels.iter().rev().copied())
+        .collect();
+    sweep
+        .iter()
+        .copied()
+        .chain(sweep.iter().map(|v| -v))
+        .collect()
+}
 
 fn ramp_program_duration() -> f64 {
     RAMP_SLOPES
@@ -185,11 +231,9 @@ pub fn signal_at(kind: SignalKind, duration: f64, seed: u64, ts: f64) -> Vec<f64
                 .copied()
                 .chain(STEADY_LEVELS.iter().map(|v| -v))
                 .collect();
-            let block = n as f64 / blocks.len() as f64;
-            (0..n)
-                .map(|k| blocks[((k as f64 / block) as usize).min(blocks.len() - 1)])
-                .collect()
+            stretch(&blocks, n)
         }
+        SignalKind::Speeds => stretch(&speeds_blocks(), n),
         SignalKind::Ramp => {
             // One program: for each slope, rest, ramp up to +END, rest, ramp down to −END.
             let mut segs: Vec<(f64, f64)> = Vec::new(); // (length s, slope V/s incl. sign)
@@ -214,6 +258,14 @@ pub fn signal_at(kind: SignalKind, duration: f64, seed: u64, ts: f64) -> Vec<f64
                 .collect()
         }
     }
+}
+
+/// `n` samples of constant `blocks` of equal length.
+fn stretch(blocks: &[f64], n: usize) -> Vec<f64> {
+    let block = n as f64 / blocks.len() as f64;
+    (0..n)
+        .map(|k| blocks[((k as f64 / block) as usize).min(blocks.len() - 1)])
+        .collect()
 }
 
 /// Shape of a random-phase multisine with a slowly varying envelope.
@@ -280,6 +332,7 @@ mod tests {
                 SignalKind::D => 10.0,
                 SignalKind::Steady => 0.6,
                 SignalKind::Ramp => RAMP_END,
+                SignalKind::Speeds => SPEEDS_HIGH,
             };
             assert!(max <= want + 1e-9, "{kind:?}: max {max} > {want}");
             // Half the bound: over its default duration each signal comes near it; a wrong scale
@@ -296,6 +349,35 @@ mod tests {
         for kind in [SignalKind::A, SignalKind::D] {
             assert_eq!(signal(kind, 20.0, 3), signal(kind, 20.0, 3));
             assert_ne!(signal(kind, 20.0, 3), signal(kind, 20.0, 4));
+        }
+    }
+
+    /// `speeds` holds each level of its ladder for one block, both signs, and never changes
+    /// the voltage by more than one rung.
+    #[test]
+    fn speeds_climb_and_descend_one_rung_at_a_time() {
+        let kind = SignalKind::Speeds;
+        let u = signal(kind, kind.default_duration(), 0);
+        let levels = speeds_levels();
+        let top = levels[SPEEDS_LEVELS - 1];
+        let rung = top - levels[SPEEDS_LEVELS - 2];
+        let mut changes = 0;
+        for w in u.windows(2) {
+            let d = (w[1] - w[0]).abs();
+            if d > 0.0 {
+                changes += 1;
+                // The one sign change (lowest level forward to lowest backward) is 2·SPEEDS_LOW.
+                assert!(d <= rung.max(2.0 * SPEEDS_LOW) + 1e-12, "step {d} V");
+            }
+        }
+        assert_eq!(changes, speeds_blocks().len() - 1 - 2);
+        for v in levels {
+            for sign in [1.0, -1.0] {
+                let held = u.iter().filter(|x| (**x - sign * v).abs() < 1e-12).count();
+                let want = 2.0 * SPEEDS_BLOCK / SAMPLE_PERIOD;
+                // The top level is one block of twice the length (up, then straight down).
+                assert!((held as f64 - want).abs() <= 2.0, "{v} V: {held} samples");
+            }
         }
     }
 
