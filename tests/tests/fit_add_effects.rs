@@ -183,9 +183,9 @@ fn the_loop_adds_each_effect_and_closes_half_the_gap_to_the_truth() {
         .into_iter()
         // Compliance and backlash are fitted by `fit --add` in fit_add_load.rs: on a log with
         // one of them `diagnose` may name the other first or both as a pair (docs/limits.md),
-        // which this table's by-name check does not take. Saturation is not a `diagnose`
-        // candidate: on these logs it shows only as the acceleration carrier, with no term to
-        // add (docs/limits.md). A table has no default torques to hide.
+        // which this table's by-name check does not take. Saturation at its default
+        // size is named only on minutes of voltage steps at a larger loss (docs/limits.md),
+        // not on these logs. A table has no default torques to hide.
         .filter(|k| {
             !matches!(
                 k,
