@@ -356,9 +356,18 @@ pub fn fit(req: &FitRequest) -> Result<Model> {
     };
     super::progress::report("static friction curve", 0, f64::NAN);
     let pts: Vec<SteadyPoint> = all_steady_points(&m, req.logs);
-    start_dynamics(&mut m, req.logs, &pts, init, weak.creep)?;
+    // A fit with added effects refines from its own two starts (the weak form's and the
+    // base structure's, itself fitted from two bristle starts).
+    let other_start = start_dynamics(
+        &mut m,
+        req.logs,
+        &pts,
+        init,
+        weak.creep,
+        req.adds.is_empty(),
+    )?;
     let free = free_parameters(req.plant);
-    let mut dyn_rows = super::refine_free_run(&mut m, &free, req)?;
+    let mut dyn_rows = refine_from_starts(&mut m, other_start, &free, req)?;
     // The refinement can end where the inductance and inertia mimic a Stribeck bump (L
     // about twice and J 15 % below the emulator's, the current fit 4 points down): the
     // steady points seldom fix v0 (few of them below a few rad/s), so other (α1, v0) starts.
@@ -406,16 +415,62 @@ pub fn fit(req: &FitRequest) -> Result<Model> {
     Ok(m)
 }
 
+/// Refine `m` from its bristle start and, on another thread, from `other` (σ0, σ1) when
+/// given; keep the refinement whose free run ends cheaper. A start's cost ranks starts,
+/// not the minima a refinement reaches from them: a stiff, lightly damped bristle can cost
+/// least at the start and lead, with a winding start the weak form misread on voltage steps,
+/// to a minimum with the inductance several times too large.
+fn refine_from_starts(
+    m: &mut Model,
+    other: Option<(f64, f64)>,
+    free: &[Free],
+    req: &FitRequest,
+) -> Result<Vec<crate::model::Parameter>> {
+    let Some((sigma0, sigma1)) = other else {
+        return super::refine_free_run(m, free, req);
+    };
+    let mut second = m.clone();
+    if let Some(l) = second.lugre.as_mut() {
+        (l.sigma0, l.sigma1) = (sigma0, sigma1);
+    }
+    // The first on this thread (its progress is the one shown), the second beside it.
+    let (first_rows, second_rows) = std::thread::scope(|s| {
+        let other = s.spawn(|| super::refine_free_run(&mut second, free, req));
+        let first = super::refine_free_run(m, free, req);
+        let other = other
+            .join()
+            .unwrap_or_else(|_| Err(anyhow::anyhow!("the second refinement panicked")));
+        (first, other)
+    });
+    let res = sim_error::Residuals::new(req.logs, m.sensor.velocity_window);
+    let second_cost = |rows: &Result<_>| match rows {
+        Ok(_) => sim_error::cost(&res, &second),
+        Err(_) => f64::INFINITY,
+    };
+    let take_second = match &first_rows {
+        Ok(_) => second_cost(&second_rows) < sim_error::cost(&res, m),
+        Err(_) => second_rows.is_ok(),
+    };
+    if take_second {
+        tracing::debug!("the second bristle start ends cheaper: σ0 {sigma0}, σ1 {sigma1}");
+        *m = second;
+        return second_rows;
+    }
+    first_rows
+}
+
 /// The start of the base structure's refinement: the static curve fitted to the steady
-/// points `pts` from `init`, then the bristles from a grid (below); each stiff σ0 is also
-/// tried with the creep time σ1/σ0 the weak form read (`creep` [s]).
+/// points `pts` from `init`, then the bristles from a grid (below). Returns, when
+/// `second` asks for it, a second start (σ0, σ1) of another stiffness: the cheapest stiff
+/// start with another σ0 than the one taken.
 fn start_dynamics(
     m: &mut Model,
     logs: &[MotorLog],
     pts: &[SteadyPoint],
     init: LugreParams,
     creep: Option<f64>,
-) -> Result<()> {
+    second: bool,
+) -> Result<Option<(f64, f64)>> {
     let (lugre, _static_se) = fit_static(pts, init, false)?;
     m.lugre = Some(lugre);
     let sigma0 = init.sigma0;
@@ -477,11 +532,28 @@ fn start_dynamics(
         if best_soft.0 < SOFT_START_RATIO * best.0 {
             best = best_soft;
         }
+        // The cheapest stiff start of another σ0: its own runs, given up above the lowest
+        // among them (the first pass gave up most of them above the taken one's cost).
+        let others: Vec<usize> = stiff
+            .iter()
+            .copied()
+            .filter(|&k| second && starts[k].0 != best.1)
+            .collect();
+        let other_costs = sim_error::lowest_costs(&res, &in_order(&others), f64::INFINITY, |k| {
+            trial(others[k])
+        });
+        let other = others
+            .iter()
+            .zip(&other_costs)
+            .filter(|(_, c)| c.is_finite())
+            .min_by(|a, b| a.1.total_cmp(b.1))
+            .map(|(&k, _)| starts[k]);
         if let Some(l) = m.lugre.as_mut() {
             l.sigma0 = best.1;
             l.sigma1 = best.2;
         }
-        Ok(())
+        tracing::debug!("second bristle start (sigma0, sigma1): {other:?}");
+        Ok(other)
     }
 }
 
