@@ -392,9 +392,22 @@ pub fn fit(req: &FitRequest) -> Result<Model> {
             static_note(r);
         }
     }
+    if let Some(why) = bristle_scale_unseen(&m, req.logs) {
+        for r in &mut dyn_rows {
+            if matches!(r.name.as_str(), "sigma0" | "sigma1") {
+                r.identifiable = false;
+                r.std_err = None;
+                r.note = format!(
+                    "only the creep time σ1/σ0 = {:.3e} s is identified: {why}; no standard \
+                     error (the cost's curvature in the scale is the free run's sub-step's)",
+                    lugre.sigma1 / lugre.sigma0.max(1e-300)
+                );
+            }
+        }
+    }
     let res = m.sensor.hall_resolution_rad;
     for r in &mut dyn_rows {
-        if r.name == "sigma0" && !r.identifiable {
+        if r.name == "sigma0" && !r.identifiable && r.std_err.is_some() {
             r.note = format!(
                 "{}; the bristle deflection s/σ0 = {:.2e} rad is far below one Hall step \
                  ({res:.3} rad)",
@@ -555,6 +568,48 @@ fn start_dynamics(
         tracing::debug!("second bristle start (sigma0, sigma1): {other:?}");
         Ok(other)
     }
+}
+
+/// Why the logs show the bristles' ratio σ1/σ0 and not their scale, or None when they may
+/// show the scale. The stiffness shows either as a deflection the angle sensor resolves or
+/// as a mode the samples resolve. At breakaway the bristles stretch `s(0)/σ0`; the rotor on
+/// its bristles, `J·ẍ + c·ẋ + σ0·x` with `c = σ1 + α2 + K_t·K_b/R`, has poles whose product
+/// is `σ0/J` and sum `c/J`. When the deflection is below one Hall step and the fast pole
+/// settles within a sample (`|p|·h > 1`) while the slow one, about `σ0/c`, does not, all the
+/// logs show is the creep time `c/σ0`, which σ1/σ0 sets when σ1 dominates c.
+fn bristle_scale_unseen(m: &Model, logs: &[MotorLog]) -> Option<String> {
+    let l = m.lugre?;
+    let hall = m.sensor.hall_resolution_rad;
+    let h = logs
+        .iter()
+        .map(|g| g.sample_period())
+        .filter(|p| p.is_finite() && *p > 0.0)
+        .min_by(f64::total_cmp)?;
+    let j = m.motor.j;
+    if !(l.sigma0 > 0.0 && j > 0.0 && hall > 0.0) {
+        return None;
+    }
+    let deflection = l.s(0.0) / l.sigma0;
+    let electrical = if m.plant == Plant::Voltage && m.motor.r > 0.0 {
+        m.motor.kt * m.motor.kb / m.motor.r
+    } else {
+        0.0
+    };
+    let c = l.sigma1 + l.alpha2 + electrical;
+    let disc = c * c - 4.0 * j * l.sigma0;
+    if disc <= 0.0 {
+        // An oscillating bristle mode: its frequency carries σ0/J, the scale.
+        return None;
+    }
+    let (fast, slow) = ((c + disc.sqrt()) / (2.0 * j), (c - disc.sqrt()) / (2.0 * j));
+    (deflection < hall && fast * h > 1.0 && slow * h < 1.0).then(|| {
+        format!(
+            "the bristles stretch {deflection:.2e} rad at breakaway, below one Hall step \
+             ({hall:.3} rad), and the rotor's fast presliding pole ({:.1e} s) settles \
+             within a sample ({h} s)",
+            1.0 / fast
+        )
+    })
 }
 
 /// The parameters the LuGre refinement moves, with bounds: the whole LuGre law and the
