@@ -4,8 +4,9 @@
 //! the added effects are regressed on what that model leaves unexplained in the equation each
 //! effect acts in, window by window (see [`crate::numerics::weak_form`]):
 //!
-//! - electrical (voltage plant): `∫φ·u − R·∫φ·I − L·(−∫φ'·I) − K_b·(−∫φ'·θ)` on
-//!   `v_d·∫φ·sgn(I − i0)` (deadtime) and `−R·i0·∫φ` (current offset: `i_meas = i + i0`);
+//! - electrical (voltage plant): the sample-level winding equation of
+//!   [`crate::ident::linear`] at the fitted L/R, R and K_b re-estimated jointly with
+//!   `v_d·∫ψ·sgn(Ĩ − i0)` (deadtime) and `−R·i0·∫ψ` (current offset: `i_meas = i + i0`);
 //! - mechanical: `K_t·∫φ·(I − i0) − J·∫φ''·θ − ∫φ·F(ω)`, with F the model's steady friction
 //!   (LuGre Stribeck curve + α2·ω, or viscous b·ω), on `∫φ·sin(kθ)`, `∫φ·cos(kθ)` (cogging,
 //!   position_load) and `∫φ` (offset).
@@ -43,24 +44,25 @@ fn electrical(m: &mut Model, logs: &[MotorLog]) {
     }
     let i0 = control::effects::total_sensor_offset(&m.effects);
     let (r, l, kb) = (m.motor.r, m.motor.l, m.motor.kb);
-    // Columns: L, R, K_b, then the effects. The base fit's R and K_b have absorbed part of
-    // the effects, so they are estimated jointly with them.
-    let Some(x) = linear::electrical_rows(logs, &extra, i0).solve() else {
+    // Columns: R, K_b, then the effects, at the fitted winding's time constant L/R. The base
+    // fit's R and K_b have absorbed part of the effects, so they are estimated jointly with
+    // them; the time constant is kept (the free run resolves it, the windows barely do), and
+    // L with it.
+    let tau = l / r;
+    let Some(x) = linear::electrical_rows(logs, &extra, i0, tau).solve() else {
         return;
     };
     tracing::debug!("electrical residual regression: {x:?} (was R {r}, L {l}, Kb {kb})");
-    if x.iter().any(|v| !v.is_finite()) || x[1] <= 0.0 || x[2] <= 0.0 {
+    if x.iter().any(|v| !v.is_finite()) || x[0] <= 0.0 || x[1] <= 0.0 {
         return;
     }
-    let r = x[1];
+    let r = x[0];
     m.motor.r = r;
-    // L stays as fitted: windows of 0.48 s barely resolve the electrical time constant L/R
-    // (about 1 ms), so their estimate of L is far noisier than the free-run fit's.
-    // The L column stays in the regression so that it does not bias R, K_b and the effects.
+    m.motor.l = tau * r;
     // K_t = K_b (SI units): the mechanical equation scales as a whole with K_t, so every
     // mechanical torque parameter scales with it and the motion stays the same.
-    let c = x[2] / kb;
-    m.motor.kb = x[2];
+    let c = x[1] / kb;
+    m.motor.kb = x[1];
     m.motor.kt *= c;
     m.motor.j *= c;
     m.viscous *= c;
@@ -72,7 +74,7 @@ fn electrical(m: &mut Model, logs: &[MotorLog]) {
         lg.sigma1 *= c;
     }
     for (c, &(k, v)) in extra.iter().enumerate() {
-        let value = (v.value)(x[3 + c], r).max(v.residual_floor);
+        let value = (v.value)(x[2 + c], r).max(v.residual_floor);
         Slot::Effect(k, v.key).set(m, value);
     }
 }

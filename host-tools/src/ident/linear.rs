@@ -2,10 +2,22 @@
 //! regression that gives every model kind its first estimate of the motor constants and of
 //! the linear-in-parameter effects.
 //!
-//! Electrical equation, tested with φ over each window (see [`crate::numerics::weak_form`]):
-//! `∫φ·u = L·(−∫φ'·I) + R·∫φ·I + K_b·(−∫φ'·θ) + v_d·∫φ·sgn(I) − R·i0·∫φ`.
-//! Mechanical equation, with K_t = K_b (SI units; the data fixes only K_t/J otherwise):
-//! `K_t·∫φ·I = J·∫φ''·θ + b·(−∫φ'·θ) + Σ c_e·∫φ·g_e(θ, ω, I)`.
+//! Electrical equation, at the sample level (a voltage held over each interval `[t_j, t_j+1)`
+//! of length `h`, the velocity changing linearly over it): the winding's exact step with
+//! `a = h/τ`, `τ = L/R`, is `R·Ĩ_j = u_j − K_b·(β·ω_j + (1 − β)·ω_j+1) − losses`, with the
+//! held-equivalent current `Ĩ_j = I_j+1 + (I_j+1 − I_j)/(e^a − 1)` and
+//! `β = 1/a − 1/(e^a − 1)` (decision 0030). Tested with ψ over each window
+//! (see [`crate::numerics::weak_form`]):
+//! `∫ψ·u = R·∫ψ·Ĩ + K_b·(−∫φ'·θ + (½ − β)·h·∫φ''·θ) + v_d·∫ψ·sgn(Ĩ) − R·i0·∫ψ`.
+//! For each τ the equation is linear in the rest; τ is found by the profile of the residual
+//! over τ ([`winding_start`], decision 0032).
+//! Mechanical equation, with K_t = K_b (SI units; the data fixes only K_t/J otherwise), the
+//! torque of the current's exact mean over each interval `Ī_j = β·I_j + (1 − β)·I_j+1 +
+//! K_b·(½ − β)/R·(ω_j+1 − ω_j)`:
+//! `K_t·∫ψ·Ī = J·∫φ''·θ + b·(−∫φ'·θ) + f_c·∫φ·sgn(ω) + d_b·(−∫φ'·sgn(ω)) + Σ c_e·∫φ·g_e`,
+//! where `d_b` (with a Coulomb term) takes the bristles' damping impulse at each reversal
+//! (`σ1·Δz`, the LuGre state's swing `2·s/σ0` times σ1), which the steady friction curve
+//! lacks and would otherwise be read as inertia.
 //! Then every parameter is refined on the free-run simulation error.
 use super::free_params::{effect_keys_of, Free, Slot};
 use super::FitRequest;
@@ -152,24 +164,57 @@ impl WeakRows {
     }
 }
 
+/// The friction the weak-form regression reads.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct WeakFriction {
+    /// Viscous friction b [N·m·s/rad].
+    pub viscous: f64,
+    /// Coulomb friction fc [N·m] (0 unless asked for).
+    pub coulomb: f64,
+    /// The bristles' creep time σ1/σ0 [s]: the damping impulse at reversals over the
+    /// Coulomb friction (`σ1·2s/σ0` over `2s`); None without a Coulomb term or when either
+    /// is not positive.
+    pub creep: Option<f64>,
+}
+
 /// Weak-form estimate of the motor constants, the viscous (and, with `coulomb`, Coulomb)
-/// friction and the linear-in-parameter effects. Returns (b [N·m·s/rad], fc [N·m]).
-pub fn weak_estimate(m: &mut Model, logs: &[MotorLog], coulomb: bool) -> (f64, f64) {
+/// friction and the linear-in-parameter effects.
+pub fn weak_estimate(m: &mut Model, logs: &[MotorLog], coulomb: bool) -> WeakFriction {
     if m.plant == Plant::Voltage {
         estimate_electrical(m, logs);
     }
-    estimate_mechanical(m, logs, coulomb)
+    let out = estimate_mechanical(m, logs, coulomb);
+    tracing::debug!(
+        "weak-form start: R {:.4e} Ω, L {:.4e} H, Kb {:.4e} V·s/rad, J {:.4e} kg·m², {out:?}",
+        m.motor.r,
+        m.motor.l,
+        m.motor.kb,
+        m.motor.j
+    );
+    out
 }
 
-/// The electrical equation's regression: L [H], R [Ω], K_b = K_t [V·s/rad] and the
+/// The electrical equation's regression: the winding's time constant τ by its profile
+/// ([`winding_start`]), then at that τ R [Ω], L = τ·R [H], K_b = K_t [V·s/rad] and the
 /// deadtime and current-offset effects; a motor constant estimated non-positive keeps the
 /// paper motor's value (L, R) or the model's (K_b).
 fn estimate_electrical(m: &mut Model, logs: &[MotorLog]) {
     let extra = electrical_effects(m);
-    let rows = electrical_rows(logs, &extra, 0.0);
-    if let Some(x) = rows.solve() {
-        set_electrical(m, &extra, &x);
-    }
+    let Some(start) = winding_start(logs, &extra, 0.0) else {
+        return;
+    };
+    tracing::debug!(
+        "winding start: τ {:.4e} s ({}), profile {:.3e}..{:.3e} s at the 5 % level",
+        start.tau,
+        if start.identified {
+            "identified"
+        } else {
+            "not identified: the slowest the log allows"
+        },
+        start.interval.0,
+        start.interval.1
+    );
+    set_electrical(m, &extra, &start.x, start.tau);
 }
 
 /// The effects with a term in the electrical equation (deadtime, current offset): (effect
@@ -182,31 +227,72 @@ pub(crate) fn electrical_effects(m: &Model) -> Vec<(usize, &'static effects::Vol
         .collect()
 }
 
-/// Rows of the electrical equation over the windows of every log with a current:
-/// `∫φ·u` [V·s] against −∫φ'·I, ∫φ·I, −∫φ'·θ, then ∫φ·sgn(I − i0) or ∫φ per effect of
-/// `extra` (`i0` [A]: the current sensor's offset the model already holds, 0 for none).
+/// The winding's weights over an interval of `h` [s] for a time constant `tau` [s], with
+/// `a = h/tau`: `(1/(e^a − 1), β = 1/a − 1/(e^a − 1))` (the module doc). β is ½ for a slow
+/// winding (the trapezoid) and 0 for a fast one (the end current); its series below
+/// `a = 0.01`, where the difference cancels.
+pub(crate) fn winding_weights(h: f64, tau: f64) -> (f64, f64) {
+    let a = h / tau;
+    if !(a.is_finite() && a > 0.0) {
+        return (0.0, 0.0);
+    }
+    let lag = (-a).exp() / -(-a).exp_m1();
+    let beta = if a < 1e-2 {
+        0.5 - a / 12.0 + a * a * a / 720.0
+    } else {
+        1.0 / a - lag
+    };
+    (lag, beta)
+}
+
+/// The held-equivalent current of each interval, `Ĩ_j = I_j+1 + (I_j+1 − I_j)·lag` (the
+/// current a resistance alone would carry under that interval's voltage and back-EMF), and
+/// the current's mean over it without its back-EMF term, `β·I_j + (1 − β)·I_j+1`; both one
+/// per interval, padded with the last to the log's length.
+pub(crate) fn interval_currents(i: &[f64], lag: f64, beta: f64) -> (Vec<f64>, Vec<f64>) {
+    let n = i.len();
+    let mut held = Vec::with_capacity(n);
+    let mut mean = Vec::with_capacity(n);
+    for j in 0..n.saturating_sub(1) {
+        held.push(i[j + 1] + (i[j + 1] - i[j]) * lag);
+        mean.push(beta * i[j] + (1.0 - beta) * i[j + 1]);
+    }
+    if let (Some(&h), Some(&m)) = (held.last(), mean.last()) {
+        held.push(h);
+        mean.push(m);
+    }
+    (held, mean)
+}
+
+/// Rows of the electrical equation over the windows of every log with a current, for the
+/// winding time constant `tau` [s]: `∫ψ·u` [V·s] against ∫ψ·Ĩ (R), the back-EMF's
+/// `−∫φ'·θ + (½ − β)·h·∫φ''·θ` (K_b), then ∫ψ·sgn(Ĩ − i0) or ∫ψ per effect of `extra`
+/// (`i0` [A]: the current sensor's offset the model already holds, 0 for none).
 pub(crate) fn electrical_rows(
     logs: &[MotorLog],
     extra: &[(usize, &effects::Voltage)],
     i0: f64,
+    tau: f64,
 ) -> WeakRows {
-    let mut rows = WeakRows::new(3 + extra.len());
+    let mut rows = WeakRows::new(2 + extra.len());
     for log in logs {
         let Some(i) = &log.i else { continue };
-        let sgn_i: Vec<f64> = i
+        let h = log.sample_period();
+        let (lag, beta) = winding_weights(h, tau);
+        let (held, _) = interval_currents(i, lag, beta);
+        let sgn_i: Vec<f64> = held
             .iter()
             .map(|&c| smooth_sign(c - i0, CURRENT_EPS))
             .collect();
         let ones = vec![1.0; log.len()];
         for w in weak_form::log_windows(log) {
             rows.y.push(w.int_zoh(&log.u));
-            rows.cols[0].push(-w.int_d(i));
-            rows.cols[1].push(w.int(i));
-            rows.cols[2].push(-w.int_d(&log.theta));
+            rows.cols[0].push(w.int_zoh(&held));
+            rows.cols[1].push(-w.int_d(&log.theta) + (0.5 - beta) * h * w.int_dd(&log.theta));
             for (c, (_, v)) in extra.iter().enumerate() {
-                rows.cols[3 + c].push(match v.column {
-                    VoltageColumn::SignOfCurrent => w.int(&sgn_i),
-                    VoltageColumn::One => w.int(&ones),
+                rows.cols[2 + c].push(match v.column {
+                    VoltageColumn::SignOfCurrent => w.int_zoh(&sgn_i),
+                    VoltageColumn::One => w.int_zoh(&ones),
                 });
             }
         }
@@ -214,39 +300,170 @@ pub(crate) fn electrical_rows(
     rows
 }
 
-/// Stores the electrical coefficients `x` (L, R, K_b, then one per effect of `extra`): the
-/// deadtime's v_d [V] as estimated, the current offset's i0 [A] from its voltage −R·i0.
-fn set_electrical(m: &mut Model, extra: &[(usize, &effects::Voltage)], x: &[f64]) {
+/// Upper quantile of χ² with one degree of freedom at the 5 % level: the profile
+/// likelihood's interval of τ.
+const CHI2_1_95: f64 = 3.841;
+/// Profile grid of τ: quarter decades from a thousandth of the sample period (`e^(−1000)`:
+/// a winding no sample can tell from an instant one) to a hundred sample periods (a winding
+/// slow against every sample, where the regression is the trapezoid's).
+const TAU_GRID: (i32, i32) = (-12, 8);
+
+/// The start of the winding found by [`winding_start`].
+pub(crate) struct WindingStart {
+    /// Time constant L/R [s].
+    pub tau: f64,
+    /// Coefficients at `tau`: R, K_b, then one per effect.
+    pub x: Vec<f64>,
+    /// Whether the profile's interval closes above the grid's fast end.
+    pub identified: bool,
+    /// The τ the profile does not reject at the 5 % level [s].
+    pub interval: (f64, f64),
+}
+
+/// The winding's time constant by the profile of the electrical regression's residual over
+/// τ (for each τ the rest is linear): a quarter-decade grid ([`TAU_GRID`], in sample
+/// periods), then a golden-section search between the best point's neighbours. The profile's
+/// interval is the τ whose residual is within [`CHI2_1_95`] of the least in
+/// `(windows/2)·ln(RSS/RSS_min)` (half-overlapping windows: about half as many independent
+/// rows). Where that interval reaches the grid's fast end, the log does not show the
+/// winding's lag (a winding much faster than the sample): the start is then the interval's
+/// slow end, the slowest winding the log does not contradict, and `identified` is false.
+pub(crate) fn winding_start(
+    logs: &[MotorLog],
+    extra: &[(usize, &effects::Voltage)],
+    i0: f64,
+) -> Option<WindingStart> {
+    let h = logs
+        .iter()
+        .filter(|l| l.i.is_some())
+        .map(|l| l.sample_period())
+        .filter(|p| p.is_finite() && *p > 0.0)
+        .min_by(f64::total_cmp)?;
+    let fit = |tau: f64| -> Option<(Vec<f64>, f64, usize)> {
+        let rows = electrical_rows(logs, extra, i0, tau);
+        if rows.y.len() <= rows.cols.len() {
+            return None;
+        }
+        let refs: Vec<&[f64]> = rows.cols.iter().map(|c| c.as_slice()).collect();
+        let f = lstsq(&refs, &rows.y);
+        f.rss.is_finite().then_some((f.beta, f.rss, rows.y.len()))
+    };
+    let grid: Vec<f64> = (TAU_GRID.0..=TAU_GRID.1)
+        .map(|k| h * 10f64.powf(k as f64 / 4.0))
+        .collect();
+    let rss: Vec<f64> = grid
+        .iter()
+        .map(|&t| fit(t).map_or(f64::INFINITY, |f| f.1))
+        .collect();
+    let best = (0..grid.len()).min_by(|&a, &b| rss[a].total_cmp(&rss[b]))?;
+    if !rss[best].is_finite() {
+        return None;
+    }
+    // Golden section on ln τ between the best grid point's neighbours.
+    let (mut lo, mut hi) = (
+        grid[best.saturating_sub(1)].ln(),
+        grid[(best + 1).min(grid.len() - 1)].ln(),
+    );
+    let cost = |lt: f64| fit(lt.exp()).map_or(f64::INFINITY, |f| f.1);
+    let g = 0.5 * (5f64.sqrt() - 1.0);
+    let (mut c, mut d) = (hi - g * (hi - lo), lo + g * (hi - lo));
+    let (mut fc, mut fd) = (cost(c), cost(d));
+    for _ in 0..40 {
+        if fc < fd {
+            hi = d;
+            (d, fd) = (c, fc);
+            c = hi - g * (hi - lo);
+            fc = cost(c);
+        } else {
+            lo = c;
+            (c, fc) = (d, fd);
+            d = lo + g * (hi - lo);
+            fd = cost(d);
+        }
+    }
+    let mut tau = (0.5 * (lo + hi)).exp();
+    let (mut x, mut rss_min, rows) = fit(tau)?;
+    if rss[best] < rss_min {
+        (tau, rss_min) = (grid[best], rss[best]);
+        x = fit(tau)?.0;
+    }
+    let rejected = |r: f64| 0.5 * rows as f64 * (r / rss_min).ln() > CHI2_1_95;
+    // The interval's ends: bisection on ln τ between τ and the nearest rejected grid point.
+    let edge = |out: f64| {
+        let (mut inside, mut outside) = (tau.ln(), out.ln());
+        for _ in 0..30 {
+            let mid = 0.5 * (inside + outside);
+            if rejected(cost(mid)) {
+                outside = mid;
+            } else {
+                inside = mid;
+            }
+        }
+        inside.exp()
+    };
+    let below = (0..grid.len())
+        .rev()
+        .find(|&k| grid[k] < tau && rejected(rss[k]));
+    let above = (0..grid.len()).find(|&k| grid[k] > tau && rejected(rss[k]));
+    let interval = (
+        below.map_or(grid[0], |k| edge(grid[k])),
+        above.map_or(grid[grid.len() - 1], |k| edge(grid[k])),
+    );
+    let identified = below.is_some();
+    if !identified {
+        tau = interval.1;
+        x = fit(tau)?.0;
+    }
+    Some(WindingStart {
+        tau,
+        x,
+        identified,
+        interval,
+    })
+}
+
+/// Stores the electrical coefficients `x` (R, K_b, then one per effect of `extra`) and
+/// L = `tau`·R: the deadtime's v_d [V] as estimated, the current offset's i0 [A] from its
+/// voltage −R·i0.
+fn set_electrical(m: &mut Model, extra: &[(usize, &effects::Voltage)], x: &[f64], tau: f64) {
     let fallback = control::motor::MotorParams::<f64>::paper();
-    m.motor.l = if x[0] > 0.0 { x[0] } else { fallback.l };
-    m.motor.r = if x[1] > 0.0 { x[1] } else { fallback.r };
-    if x[2] > 0.0 {
-        m.motor.kb = x[2];
-        m.motor.kt = x[2];
+    m.motor.r = if x[0] > 0.0 { x[0] } else { fallback.r };
+    m.motor.l = if x[0] > 0.0 && tau.is_finite() && tau > 0.0 {
+        tau * x[0]
+    } else {
+        fallback.l
+    };
+    if x[1] > 0.0 {
+        m.motor.kb = x[1];
+        m.motor.kt = x[1];
     }
     for (c, (k, v)) in extra.iter().enumerate() {
-        let value = (v.value)(x[3 + c], m.motor.r);
+        let value = (v.value)(x[2 + c], m.motor.r);
         Slot::Effect(*k, v.key).set(m, value);
     }
 }
 
 /// The mechanical equation's regression: J [kg·m²], the viscous friction b, with `coulomb`
-/// the Coulomb friction fc, and the linear-in-parameter effects' keys (each clamped to its
-/// bounds). Returns (b, fc), both 0 when the logs give too few windows.
-fn estimate_mechanical(m: &mut Model, logs: &[MotorLog], coulomb: bool) -> (f64, f64) {
+/// the Coulomb friction fc and the bristles' impulse at reversals, and the
+/// linear-in-parameter effects' keys (each clamped to its bounds). All friction 0 when the
+/// logs give too few windows.
+fn estimate_mechanical(m: &mut Model, logs: &[MotorLog], coulomb: bool) -> WeakFriction {
     let map = mechanical_effects(m);
     let rows = mechanical_rows(m, logs, coulomb, &map);
     let Some(x) = rows.solve() else {
-        return (0.0, 0.0);
+        return WeakFriction::default();
     };
     if x[0] > 0.0 {
         m.motor.j = x[0];
     }
-    let b = x[1].max(0.0);
-    let fc = if coulomb { x[2].max(0.0) } else { 0.0 };
-    let base = if coulomb { 3 } else { 2 };
+    let base = if coulomb { 4 } else { 2 };
     set_mechanical_effects(m, &map, &x[base..]);
-    (b, fc)
+    let fc = if coulomb { x[2].max(0.0) } else { 0.0 };
+    WeakFriction {
+        viscous: x[1].max(0.0),
+        coulomb: fc,
+        creep: (coulomb && fc > 0.0 && x[3] > 0.0).then(|| x[3] / fc),
+    }
 }
 
 /// The regressor groups of the model's linear-in-parameter effects, in the model's order.
@@ -300,20 +517,31 @@ impl MechanicalSignals {
     }
 }
 
-/// Rows of the mechanical equation over the windows of every usable log: `K_t·∫φ·I`
-/// [N·m·s] (or `∫φ·u` on a torque plant) against ∫φ''·θ, −∫φ'·θ, with `coulomb` ∫φ·sgn(ω),
-/// then ∫φ·g for each regressor of `map`.
+/// Rows of the mechanical equation over the windows of every usable log: the torque of the
+/// current's mean over each interval (the module doc; the model's R, L, K_t, K_b), or
+/// `∫ψ·u` on a torque plant, [N·m·s] against ∫φ''·θ, −∫φ'·θ, with `coulomb` ∫φ·sgn(ω) and
+/// −∫φ'·sgn(ω), then ∫φ·g for each regressor of `map`.
 fn mechanical_rows(m: &Model, logs: &[MotorLog], coulomb: bool, map: &[EffCols]) -> WeakRows {
-    let base = if coulomb { 3 } else { 2 };
+    let base = if coulomb { 4 } else { 2 };
     let mut rows = WeakRows::new(base + map.iter().map(EffCols::width).sum::<usize>());
+    let voltage = m.plant == Plant::Voltage;
     for log in logs {
         let Some(s) = MechanicalSignals::of(m, log) else {
             continue;
         };
         let g = effect_regressors(m, map, log, &s);
+        let h = log.sample_period();
+        let (lag, beta) = winding_weights(h, m.motor.l / m.motor.r);
+        let mean = interval_currents(&s.cur, lag, beta).1;
+        // The mean current's back-EMF term, `K_b·(½ − β)/R` per unit of velocity change.
+        let emf = if m.motor.r > 0.0 {
+            m.motor.kb * (0.5 - beta) / m.motor.r
+        } else {
+            0.0
+        };
         for w in weak_form::log_windows(log) {
-            let lhs = if m.plant == Plant::Voltage {
-                m.motor.kt * w.int(&s.cur)
+            let lhs = if voltage {
+                m.motor.kt * (w.int_zoh(&mean) + emf * h * w.int_dd(&log.theta))
             } else {
                 w.int_zoh(&s.cur)
             };
@@ -322,6 +550,7 @@ fn mechanical_rows(m: &Model, logs: &[MotorLog], coulomb: bool, map: &[EffCols])
             rows.cols[1].push(-w.int_d(&log.theta));
             if coulomb {
                 rows.cols[2].push(w.int(&s.sgn));
+                rows.cols[3].push(-w.int_d(&s.sgn));
             }
             for (c, gv) in g.iter().enumerate() {
                 rows.cols[base + c].push(w.int(gv));
@@ -472,8 +701,7 @@ pub fn fixed_rows(m: &Model) -> Vec<Parameter> {
 /// Fit the linear model.
 pub fn fit(req: &FitRequest) -> Result<Model> {
     let mut m = skeleton(req, ModelKind::Linear);
-    let (b, _) = weak_estimate(&mut m, req.logs, false);
-    m.viscous = b;
+    m.viscous = weak_estimate(&mut m, req.logs, false).viscous;
     let mut free = motor_free(req.plant);
     free.push(Free {
         slot: Slot::Viscous,

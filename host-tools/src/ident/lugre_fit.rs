@@ -340,7 +340,8 @@ fn restart_stribeck(
 /// Fit the LuGre model.
 pub fn fit(req: &FitRequest) -> Result<Model> {
     let mut m = skeleton(req, ModelKind::Lugre);
-    let (b, fc) = weak_estimate(&mut m, req.logs, true);
+    let weak = weak_estimate(&mut m, req.logs, true);
+    let (b, fc) = (weak.viscous, weak.coulomb);
     // Initial bristles: deflection of 1 mrad at breakaway, critically damped with the rotor
     // (σ1 = 2·sqrt(σ0·J)), the usual LuGre starting point (Canudas de Wit et al. 1995).
     let s_guess = fc.max(1e-4);
@@ -357,7 +358,14 @@ pub fn fit(req: &FitRequest) -> Result<Model> {
     let pts: Vec<SteadyPoint> = all_steady_points(&m, req.logs);
     // A fit with added effects refines from its own two starts (the weak form's and the
     // base structure's, itself fitted from two bristle starts).
-    let other_start = start_dynamics(&mut m, req.logs, &pts, init, req.adds.is_empty())?;
+    let other_start = start_dynamics(
+        &mut m,
+        req.logs,
+        &pts,
+        init,
+        weak.creep,
+        req.adds.is_empty(),
+    )?;
     let free = free_parameters(req.plant);
     let mut dyn_rows = refine_from_starts(&mut m, other_start, &free, req)?;
     // The refinement can end where the inductance and inertia mimic a Stribeck bump (L
@@ -384,9 +392,22 @@ pub fn fit(req: &FitRequest) -> Result<Model> {
             static_note(r);
         }
     }
+    if let Some(why) = bristle_scale_unseen(&m, req.logs) {
+        for r in &mut dyn_rows {
+            if matches!(r.name.as_str(), "sigma0" | "sigma1") {
+                r.identifiable = false;
+                r.std_err = None;
+                r.note = format!(
+                    "only the creep time σ1/σ0 = {:.3e} s is identified: {why}; no standard \
+                     error (the cost's curvature in the scale is the free run's sub-step's)",
+                    lugre.sigma1 / lugre.sigma0.max(1e-300)
+                );
+            }
+        }
+    }
     let res = m.sensor.hall_resolution_rad;
     for r in &mut dyn_rows {
-        if r.name == "sigma0" && !r.identifiable {
+        if r.name == "sigma0" && !r.identifiable && r.std_err.is_some() {
             r.note = format!(
                 "{}; the bristle deflection s/σ0 = {:.2e} rad is far below one Hall step \
                  ({res:.3} rad)",
@@ -460,6 +481,7 @@ fn start_dynamics(
     logs: &[MotorLog],
     pts: &[SteadyPoint],
     init: LugreParams,
+    creep: Option<f64>,
     second: bool,
 ) -> Result<Option<(f64, f64)>> {
     let (lugre, _static_se) = fit_static(pts, init, false)?;
@@ -482,7 +504,8 @@ fn start_dynamics(
             .iter()
             .flat_map(|&s0| {
                 let soft = vec![2.0 * (s0 * m.motor.j.max(0.0)).sqrt(), 0.1, 1.0];
-                let stiff = vec![0.1, 1.0, 10.0, 30.0];
+                let mut stiff = vec![0.1, 1.0, 10.0, 30.0];
+                stiff.extend(creep.map(|c| c * s0));
                 let s1s = if s0 < 30.0 { soft } else { stiff };
                 s1s.into_iter().map(move |s1| (s0, s1))
             })
@@ -545,6 +568,48 @@ fn start_dynamics(
         tracing::debug!("second bristle start (sigma0, sigma1): {other:?}");
         Ok(other)
     }
+}
+
+/// Why the logs show the bristles' ratio σ1/σ0 and not their scale, or None when they may
+/// show the scale. The stiffness shows either as a deflection the angle sensor resolves or
+/// as a mode the samples resolve. At breakaway the bristles stretch `s(0)/σ0`; the rotor on
+/// its bristles, `J·ẍ + c·ẋ + σ0·x` with `c = σ1 + α2 + K_t·K_b/R`, has poles whose product
+/// is `σ0/J` and sum `c/J`. When the deflection is below one Hall step and the fast pole
+/// settles within a sample (`|p|·h > 1`) while the slow one, about `σ0/c`, does not, all the
+/// logs show is the creep time `c/σ0`, which σ1/σ0 sets when σ1 dominates c.
+fn bristle_scale_unseen(m: &Model, logs: &[MotorLog]) -> Option<String> {
+    let l = m.lugre?;
+    let hall = m.sensor.hall_resolution_rad;
+    let h = logs
+        .iter()
+        .map(|g| g.sample_period())
+        .filter(|p| p.is_finite() && *p > 0.0)
+        .min_by(f64::total_cmp)?;
+    let j = m.motor.j;
+    if !(l.sigma0 > 0.0 && j > 0.0 && hall > 0.0) {
+        return None;
+    }
+    let deflection = l.s(0.0) / l.sigma0;
+    let electrical = if m.plant == Plant::Voltage && m.motor.r > 0.0 {
+        m.motor.kt * m.motor.kb / m.motor.r
+    } else {
+        0.0
+    };
+    let c = l.sigma1 + l.alpha2 + electrical;
+    let disc = c * c - 4.0 * j * l.sigma0;
+    if disc <= 0.0 {
+        // An oscillating bristle mode: its frequency carries σ0/J, the scale.
+        return None;
+    }
+    let (fast, slow) = ((c + disc.sqrt()) / (2.0 * j), (c - disc.sqrt()) / (2.0 * j));
+    (deflection < hall && fast * h > 1.0 && slow * h < 1.0).then(|| {
+        format!(
+            "the bristles stretch {deflection:.2e} rad at breakaway, below one Hall step \
+             ({hall:.3} rad), and the rotor's fast presliding pole ({:.1e} s) settles \
+             within a sample ({h} s)",
+            1.0 / fast
+        )
+    })
 }
 
 /// The parameters the LuGre refinement moves, with bounds: the whole LuGre law and the
