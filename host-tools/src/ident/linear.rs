@@ -206,7 +206,9 @@ fn estimate_electrical(m: &mut Model, logs: &[MotorLog]) {
     tracing::debug!(
         "winding start: τ {:.4e} s ({}), profile {:.3e}..{:.3e} s at the 5 % level",
         start.tau,
-        if start.identified {
+        if start.at_slow_end {
+            "at the search's slow end of 100 sample periods: the winding may be slower"
+        } else if start.identified {
             "identified"
         } else {
             "not identified: the slowest the log allows"
@@ -316,6 +318,9 @@ pub(crate) struct WindingStart {
     pub x: Vec<f64>,
     /// Whether the profile's interval closes above the grid's fast end.
     pub identified: bool,
+    /// Whether the least residual lies at the grid's slow end (a hundred sample periods): the
+    /// winding may be slower still, and the start's R and L are then not to be trusted.
+    pub at_slow_end: bool,
     /// The τ the profile does not reject at the 5 % level [s].
     pub interval: (f64, f64),
 }
@@ -410,6 +415,7 @@ pub(crate) fn winding_start(
         above.map_or(grid[grid.len() - 1], |k| edge(grid[k])),
     );
     let identified = below.is_some();
+    let at_slow_end = best == grid.len() - 1;
     if !identified {
         tau = interval.1;
         x = fit(tau)?.0;
@@ -418,6 +424,7 @@ pub(crate) fn winding_start(
         tau,
         x,
         identified,
+        at_slow_end,
         interval,
     })
 }
