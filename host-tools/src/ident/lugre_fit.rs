@@ -392,15 +392,23 @@ pub fn fit(req: &FitRequest) -> Result<Model> {
             static_note(r);
         }
     }
-    if let Some(why) = bristle_scale_unseen(&m, req.logs) {
+    if let Some(unseen) = bristle_scale_unseen(&m, req.logs) {
+        let what = if unseen.ratio_seen {
+            format!(
+                "only the creep time σ1/σ0 = {:.3e} s is identified",
+                lugre.sigma1 / lugre.sigma0.max(1e-300)
+            )
+        } else {
+            "neither the bristles' scale nor their creep time is identified".to_string()
+        };
         for r in &mut dyn_rows {
             if matches!(r.name.as_str(), "sigma0" | "sigma1") {
                 r.identifiable = false;
                 r.std_err = None;
                 r.note = format!(
-                    "only the creep time σ1/σ0 = {:.3e} s is identified: {why}; no standard \
-                     error (the cost's curvature in the scale is the free run's sub-step's)",
-                    lugre.sigma1 / lugre.sigma0.max(1e-300)
+                    "{what}: {}; no standard error (the cost's curvature in the scale is the \
+                     free run's sub-step's)",
+                    unseen.why
                 );
             }
         }
@@ -577,7 +585,7 @@ fn start_dynamics(
 /// is `σ0/J` and sum `c/J`. When the deflection is below one Hall step and the fast pole
 /// settles within a sample (`|p|·h > 1`) while the slow one, about `σ0/c`, does not, all the
 /// logs show is the creep time `c/σ0`, which σ1/σ0 sets when σ1 dominates c.
-fn bristle_scale_unseen(m: &Model, logs: &[MotorLog]) -> Option<String> {
+fn bristle_scale_unseen(m: &Model, logs: &[MotorLog]) -> Option<BristleScale> {
     let l = m.lugre?;
     let hall = m.sensor.hall_resolution_rad;
     let h = logs
@@ -598,18 +606,40 @@ fn bristle_scale_unseen(m: &Model, logs: &[MotorLog]) -> Option<String> {
     let c = l.sigma1 + l.alpha2 + electrical;
     let disc = c * c - 4.0 * j * l.sigma0;
     if disc <= 0.0 {
-        // An oscillating bristle mode: its frequency carries σ0/J, the scale.
-        return None;
+        // An oscillating bristle mode: its frequency `√(σ0/J)` carries the scale, unless
+        // it lies above the samples' Nyquist frequency and its envelope (`c/2J`) dies
+        // within a sample; then the creep time `c/σ0` (at most two samples here) is gone
+        // with it, and the logs show neither.
+        let (wn, decay) = ((l.sigma0 / j).sqrt(), c / (2.0 * j));
+        return (deflection < hall && wn * h > std::f64::consts::PI && decay * h > 1.0).then(
+            || BristleScale {
+                ratio_seen: false,
+                why: format!(
+                    "the bristles stretch {deflection:.2e} rad at breakaway, below one Hall \
+                     step ({hall:.3} rad), and their mode ({:.0} Hz) lies above the samples' \
+                     Nyquist frequency and dies within a sample ({h} s)",
+                    wn / (2.0 * std::f64::consts::PI)
+                ),
+            },
+        );
     }
     let (fast, slow) = ((c + disc.sqrt()) / (2.0 * j), (c - disc.sqrt()) / (2.0 * j));
-    (deflection < hall && fast * h > 1.0 && slow * h < 1.0).then(|| {
-        format!(
+    (deflection < hall && fast * h > 1.0 && slow * h < 1.0).then(|| BristleScale {
+        ratio_seen: true,
+        why: format!(
             "the bristles stretch {deflection:.2e} rad at breakaway, below one Hall step \
              ({hall:.3} rad), and the rotor's fast presliding pole ({:.1e} s) settles \
              within a sample ({h} s)",
             1.0 / fast
-        )
+        ),
     })
+}
+
+/// Why the logs do not show the bristles' scale ([`bristle_scale_unseen`]), and whether
+/// they show the creep time σ1/σ0.
+struct BristleScale {
+    ratio_seen: bool,
+    why: String,
 }
 
 /// The parameters the LuGre refinement moves, with bounds: the whole LuGre law and the
@@ -669,5 +699,27 @@ mod tests {
         // Longer than the log: one more than its length; no period: the minimum.
         assert_eq!(in_samples(&log_at(1e-9, 100), QS_WINDOW_S, 4), 101);
         assert_eq!(in_samples(&log_at(0.0, 100), QS_WINDOW_S, 4), 4);
+    }
+
+    /// The paper motor's bristles at a stiffness `sigma0` and damping `sigma1` on 12 ms logs.
+    fn paper_with(sigma0: f64, sigma1: f64) -> Option<BristleScale> {
+        let mut m = Model::new(ModelKind::Lugre, Plant::Voltage, 0.012);
+        m.motor = control::motor::MotorParams::<f64>::paper();
+        m.sensor.hall_resolution_rad = 0.0952;
+        let mut l = LugreParams::paper();
+        (l.sigma0, l.sigma1) = (sigma0, sigma1);
+        m.lugre = Some(l);
+        bristle_scale_unseen(&m, &[log_at(0.012, 100)])
+    }
+
+    #[test]
+    fn bristle_scale_seen_only_where_a_deflection_or_a_mode_shows_it() {
+        // The paper's overdamped bristles: the creep time alone.
+        assert!(paper_with(317.0, 22.0).is_some_and(|b| b.ratio_seen));
+        // Stiff, lightly damped: a 500 Hz mode far above the 42 Hz Nyquist frequency that
+        // dies within a sample: neither shows.
+        assert!(paper_with(3000.0, 0.1).is_some_and(|b| !b.ratio_seen));
+        // A soft bristle stretching several Hall steps shows its scale.
+        assert!(paper_with(0.4, 0.05).is_none());
     }
 }
