@@ -635,6 +635,14 @@ mod tests {
 
     /// Ticks until the commissioning ends; its outcome.
     fn commission_result(emu: &mut EmulatedBoard, extra: &[(usize, HostMsg)]) -> CommissionOutcome {
+        commission_run(emu, extra).0
+    }
+
+    /// Ticks until the commissioning ends; its outcome and the periods it took.
+    fn commission_run(
+        emu: &mut EmulatedBoard,
+        extra: &[(usize, HostMsg)],
+    ) -> (CommissionOutcome, usize) {
         for k in 0..2000 {
             for (_, m) in extra.iter().filter(|(at, _)| *at == k) {
                 emu.receive(&frame(m));
@@ -647,7 +655,7 @@ mod tests {
                         CommissionOutcome::Running
                             | CommissionOutcome::Failed(CommissionError::Aborted)
                     ) {
-                        return outcome;
+                        return (outcome, k + 1);
                     }
                 }
             }
@@ -670,20 +678,29 @@ mod tests {
         emu
     }
 
-    /// Periods into a run: in the first hold, in the counted revolution, in the backward
-    /// pass.
-    const RESTART_PERIODS: [usize; 3] = {
-        let h = control::commission::HOLD_PERIODS as usize;
-        [7, 4 * h + 10, 7 * h + 10]
-    };
+    /// Periods into a run of `periods` in all: in the first hold (the ramp's), in the counted
+    /// revolution (holds 3 to 5), in the backward pass (holds 6 to 8). The ramp extends the
+    /// first hold only, so the later holds are the run's last ones.
+    fn restart_periods(periods: usize) -> [usize; 3] {
+        use control::commission::{HOLDS, HOLD_PERIODS};
+        let h = usize::from(HOLD_PERIODS);
+        let counted = periods - (usize::from(HOLDS) - 3) * h;
+        let backward = periods - (usize::from(HOLDS) - 6) * h;
+        let first_ends = periods - (usize::from(HOLDS) - 1) * h;
+        assert!(
+            first_ends > h,
+            "the ramp held the first vector {first_ends} periods"
+        );
+        [h / 4, counted + h / 2, backward + h / 2]
+    }
 
     #[test]
     fn a_retried_commission_request_leaves_the_run_as_it_was() {
         // The host resends `Commission` when the Ack comes late: in the middle of a hold,
         // of the counted revolution, of the backward pass.
-        let once = commission_result(&mut commissioning_board(), &[]);
+        let (once, periods) = commission_run(&mut commissioning_board(), &[]);
         assert!(matches!(once, CommissionOutcome::Done(_)), "{once:?}");
-        for at in RESTART_PERIODS {
+        for at in restart_periods(periods) {
             let mut emu = commissioning_board();
             let again = commission_result(&mut emu, &[(at, HostMsg::Commission)]);
             assert_eq!(again, once, "Commission again after {at} periods");
@@ -694,11 +711,12 @@ mod tests {
     fn commissioning_started_on_a_turning_rotor_learns_the_same_table() {
         // A run stopped mid-way and started again at once: the rotor is still turning and
         // the winding still carries the stopped run's current.
-        let CommissionOutcome::Done(once) = commission_result(&mut commissioning_board(), &[])
+        let (CommissionOutcome::Done(once), periods) =
+            commission_run(&mut commissioning_board(), &[])
         else {
             panic!("the first run failed");
         };
-        for at in RESTART_PERIODS {
+        for at in restart_periods(periods) {
             let mut emu = commissioning_board();
             let again =
                 commission_result(&mut emu, &[(at, HostMsg::Stop), (at, HostMsg::Commission)]);
