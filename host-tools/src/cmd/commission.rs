@@ -49,7 +49,7 @@ fn error_text(e: CommissionError) -> &'static str {
             "the board measured little or no current while it held the voltage (current sense not working, motor phases not connected, or a winding resistance over four times the coefficients' R); nothing was stored"
         }
         CommissionError::RampStalled => {
-            "the board raises the voltage slowly at the start until it measures a current, and it never measured enough (a quarter of the commissioning current) with the rotor at rest, so the voltage stayed low and the run failed; check that the current sense works and the motor's three phases are connected, that the rotor turns freely and is not held or driven, and that the coefficients' dead time suits the bridge (a drop over twice the expected one needs a higher voltage); a low commissioning current (30 % of the coefficients' i_max, lowered with the board temperature: below about 6.5 A the ramp's steps are too small to finish in time) or a large back-EMF constant for the winding (K_b over the pole pairs, divided by R, above about 0.65 V·s/(rad·Ω)) also stops it short; nothing was stored"
+            "the board raises the voltage slowly at the start until it measures a current, and it never measured enough (a quarter of the commissioning current) with the rotor at rest, so the voltage stayed low and the run failed; check that the current sense works and the motor's three phases are connected, that the rotor turns freely and is not held or driven, and that the coefficients' dead time suits the bridge (a drop over twice the expected one needs a higher voltage); nothing was stored"
         }
     }
 }
