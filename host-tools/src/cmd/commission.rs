@@ -49,7 +49,7 @@ fn error_text(e: CommissionError) -> &'static str {
             "the board measured little or no current while it held the voltage (current sense not working, motor phases not connected, or a winding resistance over four times the coefficients' R); nothing was stored"
         }
         CommissionError::RampStalled => {
-            "the board raises the voltage slowly at the start until it measures a current, and it never measured enough (a quarter of the commissioning current) with the rotor at rest, so the voltage stayed low and the run failed; check that the current sense works and the motor's three phases are connected, that the rotor turns freely and is not held or driven, and that the coefficients' dead time suits the bridge (a drop over twice the expected one needs a higher voltage); nothing was stored"
+            "the board raises the voltage slowly at the start until it measures a current, and it never measured enough (a quarter of the commissioning current) with the rotor at rest, so the voltage stayed low and the run failed; check that the current sense works and the motor's three phases are connected, that the rotor turns freely and is not held or driven, that the coefficients' dead time suits the bridge (a drop over twice the expected one needs a higher voltage), and that the commissioning current is not too low (below about 6.5 A, an i_max below about 22 A, the ramp runs out of time; so it does for a motor whose back-EMF constant per pole pair is several times 0.0065 V·s/rad): raise i_max within the motor's rating for the run; nothing was stored"
         }
     }
 }
