@@ -11,14 +11,13 @@
 //! torque constant, a rest's resistance).
 //!
 //! Seeds: two per case; each run is a few seconds of CPU in release.
-use control::effects::{Effect, EffectKind};
+use control::effects::EffectKind;
 use control::motor::MotorParams;
 use e2e::other_plant::{Extra, OtherPlant};
 use motorid::diagnose::{diagnose, Diagnosis, Options, Structure};
 use motorid::effect_spec::EffectSpec;
 use motorid::emulator::{signal, simulate_signal, EmulatorConfig, SignalKind};
 use motorid::log::{MotorLog, Plant};
-use motorid::model::{Model, ModelKind};
 
 const TS: f64 = 0.012;
 const SEEDS: [u64; 2] = [1, 2];
@@ -46,21 +45,10 @@ fn other(extra: Extra, kind: SignalKind, seconds: f64, seed: u64) -> MotorLog {
 }
 
 /// `diagnose` of the independent plant's own constants without its extra physics: Coulomb
-/// and viscous friction, the rigid inertia, its Hall step.
+/// and viscous friction, the rigid inertia.
 fn judge_other(log: &MotorLog) -> Diagnosis {
-    let p = OtherPlant::new(Extra::None);
-    let mut m = Model::new(ModelKind::Linear, Plant::Voltage, TS);
-    m.motor = MotorParams {
-        r: p.r,
-        l: p.l,
-        kt: p.kt,
-        kb: p.kt,
-        j: p.j,
-    };
-    m.viscous = p.b;
-    m.effects = vec![Effect::Coulomb { fc: p.fc }];
-    m.sensor.hall_resolution_rad = p.hall;
-    diagnose(log, &Structure::from_model(&m), &Options::default())
+    let st = e2e::false_alarms::correct_structure(&OtherPlant::new(Extra::None));
+    diagnose(log, &st, &Options::default())
 }
 
 fn findings(d: &Diagnosis) -> Vec<String> {
