@@ -31,18 +31,67 @@ pub const DEFAULT_EFFECT: EffectKind = EffectKind::Offset;
 
 /// Physics outside the effect list that the demo can hide (`--unnamed`), through the
 /// emulator's extra load: no named effect has its law, so the loop can only add a table on
-/// the variable that carries it.
+/// the variable that carries it (after any named effect that takes part of it).
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Unnamed {
     /// A fan or pump on the shaft: an aerodynamic drag c·ω·|ω| with c = 1e-5 N·m·s²/rad²
     /// (0.016 N·m at 40 rad/s), quadratic in the speed where the list's friction laws are
     /// constant or linear in it.
     Fan,
+    /// A cam on the shaft lifting a spring-loaded follower (a valve or plunger drive): the
+    /// cam lifts it 5 mm over 240° against a spring of 5 N preload and 1 kN/m, holds it for
+    /// 30° and lets it fall back over 90°: a load that depends on the angle alone but is no
+    /// sinusoid, so the list's one-harmonic angle terms take only part of it.
+    Cam,
 }
 
 /// Drag coefficient of [`Unnamed::Fan`] [N·m·s²/rad²]: 0.016 N·m at the fitting signal's RMS
 /// speed (40 rad/s), a sixth of the paper motor's Coulomb friction, 0.23 N·m at its fastest.
 pub const FAN_DRAG: f64 = 1e-5;
+
+/// Lift of [`Unnamed::Cam`]'s follower [m].
+pub const CAM_LIFT: f64 = 5e-3;
+/// Spring force on [`Unnamed::Cam`]'s follower at the bottom of its travel [N].
+pub const CAM_PRELOAD: f64 = 5.0;
+/// Stiffness of [`Unnamed::Cam`]'s follower spring [N/m].
+pub const CAM_STIFFNESS: f64 = 1000.0;
+/// Angles of [`Unnamed::Cam`]'s rise, dwell at the top and fall [rad]; the rest of the
+/// revolution is a dwell at the bottom.
+pub const CAM_RISE: f64 = 4.0 * std::f64::consts::PI / 3.0;
+/// See [`CAM_RISE`].
+pub const CAM_DWELL: f64 = std::f64::consts::PI / 6.0;
+/// See [`CAM_RISE`].
+pub const CAM_FALL: f64 = std::f64::consts::PI / 2.0;
+
+/// Cycloidal motion over `span` [rad] at `phi` into it: the follower's lift as a share of
+/// the full lift, and its derivative over the angle [1/rad] (zero speed and acceleration at
+/// both ends, the standard cam law for a follower held by a spring).
+fn cycloidal(phi: f64, span: f64) -> (f64, f64) {
+    let q = std::f64::consts::TAU * phi / span;
+    (
+        phi / span - q.sin() / std::f64::consts::TAU,
+        (1.0 - q.cos()) / span,
+    )
+}
+
+/// Load torque of [`Unnamed::Cam`] at the rotor angle `theta` [N·m, opposing positive
+/// motion]: with the follower's lift s(θ) and the spring's force F = F0 + k·s, the work the
+/// shaft does is F·ds, so the torque is F·ds/dθ whatever the follower's geometry (no
+/// friction in the follower). It is conservative: its mean over a revolution is zero.
+pub fn cam_torque(theta: f64) -> f64 {
+    let phi = theta.rem_euclid(std::f64::consts::TAU);
+    let (lift, slope) = if phi < CAM_RISE {
+        cycloidal(phi, CAM_RISE)
+    } else if phi < CAM_RISE + CAM_DWELL {
+        (1.0, 0.0)
+    } else if phi < CAM_RISE + CAM_DWELL + CAM_FALL {
+        let (l, d) = cycloidal(phi - CAM_RISE - CAM_DWELL, CAM_FALL);
+        (1.0 - l, -d)
+    } else {
+        (0.0, 0.0)
+    };
+    (CAM_PRELOAD + CAM_STIFFNESS * CAM_LIFT * lift) * CAM_LIFT * slope
+}
 
 impl Unnamed {
     /// What the user reads about it.
@@ -51,6 +100,14 @@ impl Unnamed {
             Unnamed::Fan => {
                 format!("fan drag {FAN_DRAG:e}·ω·|ω| N·m (a law the effect list lacks)")
             }
+            Unnamed::Cam => format!(
+                "a cam lifting a spring-loaded follower {:.0} mm over {:.0}° and dropping it over \
+                 {:.0}° once a revolution, up to {:.3} N·m (an angle profile the effect list lacks)",
+                CAM_LIFT * 1e3,
+                CAM_RISE.to_degrees(),
+                CAM_FALL.to_degrees(),
+                cam_peak()
+            ),
         }
     }
 
@@ -58,14 +115,28 @@ impl Unnamed {
     pub fn carrier(self) -> control::effects::TableVar {
         match self {
             Unnamed::Fan => control::effects::TableVar::Omega,
+            Unnamed::Cam => control::effects::TableVar::Theta,
+        }
+    }
+
+    /// Its load torque [N·m] at a true state.
+    pub fn torque(self, x: crate::emulator::LoadInputs) -> f64 {
+        match self {
+            Unnamed::Fan => FAN_DRAG * x.omega * x.omega.abs(),
+            Unnamed::Cam => cam_torque(x.theta),
         }
     }
 
     fn hide(self, cfg: EmulatorConfig) -> EmulatorConfig {
-        match self {
-            Unnamed::Fan => cfg.with_extra_load(|x| FAN_DRAG * x.omega * x.omega.abs()),
-        }
+        cfg.with_extra_load(move |x| self.torque(x))
     }
+}
+
+/// Largest magnitude of [`cam_torque`] over a revolution [N·m] (on a 0.1° grid).
+fn cam_peak() -> f64 {
+    (0..3600)
+        .map(|k| cam_torque(f64::from(k).to_radians() / 10.0).abs())
+        .fold(0.0, f64::max)
 }
 
 /// Most diagnose → add → refit rounds.
@@ -93,7 +164,13 @@ pub const STEP_DURATION: f64 = 30.0;
     the strongest new finding (or, when no effect of the list is left but the model is not \
     adequate, a table on the variable that carries the rest). A refit is kept only when it \
     explains signal b significantly better (F-test at the 1 % level); otherwise the next \
-    finding is tried. Stops when the model is adequate, nothing is left to add, or after 4 refits."
+    finding is tried. Stops when the model is adequate, nothing is left to add, or after 4 refits.\n\n\
+    --unnamed hides physics the effect list has no law for, instead of the default effect: fan \
+    (a drag c·ω·|ω|, carried by omega) or cam (a cam lifting a spring-loaded follower once a \
+    revolution, carried by theta; the one-harmonic angle terms position_load and cogging take \
+    part of it first). The loop can take the rest in only through a table on the variable that \
+    carries it, and the demo prints the start and final models' load torque against the true \
+    one, as RMS over the test run's true states."
 )]
 pub struct Args {
     /// Hidden effect, NAME or NAME:key=value,... (repeatable; default: offset).
@@ -201,7 +278,40 @@ pub struct Outcome {
     /// The final model against the truth on the test log; `None` where the truth is no model
     /// of the list's terms (unnamed physics).
     pub closeness: Option<Closeness>,
+    /// With unnamed physics: the models' load torque against the true one over the test
+    /// run's states.
+    pub torque: Option<TorqueDistance>,
     pub report: Option<PathBuf>,
+}
+
+/// How far a model's load torque is from the true one, as RMS over the true states of the
+/// test run [N·m]: where the truth is no model of the list's terms (unnamed physics hidden),
+/// the distance that still means something is between the torques themselves, whatever
+/// terms make them up.
+#[derive(Debug, Clone, Copy)]
+pub struct TorqueDistance {
+    /// The model the loop started from (no effect added).
+    pub start: f64,
+    /// The final model.
+    pub last: f64,
+    /// RMS of the hidden physics' own torque, the start's distance had the rest been exact.
+    pub hidden: f64,
+}
+
+/// A model's load torque at a true state [N·m]: its friction law at steady state (the
+/// bristles settled; the sign smoothed over the model's own width) and its effects' torques.
+fn model_load_torque(m: &Model, x: crate::emulator::LoadInputs) -> f64 {
+    let lugre = m.lugre.map_or(0.0, |p| {
+        p.s(x.omega) * control::effects::smooth_sign(x.omega, m.sign_width) + p.alpha2 * x.omega
+    });
+    let friction = lugre + m.viscous * x.omega;
+    let e = control::effects::EffectInputs {
+        theta: x.theta,
+        omega: x.omega,
+        current: x.i,
+        kt: m.motor.kt,
+    };
+    friction + control::effects::total_torque_with_width(&m.effects, &e, m.sign_width)
 }
 
 impl Outcome {
@@ -297,12 +407,23 @@ pub fn run_loop(
     let last = out.final_round();
     let (pred, final_fit) = say_final(say, &out, test_log)?;
     let closeness = say_closeness(say, &logs, &iterations, final_fit)?;
+    let torque = unnamed.map(|u| {
+        let d = torque_distance(u, &logs, out.rounds.first().map_or(&last.model, |r| &r.model), &last.model);
+        say(&format!(
+            "final model against the truth: load torque over the test run's true states, RMS \
+             error {:.4} N·m (start model: {:.4} N·m; the unnamed physics' own torque: {:.4} N·m \
+             RMS)",
+            d.last, d.start, d.hidden
+        ));
+        d
+    });
     let mut outcome = Outcome {
         hidden: hidden.to_vec(),
         unnamed,
         iterations,
         added: last.adds.clone(),
         closeness,
+        torque,
         report: None,
     };
     if let Some(dir) = report_dir {
@@ -391,6 +512,9 @@ struct DemoLogs {
     /// The emulator's own model; `None` when unnamed physics is hidden (no model of the
     /// list's terms is the truth then).
     truth: Option<crate::model::Model>,
+    /// The emulator's model without the unnamed physics, and the test run's true states.
+    named_truth: crate::model::Model,
+    test_states: crate::emulator::Truth,
 }
 
 impl DemoLogs {
@@ -408,27 +532,52 @@ impl DemoLogs {
         if let Some(u) = unnamed {
             cfg = u.hide(cfg);
         }
-        let log = |offset: u64, kind: SignalKind, duration: f64, name: &str| -> Result<MotorLog> {
+        let sim = |offset: u64, kind: SignalKind, duration: f64, name: &str| {
             let mut c = cfg.clone();
             c.seed = seed.wrapping_add(offset);
-            let mut log = simulate_signal(&c, kind, duration)?.log;
-            log.source = PathBuf::from(name);
-            Ok(log)
+            let mut res = simulate_signal(&c, kind, duration)?;
+            res.log.source = PathBuf::from(name);
+            anyhow::Ok(res)
         };
-        let fit_log = log(0, SignalKind::A, duration, "emulated signal a")?;
+        let fit_log = sim(0, SignalKind::A, duration, "emulated signal a")?.log;
         // The braking experiment: after each voltage step down the drive brakes the moving
         // rotor, the only place where load-dependent friction differs from a lower K_t.
-        let step_log = log(2000, SignalKind::D, STEP_DURATION, "emulated signal d")?;
-        let select = log(1000, SignalKind::B, duration, "emulated signal b")?;
+        let step_log = sim(2000, SignalKind::D, STEP_DURATION, "emulated signal d")?.log;
+        let select = sim(1000, SignalKind::B, duration, "emulated signal b")?.log;
         // The selection log decides which refits are kept; the scores are reported on a
         // fresh log that no choice was made on.
-        let test = log(3000, SignalKind::B, duration, "emulated signal b (test)")?;
+        let test = sim(3000, SignalKind::B, duration, "emulated signal b (test)")?;
         Ok(DemoLogs {
             fit: [fit_log, step_log],
             select,
-            test,
+            test: test.log,
             truth: unnamed.is_none().then(|| cfg.truth_model()),
+            named_truth: cfg.truth_model(),
+            test_states: test.truth,
         })
+    }
+}
+
+/// The start and final models' load torque against the true one (the emulator's named
+/// part and the unnamed physics `u`) over the true states of the test run.
+fn torque_distance(u: Unnamed, logs: &DemoLogs, start: &Model, last: &Model) -> TorqueDistance {
+    let s = &logs.test_states;
+    let states: Vec<crate::emulator::LoadInputs> = (0..s.theta.len())
+        .map(|k| crate::emulator::LoadInputs {
+            t: logs.test.t[k],
+            theta: s.theta[k],
+            omega: s.omega[k],
+            i: s.i[k],
+        })
+        .collect();
+    let rms = |f: &dyn Fn(crate::emulator::LoadInputs) -> f64| {
+        (states.iter().map(|x| f(*x).powi(2)).sum::<f64>() / states.len().max(1) as f64).sqrt()
+    };
+    let truth = |x| model_load_torque(&logs.named_truth, x) + u.torque(x);
+    TorqueDistance {
+        start: rms(&|x| model_load_torque(start, x) - truth(x)),
+        last: rms(&|x| model_load_torque(last, x) - truth(x)),
+        hidden: rms(&|x| u.torque(x)),
     }
 }
 
@@ -717,11 +866,55 @@ mod tests {
                 .map(|s| EffectSpec::parse(s).unwrap())
                 .collect(),
             closeness: None,
+            torque: None,
             report: None,
         };
         assert!(outcome(&["table:var=omega,bins=8"]).found_all());
         assert!(!outcome(&["table:var=current,bins=8"]).found_all());
         assert!(!outcome(&["stribeck"]).found_all());
+    }
+
+    /// The cam's torque is the follower's spring work per angle: over the rise the shaft
+    /// does F0·H + k·H²/2 of work (the spring's energy gained), over the fall it gets the
+    /// same back, and nothing over the dwells.
+    #[test]
+    fn cam_torque_is_the_spring_work_per_angle() {
+        let n = 200_000;
+        let work = |a: f64, b: f64| {
+            let h = (b - a) / n as f64;
+            (0..n)
+                .map(|k| cam_torque(a + (k as f64 + 0.5) * h) * h)
+                .sum::<f64>()
+        };
+        let energy = CAM_PRELOAD * CAM_LIFT + 0.5 * CAM_STIFFNESS * CAM_LIFT * CAM_LIFT;
+        let fall = CAM_RISE + CAM_DWELL;
+        assert!((work(0.0, CAM_RISE) - energy).abs() < 1e-6 * energy);
+        assert!((work(fall, fall + CAM_FALL) + energy).abs() < 1e-6 * energy);
+        assert!(work(0.0, std::f64::consts::TAU).abs() < 1e-6 * energy);
+        assert_eq!(cam_torque(CAM_RISE + 0.5 * CAM_DWELL), 0.0);
+        // One revolution on: the same torque.
+        let t = 1.234;
+        assert!((cam_torque(t) - cam_torque(t + std::f64::consts::TAU)).abs() < 1e-12);
+    }
+
+    /// Each unnamed kind is found through its own carrier only.
+    #[test]
+    fn each_unnamed_kind_has_its_carrier() {
+        use control::effects::TableVar;
+        assert_eq!(Unnamed::Fan.carrier(), TableVar::Omega);
+        assert_eq!(Unnamed::Cam.carrier(), TableVar::Theta);
+        let outcome = |added: &str| Outcome {
+            hidden: Vec::new(),
+            unnamed: Some(Unnamed::Cam),
+            iterations: Vec::new(),
+            added: vec![EffectSpec::parse(added).unwrap()],
+            closeness: None,
+            torque: None,
+            report: None,
+        };
+        assert!(outcome("table:var=theta,bins=12").found_all());
+        assert!(!outcome("table:var=omega,bins=8").found_all());
+        assert!(!outcome("position_load").found_all());
     }
 
     fn fits(x: f64, xdot: f64, i: f64) -> ident::Fits {
@@ -744,6 +937,7 @@ mod tests {
             iterations: Vec::new(),
             added: vec![EffectSpec::parse("deadtime:vd=0.4").unwrap()],
             closeness: Some(Closeness { start, last, truth }),
+            torque: None,
             report: None,
         };
         // The name, but the current fit closed half of nothing: 84 % against 98.6 % from 70 %.
