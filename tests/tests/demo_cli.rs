@@ -109,7 +109,7 @@ fn demo_finds_the_hidden_effect_and_the_error_falls() {
 
 /// Physics outside the effect list (a fan's drag, quadratic in the speed): the loop says the
 /// LuGre model is not adequate and which variable carries the rest, adds a table over it,
-/// and the test fits rise.
+/// the test fits rise and the final model's load torque is nearer the true one.
 #[test]
 fn demo_hides_unnamed_physics_and_a_table_takes_it_in() {
     let dir = tempfile::tempdir().unwrap();
@@ -156,6 +156,11 @@ fn demo_hides_unnamed_physics_and_a_table_takes_it_in() {
             "test {key} fit did not improve: {first} -> {last}"
         );
     }
+    let (final_rms, start_rms) = torque_distance(&text);
+    assert!(
+        final_rms < start_rms,
+        "the final model's load torque is no nearer the truth: {final_rms} against {start_rms}"
+    );
 }
 
 /// The models' load torque against the true one on the demo's distance line: (final, start).

@@ -408,7 +408,12 @@ pub fn run_loop(
     let (pred, final_fit) = say_final(say, &out, test_log)?;
     let closeness = say_closeness(say, &logs, &iterations, final_fit)?;
     let torque = unnamed.map(|u| {
-        let d = torque_distance(u, &logs, out.rounds.first().map_or(&last.model, |r| &r.model), &last.model);
+        let d = torque_distance(
+            u,
+            &logs,
+            out.rounds.first().map_or(&last.model, |r| &r.model),
+            &last.model,
+        );
         say(&format!(
             "final model against the truth: load torque over the test run's true states, RMS \
              error {:.4} N·m (start model: {:.4} N·m; the unnamed physics' own torque: {:.4} N·m \
