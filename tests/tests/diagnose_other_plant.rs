@@ -212,6 +212,9 @@ fn diagnose_presliding(kind: SignalKind, seed: u64) -> Outcome {
     judge(log, &given_model(&p.base, true), kind, seed)
 }
 
+/// A case judged on a signal with a seed.
+type Judged = fn(SignalKind, u64) -> Outcome;
+
 fn check_presliding(kind: SignalKind) {
     let runs: Vec<Outcome> = SEEDS
         .iter()
@@ -601,7 +604,7 @@ fn write_table() {
             kind.name()
         );
     };
-    let friction: [(&str, fn(SignalKind, u64) -> Outcome); 2] = [
+    let friction: [(&str, Judged); 2] = [
         ("coulomb", diagnose_coulomb),
         ("presliding", diagnose_presliding),
     ];
