@@ -163,7 +163,16 @@ pub static D: Descriptor = Descriptor {
     // I) holds structure no named effect explains (`diagnose/carriers.rs`).
     diagnose: Diagnose {
         variants: no_variants,
-        present: no_columns,
+        // The model's table stands in the torque equation's base as its node columns, so
+        // that what it explains is not left to the carriers (a table over θ would
+        // otherwise still be found carried by θ once added).
+        present: |e, s| {
+            let cur = s.i.as_deref().unwrap_or(&s.drive);
+            columns(e, &s.theta_s, &s.omega, cur)
+                .into_iter()
+                .map(|c| (Equation::Mechanical, c))
+                .collect()
+        },
         keys: no_keys,
         column_names: &[],
         torque_unit: "N·m",
