@@ -232,4 +232,14 @@ fn demo_hides_a_cam_and_a_table_over_the_angle_takes_it_in() {
         final_rms < start_rms,
         "the final model's load torque is no nearer the truth: {final_rms} against {start_rms}"
     );
+    // Once the table is in the model, what it explains is no longer left to the angle.
+    let after: Vec<&str> = text
+        .lines()
+        .skip_while(|l| !(l.starts_with("step ") && l.contains("table(theta)")))
+        .filter(|l| l.contains("diagnose ("))
+        .collect();
+    assert!(
+        !after.is_empty() && after.iter().all(|l| !l.contains("carried by theta")),
+        "the model with the table over the angle is still found carried by it: {after:?}"
+    );
 }
