@@ -119,7 +119,7 @@ fn set_table_range(spec: &mut crate::effect_spec::EffectSpec, logs: &[MotorLog],
 }
 
 /// Mechanical regressors g_e of the linear-in-parameter effects: (effect index, key(s)).
-enum EffCols {
+pub(crate) enum EffCols {
     /// One key and its regressor (the torque per unit of the key).
     One(usize, &'static str, Regressor),
     /// A sine and a cosine of `h·θ` (amplitude and phase), h the periods per revolution.
@@ -130,11 +130,18 @@ enum EffCols {
 
 impl EffCols {
     /// Number of regression columns (unknowns) of this group.
-    fn width(&self) -> usize {
+    pub(crate) fn width(&self) -> usize {
         match self {
             EffCols::One(..) => 1,
             EffCols::SinCos(..) => 2,
             EffCols::Table(_, n) => *n,
+        }
+    }
+
+    /// Index of the effect in the model.
+    pub(crate) fn effect(&self) -> usize {
+        match *self {
+            EffCols::One(k, ..) | EffCols::SinCos(k, _) | EffCols::Table(k, _) => k,
         }
     }
 }
@@ -142,12 +149,12 @@ impl EffCols {
 /// The rows of a weak-form regression: one column per unknown and the left-hand side, one
 /// entry per window.
 pub(crate) struct WeakRows {
-    cols: Vec<Vec<f64>>,
-    y: Vec<f64>,
+    pub(crate) cols: Vec<Vec<f64>>,
+    pub(crate) y: Vec<f64>,
 }
 
 impl WeakRows {
-    fn new(unknowns: usize) -> WeakRows {
+    pub(crate) fn new(unknowns: usize) -> WeakRows {
         WeakRows {
             cols: vec![Vec::new(); unknowns],
             y: Vec::new(),
@@ -474,7 +481,7 @@ fn estimate_mechanical(m: &mut Model, logs: &[MotorLog], coulomb: bool) -> WeakF
 }
 
 /// The regressor groups of the model's linear-in-parameter effects, in the model's order.
-fn mechanical_effects(m: &Model) -> Vec<EffCols> {
+pub(crate) fn mechanical_effects(m: &Model) -> Vec<EffCols> {
     let mut map = Vec::new();
     for (k, e) in m.effects.iter().enumerate() {
         let d = effects::of(e.kind());
@@ -499,19 +506,19 @@ fn mechanical_effects(m: &Model) -> Vec<EffCols> {
 }
 
 /// The signals of one log the mechanical regressors are made of.
-struct MechanicalSignals {
+pub(crate) struct MechanicalSignals {
     /// Smoothed velocity [rad/s].
-    ws: Vec<f64>,
+    pub(crate) ws: Vec<f64>,
     /// Smooth sign of `ws`, of the model's sign width.
-    sgn: Vec<f64>,
+    pub(crate) sgn: Vec<f64>,
     /// Current less the sensor offset [A] (voltage plant), or the torque command (torque
     /// plant).
-    cur: Vec<f64>,
+    pub(crate) cur: Vec<f64>,
 }
 
 impl MechanicalSignals {
     /// The signals of `log`; None for a voltage-plant log without a current.
-    fn of(m: &Model, log: &MotorLog) -> Option<MechanicalSignals> {
+    pub(crate) fn of(m: &Model, log: &MotorLog) -> Option<MechanicalSignals> {
         let offset = control::effects::total_sensor_offset(&m.effects);
         let cur: Vec<f64> = match (m.plant == Plant::Voltage, &log.i) {
             (true, Some(i)) => i.iter().map(|c| c - offset).collect(),
@@ -531,27 +538,14 @@ impl MechanicalSignals {
 fn mechanical_rows(m: &Model, logs: &[MotorLog], coulomb: bool, map: &[EffCols]) -> WeakRows {
     let base = if coulomb { 4 } else { 2 };
     let mut rows = WeakRows::new(base + map.iter().map(EffCols::width).sum::<usize>());
-    let voltage = m.plant == Plant::Voltage;
     for log in logs {
         let Some(s) = MechanicalSignals::of(m, log) else {
             continue;
         };
         let g = effect_regressors(m, map, log, &s);
-        let h = log.sample_period();
-        let (lag, beta) = winding_weights(h, m.motor.l / m.motor.r);
-        let mean = interval_currents(&s.cur, lag, beta).1;
-        // The mean current's back-EMF term, `K_b·(½ − β)/R` per unit of velocity change.
-        let emf = if m.motor.r > 0.0 {
-            m.motor.kb * (0.5 - beta) / m.motor.r
-        } else {
-            0.0
-        };
-        for w in weak_form::log_windows(log) {
-            let lhs = if voltage {
-                m.motor.kt * (w.int_zoh(&mean) + emf * h * w.int_dd(&log.theta))
-            } else {
-                w.int_zoh(&s.cur)
-            };
+        let windows = weak_form::log_windows(log);
+        let drive = drive_torques(m, log, &s, &windows);
+        for (w, lhs) in windows.iter().zip(drive) {
             rows.y.push(lhs);
             rows.cols[0].push(w.int_dd(&log.theta));
             rows.cols[1].push(-w.int_d(&log.theta));
@@ -567,9 +561,36 @@ fn mechanical_rows(m: &Model, logs: &[MotorLog], coulomb: bool, map: &[EffCols])
     rows
 }
 
+/// The drive's torque over each of `windows` of `log` [N·m·s]: K_t times the current's exact
+/// mean over each interval, `β·I_j + (1 − β)·I_j+1 + K_b·(½ − β)/R·(ω_j+1 − ω_j)` (the module
+/// doc; the model's R, L, K_t, K_b), or `∫ψ·u` on a torque plant.
+pub(crate) fn drive_torques(
+    m: &Model,
+    log: &MotorLog,
+    s: &MechanicalSignals,
+    windows: &[weak_form::Window],
+) -> Vec<f64> {
+    if m.plant != Plant::Voltage {
+        return windows.iter().map(|w| w.int_zoh(&s.cur)).collect();
+    }
+    let h = log.sample_period();
+    let (lag, beta) = winding_weights(h, m.motor.l / m.motor.r);
+    let mean = interval_currents(&s.cur, lag, beta).1;
+    // The mean current's back-EMF term, `K_b·(½ − β)/R` per unit of velocity change.
+    let emf = if m.motor.r > 0.0 {
+        m.motor.kb * (0.5 - beta) / m.motor.r
+    } else {
+        0.0
+    };
+    windows
+        .iter()
+        .map(|w| m.motor.kt * (w.int_zoh(&mean) + emf * h * w.int_dd(&log.theta)))
+        .collect()
+}
+
 /// The torque regressors g of `map`'s effects on one log, sample by sample, one per
 /// unknown in `map`'s order (a sine and a cosine per periodic effect, one per table node).
-fn effect_regressors(
+pub(crate) fn effect_regressors(
     m: &Model,
     map: &[EffCols],
     log: &MotorLog,
@@ -606,7 +627,7 @@ fn effect_regressors(
 /// Stores the effects' coefficients `x` (in `map`'s order): a key clamped to its bounds, a
 /// periodic effect's sine and cosine as amplitude [N·m] and phase [rad], a table's node
 /// torques clamped to ±10 N·m.
-fn set_mechanical_effects(m: &mut Model, map: &[EffCols], x: &[f64]) {
+pub(crate) fn set_mechanical_effects(m: &mut Model, map: &[EffCols], x: &[f64]) {
     let mut c = 0;
     for e in map {
         match *e {
