@@ -4,9 +4,9 @@
 # recorded input trace qemu-parity/trace/closed_loop.qpt, run the same code on the host, and
 # compare the f32 outputs bit for bit. Then count the instructions each 12 ms period of the
 # board logic (limits, faults, telemetry and the control step) takes, per observer
-# (none / LuGre / SINDYc / LuGre with a 16-node speed table and saturation), from QEMU's
-# per-instruction exec log; the SINDYc configuration in experiment mode (signal a) is counted
-# too, not held to the budget (13 sines a period).
+# (none / LuGre / SINDYc / SINDYc in experiment mode on signal a / LuGre with all eight effect
+# slots used), from QEMU's per-instruction exec log, each held to the budget of
+# docs/decisions/0036-step-budget-counts-the-fullest-blob.md.
 #
 # Installs qemu-system-arm (Debian) and the thumbv7em-none-eabihf target when missing.
 # Builds in $CARGO_TARGET_DIR, by default <repo>/target/qemu (a separate directory, so that it

@@ -53,9 +53,11 @@ pub struct Inputs<'a> {
 type Outputs = BTreeMap<(String, usize), [u32; N_OUTPUTS]>;
 
 /// Most instructions one 12 ms control period (board logic and step) may take on the
-/// Cortex-M4F: 2,000, under 1 % of the period at 170 MHz even at several cycles per
-/// instruction, which leaves the rest for the Hall and PWM interrupts and the link.
-const STEP_BUDGET: u64 = 2000;
+/// Cortex-M4F: 4,000, 1 % of the period at 170 MHz at five cycles an instruction. Five is a
+/// pessimistic mean for this code: the FPU adds and multiplies in one cycle and divides in
+/// 14, loads take two, and the flash's wait states are hidden by the ART accelerator on
+/// straight code. The other 99 % are left to the Hall and PWM interrupts and the link.
+const STEP_BUDGET: u64 = 4000;
 
 fn host_outputs(inp: &Inputs) -> Result<(Outputs, usize), String> {
     let trace = Trace::parse(inp.trace).map_err(|e| format!("embedded trace: {e:?}"))?;
@@ -244,20 +246,15 @@ fn count(qemu_out: &str) -> Result<(), String> {
                 obs.name()
             ));
         }
-        let budget = if obs.budgeted() {
-            format!("budget {STEP_BUDGET}")
-        } else {
-            "open-loop experiment, not budgeted".to_string()
-        };
         println!(
-            "instructions per control period (board logic + step), {:<6}: mean {:.0}, min {}, max {} over {} steps ({budget})",
+            "instructions per control period (board logic + step), {:<9}: mean {:.0}, min {}, max {} over {} steps (budget {STEP_BUDGET})",
             obs.name(),
             s.1 as f64 / s.0 as f64,
             s.2,
             s.3,
             s.0
         );
-        if obs.budgeted() && s.3 > STEP_BUDGET {
+        if s.3 > STEP_BUDGET {
             return Err(format!(
                 "observer {}: a control period took {} instructions, over the budget of {STEP_BUDGET}",
                 obs.name(),

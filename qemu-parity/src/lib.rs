@@ -15,7 +15,7 @@
 //!   v_bus f32, omega_ref f32, v_override f32, then per edge: ticks u32, state u8, 3 zeros.
 //! * The configurations are the coefficient blobs `motorid export --edge-timing 0.1` wrote for
 //!   the models (`trace/lugre.bin`, `trace/sindyc.bin`, and `trace/lugre-table.bin`: the
-//!   LuGre model with a 16-node speed table and saturation added by hand), decoded with
+//!   LuGre model with all eight effect slots filled by hand), decoded with
 //!   `control::blob::decode` and turned into a step configuration with
 //!   `Coefficients::step_config`, as the firmware does; "none" is the default coefficients.
 #![no_std]
@@ -47,8 +47,10 @@ pub enum Observer {
     /// The SINDYc configuration in experiment mode: the paper's signal a, open loop, with
     /// the observer following the measured speed.
     SindycSignalA,
-    /// LuGre observer with a 16-node lookup table over the speed and magnetic saturation
-    /// compensated (`trace/lugre-table.toml`): the largest effect evaluation a step does.
+    /// LuGre observer with all eight effect slots of the blob used (`trace/lugre-table.toml`:
+    /// a 16-node lookup table over the speed, magnetic saturation, cogging, a position load,
+    /// heating, dead time, asymmetry and a current offset): the largest effect evaluation a
+    /// blob can ask of a step.
     LugreTable,
 }
 
@@ -62,13 +64,6 @@ impl Observer {
         Observer::LugreTable,
     ];
 
-    /// Whether the instruction budget applies: to the speed-mode configurations. Signal a
-    /// evaluates 13 sines a period (`control::excitation`), which takes it beyond the
-    /// budget; its count is reported beside them.
-    pub fn budgeted(self) -> bool {
-        self != Observer::SindycSignalA
-    }
-
     /// Lower-case name used in the printed lines.
     pub fn name(self) -> &'static str {
         match self {
@@ -76,7 +71,7 @@ impl Observer {
             Observer::Lugre => "lugre",
             Observer::Sindyc => "sindyc",
             Observer::SindycSignalA => "sindyc-a",
-            Observer::LugreTable => "lugre+table",
+            Observer::LugreTable => "lugre+all",
         }
     }
 }
@@ -168,7 +163,7 @@ impl<'a> Trace<'a> {
 pub struct Blobs<'a> {
     pub lugre: &'a [u8],
     pub sindyc: &'a [u8],
-    /// LuGre with a 16-node speed table and saturation.
+    /// LuGre with all eight effect slots used.
     pub lugre_table: &'a [u8],
 }
 

@@ -21,7 +21,7 @@ static TRACE: &[u8] = include_bytes!("../trace/closed_loop.qpt");
 static LUGRE: &[u8] = include_bytes!("../trace/lugre.bin");
 /// The SINDYc model's coefficient blob (`motorid export`).
 static SINDYC: &[u8] = include_bytes!("../trace/sindyc.bin");
-/// The LuGre model with a 16-node speed table and saturation (`motorid export`).
+/// The LuGre model with all eight effect slots used (`motorid export`).
 static LUGRE_TABLE: &[u8] = include_bytes!("../trace/lugre-table.bin");
 
 /// The configurations' blobs.

@@ -172,7 +172,7 @@ fn case_with_seed(effect: EffectKind, seed: Option<u64>) -> Row {
 }
 
 #[test]
-#[ignore = "slow: about 5 min on 2 cores in release (20 fits); run with `cargo test --release -p e2e \
+#[ignore = "slow: about 1 min on 2 cores in release (20 fits); run with `cargo test --release -p e2e \
             --test fit_add_effects -- --ignored --nocapture`"]
 fn the_loop_adds_each_effect_and_closes_half_the_gap_to_the_truth() {
     // Presliding only moves σ0/σ1 of the LuGre law, and viscous only α2: the base LuGre

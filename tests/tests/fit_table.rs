@@ -143,8 +143,9 @@ fn simulate_refuses_a_table_without_node_torques() {
     );
 }
 
-/// The blob whose step cost `scripts/qemu-parity.sh` counts (LuGre, a 16-node speed table and
-/// saturation) is what `motorid export` writes for its model, byte for byte.
+/// The blob whose step cost `scripts/qemu-parity.sh` counts (LuGre with all eight effect slots
+/// used, a 16-node speed table and saturation among them) is what `motorid export` writes for
+/// its model, byte for byte.
 #[test]
 fn the_counted_table_blob_is_the_export_of_its_model() {
     let dir = tempfile::tempdir().unwrap();
@@ -167,7 +168,13 @@ fn the_counted_table_blob_is_the_export_of_its_model() {
     );
     let v: Value =
         serde_json::from_str(&run_ok(dir.path(), &["inspect", "blob.bin", "--json"])).unwrap();
-    let effects = v["coefficients"]["effects"].to_string();
+    let effects = &v["coefficients"]["effects"];
+    assert_eq!(
+        effects.as_array().map(Vec::len),
+        Some(control::blob::MAX_EFFECTS),
+        "{effects}"
+    );
+    let effects = effects.to_string();
     assert!(
         effects.contains("\"bins\":16") && effects.contains("Saturation"),
         "{effects}"

@@ -7,20 +7,19 @@
 //! - electrical (voltage plant): the sample-level winding equation of
 //!   [`crate::ident::linear`] at the fitted L/R, R and K_b re-estimated jointly with
 //!   `v_d·∫ψ·sgn(Ĩ − i0)` (deadtime) and `−R·i0·∫ψ` (current offset: `i_meas = i + i0`);
-//! - mechanical: `K_t·∫φ·(I − i0) − J·∫φ''·θ − ∫φ·F(ω)`, with F the model's steady friction
-//!   (LuGre Stribeck curve + α2·ω, or viscous b·ω), on `∫φ·sin(kθ)`, `∫φ·cos(kθ)` (cogging,
-//!   position_load) and `∫φ` (offset).
+//! - mechanical: the drive's torque of the same sample-level winding (K_t times the current's
+//!   exact mean over each interval, [`linear::drive_torques`]) less `J·∫φ''·θ + ∫φ·F(ω)`,
+//!   with F the model's steady friction (LuGre Stribeck curve + α2·ω, or viscous b·ω), on the
+//!   regressors the linear fit uses for the same effects: `∫φ·sin(kθ)`, `∫φ·cos(kθ)`
+//!   (cogging, position_load) and `∫φ` (offset), each kept within its key's bounds.
 //!
 //! Only the added effects' magnitudes change; the base model's parameters are kept.
-use crate::effects::{self, TorqueSignals, WeakTorque};
+use crate::effects;
 use crate::ident::free_params::Slot;
-use crate::ident::linear;
+use crate::ident::linear::{self, EffCols, MechanicalSignals, WeakRows};
 use crate::log::{MotorLog, Plant};
 use crate::model::Model;
-use crate::numerics::differentiation::smooth_velocity;
-use crate::numerics::least_squares::lstsq;
 use crate::numerics::weak_form;
-use control::effects::{smooth_sign, Effect};
 
 /// `base` with the effects of `with` (structure) re-estimated on `base`'s residuals in `logs`.
 /// Effects this regression does not cover keep the values they have in `with`.
@@ -79,113 +78,72 @@ fn electrical(m: &mut Model, logs: &[MotorLog]) {
     }
 }
 
-/// The signals of one log the torque regressors are made of: smoothed velocity, its smooth
-/// sign, the current less the sensor offset (the command on a torque plant).
-struct Signals {
-    ws: Vec<f64>,
-    sgn: Vec<f64>,
-    cur: Vec<f64>,
-}
-
-/// The columns of effect `e` in the mechanical residual regression: a sine and a cosine
-/// of h·θ for an angle-periodic torque, else one per key of its weak-form torque.
-fn columns(e: &Effect<f64>, kt: f64, log: &MotorLog, s: &Signals) -> Vec<Vec<f64>> {
-    let d = effects::of(e.kind());
-    match (d.weak_torque, (d.harmonic)(e)) {
-        (WeakTorque::Periodic, Some(h)) => vec![
-            log.theta.iter().map(|t| (h * t).sin()).collect(),
-            log.theta.iter().map(|t| (h * t).cos()).collect(),
-        ],
-        (WeakTorque::PerKey(keys), _) => {
-            let s = TorqueSignals {
-                effect: e,
-                kt,
-                theta: &log.theta,
-                ws: &s.ws,
-                sgn: &s.sgn,
-                cur: &s.cur,
-            };
-            keys.iter().map(|(_, g)| g(&s)).collect()
-        }
-        _ => vec![],
-    }
-}
-
-/// The keys [`columns`] estimates, in its order.
-fn column_keys(e: &Effect<f64>) -> Vec<&'static str> {
-    match effects::of(e.kind()).weak_torque {
-        WeakTorque::Periodic => vec!["amp", "phase"],
-        WeakTorque::PerKey(keys) => keys.iter().map(|(k, _)| *k).collect(),
-        _ => vec![],
-    }
-}
-
 fn mechanical(m: &mut Model, logs: &[MotorLog]) {
-    let idx: Vec<usize> = (0..m.effects.len())
-        .filter(|&k| effects::of(m.effects[k].kind()).on_residual)
+    let map: Vec<EffCols> = linear::mechanical_effects(m)
+        .into_iter()
+        .filter(|c| effects::of(m.effects[c.effect()].kind()).on_residual)
         .collect();
-    if idx.is_empty() {
+    if map.is_empty() {
         return;
     }
-    let voltage = m.plant == Plant::Voltage;
-    let i0 = control::effects::total_sensor_offset(&m.effects);
-    let ncols: usize = idx.iter().map(|&k| column_keys(&m.effects[k]).len()).sum();
-    let mut cols: Vec<Vec<f64>> = vec![Vec::new(); ncols];
-    let mut y = Vec::new();
+    let mut rows = WeakRows::new(map.iter().map(EffCols::width).sum());
     for log in logs {
-        let cur: Vec<f64> = match (voltage, &log.i) {
-            (true, Some(i)) => i.iter().map(|c| c - i0).collect(),
-            (true, None) => continue,
-            (false, _) => log.u.clone(),
+        let Some(s) = MechanicalSignals::of(m, log) else {
+            continue;
         };
-        let ws = smooth_velocity(log);
-        let sgn = ws.iter().map(|&w| smooth_sign(w, m.sign_width)).collect();
-        let fric: Vec<f64> = ws
-            .iter()
-            .map(|&w| match &m.lugre {
-                Some(l) => l.steady_friction(w),
-                None => m.viscous * w,
-            })
-            .collect();
-        let sig = Signals { ws, sgn, cur };
-        let cur = &sig.cur;
-        let g: Vec<Vec<f64>> = idx
-            .iter()
-            .flat_map(|&k| columns(&m.effects[k], m.motor.kt, log, &sig))
-            .collect();
-        for w in weak_form::log_windows(log) {
-            let drive = if voltage {
-                m.motor.kt * w.int(cur)
-            } else {
-                w.int_zoh(cur)
-            };
-            y.push(drive - m.motor.j * w.int_dd(&log.theta) - w.int(&fric));
+        let fric: Vec<f64> =
+            s.ws.iter()
+                .map(|&w| match &m.lugre {
+                    Some(l) => l.steady_friction(w),
+                    None => m.viscous * w,
+                })
+                .collect();
+        let g = linear::effect_regressors(m, &map, log, &s);
+        let windows = weak_form::log_windows(log);
+        let drive = linear::drive_torques(m, log, &s, &windows);
+        for (w, d) in windows.iter().zip(drive) {
+            rows.y
+                .push(d - m.motor.j * w.int_dd(&log.theta) - w.int(&fric));
             for (c, gv) in g.iter().enumerate() {
-                cols[c].push(w.int(gv));
+                rows.cols[c].push(w.int(gv));
             }
         }
     }
-    if y.len() <= cols.len() {
+    let Some(x) = rows.solve() else {
         return;
-    }
-    let refs: Vec<&[f64]> = cols.iter().map(|c| c.as_slice()).collect();
-    let x = lstsq(&refs, &y).beta;
+    };
     tracing::debug!("mechanical residual regression: {x:?}");
     if x.iter().any(|v| !v.is_finite()) {
         return;
     }
-    let mut c = 0;
-    for &k in &idx {
-        let keys = column_keys(&m.effects[k]);
-        if keys == ["amp", "phase"] {
-            let (a, b) = (x[c], x[c + 1]);
-            Slot::Effect(k, "amp").set(m, a.hypot(b));
-            Slot::Effect(k, "phase").set(m, b.atan2(a));
-        } else {
-            for (j, key) in keys.into_iter().enumerate() {
-                Slot::Effect(k, key).set(m, x[c + j]);
-            }
+    linear::set_mechanical_effects(m, &map, &x);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::effect_spec::EffectSpec;
+    use crate::emulator::{simulate_signal, EmulatorConfig, SignalKind};
+
+    /// The emulator's own model with its load torque hidden: the residual regression reads
+    /// the load back from what the model leaves, in the torque equation the linear fit uses.
+    #[test]
+    fn a_hidden_load_is_read_back_on_the_true_model() {
+        for t0 in [0.03, -0.05] {
+            let spec = EffectSpec::parse(&format!("offset:t0={t0}")).unwrap();
+            let cfg = EmulatorConfig::paper().with_effects(vec![spec.to_effect()]);
+            let log = simulate_signal(&cfg, SignalKind::A, 60.0).unwrap().log;
+            let truth = cfg.truth_model();
+            let mut base = truth.clone();
+            base.effects.clear();
+            let mut with = truth.clone();
+            Slot::Effect(0, "t0").set(&mut with, 0.0);
+            let m = estimate(&base, &with, std::slice::from_ref(&log));
+            let read = Slot::Effect(0, "t0").get(&m);
+            assert!(
+                (read / t0 - 1.0).abs() < 0.05,
+                "hidden load {t0} N·m read as {read}"
+            );
         }
-        c += column_keys(&m.effects[k]).len();
     }
 }

@@ -119,7 +119,7 @@ fn set_table_range(spec: &mut crate::effect_spec::EffectSpec, logs: &[MotorLog],
 }
 
 /// Mechanical regressors g_e of the linear-in-parameter effects: (effect index, key(s)).
-enum EffCols {
+pub(crate) enum EffCols {
     /// One key and its regressor (the torque per unit of the key).
     One(usize, &'static str, Regressor),
     /// A sine and a cosine of `h·θ` (amplitude and phase), h the periods per revolution.
@@ -130,11 +130,18 @@ enum EffCols {
 
 impl EffCols {
     /// Number of regression columns (unknowns) of this group.
-    fn width(&self) -> usize {
+    pub(crate) fn width(&self) -> usize {
         match self {
             EffCols::One(..) => 1,
             EffCols::SinCos(..) => 2,
             EffCols::Table(_, n) => *n,
+        }
+    }
+
+    /// Index of the effect in the model.
+    pub(crate) fn effect(&self) -> usize {
+        match *self {
+            EffCols::One(k, ..) | EffCols::SinCos(k, _) | EffCols::Table(k, _) => k,
         }
     }
 }
@@ -142,12 +149,12 @@ impl EffCols {
 /// The rows of a weak-form regression: one column per unknown and the left-hand side, one
 /// entry per window.
 pub(crate) struct WeakRows {
-    cols: Vec<Vec<f64>>,
-    y: Vec<f64>,
+    pub(crate) cols: Vec<Vec<f64>>,
+    pub(crate) y: Vec<f64>,
 }
 
 impl WeakRows {
-    fn new(unknowns: usize) -> WeakRows {
+    pub(crate) fn new(unknowns: usize) -> WeakRows {
         WeakRows {
             cols: vec![Vec::new(); unknowns],
             y: Vec::new(),
@@ -474,7 +481,7 @@ fn estimate_mechanical(m: &mut Model, logs: &[MotorLog], coulomb: bool) -> WeakF
 }
 
 /// The regressor groups of the model's linear-in-parameter effects, in the model's order.
-fn mechanical_effects(m: &Model) -> Vec<EffCols> {
+pub(crate) fn mechanical_effects(m: &Model) -> Vec<EffCols> {
     let mut map = Vec::new();
     for (k, e) in m.effects.iter().enumerate() {
         let d = effects::of(e.kind());
@@ -499,19 +506,19 @@ fn mechanical_effects(m: &Model) -> Vec<EffCols> {
 }
 
 /// The signals of one log the mechanical regressors are made of.
-struct MechanicalSignals {
+pub(crate) struct MechanicalSignals {
     /// Smoothed velocity [rad/s].
-    ws: Vec<f64>,
+    pub(crate) ws: Vec<f64>,
     /// Smooth sign of `ws`, of the model's sign width.
-    sgn: Vec<f64>,
+    pub(crate) sgn: Vec<f64>,
     /// Current less the sensor offset [A] (voltage plant), or the torque command (torque
     /// plant).
-    cur: Vec<f64>,
+    pub(crate) cur: Vec<f64>,
 }
 
 impl MechanicalSignals {
     /// The signals of `log`; None for a voltage-plant log without a current.
-    fn of(m: &Model, log: &MotorLog) -> Option<MechanicalSignals> {
+    pub(crate) fn of(m: &Model, log: &MotorLog) -> Option<MechanicalSignals> {
         let offset = control::effects::total_sensor_offset(&m.effects);
         let cur: Vec<f64> = match (m.plant == Plant::Voltage, &log.i) {
             (true, Some(i)) => i.iter().map(|c| c - offset).collect(),
@@ -531,27 +538,14 @@ impl MechanicalSignals {
 fn mechanical_rows(m: &Model, logs: &[MotorLog], coulomb: bool, map: &[EffCols]) -> WeakRows {
     let base = if coulomb { 4 } else { 2 };
     let mut rows = WeakRows::new(base + map.iter().map(EffCols::width).sum::<usize>());
-    let voltage = m.plant == Plant::Voltage;
     for log in logs {
         let Some(s) = MechanicalSignals::of(m, log) else {
             continue;
         };
         let g = effect_regressors(m, map, log, &s);
-        let h = log.sample_period();
-        let (lag, beta) = winding_weights(h, m.motor.l / m.motor.r);
-        let mean = interval_currents(&s.cur, lag, beta).1;
-        // The mean current's back-EMF term, `K_b·(½ − β)/R` per unit of velocity change.
-        let emf = if m.motor.r > 0.0 {
-            m.motor.kb * (0.5 - beta) / m.motor.r
-        } else {
-            0.0
-        };
-        for w in weak_form::log_windows(log) {
-            let lhs = if voltage {
-                m.motor.kt * (w.int_zoh(&mean) + emf * h * w.int_dd(&log.theta))
-            } else {
-                w.int_zoh(&s.cur)
-            };
+        let windows = weak_form::log_windows(log);
+        let drive = drive_torques(m, log, &s, &windows);
+        for (w, lhs) in windows.iter().zip(drive) {
             rows.y.push(lhs);
             rows.cols[0].push(w.int_dd(&log.theta));
             rows.cols[1].push(-w.int_d(&log.theta));
@@ -567,9 +561,36 @@ fn mechanical_rows(m: &Model, logs: &[MotorLog], coulomb: bool, map: &[EffCols])
     rows
 }
 
+/// The drive's torque over each of `windows` of `log` [N·m·s]: K_t times the current's exact
+/// mean over each interval, `β·I_j + (1 − β)·I_j+1 + K_b·(½ − β)/R·(ω_j+1 − ω_j)` (the module
+/// doc; the model's R, L, K_t, K_b), or `∫ψ·u` on a torque plant.
+pub(crate) fn drive_torques(
+    m: &Model,
+    log: &MotorLog,
+    s: &MechanicalSignals,
+    windows: &[weak_form::Window],
+) -> Vec<f64> {
+    if m.plant != Plant::Voltage {
+        return windows.iter().map(|w| w.int_zoh(&s.cur)).collect();
+    }
+    let h = log.sample_period();
+    let (lag, beta) = winding_weights(h, m.motor.l / m.motor.r);
+    let mean = interval_currents(&s.cur, lag, beta).1;
+    // The mean current's back-EMF term, `K_b·(½ − β)/R` per unit of velocity change.
+    let emf = if m.motor.r > 0.0 {
+        m.motor.kb * (0.5 - beta) / m.motor.r
+    } else {
+        0.0
+    };
+    windows
+        .iter()
+        .map(|w| m.motor.kt * (w.int_zoh(&mean) + emf * h * w.int_dd(&log.theta)))
+        .collect()
+}
+
 /// The torque regressors g of `map`'s effects on one log, sample by sample, one per
 /// unknown in `map`'s order (a sine and a cosine per periodic effect, one per table node).
-fn effect_regressors(
+pub(crate) fn effect_regressors(
     m: &Model,
     map: &[EffCols],
     log: &MotorLog,
@@ -606,7 +627,7 @@ fn effect_regressors(
 /// Stores the effects' coefficients `x` (in `map`'s order): a key clamped to its bounds, a
 /// periodic effect's sine and cosine as amplitude [N·m] and phase [rad], a table's node
 /// torques clamped to ±10 N·m.
-fn set_mechanical_effects(m: &mut Model, map: &[EffCols], x: &[f64]) {
+pub(crate) fn set_mechanical_effects(m: &mut Model, map: &[EffCols], x: &[f64]) {
     let mut c = 0;
     for e in map {
         match *e {
@@ -723,4 +744,183 @@ pub fn fit(req: &FitRequest) -> Result<Model> {
                      simulation error"
         .into();
     Ok(m)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The winding `L·di/dt + R·i = u − K_b·ω` stepped over one interval of `h` with `u`
+    /// held and ω linear from `w0` to `w1`, by `SUB` exact exponential sub-steps, each with
+    /// its mid-point velocity: a reference independent of the weights under test.
+    fn winding_step(i: f64, u: f64, w0: f64, w1: f64, (r, l, kb): (f64, f64, f64), h: f64) -> f64 {
+        const SUB: usize = 4000;
+        let dt = h / SUB as f64;
+        let decay = (-dt * r / l).exp();
+        let mut i = i;
+        for k in 0..SUB {
+            let w = w0 + (w1 - w0) * (k as f64 + 0.5) / SUB as f64;
+            let target = (u - kb * w) / r;
+            i = target + (i - target) * decay;
+        }
+        i
+    }
+
+    #[test]
+    fn winding_weights_have_the_trapezoid_and_end_point_limits() {
+        // Slow winding (a → 0): the trapezoid's ½; fast (a → ∞): the end current.
+        let (lag, beta) = winding_weights(1e-3, 1e3);
+        assert!(
+            (beta - 0.5).abs() < 1e-6 && lag > 1e5,
+            "slow: lag {lag}, β {beta}"
+        );
+        let (lag, beta) = winding_weights(1.0, 1e-2);
+        assert!(
+            beta.abs() < 1.1e-2 && lag < 1e-40,
+            "fast: lag {lag}, β {beta}"
+        );
+        // The series below a = 0.01 meets the closed form there.
+        let (_, below) = winding_weights(0.01 - 1e-12, 1.0);
+        let (_, above) = winding_weights(0.01 + 1e-12, 1.0);
+        assert!(
+            (below - above).abs() < 1e-9,
+            "β jumps at the series' switch: {below} {above}"
+        );
+        // No time constant or no interval: no weights, not a NaN.
+        assert_eq!(winding_weights(0.012, 0.0), (0.0, 0.0));
+        assert_eq!(winding_weights(0.0, 1e-3), (0.0, 0.0));
+        assert_eq!(winding_weights(0.012, f64::NAN), (0.0, 0.0));
+    }
+
+    #[test]
+    fn held_current_and_mean_are_the_exact_step_of_the_winding() {
+        // For a held voltage and a linear velocity, R times the held-equivalent current is
+        // the voltage less the back-EMF of the weighted velocity β·ω_j + (1 − β)·ω_j+1, and
+        // the mean current over the interval is β·I_j + (1 − β)·I_j+1 plus the velocity's
+        // term K_b·(½ − β)/R·(ω_j+1 − ω_j) (the module doc), from a slow winding to one far
+        // faster than the sample.
+        let (r, kb, h) = (0.2, 0.07, 0.012);
+        for tau in [5e-1, 1.2e-2, 1.5e-3, 1e-4] {
+            let (lag, beta) = winding_weights(h, tau);
+            let (i0, u, w0, w1) = (1.3, 2.0, 10.0, 25.0);
+            let i1 = winding_step(i0, u, w0, w1, (r, tau * r, kb), h);
+            let (held, mean) = interval_currents(&[i0, i1], lag, beta);
+            let emf = kb * (beta * w0 + (1.0 - beta) * w1);
+            assert!(
+                (r * held[0] - (u - emf)).abs() < 1e-6,
+                "τ {tau}: R·Ĩ {} against u − emf {}",
+                r * held[0],
+                u - emf
+            );
+            // The mean by the same sub-steps, summed.
+            const SUB: usize = 4000;
+            let (mut i, mut sum) = (i0, 0.0);
+            for k in 0..SUB {
+                let w = w0 + (w1 - w0) * k as f64 / SUB as f64;
+                let w_next = w0 + (w1 - w0) * (k + 1) as f64 / SUB as f64;
+                let next = winding_step(i, u, w, w_next, (r, tau * r, kb), h / SUB as f64);
+                sum += 0.5 * (i + next);
+                i = next;
+            }
+            let exact_mean = sum / SUB as f64;
+            let modelled = mean[0] + kb * (0.5 - beta) / r * (w1 - w0);
+            assert!(
+                (modelled - exact_mean).abs() < 1e-5 * exact_mean.abs().max(1.0),
+                "τ {tau}: mean current {modelled} against {exact_mean}"
+            );
+        }
+    }
+
+    /// A log of the winding alone: random voltages held over `h`, a velocity linear between
+    /// samples (a sum of slow sines), the current stepped exactly.
+    fn winding_log(tau: f64, h: f64, seconds: f64) -> MotorLog {
+        let (r, kb) = (0.2, 0.07);
+        let n = (seconds / h) as usize;
+        let t: Vec<f64> = (0..n).map(|k| k as f64 * h).collect();
+        let omega: Vec<f64> = t
+            .iter()
+            .map(|&t| 40.0 * (1.3 * t).sin() + 15.0 * (4.1 * t + 1.0).sin())
+            .collect();
+        let mut theta = vec![0.0; n];
+        for k in 1..n {
+            theta[k] = theta[k - 1] + 0.5 * h * (omega[k - 1] + omega[k]);
+        }
+        // A deterministic pseudo-random held voltage (a multiplicative congruential draw),
+        // changing every sample, around the back-EMF.
+        let mut state = 0x2545_f491u64;
+        let u: Vec<f64> = omega
+            .iter()
+            .map(|w| {
+                state = state
+                    .wrapping_mul(6_364_136_223_846_793_005)
+                    .wrapping_add(1);
+                kb * w + 3.0 * ((state >> 11) as f64 / (1u64 << 53) as f64 - 0.5)
+            })
+            .collect();
+        let mut i = vec![0.0; n];
+        for k in 1..n {
+            i[k] = winding_step(
+                i[k - 1],
+                u[k - 1],
+                omega[k - 1],
+                omega[k],
+                (r, tau * r, kb),
+                h,
+            );
+        }
+        MotorLog {
+            t,
+            u,
+            i: Some(i),
+            theta,
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn the_winding_start_reads_r_kb_and_tau_from_an_exact_winding() {
+        let h = 0.012;
+        for tau in [6e-3, 1.2e-2, 4e-2] {
+            let log = winding_log(tau, h, 30.0);
+            let s = winding_start(std::slice::from_ref(&log), &[], 0.0).expect("a start");
+            let (r, kb) = (s.x[0], s.x[1]);
+            assert!(s.identified && !s.at_slow_end, "τ {tau}: not identified");
+            assert!((r / 0.2 - 1.0).abs() < 0.01, "τ {tau}: R {r}");
+            assert!((kb / 0.07 - 1.0).abs() < 0.01, "τ {tau}: K_b {kb}");
+            assert!((s.tau / tau - 1.0).abs() < 0.05, "τ {tau}: read {}", s.tau);
+            assert!(
+                s.interval.0 <= tau && tau <= s.interval.1,
+                "τ {tau} outside the interval {:?}",
+                s.interval
+            );
+        }
+    }
+
+    #[test]
+    fn the_winding_start_says_when_the_winding_is_beyond_the_profile() {
+        let h = 0.012;
+        // Far faster than a sample: the log cannot show the lag; the start is the slowest
+        // winding the log does not contradict, and says it is not identified.
+        let fast = winding_log(1e-6, h, 30.0);
+        let s = winding_start(std::slice::from_ref(&fast), &[], 0.0).expect("a start");
+        assert!(
+            !s.identified,
+            "a 1 µs winding called identified at τ {}",
+            s.tau
+        );
+        assert!(s.tau < h, "fast winding started at τ {}", s.tau);
+        assert!(
+            (s.x[0] / 0.2 - 1.0).abs() < 0.01,
+            "fast winding: R {}",
+            s.x[0]
+        );
+        // Far slower than the profile's grid: the least residual sits at its slow end.
+        let slow = winding_log(1e3 * h, h, 30.0);
+        let s = winding_start(std::slice::from_ref(&slow), &[], 0.0).expect("a start");
+        assert!(
+            s.at_slow_end,
+            "a winding of 1000 samples not flagged at τ {}",
+            s.tau
+        );
+    }
 }
