@@ -217,8 +217,7 @@ pub const RAMP_WINDOW_MAX: u16 = 3 * HOLD_PERIODS;
 pub const RAMP_PERIODS: u16 = 600;
 /// Longest run [periods]: the ramp's longest (for the largest back-EMF constant a run is
 /// started for) and then every hold (the first, which the ramp extends, among them).
-pub const RUN_PERIODS_MAX: u16 =
-    RAMP_PERIODS * RAMP_K_RATIO_MAX + HOLDS as u16 * HOLD_PERIODS;
+pub const RUN_PERIODS_MAX: u16 = RAMP_PERIODS * RAMP_K_RATIO_MAX + HOLDS as u16 * HOLD_PERIODS;
 /// Largest factor one step may grow the ramp's voltage (above the smallest drop) by. The
 /// step's bound through the winding's R scales what the samples missed by the target over
 /// the sampled current (module docs); the cap keeps a reading error of the current sense
@@ -1703,7 +1702,11 @@ mod tests {
         // (plus the noise) through twice R'_min: the smallest R' is now that.
         c.ramp_i = [1.0, 1.0, 1.0];
         c.ramp_learn(e + 2.0 * r_min * (1.0 + RAMP_SENSE_NOISE), 1.0, n);
-        assert!((c.ramp_r - 2.0 * r_min).abs() <= 1e-6 * r_min, "{}", c.ramp_r);
+        assert!(
+            (c.ramp_r - 2.0 * r_min).abs() <= 1e-6 * r_min,
+            "{}",
+            c.ramp_r
+        );
         // Behind a drop of up to 0.6 V the voltages below say nothing alone; against the
         // first sample of a quarter of the target, 1 A more for a step of 10·R'_min·(1 A
         // plus twice the noise) beyond the back-EMF shows ten times R'_min, taken up to the
@@ -1714,7 +1717,11 @@ mod tests {
         assert_eq!(c.ramp_r, r_min);
         assert_eq!(c.ramp_window_max(), 3.0 * f32::from(RAMP_WINDOW_MAX));
         c.ramp_i = [3.5, 3.5, 3.5];
-        c.ramp_learn(0.3 + e + 10.0 * r_min * (1.0 + 2.0 * RAMP_SENSE_NOISE), 3.5, n);
+        c.ramp_learn(
+            0.3 + e + 10.0 * r_min * (1.0 + 2.0 * RAMP_SENSE_NOISE),
+            3.5,
+            n,
+        );
         assert_eq!(c.ramp_r, c.ramp_r_cap);
         assert!((c.ramp_r_cap - 3.0 * r_min).abs() <= 1e-6 * r_min);
         assert_eq!(c.ramp_window_max(), f32::from(RAMP_WINDOW_MAX));
@@ -1724,7 +1731,11 @@ mod tests {
         c.ramp_i = [0.3, 0.3, 0.3];
         c.ramp_learn(0.3, 0.3, n);
         c.ramp_i = [1.3, 1.3, 1.3];
-        c.ramp_learn(0.3 + e + 10.0 * r_min * (1.0 + 2.0 * RAMP_SENSE_NOISE), 1.3, n);
+        c.ramp_learn(
+            0.3 + e + 10.0 * r_min * (1.0 + 2.0 * RAMP_SENSE_NOISE),
+            1.3,
+            n,
+        );
         assert_eq!(c.ramp_r, r_min);
         // The default blob never takes more than R'_min.
         let mut d = Commissioner::new(5.0, 9.0, 0.0, 0.2, K_EMF);
@@ -1743,7 +1754,11 @@ mod tests {
         let r_blob = 24.0f32 / 111.0;
         let i_lim = 9.0f32;
         let v_run = vd + i_lim * PATH_R_SHARE * r_blob;
-        for k in [0.2 / 11.0, 0.2 / 4.0, f32::from(RAMP_K_RATIO_MAX) * RAMP_K_EMF] {
+        for k in [
+            0.2 / 11.0,
+            0.2 / 4.0,
+            f32::from(RAMP_K_RATIO_MAX) * RAMP_K_EMF,
+        ] {
             for r in [0.01, 0.02, 0.05, f64::from(r_blob), 0.5] {
                 for lag in [0.0, 1.0, 5.0] {
                     for vd_ratio in [0.5, 1.0, 2.0] {
