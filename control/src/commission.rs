@@ -121,13 +121,15 @@
 //!   makes them longer. A window grows with `k_w/R'_s`, so with `R'_s = R'_min` a large
 //!   `k_w` would need windows past [`RAMP_WINDOW_MAX`] long before the target; instead
 //!   `R'_s` grows with what the samples show. Each sample that passes the rest test with its
-//!   window bounds the path's R from below, and the bound holds for every later voltage:
-//!   `R' ≥ (x − c_m − E_n)/j` from the sample alone, and, against the first such sample
-//!   of at least [`CURRENT_SHARE`] of the target `(x_f, i_f)` (the smaller of its two
-//!   readings), `R' ≥ (x − x_f − E_n)/(j − i_f + `[`RAMP_SENSE_NOISE`]`)`, whatever the drop
-//!   (the drop cancels, and a back-EMF at `x_f` only lowers `i_f`). That needs a winding
-//!   that conducts at `x_f`, so its current is linear in the voltage: a reading of ten
-//!   times the floor is not the sense's noise, where one just above the floor may be.
+//!   window and reads at least [`CURRENT_SHARE`] of the target (both readings; 2 A at a
+//!   9 A limit) bounds the path's R from below, and the bound holds for every later
+//!   voltage: `R' ≥ (x − c_m − E_n)/j` from the sample alone, and, against the first such
+//!   sample `(x_f, i_f)` (the smaller of its two readings),
+//!   `R' ≥ (x − x_f − E_n)/(j − i_f + `[`RAMP_SENSE_NOISE`]`)`, whatever the drop (the drop
+//!   cancels, and a back-EMF at `x_f` only lowers `i_f`). The second needs a winding that
+//!   conducts at `x_f`, so its current is linear in the voltage, and both need a sense
+//!   that works: a reading of a quarter of the target is neither the sense's noise nor a
+//!   dead sense's, where one just above the floor may be.
 //!   `R'_s` is the largest of these and `R'_min`, but at most `ρ·R'_min` with
 //!   `ρ = k_w/`[`RAMP_K_EMF`] (1 for the default blob, whose ramp this leaves as it was):
 //!   from there the ramp climbs as the default blob's does from `R'_min`, and a reading
@@ -568,8 +570,15 @@ impl Commissioner {
     /// ramp's voltage `x` above [`Self::ramp_base`] [V], up to `R'_min·ρ` (module docs):
     /// `R' ≥ (x − c_m − E_n)/j` from the sample alone, and
     /// `R' ≥ (x − x_f − E_n)/(j − i_f + `[`RAMP_SENSE_NOISE`]`)` against the first sample
-    /// of at least [`CURRENT_SHARE`] of the target `(x_f, i_f)`, whatever the drop.
+    /// `(x_f, i_f)`, whatever the drop. Only samples of at least [`CURRENT_SHARE`] of the
+    /// target count.
     fn ramp_learn(&mut self, x: f32, i_ss: f32, n: u16) {
+        let [_, i1, i2] = self.ramp_i;
+        let i = i1.min(i2);
+        if i < CURRENT_SHARE * RAMP_TARGET * self.i_limit {
+            // Maybe a dead sense's reading, which bounds nothing.
+            return;
+        }
         let j = Self::ramp_resting(i_ss);
         let e = self.ramp_emf / f32::from(n.max(1));
         let c = (RAMP_DROP_ERROR - 1.0 / RAMP_DROP_ERROR) * self.v_dead;
@@ -581,11 +590,7 @@ impl Commissioner {
                 r = r.max((x - x_f - e) / d);
             }
         } else {
-            let [_, i1, i2] = self.ramp_i;
-            let i = i1.min(i2);
-            if i >= CURRENT_SHARE * RAMP_TARGET * self.i_limit {
-                self.ramp_first = (x, i);
-            }
+            self.ramp_first = (x, i);
         }
         if r > self.ramp_r {
             self.ramp_r = r.min(self.ramp_r_cap);
@@ -1692,31 +1697,32 @@ mod tests {
         // 2.03 A).
         let r_min = PATH_R_SHARE * RAMP_R_MIN;
         let n = 40u16;
-        // No dead time to allow for. A current at the floor shows nothing beyond R'_min.
+        // No dead time to allow for. Readings at the floor, and below a quarter of the
+        // target (a dead sense's, maybe), show nothing, even at a voltage that would drive
+        // them through ten times R'_min.
         let mut c = Commissioner::new(5.0, 9.0, 0.0, 0.2, 3.0 * RAMP_K_EMF);
         let e = c.ramp_emf / f32::from(n);
-        c.ramp_i = [0.0, 0.0, 0.0];
-        c.ramp_learn(e + r_min * 0.1, 0.0, n);
-        assert_eq!(c.ramp_r, r_min);
-        // 1 A resting at a voltage that, less the back-EMF the window allows, drives it
+        for i in [0.0, 1.0] {
+            c.ramp_i = [i; 3];
+            c.ramp_learn(e + 10.0 * r_min * (i + RAMP_SENSE_NOISE), i, n);
+            assert_eq!(c.ramp_r, r_min, "{i} A");
+        }
+        // 2.5 A resting at a voltage that, less the back-EMF the window allows, drives it
         // (plus the noise) through twice R'_min: the smallest R' is now that.
-        c.ramp_i = [1.0, 1.0, 1.0];
-        c.ramp_learn(e + 2.0 * r_min * (1.0 + RAMP_SENSE_NOISE), 1.0, n);
-        assert!(
-            (c.ramp_r - 2.0 * r_min).abs() <= 1e-6 * r_min,
-            "{}",
-            c.ramp_r
-        );
-        // Behind a drop of up to 0.6 V the voltages below say nothing alone; against the
-        // first sample of a quarter of the target, 1 A more for a step of 10·R'_min·(1 A
-        // plus twice the noise) beyond the back-EMF shows ten times R'_min, taken up to the
-        // ratio. The longest window is then the stated one.
+        c.ramp_i = [2.5; 3];
+        c.ramp_learn(e + 2.0 * r_min * (2.5 + RAMP_SENSE_NOISE), 2.5, n);
+        let twice = 2.0 * r_min;
+        assert!((c.ramp_r - twice).abs() <= 1e-6 * r_min, "{}", c.ramp_r);
+        // Behind a drop of up to 0.6 V these voltages say nothing alone; against the first
+        // sample, 1 A more for a step of 10·R'_min·(1 A plus twice the noise) beyond the
+        // back-EMF shows ten times R'_min, taken up to the ratio. The longest window is
+        // then the stated one.
         let mut c = Commissioner::new(5.0, 9.0, 0.4, 0.2, 3.0 * RAMP_K_EMF);
-        c.ramp_i = [2.5, 2.5, 2.5];
+        c.ramp_i = [2.5; 3];
         c.ramp_learn(0.3, 2.5, n);
         assert_eq!(c.ramp_r, r_min);
         assert_eq!(c.ramp_window_max(), 3.0 * f32::from(RAMP_WINDOW_MAX));
-        c.ramp_i = [3.5, 3.5, 3.5];
+        c.ramp_i = [3.5; 3];
         c.ramp_learn(
             0.3 + e + 10.0 * r_min * (1.0 + 2.0 * RAMP_SENSE_NOISE),
             3.5,
@@ -1725,22 +1731,22 @@ mod tests {
         assert_eq!(c.ramp_r, c.ramp_r_cap);
         assert!((c.ramp_r_cap - 3.0 * r_min).abs() <= 1e-6 * r_min);
         assert_eq!(c.ramp_window_max(), f32::from(RAMP_WINDOW_MAX));
-        // A first sample below a quarter of the target (it may be the sense's noise) is not
-        // one: the same step from it shows nothing.
+        // A reading below a quarter of the target is no first sample: the same step from
+        // it shows nothing (the sample after it becomes the first).
         let mut c = Commissioner::new(5.0, 9.0, 0.4, 0.2, 3.0 * RAMP_K_EMF);
-        c.ramp_i = [0.3, 0.3, 0.3];
-        c.ramp_learn(0.3, 0.3, n);
-        c.ramp_i = [1.3, 1.3, 1.3];
+        c.ramp_i = [1.5; 3];
+        c.ramp_learn(0.3, 1.5, n);
+        c.ramp_i = [2.5; 3];
         c.ramp_learn(
             0.3 + e + 10.0 * r_min * (1.0 + 2.0 * RAMP_SENSE_NOISE),
-            1.3,
+            2.5,
             n,
         );
         assert_eq!(c.ramp_r, r_min);
         // The default blob never takes more than R'_min.
         let mut d = Commissioner::new(5.0, 9.0, 0.0, 0.2, K_EMF);
-        d.ramp_i = [2.0, 2.0, 2.0];
-        d.ramp_learn(1.0, 2.0, n);
+        d.ramp_i = [2.5; 3];
+        d.ramp_learn(1.0, 2.5, n);
         assert_eq!(d.ramp_r, r_min);
     }
 
