@@ -145,3 +145,26 @@ pub fn run(args: Args) -> Result<()> {
     }
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_host_waits_longer_than_the_longest_run() {
+        let longest =
+            f64::from(control::commission::RUN_PERIODS_MAX) * f64::from(control::CONTROL_PERIOD_S);
+        assert!(RESULT_TIMEOUT.as_secs_f64() > longest, "{longest} s");
+    }
+
+    #[test]
+    fn a_refused_back_emf_constant_names_the_ratio_and_the_units() {
+        let text = error_text(CommissionError::BackEmfTooLarge);
+        let ratio = control::commission::RAMP_K_RATIO_MAX.to_string();
+        assert!(text.contains(&format!("over {ratio} times")), "{text}");
+        assert!(
+            text.contains("V·s/rad") && text.contains("V/krpm"),
+            "{text}"
+        );
+    }
+}
