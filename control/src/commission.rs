@@ -88,23 +88,24 @@
 //!   From the samples, `i_s = i₂ + `[`RAMP_LAG_PERIODS`]`·max(i₂ − i₁, 0)` bounds the steady
 //!   current for L/R up to that many periods (the remaining rise of an exponential is
 //!   `Δ/(e^(T·R/L) − 1) ≤ Δ·L/(R·T)`), and `j = max(i_s, floor) + `[`RAMP_SENSE_NOISE`]
-//!   bounds what a sense off by up to that much reads for it. The resting current at `x`
-//!   is then at most `j + E_n/R'_min`, and the ramp steps to the larger of
-//!   - `x + R'_min·(i_t − j − E_n/R'_min)`: a step of `Δx` adds at most `Δx/R'_min` to a
+//!   bounds what a sense off by up to that much reads for it. With `R'_s` the smallest path
+//!   R the samples allow (below; `R'_min` until they show more), the resting current at
+//!   `x` is at most `j + E_n/R'_s`, and the ramp steps to the larger of
+//!   - `x + R'_s·(i_t − j − E_n/R'_s)`: a step of `Δx` adds at most `Δx/R'_s` to a
 //!     resting current whatever the drop;
 //!   - `c_m + i_t·(x − c_m − E_n)/j`, but at most [`RAMP_STEP_MAX`]`·x`: the samples bound
 //!     the path's R from below, `R' ≥ (x − c − E_n)/j`, so the resting current at `x'`,
 //!     `(x' − c)/R'`, stays below `i_t` for every drop in the range once
-//!     `x − c_m − E_n ≥ j·R'_min` (below that the first is the larger).
+//!     `x − c_m − E_n ≥ j·R'_s` (below that the first is the larger).
 //!
 //!   Either keeps the resting current at the new voltage at or below `i_t` for every R from
 //!   [`RAMP_R_MIN`], L/R up to [`RAMP_LAG_PERIODS`], drop in the range, back-EMF constant up
 //!   to `k_w` and a sense error up to [`RAMP_SENSE_NOISE`]; the rest of the target's margin
-//!   covers larger errors. The window is `n = 2·(π/3)·k_w/(T·R'_min·(i_t − j))`, which
+//!   covers larger errors. The window is `n = 2·(π/3)·k_w/(T·R'_s·(i_t − j))`, which
 //!   leaves half the room below the target to what a creep may hide and half to the step
-//!   (the fastest climb where the first step rules), at most [`RAMP_WINDOW_MAX`]. The ramp
+//!   (the fastest climb where the first step rules), at most `n_max` below. The ramp
 //!   ends once `i_s` reaches [`RAMP_END`] of the target, where the window would be longer
-//!   than [`RAMP_WINDOW_MAX`], at the run's voltage, or after [`RAMP_PERIODS`]; short of
+//!   than `n_max`, at the run's voltage, or after its budget of periods below; short of
 //!   [`CURRENT_SHARE`] of its target a failed run reports
 //!   [`CommissionError::RampStalled`]. A voltage past `c_m + E_n + ¾·R_blob·floor/`
 //!   [`CURRENT_SHARE`] drives more than the floor through any winding the run admits (up
@@ -114,7 +115,30 @@
 //!   resting rotor; the ramp bounds nothing else (a rotor swinging past a centre adds its
 //!   back-EMF for a moment). Below [`RAMP_R_MIN`], with a drop outside the range, a larger
 //!   back-EMF constant or a current sense off by more than the target's margin the ramp
-//!   may pass `i_limit`; the limit below then cuts the voltage at the next period;
+//!   may pass `i_limit`; the limit below then cuts the voltage at the next period.
+//!
+//!   The blob's `k` sizes nothing but the windows, through `E_n`: a `k` it overstates only
+//!   makes them longer. A window grows with `k_w/R'_s`, so with `R'_s = R'_min` a large
+//!   `k_w` would need windows past [`RAMP_WINDOW_MAX`] long before the target; instead
+//!   `R'_s` grows with what the samples show. Each sample that passes the rest test with its
+//!   window and reads at least [`CURRENT_SHARE`] of the target (both readings; 2 A at a
+//!   9 A limit) bounds the path's R from below, and the bound holds for every later
+//!   voltage: `R' ≥ (x − c_m − E_n)/j` from the sample alone, and, against the first such
+//!   sample `(x_f, i_f)` (the smaller of its two readings),
+//!   `R' ≥ (x − x_f − E_n)/(j − i_f + `[`RAMP_SENSE_NOISE`]`)`, whatever the drop (the drop
+//!   cancels, and a back-EMF at `x_f` only lowers `i_f`). The second needs a winding that
+//!   conducts at `x_f`, so its current is linear in the voltage, and both need a sense
+//!   that works: a reading of a quarter of the target is neither the sense's noise nor a
+//!   dead sense's, where one just above the floor may be.
+//!   `R'_s` is the largest of these and `R'_min`, but at most `ρ·R'_min` with
+//!   `ρ = k_w/`[`RAMP_K_EMF`] (1 for the default blob, whose ramp this leaves as it was):
+//!   from there the ramp climbs as the default blob's does from `R'_min`, and a reading
+//!   error beyond [`RAMP_SENSE_NOISE`] is not scaled further. The longest window is
+//!   `n_max = `[`RAMP_WINDOW_MAX`]`·ρ·R'_min/R'_s` and the budget [`RAMP_PERIODS`]`·ρ`
+//!   periods: while the samples show nothing beyond `R'_min` (the drop's error range, where
+//!   no current may flow) the climb is `ρ` times slower. A blob whose `ρ` is over
+//!   [`RAMP_K_RATIO_MAX`] is refused before anything is driven
+//!   ([`CommissionError::BackEmfTooLarge`]);
 //! - whenever `|I|` exceeds the run's current limit `i_limit`, `V_hi` falls to
 //!   `V_b + (V − V_b)·i_limit/|I|` for the voltage `V` that drove `I`, which drives at most
 //!   the limit through a resting winding for any drop from `V_b` up, and stays there for
@@ -173,19 +197,29 @@ pub const RAMP_END: f32 = 0.9;
 /// are sized for unless the blob gives a larger one: the default blob's motor, the paper's
 /// (`K_b` = 7.91/111 V·s/rad over 11 pole pairs). With [`RAMP_R_MIN`] it states the bound
 /// `k/R ≤ max(k_blob, RAMP_K_EMF)/R_min` the ramp keeps a creeping rotor within (module
-/// docs); a blob's small or wrong `k` does not shrink the window.
-pub const RAMP_K_EMF: f32 = 7.91 / 111.0 / 11.0;
+/// docs); a blob's small or wrong `k` does not shrink the window. Computed as the default
+/// blob's `kb/pole_pairs` is, so that the two are equal and the default blob's ramp is sized
+/// by ratio 1 exactly.
+pub const RAMP_K_EMF: f32 = (7.91f64 / 111.0) as f32 / 11.0;
+/// Largest ratio of the blob's back-EMF constant per pole pair to [`RAMP_K_EMF`] a run is
+/// started for (module docs): the ramp's windows, its longest window and its time grow in
+/// proportion until the samples show a winding R large enough, and a blob past it is
+/// refused before anything is driven ([`CommissionError::BackEmfTooLarge`]).
+pub const RAMP_K_RATIO_MAX: u16 = 8;
 /// Longest window without a Hall edge the ramp waits for before a step [periods] (three
 /// holds): near the target a creep may hide only a little, which takes a long window to
-/// rule out, and the ramp ends where the window it needs would be longer.
+/// rule out, and the ramp ends where the window it needs would be longer. For a larger
+/// back-EMF constant than [`RAMP_K_EMF`] it is longer until the samples show a winding R
+/// large enough (module docs).
 pub const RAMP_WINDOW_MAX: u16 = 3 * HOLD_PERIODS;
-/// Longest the ramp runs [periods] (7.2 s at 12 ms): it holds the first vector that long at
-/// most, and ends there; short of [`CURRENT_SHARE`] of its target, a run that then fails
-/// reports [`CommissionError::RampStalled`].
+/// Longest the ramp runs [periods] (7.2 s at 12 ms) for a back-EMF constant up to
+/// [`RAMP_K_EMF`], in proportion to a larger one (up to [`RAMP_K_RATIO_MAX`] times): it holds
+/// the first vector that long at most, and ends there; short of [`CURRENT_SHARE`] of its
+/// target, a run that then fails reports [`CommissionError::RampStalled`].
 pub const RAMP_PERIODS: u16 = 600;
-/// Longest run [periods]: the ramp's longest and then every hold (the first, which the ramp
-/// extends, among them).
-pub const RUN_PERIODS_MAX: u16 = RAMP_PERIODS + HOLDS as u16 * HOLD_PERIODS;
+/// Longest run [periods]: the ramp's longest (for the largest back-EMF constant a run is
+/// started for) and then every hold (the first, which the ramp extends, among them).
+pub const RUN_PERIODS_MAX: u16 = RAMP_PERIODS * RAMP_K_RATIO_MAX + HOLDS as u16 * HOLD_PERIODS;
 /// Largest factor one step may grow the ramp's voltage (above the smallest drop) by. The
 /// step's bound through the winding's R scales what the samples missed by the target over
 /// the sampled current (module docs); the cap keeps a reading error of the current sense
@@ -270,6 +304,11 @@ pub enum CommissionError {
     /// voltage led to. Also a dead current sense: no resting current above the floor at a
     /// voltage that drives more through any winding the run admits (the run ends there).
     RampStalled,
+    /// The blob's back-EMF constant per pole pair is over [`RAMP_K_RATIO_MAX`] times
+    /// [`RAMP_K_EMF`]: the first hold's ramp would have to wait too long between its steps
+    /// to keep a creeping rotor of that constant within the limit (module docs). Refused
+    /// before anything is driven: a `kb` in other units than V·s/rad, or too few pole pairs.
+    BackEmfTooLarge,
 }
 
 /// How the last commissioning run ended.
@@ -390,6 +429,20 @@ pub struct Commissioner {
     /// The back-EMF [V] a rotor may have and still cross no Hall edge in a window of `n`
     /// periods at one voltage is at most this over `n` ([V·periods], module docs).
     ramp_emf: f32,
+    /// The smallest path resistance `R'` [Ω] the samples so far allow (`R'_min` before they
+    /// show more, module docs): the ramp's steps and windows are sized for it.
+    ramp_r: f32,
+    /// The largest `R'` [Ω] the ramp sizes itself for: `R'_min` times the ratio `ρ` of the
+    /// windows' back-EMF constant to [`RAMP_K_EMF`].
+    ramp_r_cap: f32,
+    /// The first sample of at least [`CURRENT_SHARE`] of the target that passed the rest test
+    /// with its window: (voltage above [`Self::ramp_base`] [V], current [A]) ((0, 0): none
+    /// yet).
+    ramp_first: (f32, f32),
+    /// Longest the ramp runs [periods]: [`RAMP_PERIODS`] times `ρ`.
+    ramp_budget: u16,
+    /// The blob's back-EMF constant is over [`RAMP_K_RATIO_MAX`] times [`RAMP_K_EMF`].
+    refused: bool,
     /// Periods the ramp has run.
     ramp_periods: u16,
     /// The ramp ended short of [`CURRENT_SHARE`] of its target.
@@ -454,6 +507,11 @@ impl Commissioner {
             ramp_run: 0,
             ramp_still: 0,
             ramp_emf: 0.0,
+            ramp_r: PATH_R_SHARE * RAMP_R_MIN,
+            ramp_r_cap: PATH_R_SHARE * RAMP_R_MIN,
+            ramp_first: (0.0, 0.0),
+            ramp_budget: RAMP_PERIODS,
+            refused: false,
             ramp_periods: 0,
             ramp_stalled: false,
             ramped: false,
@@ -471,21 +529,72 @@ impl Commissioner {
 
     /// Starts the ramp at the voltage that drives [`RAMP_TARGET`] of the limit through
     /// [`RAMP_R_MIN`] when the true drop is the smallest, and bounds the back-EMF of a rotor
-    /// that crosses no Hall edge, for a back-EMF constant of `k_emf` [V·s/rad electrical]
-    /// or [`RAMP_K_EMF`], the larger (module docs): a rotor with back-EMF `e ≤ k·ω` turns at
-    /// `ω ≥ e/k` and so crosses 60° electrical within `(π/3)·k/e`.
+    /// that crosses no Hall edge, for a back-EMF constant `k_w` of `k_emf` [V·s/rad
+    /// electrical] or [`RAMP_K_EMF`], the larger (module docs): a rotor with back-EMF
+    /// `e ≤ k·ω` turns at `ω ≥ e/k` and so crosses 60° electrical within `(π/3)·k/e`. The
+    /// ratio `ρ = k_w/`[`RAMP_K_EMF`] sets the largest R the steps and windows are sized for
+    /// once the samples show it and the ramp's time; over [`RAMP_K_RATIO_MAX`] the run is
+    /// refused.
     fn with_ramp(mut self, k_emf: f32) -> Self {
-        let room = self.volts - self.ramp_base();
-        let target = RAMP_TARGET * self.i_limit;
-        let start = PATH_R_SHARE * RAMP_R_MIN * target;
-        self.ramp = (room > 0.0 && start < room).then_some(start);
         let k = if k_emf > RAMP_K_EMF {
             k_emf
         } else {
             RAMP_K_EMF
         };
+        let ratio = k / RAMP_K_EMF;
+        if ratio > f32::from(RAMP_K_RATIO_MAX) {
+            self.refused = true;
+            self.hold = HOLDS;
+            return self;
+        }
+        let room = self.volts - self.ramp_base();
+        let target = RAMP_TARGET * self.i_limit;
+        let start = PATH_R_SHARE * RAMP_R_MIN * target;
+        self.ramp = (room > 0.0 && start < room).then_some(start);
         self.ramp_emf = core::f32::consts::FRAC_PI_3 * k / crate::CONTROL_PERIOD_S;
+        self.ramp_r_cap = PATH_R_SHARE * RAMP_R_MIN * ratio;
+        // At most RAMP_K_RATIO_MAX·RAMP_PERIODS, within u16.
+        self.ramp_budget = (f32::from(RAMP_PERIODS) * ratio) as u16;
         self
+    }
+
+    /// The longest window [periods] the ramp waits for: [`RAMP_WINDOW_MAX`] times the ratio
+    /// of the largest `R'` it sizes itself for to the smallest the samples allow, so that
+    /// it is [`RAMP_WINDOW_MAX`] once they show the largest (module docs).
+    fn ramp_window_max(&self) -> f32 {
+        libm::ceilf(f32::from(RAMP_WINDOW_MAX) * (self.ramp_r_cap / self.ramp_r))
+    }
+
+    /// Raises the smallest path R the ramp is sized for to what a sample passing the rest
+    /// test with its window of `n` periods allows, `i_ss` [A] its steady bound, at the
+    /// ramp's voltage `x` above [`Self::ramp_base`] [V], up to `R'_min·ρ` (module docs):
+    /// `R' ≥ (x − c_m − E_n)/j` from the sample alone, and
+    /// `R' ≥ (x − x_f − E_n)/(j − i_f + `[`RAMP_SENSE_NOISE`]`)` against the first sample
+    /// `(x_f, i_f)`, whatever the drop. Only samples of at least [`CURRENT_SHARE`] of the
+    /// target count.
+    fn ramp_learn(&mut self, x: f32, i_ss: f32, n: u16) {
+        let [_, i1, i2] = self.ramp_i;
+        let i = i1.min(i2);
+        if i < CURRENT_SHARE * RAMP_TARGET * self.i_limit {
+            // Maybe a dead sense's reading, which bounds nothing.
+            return;
+        }
+        let j = Self::ramp_resting(i_ss);
+        let e = self.ramp_emf / f32::from(n.max(1));
+        let c = (RAMP_DROP_ERROR - 1.0 / RAMP_DROP_ERROR) * self.v_dead;
+        let mut r = (x - c - e) / j;
+        let (x_f, i_f) = self.ramp_first;
+        if i_f > 0.0 {
+            let d = j - i_f + RAMP_SENSE_NOISE;
+            if d > 0.0 {
+                r = r.max((x - x_f - e) / d);
+            }
+        } else {
+            self.ramp_first = (x, i);
+        }
+        if r > self.ramp_r {
+            self.ramp_r = r.min(self.ramp_r_cap);
+        }
     }
 
     /// Ends the ramp at the voltage it holds, and notes whether it ended short of
@@ -507,15 +616,17 @@ impl Commissioner {
 
     /// The window without a Hall edge [periods] a step from the steady current bound `i_ss`
     /// [A] waits for: the one that leaves half the room below the target to what a creep
-    /// may hide at [`RAMP_R_MIN`] and half to the step (the fastest climb), at most
-    /// [`RAMP_WINDOW_MAX`].
+    /// may hide through the smallest path R the samples allow and half to the step (the
+    /// fastest climb), at most [`Self::ramp_window_max`].
     fn ramp_window(&self, i_ss: f32) -> u16 {
         let half = 0.5 * (RAMP_TARGET * self.i_limit - Self::ramp_resting(i_ss));
-        let periods = self.ramp_emf / (PATH_R_SHARE * RAMP_R_MIN * half);
-        if half > 0.0 && periods < f32::from(RAMP_WINDOW_MAX) {
+        let periods = self.ramp_emf / (self.ramp_r * half);
+        let max = self.ramp_window_max();
+        // `max` is at most RAMP_K_RATIO_MAX·RAMP_WINDOW_MAX, within u16.
+        if half > 0.0 && periods < max {
             (libm::ceilf(periods) as u16).max(2)
         } else {
-            RAMP_WINDOW_MAX
+            max as u16
         }
     }
 
@@ -563,9 +674,9 @@ impl Commissioner {
     fn ramp_next(&self, x: f32, i_ss: f32, n: u16) -> Option<f32> {
         let target = RAMP_TARGET * self.i_limit;
         let j = Self::ramp_resting(i_ss);
-        let r_min = PATH_R_SHARE * RAMP_R_MIN;
+        let r_min = self.ramp_r;
         if i_ss >= RAMP_END * target
-            || 0.5 * (target - j) * r_min * f32::from(RAMP_WINDOW_MAX) <= self.ramp_emf
+            || 0.5 * (target - j) * r_min * self.ramp_window_max() <= self.ramp_emf
         {
             return None;
         }
@@ -696,7 +807,7 @@ impl Commissioner {
         self.period = self.period.wrapping_add(1);
         if self.ramp.is_some() {
             self.ramp_periods = self.ramp_periods.saturating_add(1);
-            if self.ramp_periods >= RAMP_PERIODS {
+            if self.ramp_periods >= self.ramp_budget {
                 self.ramp_end();
             }
         }
@@ -748,6 +859,9 @@ impl Commissioner {
                 let (v_a, i_a) = self.ramp_anchor;
                 if rest && i2 >= RAMP_CURRENT_FLOOR && i2 * v_a >= i_a * v {
                     self.ramp_anchor = (v, i2);
+                }
+                if rest {
+                    self.ramp_learn(x, i_ss, self.ramp_still);
                 }
                 if rest && self.ramp_anchor.0 <= 0.0 && self.ramp_past_floor(x, self.ramp_still) {
                     // No resting sample above the floor where any working sense has one.
@@ -899,6 +1013,9 @@ impl Commissioner {
     /// [`CommissionError::RampStalled`] (the voltage it held may be what failed), but for
     /// a Hall state 000 or 111, which no voltage explains.
     fn result(&self) -> Result<Commissioning, CommissionError> {
+        if self.refused {
+            return Err(CommissionError::BackEmfTooLarge);
+        }
         if self.sense_dead {
             return Err(CommissionError::RampStalled);
         }
@@ -948,8 +1065,9 @@ mod tests {
     use crate::board::centre_sector;
     use std::vec::Vec;
 
-    /// Back-EMF per electrical radian and second of the default blob's motor [V·s/rad].
-    const K_EMF: f32 = 7.91 / 111.0 / 11.0;
+    /// Back-EMF per electrical radian and second of the default blob's motor [V·s/rad], as
+    /// the board computes it from the blob (`kb` in f32 over the pole pairs).
+    const K_EMF: f32 = (7.91f64 / 111.0) as f32 / 11.0;
 
     /// An ideal rotor in one of six Hall sectors of a given state sequence.
     struct Rotor {
@@ -1540,12 +1658,130 @@ mod tests {
 
     #[test]
     fn the_stated_back_emf_constant_is_the_default_blobs() {
+        // Equal, not close: the default blob's ramp is then sized by a ratio of exactly 1.
         let co = crate::blob::Coefficients::default();
         let k = co.motor.kb / f32::from(co.pole_pairs);
-        assert!(
-            (k - RAMP_K_EMF).abs() <= 1e-6 * RAMP_K_EMF,
-            "{k} vs {RAMP_K_EMF}"
+        assert_eq!(k.to_bits(), RAMP_K_EMF.to_bits(), "{k} vs {RAMP_K_EMF}");
+        let c = Commissioner::new(2.0, 9.0, 0.2, 0.2, k);
+        assert_eq!(c.ramp_r_cap.to_bits(), c.ramp_r.to_bits());
+        assert_eq!(c.ramp_budget, RAMP_PERIODS);
+        assert_eq!(c.ramp_window_max(), f32::from(RAMP_WINDOW_MAX));
+    }
+
+    #[test]
+    fn a_back_emf_constant_past_the_largest_ratio_is_refused_before_anything_is_driven() {
+        let run = |ratio: f32| {
+            let mut c = Commissioner::new(2.0, 9.0, 0.2, 0.2, ratio * RAMP_K_EMF);
+            c.tick(1, [], false, 0.0)
+        };
+        let max = f32::from(RAMP_K_RATIO_MAX);
+        // A kb in V/krpm (104.7 times), or a tenth over the largest ratio.
+        for ratio in [1.1 * max, 7.91 / 111.0 * 1000.0 / 9.549_297 / RAMP_K_EMF] {
+            assert_eq!(
+                run(ratio),
+                CommissionStep::Done(Err(CommissionError::BackEmfTooLarge)),
+                "ratio {ratio}"
+            );
+        }
+        for ratio in [0.0, 1.0, 0.99 * max] {
+            assert!(
+                matches!(run(ratio), CommissionStep::Hold { .. }),
+                "ratio {ratio}"
+            );
+        }
+    }
+
+    #[test]
+    fn the_ramp_takes_a_larger_smallest_r_only_from_what_the_samples_bound() {
+        // Blobs of three times the stated back-EMF constant (9 A, a quarter of the target
+        // 2.03 A).
+        let r_min = PATH_R_SHARE * RAMP_R_MIN;
+        let n = 40u16;
+        // No dead time to allow for. Readings at the floor, and below a quarter of the
+        // target (a dead sense's, maybe), show nothing, even at a voltage that would drive
+        // them through ten times R'_min.
+        let mut c = Commissioner::new(5.0, 9.0, 0.0, 0.2, 3.0 * RAMP_K_EMF);
+        let e = c.ramp_emf / f32::from(n);
+        for i in [0.0, 1.0] {
+            c.ramp_i = [i; 3];
+            c.ramp_learn(e + 10.0 * r_min * (i + RAMP_SENSE_NOISE), i, n);
+            assert_eq!(c.ramp_r, r_min, "{i} A");
+        }
+        // 2.5 A resting at a voltage that, less the back-EMF the window allows, drives it
+        // (plus the noise) through twice R'_min: the smallest R' is now that.
+        c.ramp_i = [2.5; 3];
+        c.ramp_learn(e + 2.0 * r_min * (2.5 + RAMP_SENSE_NOISE), 2.5, n);
+        let twice = 2.0 * r_min;
+        assert!((c.ramp_r - twice).abs() <= 1e-6 * r_min, "{}", c.ramp_r);
+        // Behind a drop of up to 0.6 V these voltages say nothing alone; against the first
+        // sample, 1 A more for a step of 10·R'_min·(1 A plus twice the noise) beyond the
+        // back-EMF shows ten times R'_min, taken up to the ratio. The longest window is
+        // then the stated one.
+        let mut c = Commissioner::new(5.0, 9.0, 0.4, 0.2, 3.0 * RAMP_K_EMF);
+        c.ramp_i = [2.5; 3];
+        c.ramp_learn(0.3, 2.5, n);
+        assert_eq!(c.ramp_r, r_min);
+        assert_eq!(c.ramp_window_max(), 3.0 * f32::from(RAMP_WINDOW_MAX));
+        c.ramp_i = [3.5; 3];
+        c.ramp_learn(
+            0.3 + e + 10.0 * r_min * (1.0 + 2.0 * RAMP_SENSE_NOISE),
+            3.5,
+            n,
         );
+        assert_eq!(c.ramp_r, c.ramp_r_cap);
+        assert!((c.ramp_r_cap - 3.0 * r_min).abs() <= 1e-6 * r_min);
+        assert_eq!(c.ramp_window_max(), f32::from(RAMP_WINDOW_MAX));
+        // A reading below a quarter of the target is no first sample: the same step from
+        // it shows nothing (the sample after it becomes the first).
+        let mut c = Commissioner::new(5.0, 9.0, 0.4, 0.2, 3.0 * RAMP_K_EMF);
+        c.ramp_i = [1.5; 3];
+        c.ramp_learn(0.3, 1.5, n);
+        c.ramp_i = [2.5; 3];
+        c.ramp_learn(
+            0.3 + e + 10.0 * r_min * (1.0 + 2.0 * RAMP_SENSE_NOISE),
+            2.5,
+            n,
+        );
+        assert_eq!(c.ramp_r, r_min);
+        // The default blob never takes more than R'_min.
+        let mut d = Commissioner::new(5.0, 9.0, 0.0, 0.2, K_EMF);
+        d.ramp_i = [2.5; 3];
+        d.ramp_learn(1.0, 2.5, n);
+        assert_eq!(d.ramp_r, r_min);
+    }
+
+    #[test]
+    fn a_large_back_emf_constant_keeps_a_resting_winding_below_the_limit_from_r_min() {
+        // Blobs stating 2.8, 7.7 and 8 times the stated constant (K_b 0.2 V·s/rad over 11
+        // and 4 pole pairs, the largest ratio), with the default R, on windings from the
+        // smallest designed R: whatever the blob states, the ramp keeps a resting winding
+        // within the limit, and on the blob's own R it reaches its current.
+        let vd = crate::board::dead_time_drop(22.2);
+        let r_blob = 24.0f32 / 111.0;
+        let i_lim = 9.0f32;
+        let v_run = vd + i_lim * PATH_R_SHARE * r_blob;
+        for k in [
+            0.2 / 11.0,
+            0.2 / 4.0,
+            f32::from(RAMP_K_RATIO_MAX) * RAMP_K_EMF,
+        ] {
+            for r in [0.01, 0.02, 0.05, f64::from(r_blob), 0.5] {
+                for lag in [0.0, 1.0, 5.0] {
+                    for vd_ratio in [0.5, 1.0, 2.0] {
+                        let mut c = Commissioner::new(v_run, i_lim, vd, r_blob, k);
+                        let peak = resting_rl(&mut c, r, lag, vd_ratio * f64::from(vd));
+                        let case = std::format!("k {k}, {r} Ω, L/R {lag}, drop {vd_ratio}×");
+                        assert!(peak <= f64::from(i_lim), "{peak} A > {i_lim} A: {case}");
+                        if r == f64::from(r_blob) {
+                            // The samples showed the largest R the ramp sizes itself for.
+                            assert_eq!(c.ramp_r, c.ramp_r_cap, "{case}");
+                            assert!(!c.ramp_stalled, "stalled at {peak} A: {case}");
+                            assert!(peak >= 0.5 * f64::from(i_lim), "{peak} A: {case}");
+                        }
+                    }
+                }
+            }
+        }
     }
 
     #[test]

@@ -1211,3 +1211,152 @@ fn commissioning_sweep_over_r_lag_drop_friction_and_start() {
          {stalled} RampStalled, {learned} learned"
     );
 }
+
+/// Runs commissioning on the emulated `plant` (its winding R and the dead-time drop `drop`
+/// times the board's estimate taken from it, Coulomb friction `friction` [N·m] alone, the
+/// rotor placed `start` sectors on) with `co` in flash. Returns the largest current [A] a
+/// resting rotor would draw at the voltages held, the largest true current [A], the
+/// outcome, the periods the run took and whether the flash was written.
+fn commission_blob(
+    mut plant: EmulatorConfig,
+    co: &Coefficients,
+    (drop, friction, start): (f64, f64, f64),
+) -> (f64, f64, CommissionOutcome, usize, bool) {
+    let r = plant.motor.r;
+    plant.lugre.alpha0 = friction;
+    plant.lugre.alpha1 = 0.0;
+    plant.lugre.alpha2 = 0.0;
+    let vd = drop * dead_time_drop();
+    plant.effects.push(Effect::Deadtime { vd });
+    let sector = std::f64::consts::TAU / (6.0 * f64::from(plant.pole_pairs));
+    let mut slots = RamFlash::new(None).into_slots().unwrap();
+    slots
+        .store(&motorid::board::coeffs::encode(co).unwrap())
+        .unwrap();
+    let mut emu = EmulatedBoard::new(plant, Wiring::default(), slots.into_inner()).unwrap();
+    emu.hardware_mut().place_rotor(start * sector);
+    let seq = emu.coeff_seq();
+    replies(&mut emu);
+    emu.handle(&HostMsg::Commission);
+    let (mut at_rest, mut peak, mut periods) = (0.0f64, 0.0f64, 0usize);
+    let n = usize::from(control::commission::RUN_PERIODS_MAX)
+        + usize::from(control::commission::HOLD_PERIODS);
+    for k in 0..n {
+        emu.tick();
+        peak = peak.max(emu.hardware().peak_current());
+        let v = emu.hardware().last_volts();
+        at_rest = at_rest.max((v - vd).max(0.0) / (0.75 * r));
+        periods = k + 1;
+        if emu.board().mode() == Mode::Idle {
+            break;
+        }
+    }
+    emu.handle(&HostMsg::ReadCommission);
+    let outcome = replies(&mut emu)
+        .into_iter()
+        .find_map(|m| match m {
+            BoardMsg::Commission { outcome, .. } => Some(outcome),
+            _ => None,
+        })
+        .unwrap();
+    (at_rest, peak, outcome, periods, emu.coeff_seq() != seq)
+}
+
+/// The paper's coefficients (30 A, so a 9 A commissioning current) stating the back-EMF
+/// and torque constant `kb` [V·s/rad] over `pole_pairs`.
+fn coefficients_with_kb(kb: f32, pole_pairs: u8) -> Coefficients {
+    let mut co = paper_coefficients(24.0, 30.0);
+    co.motor.kb = kb;
+    co.motor.kt = kb;
+    co.pole_pairs = pole_pairs;
+    co
+}
+
+#[test]
+fn a_blob_with_a_large_back_emf_constant_commissions_its_own_motor() {
+    // A motor with K_b 0.2 V·s/rad (2.8 and 7.7 times the stated constant per pole pair at
+    // 11 and 4 pole pairs) on the blob's own R, 0.22 Ω, and its correct blob: the ramp
+    // reaches its current and the run learns the table, within the limit at rest, from two
+    // starts behind the ends of the drop's range.
+    let i_comm = commission_limit();
+    for pole_pairs in [11u8, 4] {
+        let co = coefficients_with_kb(0.2, pole_pairs);
+        let mut plant = EmulatorConfig::paper();
+        plant.motor.kb = 0.2;
+        plant.motor.kt = 0.2;
+        plant.pole_pairs = u16::from(pole_pairs);
+        for drop in [0.5, 2.0] {
+            for start in [0.0, 2.9] {
+                let (at_rest, peak, out, periods, stored) =
+                    commission_blob(plant.clone(), &co, (drop, 0.03, start));
+                let case = format!("{pole_pairs} pole pairs, drop {drop}x, start {start}");
+                eprintln!(
+                    "{case}: {at_rest:.2} A at rest, true peak {peak:.2} A, {periods} periods, \
+                     {out:?}"
+                );
+                assert!(
+                    matches!(out, CommissionOutcome::Done(_)) && stored,
+                    "{case}: {out:?}"
+                );
+                // 1e-3: the f32 voltages' rounding.
+                assert!(
+                    at_rest <= i_comm * (1.0 + 1e-3),
+                    "{case}: {at_rest} A at rest > {i_comm} A"
+                );
+                assert!(peak <= PEAK_SHARE * i_comm, "{case}: true peak {peak} A");
+            }
+        }
+    }
+}
+
+#[test]
+fn a_blob_overstating_the_back_emf_constant_keeps_the_commissioning_current_at_rest() {
+    // The paper's motor (K_b 0.071 V·s/rad) at 10 and 20 mΩ behind blobs stating K_b 0.2
+    // V·s/rad over 11 pole pairs, and the largest ratio the board starts a run for, with
+    // the blob's default R (0.22 Ω): the ramp takes a larger R only from what its samples
+    // show, and a resting rotor stays within the limit.
+    let i_comm = commission_limit();
+    let k_max = f32::from(control::commission::RAMP_K_RATIO_MAX) * control::commission::RAMP_K_EMF;
+    let mut top = 0.0f64;
+    for kb in [0.2, 11.0 * k_max] {
+        let co = coefficients_with_kb(kb, 11);
+        for r in [0.01, 0.02] {
+            let mut plant = EmulatorConfig::paper();
+            plant.motor.r = r;
+            plant.motor.l = 0.42 * r * f64::from(control::CONTROL_PERIOD_S);
+            for (drop, friction, start) in [(0.5, 0.005, 0.0), (1.0, 0.03, 2.9), (2.0, 0.005, 2.9)]
+            {
+                let (at_rest, peak, out, periods, _) =
+                    commission_blob(plant.clone(), &co, (drop, friction, start));
+                let case =
+                    format!("blob K_b {kb}, {r} Ω, drop {drop}x, {friction} N·m, start {start}");
+                eprintln!(
+                    "{case}: {at_rest:.2} A at rest, true peak {peak:.2} A, {periods} periods, \
+                     {out:?}"
+                );
+                // 1e-3: the f32 voltages' rounding.
+                assert!(
+                    at_rest <= i_comm * (1.0 + 1e-3),
+                    "{case}: {at_rest} A at rest > {i_comm} A"
+                );
+                assert!(peak <= PEAK_SHARE * i_comm, "{case}: true peak {peak} A");
+                top = top.max(at_rest);
+            }
+        }
+    }
+    assert!(top > 0.5 * i_comm, "largest current at rest {top} A");
+}
+
+#[test]
+fn a_blob_with_kb_in_other_units_is_refused_before_anything_is_driven() {
+    // 7.91 for 7.91/111 V·s/rad: 111 times the constant, past the largest ratio.
+    let co = coefficients_with_kb(7.91, 11);
+    let (at_rest, peak, out, periods, stored) =
+        commission_blob(EmulatorConfig::paper(), &co, (1.0, 0.03, 2.0));
+    assert_eq!(
+        out,
+        CommissionOutcome::Failed(CommissionError::BackEmfTooLarge)
+    );
+    assert!(!stored);
+    assert_eq!((at_rest, peak), (0.0, 0.0), "after {periods} periods");
+}

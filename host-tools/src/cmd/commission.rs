@@ -28,12 +28,13 @@ pub struct Args {
 }
 
 /// Longest wait for the result after the start: the run itself is 9 holds of 0.3 s, the
-/// first extended by up to 7.2 s while its current ramp runs
-/// ([`control::commission::RUN_PERIODS_MAX`]: 9.9 s in all).
-const RESULT_TIMEOUT: Duration = Duration::from_secs(60);
+/// first extended while its current ramp runs, by up to 7.2 s, and up to eight times that
+/// for coefficients with a large back-EMF constant
+/// ([`control::commission::RUN_PERIODS_MAX`]: 60.3 s in all).
+const RESULT_TIMEOUT: Duration = Duration::from_secs(75);
 
-fn error_text(e: CommissionError) -> &'static str {
-    match e {
+fn error_text(e: CommissionError) -> String {
+    let text = match e {
         CommissionError::NoMotion => {
             "the Hall state did not change (rotor blocked, voltage too low, or Hall sensors not connected)"
         }
@@ -49,9 +50,17 @@ fn error_text(e: CommissionError) -> &'static str {
             "the board measured little or no current while it held the voltage (current sense not working, motor phases not connected, or a winding resistance over four times the coefficients' R); nothing was stored"
         }
         CommissionError::RampStalled => {
-            "the board raises the voltage slowly at the start until it measures a current, and it never measured enough (a quarter of the commissioning current) with the rotor at rest, so the voltage stayed low and the run failed; check that the current sense works and the motor's three phases are connected, that the rotor turns freely and is not held or driven, that the coefficients' dead time suits the bridge (a drop over twice the expected one needs a higher voltage), and that the commissioning current is not too low (below about 6.5 A, an i_max below about 22 A, the ramp runs out of time; so it does for a motor whose back-EMF constant per pole pair is several times 0.0065 V·s/rad): raise i_max within the motor's rating for the run; nothing was stored"
+            "the board raises the voltage slowly at the start until it measures a current, and it never measured enough (a quarter of the commissioning current) with the rotor at rest, so the voltage stayed low and the run failed; check that the current sense works and the motor's three phases are connected, that the rotor turns freely and is not held or driven, that the coefficients' dead time suits the bridge (a drop over twice the expected one needs a higher voltage), and that the commissioning current is not too low (below about 6.5 A, an i_max below about 22 A, the ramp runs out of time): raise i_max within the motor's rating for the run; nothing was stored"
         }
-    }
+        CommissionError::BackEmfTooLarge => {
+            return format!(
+                "the coefficients' back-EMF constant per pole pair (motor.kb over pole_pairs) is over {} times the {:.4} V·s/rad the board's current ramp at the start is sized for, so the board refused the run before driving anything; check that motor.kb is in V·s/rad (not V/krpm) and pole_pairs is the motor's; nothing was stored",
+                control::commission::RAMP_K_RATIO_MAX,
+                control::commission::RAMP_K_EMF
+            )
+        }
+    };
+    text.to_string()
 }
 
 /// The result as JSON.
@@ -135,4 +144,27 @@ pub fn run(args: Args) -> Result<()> {
         println!("stored with the coefficients as flash slot sequence {seq}");
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_host_waits_longer_than_the_longest_run() {
+        let longest =
+            f64::from(control::commission::RUN_PERIODS_MAX) * f64::from(control::CONTROL_PERIOD_S);
+        assert!(RESULT_TIMEOUT.as_secs_f64() > longest, "{longest} s");
+    }
+
+    #[test]
+    fn a_refused_back_emf_constant_names_the_ratio_and_the_units() {
+        let text = error_text(CommissionError::BackEmfTooLarge);
+        let ratio = control::commission::RAMP_K_RATIO_MAX.to_string();
+        assert!(text.contains(&format!("over {ratio} times")), "{text}");
+        assert!(
+            text.contains("V·s/rad") && text.contains("V/krpm"),
+            "{text}"
+        );
+    }
 }
