@@ -54,7 +54,7 @@ fn error_text(e: CommissionError) -> String {
         }
         CommissionError::BackEmfTooLarge => {
             return format!(
-                "the coefficients' back-EMF constant per pole pair (motor.kb over pole_pairs) is over {} times the {:.4} V·s/rad the board's current ramp at the start is sized for, so the board refused the run before driving anything; check that motor.kb is in V·s/rad (not V/krpm) and pole_pairs is the motor's; nothing was stored",
+                "the coefficients' back-EMF constant per pole pair (motor.kb over pole_pairs) is over {} times the {:.4} V·s/rad the board's current ramp at the start is sized for, so the board refused the run before driving anything; check that motor.kb is in V·s/rad (not V/krpm) and pole_pairs is the motor's; a motor whose constant really is that large (a gimbal or hub motor) cannot be commissioned by the board yet; nothing was stored",
                 control::commission::RAMP_K_RATIO_MAX,
                 control::commission::RAMP_K_EMF
             )
