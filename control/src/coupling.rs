@@ -24,7 +24,10 @@
 //! the root is ω2 (the load coasts). Otherwise it lies where the torque has the sign it has
 //! there, on the linear law of the face that pushes (or the spring's), whose root is
 //! `(j2·ω2/h + k·(θ1' − θ2 − e) + c·ω1') / (j2/h + k·h + c)` with `e` the face's offset
-//! (`±g/2`; 0 for the spring). The step is stable for any stiffness and never adds energy.
+//! (`±g/2`; 0 for the spring), as long as that speed leaves the load beyond the face. The
+//! damper's torque drops to zero as the load crosses the face, so the difference may jump
+//! over zero there instead: then the step ends with the load at the face,
+//! `ω2' = (θ1' − θ2 − e)/h`. The step is stable for any stiffness and never adds energy.
 use num_traits::Float;
 
 /// Frequency of a gap's contact times the step: the critically damped contact rings at
@@ -97,8 +100,14 @@ impl<F: Float> Coupling<F> {
                 (kc, cc, if at_rest > F::zero() { half } else { -half })
             }
         };
-        let omega = (j2 * s.omega / h + k * (theta1 - s.theta - offset) + c * omega1)
+        let mut omega = (j2 * s.omega / h + k * (theta1 - s.theta - offset) + c * omega1)
             / (j2 / h + k * h + c);
+        // The face's law reaches inside the gap, where no torque acts: a root there is none,
+        // and the residual changes sign where the load reaches the face.
+        let x = theta1 - s.theta - h * omega;
+        if (offset > F::zero() && x < offset) || (offset < F::zero() && x > offset) {
+            omega = (theta1 - s.theta - offset) / h;
+        }
         LoadState {
             theta: s.theta + h * omega,
             omega,
@@ -110,8 +119,8 @@ impl<F: Float> Coupling<F> {
 mod tests {
     use super::*;
 
-    /// The step's speed solves the backward Euler equation to rounding, on the spring and on
-    /// both faces and inside the gap.
+    /// The step's speed is where the backward Euler equation's residual changes sign, on the
+    /// spring, on both faces and inside the gap.
     #[test]
     fn the_step_solves_the_implicit_equation() {
         let h = 2e-4;
@@ -133,19 +142,20 @@ mod tests {
                 };
                 let (t1, w1) = (s.theta + 0.4 * draw(), 20.0 * draw());
                 let n = cpl.step(j2, s, t1, w1, h);
-                let lhs = j2 * (n.omega - s.omega) / h;
-                let rhs = cpl.torque(t1 - n.theta, w1 - n.omega);
-                let scale = 1.0 + lhs.abs() + rhs.abs();
-                assert!((lhs - rhs).abs() < 1e-9 * scale, "{cpl:?} {s:?} {lhs} {rhs}");
+                // The residual of the implicit equation changes sign at the step's speed.
+                let r = |w: f64| j2 * (w - s.omega) / h - cpl.torque(t1 - s.theta - h * w, w1 - w);
+                let eps = 1e-9 * (1.0 + n.omega.abs());
+                assert!(r(n.omega - eps) <= 0.0 && r(n.omega + eps) >= 0.0, "{cpl:?} {s:?} {t1} {w1} {n:?}");
                 assert_eq!(n.theta, s.theta + h * n.omega);
             }
         }
     }
 
-    /// Driven into a face at a steady speed, the load is caught within a few steps and then
-    /// follows the rotor at the face's distance: an inelastic impact.
+    /// Driven into a face at a steady speed, the load is caught and then moves with the
+    /// rotor: an inelastic impact (an elastic one would send it off at twice the rotor's
+    /// speed), of which at most 1 % of the impact speed comes back.
     #[test]
-    fn a_caught_load_follows_the_face() {
+    fn a_caught_load_moves_with_the_rotor() {
         let h = 1e-3;
         let cpl = Coupling::gap(0.2, 1.0, h);
         let mut s = LoadState::default();
@@ -153,7 +163,8 @@ mod tests {
             let t = k as f64 * h;
             s = cpl.step(1.0, s, 2.0 * t, 2.0, h);
         }
-        assert!((s.omega - 2.0).abs() < 1e-9, "{s:?}");
-        assert!((0.8 - s.theta - 0.1).abs() < 1e-4, "{s:?}");
+        assert!((s.omega - 2.0).abs() < 0.02, "{s:?}");
+        // Within the gap, at the face it was caught by or drifting off it at that 1 %.
+        assert!(s.theta > 0.7 - 1e-4 && s.theta < 0.7 + 0.02 * 0.35, "{s:?}");
     }
 }
