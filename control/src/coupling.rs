@@ -131,7 +131,9 @@ mod tests {
         ];
         let mut seed = 7u64;
         let mut draw = || {
-            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
             (seed >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
         };
         for cpl in couplings {
@@ -145,7 +147,10 @@ mod tests {
                 // The residual of the implicit equation changes sign at the step's speed.
                 let r = |w: f64| j2 * (w - s.omega) / h - cpl.torque(t1 - s.theta - h * w, w1 - w);
                 let eps = 1e-9 * (1.0 + n.omega.abs());
-                assert!(r(n.omega - eps) <= 0.0 && r(n.omega + eps) >= 0.0, "{cpl:?} {s:?} {t1} {w1} {n:?}");
+                assert!(
+                    r(n.omega - eps) <= 0.0 && r(n.omega + eps) >= 0.0,
+                    "{cpl:?} {s:?} {t1} {w1} {n:?}"
+                );
                 assert_eq!(n.theta, s.theta + h * n.omega);
             }
         }

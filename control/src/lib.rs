@@ -29,9 +29,9 @@
 
 pub mod blob;
 pub mod board;
-pub mod coupling;
 pub mod commission;
 pub mod compensation;
+pub mod coupling;
 pub mod effects;
 pub mod excitation;
 pub mod frame;

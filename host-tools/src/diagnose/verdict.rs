@@ -706,7 +706,8 @@ pub fn load_torque(effects: &[Effect<f64>], s: &Signals) -> Vec<f64> {
                 )
             }
             Effect::Backlash { j2, gap } if j2 > 0.0 && gap >= 0.0 && s.dt > 0.0 => {
-                let theta2 = s.load_angle(|h| control::coupling::Coupling::gap(gap, 1.0, h));
+                let gap = |h| control::coupling::Coupling::gap(gap, 1.0, h);
+                let theta2 = s.load_angle(gap, super::candidates::LOAD_SUBSTEPS, s.load_hold());
                 (j2, s.second_difference(&theta2))
             }
             _ => continue,
