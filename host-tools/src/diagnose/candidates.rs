@@ -450,7 +450,7 @@ impl Signals {
     pub fn second_difference(&self, x: &[f64]) -> Vec<f64> {
         let n = x.len();
         let mut out = vec![0.0; n];
-        if n < 3 || !(self.dt > 0.0) {
+        if n < 3 || self.dt.is_nan() || self.dt <= 0.0 {
             return out;
         }
         let dt2 = self.dt * self.dt;
@@ -486,7 +486,6 @@ impl Signals {
     /// pair's reduced inertia is the load's own. While the coupling passes no torque (in
     /// flight inside a gap) the load slows by `hold` [rad/s²], its own friction
     /// ([`Signals::load_hold`]).
-
     pub fn load_angle(
         &self,
         coupling: impl Fn(f64) -> Coupling<f64>,
@@ -494,7 +493,7 @@ impl Signals {
         hold: f64,
     ) -> Vec<f64> {
         let n = self.len();
-        if n == 0 || !(self.dt > 0.0) {
+        if n == 0 || self.dt.is_nan() || self.dt <= 0.0 {
             return vec![0.0; n];
         }
         let sub = sub.max(1);
