@@ -7,6 +7,7 @@
 //! |---|---|
 //! | [`motor`] | DC-equivalent motor constants (R, L, K_t, K_b, J) |
 //! | [`effects`] | the physical effects `motorid` names, as equations |
+//! | [`coupling`] | a load behind a spring or a gap, and its implicit step |
 //! | [`hall`] | Hall-state decoding, sectors, faults, angle |
 //! | [`velocity`] | velocity estimators: moving average (the paper's) and Hall-edge timing |
 //! | [`lugre`] | LuGre friction observer with an exact (exponential) update |
@@ -30,6 +31,7 @@ pub mod blob;
 pub mod board;
 pub mod commission;
 pub mod compensation;
+pub mod coupling;
 pub mod effects;
 pub mod excitation;
 pub mod frame;

@@ -434,12 +434,13 @@ fn load_friction_is_ranked_first_on_a_braking_signal() {
 }
 
 /// The true model of a plant with a load behind a coupling or a gap (5 Hz, load twice the
-/// rotor; gap 0.5 rad), judged on its own emulated data, seeds 1-3 of signal a: the
-/// verdict's failed checks, findings and carriers, one line per log. Not asserted: these
-/// models are not yet adequate on every log (decision 0019).
-/// `cargo test --release -p e2e --test diagnose_emulated -- --ignored --nocapture`
+/// rotor; gap 0.5 rad), judged on its own emulated data, seeds 1-3 of signal a: adequate on
+/// at least 2 of the 3 for each. Each verdict is a family of checks at the 1 % level, so a
+/// sound verdict fails a correct model on about one log in a hundred, and two failures in
+/// three (a chance of 3·10⁻⁴) would be a systematic mismatch between the model's load and
+/// the plant's, not chance. Three seeds, not five: a coupled load's diagnosis simulates the
+/// load for every candidate, and these logs run in the suite.
 #[test]
-#[ignore]
 fn true_load_models_on_their_own_data() {
     let loads = [
         (
@@ -452,7 +453,9 @@ fn true_load_models_on_their_own_data() {
         ),
         ("backlash", Effect::Backlash { j2: 6e-4, gap: 0.5 }),
     ];
+    let mut failures = Vec::new();
     for (name, e) in loads {
+        let mut lines = Vec::new();
         for seed in 1..=3 {
             let mut cfg = EmulatorConfig::paper();
             cfg.seed = seed;
@@ -460,21 +463,29 @@ fn true_load_models_on_their_own_data() {
             let log = simulate_signal(&cfg, SignalKind::A, 60.0).unwrap().log;
             let st = Structure::from_model(&cfg.truth_model());
             let d = diagnose(&log, &st, &Options::default());
-            let failed: Vec<String> = d
-                .verdict
-                .checks
-                .iter()
-                .filter(|c| !c.passed)
-                .map(|c| format!("{} ({:.1e})", c.detail, c.p_value))
-                .collect();
-            let carriers: Vec<&str> = d.verdict.unexplained.iter().map(|u| u.variable).collect();
-            println!(
-                "{name} seed {seed}: adequate {}, failed {failed:?}, findings {:?}, carriers {carriers:?}",
-                d.verdict.adequate,
-                names(&d)
-            );
+            if !d.verdict.adequate {
+                let failed: Vec<String> = d
+                    .verdict
+                    .checks
+                    .iter()
+                    .filter(|c| !c.passed)
+                    .map(|c| format!("{} ({:.1e})", c.detail, c.p_value))
+                    .collect();
+                let carriers: Vec<&str> =
+                    d.verdict.unexplained.iter().map(|u| u.variable).collect();
+                lines.push(format!(
+                    "seed {seed}: judged {}, failed {failed:?}, findings {:?}, carriers {carriers:?}",
+                    d.verdict.judged,
+                    names(&d)
+                ));
+            }
+        }
+        println!("{name}: not adequate on {} of 3 {lines:?}", lines.len());
+        if lines.len() > 1 {
+            failures.push(format!("{name}: {lines:?}"));
         }
     }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
 
 /// The true model of a plant with one effect of the list (at the effect's default size),
@@ -482,8 +493,8 @@ fn true_load_models_on_their_own_data() {
 /// 1-5. Each verdict is a family of checks at the 1 % level, so a sound verdict fails a
 /// correct model on about one log in a hundred; two failures in five would be a systematic
 /// bias of the check for that effect (a column evaluated at a noisy current, a run that
-/// leaves out a sensor offset), not chance. The load effects (compliance, backlash) are not
-/// yet adequate on their own data (`true_load_models_on_their_own_data`).
+/// leaves out a sensor offset), not chance. The load effects (compliance, backlash) are
+/// judged in `true_load_models_on_their_own_data`.
 #[test]
 fn true_models_with_an_effect_are_adequate_on_their_own_data() {
     let effects = [

@@ -17,6 +17,7 @@ use crate::effect_spec::EffectSpec;
 use crate::effects;
 use crate::log::{MotorLog, Plant};
 use crate::numerics::differentiation;
+use control::coupling::{Coupling, LoadState};
 use control::effects::{smooth_sign, Effect, EffectKind, VELOCITY_EPS};
 use control::lugre::{LugreObserver, LugreParams};
 use std::collections::BTreeMap;
@@ -40,6 +41,15 @@ impl Equation {
         }
     }
 }
+
+/// Steps per sample of a load behind a gap ([`Signals::load_angle`]): the contact settles
+/// within a step or two of its own, and a catch lands within a sixteenth of a sample.
+pub const LOAD_SUBSTEPS: usize = 16;
+
+/// Largest `ω_n·h` of a spring's step in [`Signals::load_acceleration`]: backward Euler
+/// adds a damping ratio of about half of it, 0.005, a tenth of the lightest coupling the
+/// compliance candidate tests (ζ = 0.05).
+pub const SPRING_STEP: f64 = 0.01;
 
 /// Sample-level signals derived from a log.
 #[derive(Debug, Clone)]
@@ -410,125 +420,129 @@ impl Signals {
     /// The torque a load engaged across a gap of `gap` rad adds beyond the rigid inertia, per
     /// unit of its inertia: `θ̈2 − θ̈1`, the load's acceleration less the rotor's (a rigid
     /// model carries the load's inertia in J, so only the difference is new and the column
-    /// cannot stand in for an inertia error). The load's side of the gap is simulated from
-    /// the measured rotor: inside the gap it coasts at its own speed (its friction taken small
-    /// against its inertia, as behind a gear or a coupling), and where the rotor's angle
-    /// reaches either face, the contact (stiff and damped, a plastic impact) makes the load
-    /// follow the rotor's angle and speed. So the load parts from the rotor whenever the
-    /// rotor slows down, not only at a reversal, drifts across the gap and is caught again
-    /// with a jolt of torque `J2·(ω1 − ω2)`. Integrated on 16 substeps per sample with the
-    /// rotor's (smoothed) angle and speed linear in between; both accelerations are central
-    /// differences of the speeds, so a catch's jolt lands in the sample where it happens.
+    /// cannot stand in for an inertia error). The load's angle is [`Signals::load_angle`]
+    /// behind the gap, so it coasts inside the gap, parts from the rotor wherever the rotor
+    /// slows down and is caught with a jolt at either face; `θ̈2 − θ̈1` is the second
+    /// difference of the deflection `θ2 − θ1` over the sample period squared, `θ1` the angle
+    /// the torque equation integrates (the inertia's own column), so that the rigid part of
+    /// the load cancels to the last bit and a catch's jolt lands in the sample it happens in.
     pub fn backlash_acceleration(&self, gap: f64) -> Vec<f64> {
         let n = self.len();
-        let mut out = vec![0.0; n];
         if n < 3 || !(self.dt > 0.0 && gap.is_finite() && gap >= 0.0) {
+            return vec![0.0; n];
+        }
+        let theta2 = self.load_angle(
+            |h| Coupling::gap(gap, 1.0, h),
+            LOAD_SUBSTEPS,
+            self.load_hold(),
+        );
+        let deflection: Vec<f64> = theta2
+            .iter()
+            .zip(&self.theta_torque)
+            .map(|(a, b)| a - b)
+            .collect();
+        self.second_difference(&deflection)
+    }
+
+    /// `(x[k+1] − 2·x[k] + x[k−1])/dt²` at each inner sample, 0 at both ends: the mean
+    /// acceleration over the hat of width two samples, which the weak form's integral weighs
+    /// as its second derivative weighs the angle.
+    pub fn second_difference(&self, x: &[f64]) -> Vec<f64> {
+        let n = x.len();
+        let mut out = vec![0.0; n];
+        if n < 3 || self.dt.is_nan() || self.dt <= 0.0 {
             return out;
         }
-        const SUB: usize = 16;
-        let h = self.dt / SUB as f64;
-        let half = 0.5 * gap;
-        // The deceleration [rad/s²] the load's own friction gives it in flight: the finest
-        // the velocity estimate resolves, one angle step over the square of its window
-        // (2·half + 1 samples). A rotor that slows down less than that keeps the load
-        // pressed against the face; a gentler parting is the estimate's noise, and a column
-        // built on it would fit the angle's rounding error, which the residual shares.
+        let dt2 = self.dt * self.dt;
+        for k in 1..n - 1 {
+            out[k] = (x[k + 1] - 2.0 * x[k] + x[k - 1]) / dt2;
+        }
+        out
+    }
+
+    /// The deceleration [rad/s²] a load's own friction gives it in flight behind a gap: the
+    /// finest the angle resolves, one angle step over the square of the velocity window
+    /// (`2·velocity_half + 1` samples). A rotor that slows down less than that keeps the load
+    /// pressed against the face; a gentler parting is within the angle's rounding, and a
+    /// column built on it would fit that rounding (on hard braking steps of a plant without
+    /// any gap, a frictionless load's flights fitted a wide gap after a load friction).
+    pub fn load_hold(&self) -> f64 {
         let tv = (2 * self.velocity_half + 1) as f64 * self.dt;
-        let hold = self.angle_step() / (tv * tv);
-        // The load starts in the middle of the gap at the rotor's speed.
-        let (mut th2, mut w2) = (self.theta_s[0], self.omega[0]);
-        let mut w2_at = vec![0.0; n];
-        w2_at[0] = w2;
-        // Whether the load is in flight (touches neither face) at each sample.
-        let mut free = vec![true; n];
+        if tv > 0.0 {
+            self.angle_step() / (tv * tv)
+        } else {
+            0.0
+        }
+    }
+
+    /// Angle θ2 [rad] at each sample of a load of unit inertia behind the coupling
+    /// `coupling(h)` (its constants for a step `h`), driven by the measured rotor: the
+    /// smoothed angle `theta_s`, straight between samples, with that line's slope as the
+    /// rotor's speed, so that the angle and the speed the load meets are one motion (a
+    /// smoothed speed beside the angle would part and catch the load where the two
+    /// disagree). `sub` steps per sample of the coupling's own update
+    /// ([`control::coupling`], the emulator's too); the load starts with the rotor, in the
+    /// middle of any gap. A rotor whose motion is given is an infinitely heavy rotor: the
+    /// pair's reduced inertia is the load's own. While the coupling passes no torque (in
+    /// flight inside a gap) the load slows by `hold` [rad/s²], its own friction
+    /// ([`Signals::load_hold`]).
+    pub fn load_angle(
+        &self,
+        coupling: impl Fn(f64) -> Coupling<f64>,
+        sub: usize,
+        hold: f64,
+    ) -> Vec<f64> {
+        let n = self.len();
+        if n == 0 || self.dt.is_nan() || self.dt <= 0.0 {
+            return vec![0.0; n];
+        }
+        let sub = sub.max(1);
+        let h = self.dt / sub as f64;
+        let c = coupling(h);
+        let th = &self.theta_s;
+        let mut s = LoadState {
+            theta: th[0],
+            omega: if n > 1 {
+                (th[1] - th[0]) / self.dt
+            } else {
+                0.0
+            },
+        };
+        let mut out = vec![s.theta; n];
         for k in 0..n - 1 {
-            let mut touched = false;
-            for j in 1..=SUB {
-                let f = j as f64 / SUB as f64;
-                let th1 = self.theta_s[k] + (self.theta_s[k + 1] - self.theta_s[k]) * f;
-                let w1 = self.omega[k] + (self.omega[k + 1] - self.omega[k]) * f;
-                // The load's own friction slows it by `hold` while in flight.
-                let dw = (hold * h).min(w2.abs());
-                w2 -= dw * w2.signum();
-                th2 += h * w2;
-                touched = true;
-                if th1 - th2 > half {
-                    (th2, w2) = (th1 - half, w1);
-                } else if th1 - th2 < -half {
-                    (th2, w2) = (th1 + half, w1);
-                } else {
-                    touched = false;
+            let w1 = (th[k + 1] - th[k]) / self.dt;
+            for j in 1..=sub {
+                let th1 = th[k] + (th[k + 1] - th[k]) * (j as f64 / sub as f64);
+                s = c.step(1.0, s, th1, w1, h);
+                if hold > 0.0 && c.torque(th1 - s.theta, w1 - s.omega) == 0.0 {
+                    let dw = (hold * h).min(s.omega.abs());
+                    s.omega -= dw * s.omega.signum();
                 }
             }
-            w2_at[k + 1] = w2;
-            free[k + 1] = !touched;
-        }
-        // A flight shorter than the velocity estimate's half-width is not resolved: the
-        // rotor's speed change that parts the load and catches it again is smeared over
-        // that span, and such a flight moves the load's inertia torque by less than the
-        // estimate's own lag (on hard braking steps of a plant without any gap, such flights
-        // fitted a small backlash). The load counts as following the rotor there.
-        let mut k = 0;
-        while k < n {
-            if !free[k] {
-                k += 1;
-                continue;
-            }
-            let start = k;
-            while k < n && free[k] {
-                k += 1;
-            }
-            if k - start < self.velocity_half.max(1) && k < n {
-                w2_at[start..k].copy_from_slice(&self.omega[start..k]);
-            }
-        }
-        for k in 1..n - 1 {
-            let a2 = (w2_at[k + 1] - w2_at[k - 1]) / (2.0 * self.dt);
-            let a1 = (self.omega[k + 1] - self.omega[k - 1]) / (2.0 * self.dt);
-            out[k] = a2 - a1;
+            out[k + 1] = s.theta;
         }
         out
     }
 
     /// Acceleration θ̈2 of a load on a spring-damper coupling driven by the measured rotor
-    /// (natural frequency `fn_hz` against a fixed rotor, damping ratio `zeta`):
-    /// `θ̈2 = ω_n²(θ1 − θ2) + 2ζω_n(ω1 − ω2)`. The coupling's torque on the rotor is
-    /// `J2·θ̈2`, so this is the compliance's column per unit J2. Integrated with the
-    /// trapezoidal rule on 16 substeps per sample (A-stable for any stiffness), the rotor's
-    /// angle and speed linear between samples.
+    /// (natural frequency `fn_hz` against a fixed rotor, damping ratio `zeta`): the second
+    /// difference of [`Signals::load_angle`] behind the spring `k = ω_n²`, `c = 2ζω_n` per
+    /// unit of load inertia. The coupling's torque on the rotor is `J2·θ̈2`, so this is the
+    /// compliance's column per unit J2. The step is backward Euler, which damps the
+    /// coupling by about `ω_n·h/2` on top of its own damping; steps of at most
+    /// [`SPRING_STEP`]`/ω_n` keep that at a tenth of the lightest damping tested.
     pub fn load_acceleration(&self, fn_hz: f64, zeta: f64) -> Vec<f64> {
         let n = self.len();
         let wn = 2.0 * std::f64::consts::PI * fn_hz;
-        let (a0, a1) = (wn * wn, 2.0 * zeta * wn);
-        let mut out = vec![0.0; n];
-        if n == 0 || !(wn.is_finite() && wn > 0.0 && self.dt > 0.0) {
-            return out;
+        if n == 0 || !(wn.is_finite() && wn > 0.0 && self.dt > 0.0 && zeta >= 0.0) {
+            return vec![0.0; n];
         }
-        const SUB: usize = 16;
-        let h = self.dt / SUB as f64;
-        // State (θ2, ω2), starting at rest with the rotor.
-        let (mut th2, mut w2) = (self.theta_s[0], self.omega[0]);
-        let acc = |th1: f64, w1: f64, th2: f64, w2: f64| a0 * (th1 - th2) + a1 * (w1 - w2);
-        out[0] = acc(self.theta_s[0], self.omega[0], th2, w2);
-        for k in 0..n - 1 {
-            for j in 0..SUB {
-                let f0 = j as f64 / SUB as f64;
-                let f1 = (j + 1) as f64 / SUB as f64;
-                let lerp = |x: &[f64], f: f64| x[k] + (x[k + 1] - x[k]) * f;
-                let (t0, v0) = (lerp(&self.theta_s, f0), lerp(&self.omega, f0));
-                let (t1, v1) = (lerp(&self.theta_s, f1), lerp(&self.omega, f1));
-                // Trapezoid: x1 = x0 + h/2·(f(x0) + f(x1)), linear in (θ2, ω2): solve 2×2.
-                let g0 = acc(t0, v0, th2, w2);
-                // θ2' = θ2 + h/2 (ω2 + ω2'), ω2' = ω2 + h/2 (g0 + a0(t1 − θ2') + a1(v1 − ω2')).
-                let hh = h / 2.0;
-                let rhs = w2 + hh * (g0 + a0 * (t1 - th2 - hh * w2) + a1 * v1);
-                let w2n = rhs / (1.0 + hh * a1 + hh * hh * a0);
-                th2 += hh * (w2 + w2n);
-                w2 = w2n;
-            }
-            out[k + 1] = acc(self.theta_s[k + 1], self.omega[k + 1], th2, w2);
-        }
-        out
+        let sub = ((wn * self.dt / SPRING_STEP).ceil() as usize).clamp(LOAD_SUBSTEPS, 4096);
+        let spring = Coupling::Spring {
+            k: wn * wn,
+            c: 2.0 * zeta * wn,
+        };
+        self.second_difference(&self.load_angle(|_| spring, sub, 0.0))
     }
 
     /// The load-dependent friction's whole torque per unit `μ`, `|drive|·sgn(ω)` (modelled

@@ -39,7 +39,6 @@
 //! list is missing and no variable carries structure.
 use super::candidates::Signals;
 use crate::log::{MotorLog, Plant};
-use crate::numerics::differentiation::smoothed_derivative;
 use crate::numerics::statistics;
 use crate::numerics::weak_form::WeakForm;
 use control::effects::{total_sensor_offset, total_voltage_loss, Effect, EffectInputs, EffectKind};
@@ -690,8 +689,9 @@ pub fn model_torque(effects: &[Effect<f64>], s: &Signals, current: &[f64], kt: f
 /// The torque [N·m] the loads behind a coupling take from the rotor at each sample, `j2·θ̈2`
 /// with the load driven by the measured rotor: on a spring, [`Signals::load_acceleration`]
 /// at the coupling's natural frequency and damping ratio against a fixed rotor; behind a
-/// gap, [`Signals::backlash_acceleration`] (the load's acceleration less the rotor's) plus
-/// the rotor's own, both central differences of the speeds. Zeros without such a load.
+/// gap, the second difference of the load's angle ([`Signals::load_angle`], the same motion
+/// whose deflection is the candidate's column [`Signals::backlash_acceleration`]). Zeros
+/// without such a load.
 pub fn load_torque(effects: &[Effect<f64>], s: &Signals) -> Vec<f64> {
     let n = s.len();
     let mut out = vec![0.0; n];
@@ -705,13 +705,10 @@ pub fn load_torque(effects: &[Effect<f64>], s: &Signals) -> Vec<f64> {
                     s.load_acceleration(wn / (2.0 * std::f64::consts::PI), zeta),
                 )
             }
-            Effect::Backlash { j2, gap } if j2 > 0.0 && s.dt > 0.0 => {
-                let mut a = s.backlash_acceleration(gap);
-                let rotor = smoothed_derivative(&s.omega, s.dt, 1);
-                for (a, r) in a.iter_mut().zip(&rotor) {
-                    *a += r;
-                }
-                (j2, a)
+            Effect::Backlash { j2, gap } if j2 > 0.0 && gap >= 0.0 && s.dt > 0.0 => {
+                let gap = |h| control::coupling::Coupling::gap(gap, 1.0, h);
+                let theta2 = s.load_angle(gap, super::candidates::LOAD_SUBSTEPS, s.load_hold());
+                (j2, s.second_difference(&theta2))
             }
             _ => continue,
         };

@@ -48,7 +48,7 @@
 //!
 //! The load takes the same backward Euler step as the rotor, in the same solve: for a trial
 //! `ω1'` the load's new speed solves `j2·(ω2' − ω2)/h = τ_c(θ1' − θ2 − h·ω2', ω1' − ω2')`
-//! (in closed form for the linear coupling, by [`super::scalar_root`] for the contact), and
+//! (in closed form, [`control::coupling`], the one home of the coupling's equation), and
 //! the rotor feels `j2·(ω2' − ω2)/h`. That torque never falls as `ω1'` rises (τ_c never falls
 //! with the deflection or its rate), so the rotor's residual stays increasing and its root
 //! unique. Backward Euler on the coupled pair is stable for any stiffness and never adds
@@ -87,28 +87,18 @@ pub struct LoadInputs {
     pub i: f64,
 }
 
-/// Angle and speed of a load behind a coupling (`compliance`, `backlash`).
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct LoadState {
-    /// Load angle θ2 [rad] (on the rotor's side of any gear: the same scale as θ).
-    pub theta: f64,
-    /// Load speed ω2 [rad/s].
-    pub omega: f64,
-}
-
-/// Contact stiffness of a backlash over the fine step, as a frequency times the step: the
-/// critically damped contact rings at `CONTACT_FREQUENCY_STEPS / h` rad/s, which backward
-/// Euler settles in one or two steps (an inelastic impact).
-const CONTACT_FREQUENCY_STEPS: f64 = 10.0;
+/// Angle and speed of a load behind a coupling (`compliance`, `backlash`) [rad, rad/s], on
+/// the rotor's side of any gear (the same scale as θ).
+pub type LoadState = control::coupling::LoadState<f64>;
 
 /// How a load is coupled to the rotor.
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Coupling {
     /// Spring `k` [N·m/rad] and damper `c` [N·m·s/rad].
     Spring { k: f64, c: f64 },
-    /// Free across `±half` [rad], then a contact `k_c`, `c_c` per fine step `h` (set from
-    /// the reduced inertia `mu` [kg·m²] when the step is known).
-    Gap { half: f64, mu: f64 },
+    /// A gap `gap` [rad] whose contact is set per fine step from the pair's reduced inertia
+    /// `mu` [kg·m²] ([`control::coupling::Coupling::gap`]).
+    Gap { gap: f64, mu: f64 },
 }
 
 /// A load inertia on the rotor's shaft, behind a coupling.
@@ -135,7 +125,7 @@ impl Load {
                 Effect::Backlash { j2, gap } => Some(Load {
                     j2,
                     coupling: Coupling::Gap {
-                        half: 0.5 * gap,
+                        gap,
                         mu: j * j2 / (j + j2),
                     },
                     state: LoadState::default(),
@@ -145,54 +135,15 @@ impl Load {
             .collect()
     }
 
-    /// The load's state at the end of a fine step `h` (backward Euler) when the rotor ends
-    /// it at angle `theta1` and speed `omega1`.
+    /// The load's state at the end of a fine step `h` (backward Euler,
+    /// [`control::coupling::Coupling::step`]) when the rotor ends it at angle `theta1` and
+    /// speed `omega1`.
     fn step(&self, theta1: f64, omega1: f64, h: f64) -> LoadState {
-        let LoadState { theta, omega } = self.state;
-        let j2 = self.j2;
-        let w2 = match self.coupling {
-            // j2·(ω2' − ω2)/h = k·(θ1' − θ2 − h·ω2') + c·(ω1' − ω2'): linear in ω2'.
-            Coupling::Spring { k, c } => {
-                (j2 * omega / h + k * (theta1 - theta) + c * omega1) / (j2 / h + k * h + c)
-            }
-            Coupling::Gap { half, mu } => {
-                let wc = CONTACT_FREQUENCY_STEPS / h;
-                let (kc, cc) = (mu * wc * wc, 2.0 * mu * wc);
-                // Residual increasing in ω2' (τ_c never falls with the deflection or its rate).
-                let resid = |w2: f64| {
-                    let x = theta1 - theta - h * w2;
-                    j2 * (w2 - omega) / h - contact_torque(x, omega1 - w2, half, kc, cc)
-                };
-                let r0 = resid(omega);
-                if r0 == 0.0 {
-                    omega
-                } else {
-                    find_root(
-                        resid,
-                        omega,
-                        r0.abs() * h / j2 + 1e-12,
-                        1e-12 * (1.0 + omega.abs() + omega1.abs()),
-                    )
-                }
-            }
+        let coupling = match self.coupling {
+            Coupling::Spring { k, c } => control::coupling::Coupling::Spring { k, c },
+            Coupling::Gap { gap, mu } => control::coupling::Coupling::gap(gap, mu, h),
         };
-        LoadState {
-            theta: theta + h * w2,
-            omega: w2,
-        }
-    }
-}
-
-/// Torque [N·m] a gap of half-width `half` [rad] passes to the load at deflection `x`
-/// [rad] and deflection rate `v` [rad/s]: zero inside, a spring-damper `kc`, `cc` beyond it
-/// that pushes and never pulls.
-fn contact_torque(x: f64, v: f64, half: f64, kc: f64, cc: f64) -> f64 {
-    if x > half {
-        (kc * (x - half) + cc * v).max(0.0)
-    } else if x < -half {
-        (kc * (x + half) + cc * v).min(0.0)
-    } else {
-        0.0
+        coupling.step(self.j2, self.state, theta1, omega1, h)
     }
 }
 
