@@ -434,12 +434,13 @@ fn load_friction_is_ranked_first_on_a_braking_signal() {
 }
 
 /// The true model of a plant with a load behind a coupling or a gap (5 Hz, load twice the
-/// rotor; gap 0.5 rad), judged on its own emulated data, seeds 1-3 of signal a: adequate on
-/// at least 2 of the 3 for each. Each verdict is a family of checks at the 1 % level, so a
-/// sound verdict fails a correct model on about one log in a hundred, and two failures in
-/// three (a chance of 3·10⁻⁴) would be a systematic mismatch between the model's load and
-/// the plant's, not chance. Three seeds, not five: a coupled load's diagnosis simulates the
-/// load for every candidate, and these logs run in the suite.
+/// rotor; gap 0.5 rad), judged on its own emulated data, seeds 1-3 of signal a. Each verdict
+/// is a family of checks at the 1 % level, so a sound verdict fails a correct model on about
+/// one log in a hundred: the backlash model must be adequate on all three. The compliance
+/// model is not adequate on seed 2 (a `reversal` carrier holding 18 % of the torque
+/// residual, cause not found): it is allowed that one known failure and no other. Three
+/// seeds, not five: a coupled load's diagnosis simulates the load for every candidate, and
+/// these logs run in the suite.
 #[test]
 fn true_load_models_on_their_own_data() {
     let loads = [
@@ -481,7 +482,8 @@ fn true_load_models_on_their_own_data() {
             }
         }
         println!("{name}: not adequate on {} of 3 {lines:?}", lines.len());
-        if lines.len() > 1 {
+        let known = usize::from(name == "compliance");
+        if lines.len() > known {
             failures.push(format!("{name}: {lines:?}"));
         }
     }
