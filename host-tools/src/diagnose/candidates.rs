@@ -424,8 +424,10 @@ impl Signals {
     /// behind the gap, so it coasts inside the gap, parts from the rotor wherever the rotor
     /// slows down and is caught with a jolt at either face; `θ̈2 − θ̈1` is the second
     /// difference of the deflection `θ2 − θ1` over the sample period squared, `θ1` the angle
-    /// the torque equation integrates (the inertia's own column), so that the rigid part of
-    /// the load cancels to the last bit and a catch's jolt lands in the sample it happens in.
+    /// the torque equation integrates (the inertia's own column), so that a catch's jolt
+    /// lands in the sample it happens in. The load is driven by the smoothed angle and the
+    /// deflection subtracts the integrated one, so in contact the rigid part cancels only to
+    /// the difference of the two, which carries some of the angle's rounding.
     pub fn backlash_acceleration(&self, gap: f64) -> Vec<f64> {
         let n = self.len();
         if n < 3 || !(self.dt > 0.0 && gap.is_finite() && gap >= 0.0) {
@@ -445,8 +447,10 @@ impl Signals {
     }
 
     /// `(x[k+1] − 2·x[k] + x[k−1])/dt²` at each inner sample, 0 at both ends: the mean
-    /// acceleration over the hat of width two samples, which the weak form's integral weighs
-    /// as its second derivative weighs the angle.
+    /// acceleration over the hat of width two samples. The weak form takes it through its
+    /// held-input integral, whose weights differ from those its second derivative gives the
+    /// angle (a smoothing over neighbouring samples), so the column and the inertia's are
+    /// close but not weighed identically.
     pub fn second_difference(&self, x: &[f64]) -> Vec<f64> {
         let n = x.len();
         let mut out = vec![0.0; n];
