@@ -112,21 +112,7 @@ fn demo_finds_the_hidden_effect_and_the_error_falls() {
 /// the test fits rise and the final model's load torque is nearer the true one.
 #[test]
 fn demo_hides_unnamed_physics_and_a_table_takes_it_in() {
-    let dir = tempfile::tempdir().unwrap();
-    let out = motorid(
-        dir.path(),
-        &[
-            "demo",
-            "--unnamed",
-            "fan",
-            "--duration",
-            "30",
-            "--quiet",
-            "--report",
-            "rep",
-        ],
-    );
-    let text = succeeded(&out);
+    let text = unnamed_demo("fan", "30");
     // Step 0's diagnosis: not adequate, carried by the speed, and the table it offers.
     let verdict = text
         .lines()
@@ -140,15 +126,52 @@ fn demo_hides_unnamed_physics_and_a_table_takes_it_in() {
             && verdict.contains("add table:var=omega"),
         "{verdict}"
     );
-    assert!(text.contains("carried by omega: FOUND"), "{text}");
-    check_selection_lines(&text);
-    let steps: Vec<&str> = text
-        .lines()
+    let steps = kept_steps(&text);
+    assert!(
+        steps.len() >= 2 && steps[1].contains("table(omega)"),
+        "{text}"
+    );
+    the_table_took_it_in(&text, "omega");
+}
+
+/// `motorid demo --unnamed KIND --duration SECONDS`'s text.
+fn unnamed_demo(kind: &str, seconds: &str) -> String {
+    let dir = tempfile::tempdir().unwrap();
+    let out = motorid(
+        dir.path(),
+        &[
+            "demo",
+            "--unnamed",
+            kind,
+            "--duration",
+            seconds,
+            "--quiet",
+            "--report",
+            "rep",
+        ],
+    );
+    succeeded(&out)
+}
+
+/// The demo's kept steps.
+fn kept_steps(text: &str) -> Vec<&str> {
+    text.lines()
         .filter(|l| l.starts_with("step ") && !l.contains("(not kept)"))
-        .collect();
-    assert!(steps.len() >= 2, "{text}");
-    assert!(steps[1].contains("table(omega)"), "{text}");
-    // The error on the test log falls once the table is in: angle and current.
+        .collect()
+}
+
+/// What an unnamed demo must end with once a table over `var` took the physics in: the
+/// carrier FOUND, a kept step with the table, the test fits of angle and current up, the
+/// load torque nearer the truth, and no later diagnosis still carried by `var`.
+fn the_table_took_it_in(text: &str, var: &str) {
+    assert!(text.contains(&format!("carried by {var}: FOUND")), "{text}");
+    check_selection_lines(text);
+    let steps = kept_steps(text);
+    let table = format!("table({var})");
+    assert!(
+        steps.iter().any(|l| l.contains(&table)),
+        "the table over {var} was not kept: {text}"
+    );
     let (first, last) = (steps[0], steps[steps.len() - 1]);
     for key in ["x", "i"] {
         assert!(
@@ -156,10 +179,21 @@ fn demo_hides_unnamed_physics_and_a_table_takes_it_in() {
             "test {key} fit did not improve: {first} -> {last}"
         );
     }
-    let (final_rms, start_rms) = torque_distance(&text);
+    let (final_rms, start_rms) = torque_distance(text);
     assert!(
         final_rms < start_rms,
         "the final model's load torque is no nearer the truth: {final_rms} against {start_rms}"
+    );
+    // Once the table is in the model, what it explains is no longer left to its variable.
+    let after: Vec<&str> = text
+        .lines()
+        .skip_while(|l| !(l.starts_with("step ") && l.contains(&table)))
+        .filter(|l| l.contains("diagnose ("))
+        .collect();
+    let carried = format!("carried by {var}");
+    assert!(
+        !after.is_empty() && after.iter().all(|l| !l.contains(&carried)),
+        "the model with the table over {var} is still found carried by it: {after:?}"
     );
 }
 
@@ -186,21 +220,7 @@ fn torque_distance(text: &str) -> (f64, f64) {
 /// is nearer the true one than the start model's.
 #[test]
 fn demo_hides_a_cam_and_a_table_over_the_angle_takes_it_in() {
-    let dir = tempfile::tempdir().unwrap();
-    let out = motorid(
-        dir.path(),
-        &[
-            "demo",
-            "--unnamed",
-            "cam",
-            "--duration",
-            "60",
-            "--quiet",
-            "--report",
-            "rep",
-        ],
-    );
-    let text = succeeded(&out);
+    let text = unnamed_demo("cam", "60");
     let verdict = text
         .lines()
         .find(|l| l.contains("NOT adequate, carried by"))
@@ -210,36 +230,5 @@ fn demo_hides_a_cam_and_a_table_over_the_angle_takes_it_in() {
             && verdict.contains("add table:var=theta"),
         "{verdict}"
     );
-    assert!(text.contains("carried by theta: FOUND"), "{text}");
-    check_selection_lines(&text);
-    let steps: Vec<&str> = text
-        .lines()
-        .filter(|l| l.starts_with("step ") && !l.contains("(not kept)"))
-        .collect();
-    assert!(
-        steps.iter().any(|l| l.contains("table(theta)")),
-        "the table over the angle was not kept: {text}"
-    );
-    let (first, last) = (steps[0], steps[steps.len() - 1]);
-    for key in ["x", "i"] {
-        assert!(
-            fit_of(last, key) > fit_of(first, key),
-            "test {key} fit did not improve: {first} -> {last}"
-        );
-    }
-    let (final_rms, start_rms) = torque_distance(&text);
-    assert!(
-        final_rms < start_rms,
-        "the final model's load torque is no nearer the truth: {final_rms} against {start_rms}"
-    );
-    // Once the table is in the model, what it explains is no longer left to the angle.
-    let after: Vec<&str> = text
-        .lines()
-        .skip_while(|l| !(l.starts_with("step ") && l.contains("table(theta)")))
-        .filter(|l| l.contains("diagnose ("))
-        .collect();
-    assert!(
-        !after.is_empty() && after.iter().all(|l| !l.contains("carried by theta")),
-        "the model with the table over the angle is still found carried by it: {after:?}"
-    );
+    the_table_took_it_in(&text, "theta");
 }
