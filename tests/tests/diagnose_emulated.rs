@@ -438,7 +438,7 @@ fn load_friction_is_ranked_first_on_a_braking_signal() {
 /// is a family of checks at the 1 % level, so a sound verdict fails a correct model on about
 /// one log in a hundred: the backlash model must be adequate on all three. The compliance
 /// model is not adequate on seed 2 (a `reversal` carrier holding 18 % of the torque
-/// residual, cause not found): it is allowed that one known failure and no other. Three
+/// residual, cause not found): that seed alone may fail, and no other. Three
 /// seeds, not five: a coupled load's diagnosis simulates the load for every candidate, and
 /// these logs run in the suite.
 #[test]
@@ -482,8 +482,11 @@ fn true_load_models_on_their_own_data() {
             }
         }
         println!("{name}: not adequate on {} of 3 {lines:?}", lines.len());
-        let known = usize::from(name == "compliance");
-        if lines.len() > known {
+        let unknown: Vec<&String> = lines
+            .iter()
+            .filter(|l| !(name == "compliance" && l.starts_with("seed 2:")))
+            .collect();
+        if !unknown.is_empty() {
             failures.push(format!("{name}: {lines:?}"));
         }
     }
