@@ -808,20 +808,34 @@ fn verdict_line(v: &diagnose::Verdict) -> String {
             100.0 * v.level
         );
     }
-    let failed: Vec<&str> = v
+    // A check whose test cannot decide on this log (no statistic) has not passed either,
+    // but it found nothing: it is listed apart from the checks that rejected.
+    let (undecided, failed): (Vec<&diagnose::verdict::Check>, Vec<_>) = v
         .checks
         .iter()
         .filter(|c| !c.passed)
-        .map(|c| c.name)
-        .collect();
+        .partition(|c| c.statistic.is_nan());
+    let names =
+        |cs: &[&diagnose::verdict::Check]| cs.iter().map(|c| c.name).collect::<Vec<_>>().join(", ");
     let carried: Vec<String> = v
         .unexplained
         .iter()
         .map(|u| format!("{} ({:.0}%)", u.variable, 100.0 * u.share))
         .collect();
+    if failed.is_empty() && carried.is_empty() {
+        return format!(
+            "no effect of the list is left, but the checks cannot judge this log: [{}]",
+            names(&undecided)
+        );
+    }
+    let cannot = if undecided.is_empty() {
+        String::new()
+    } else {
+        format!(", cannot judge [{}]", names(&undecided))
+    };
     format!(
-        "no effect of the list is left, but NOT adequate: failed checks [{}], carried by [{}]",
-        failed.join(", "),
+        "no effect of the list is left, but NOT adequate: failed checks [{}]{cannot}, carried by [{}]",
+        names(&failed),
         carried.join(", ")
     )
 }
