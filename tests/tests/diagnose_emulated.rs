@@ -464,22 +464,7 @@ fn true_load_models_on_their_own_data() {
             let log = simulate_signal(&cfg, SignalKind::A, 60.0).unwrap().log;
             let st = Structure::from_model(&cfg.truth_model());
             let d = diagnose(&log, &st, &Options::default());
-            if !d.verdict.adequate {
-                let failed: Vec<String> = d
-                    .verdict
-                    .checks
-                    .iter()
-                    .filter(|c| !c.passed)
-                    .map(|c| format!("{} ({:.1e})", c.detail, c.p_value))
-                    .collect();
-                let carriers: Vec<&str> =
-                    d.verdict.unexplained.iter().map(|u| u.variable).collect();
-                lines.push(format!(
-                    "seed {seed}: judged {}, failed {failed:?}, findings {:?}, carriers {carriers:?}",
-                    d.verdict.judged,
-                    names(&d)
-                ));
-            }
+            lines.extend(not_adequate(seed, &d));
         }
         println!("{name}: not adequate on {} of 3 {lines:?}", lines.len());
         let unknown: Vec<&String> = lines
@@ -520,22 +505,7 @@ fn true_models_with_an_effect_are_adequate_on_their_own_data() {
             let log = simulate_signal(&cfg, SignalKind::A, 60.0).unwrap().log;
             let st = Structure::from_model(&cfg.truth_model());
             let d = diagnose(&log, &st, &Options::default());
-            if !d.verdict.adequate {
-                let failed: Vec<String> = d
-                    .verdict
-                    .checks
-                    .iter()
-                    .filter(|c| !c.passed)
-                    .map(|c| format!("{} (p {:.1e})", c.name, c.p_value))
-                    .collect();
-                let carriers: Vec<&str> =
-                    d.verdict.unexplained.iter().map(|u| u.variable).collect();
-                lines.push(format!(
-                    "seed {seed}: judged {}, failed {failed:?}, findings {:?}, carriers {carriers:?}",
-                    d.verdict.judged,
-                    names(&d)
-                ));
-            }
+            lines.extend(not_adequate(seed, &d));
         }
         println!("{spec}: not adequate on {} of 5 {lines:?}", lines.len());
         if lines.len() > 1 {
@@ -543,4 +513,25 @@ fn true_models_with_an_effect_are_adequate_on_their_own_data() {
         }
     }
     assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
+
+/// One line for a log whose true model was not called adequate: the checks that did not pass
+/// (with their p-values), the findings and the carriers; None when it was adequate.
+fn not_adequate(seed: u64, d: &motorid::diagnose::Diagnosis) -> Option<String> {
+    if d.verdict.adequate {
+        return None;
+    }
+    let failed: Vec<String> = d
+        .verdict
+        .checks
+        .iter()
+        .filter(|c| !c.passed)
+        .map(|c| format!("{}: {} (p {:.1e})", c.name, c.detail, c.p_value))
+        .collect();
+    let carriers: Vec<&str> = d.verdict.unexplained.iter().map(|u| u.variable).collect();
+    Some(format!(
+        "seed {seed}: judged {}, failed {failed:?}, findings {:?}, carriers {carriers:?}",
+        d.verdict.judged,
+        names(d)
+    ))
 }
